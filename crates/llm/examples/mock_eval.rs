@@ -119,7 +119,8 @@ fn main() {
         let service = service(&server.uri(), &cache, offline);
         let mut registry = StrategyRegistry::new();
         register_strategies(&mut registry, service.clone(), PlannerConfig::default(), 16);
-        let prefetch = prefetch_probabilities(&service, &specs, &pairs).expect("prefetch");
+        let prefetch =
+            prefetch_probabilities(&service, &specs, &pairs, &|_, _| {}).expect("prefetch");
         let prefetched = started.elapsed();
         let mut outs = Vec::new();
         for spec in SPECS {

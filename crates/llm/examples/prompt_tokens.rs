@@ -48,7 +48,10 @@ fn measure(label: &str, scenes: &[Scene]) {
                 let t = tokens(&m);
                 total += t;
                 questions += 1;
-                if distinct.insert(cache_key(&key_config, &m)) {
+                if distinct.insert(cache_key(
+                    &key_config,
+                    &ferret_llm::Request::plain(m.clone()),
+                )) {
                     distinct_tokens += t;
                 }
             }

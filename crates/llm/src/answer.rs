@@ -1,51 +1,225 @@
 //! Reading answers: probabilities from the probability prompts, a container from P-DIRECT.
 //!
-//! Both follow DESIGN.md exactly. Reasoning some models write between `<think>` and `</think>`
-//! is removed first (gpt-oss and DeepSeek-style models served without a reasoning parser put it in
-//! the answer text; a percentage in the reasoning is not the answer).
+//! **Probabilities.** The prompts ask for a percentage between 1 % and 100 %, so a number is a
+//! percentage whether or not it carries `%` ("70" → 0.70, "1" → 0.01); only a bare decimal below
+//! one ("0.7") is read as a fraction. Values are clamped to [0.01, 1]. Reasoning some models write
+//! between `<think>` and `</think>` is ignored (a percentage in the reasoning is not the answer).
+//! Every answer falls in one [`AnswerClass`]; three classes are not answers: no number, several
+//! different numbers, and a restatement of the prompt's worked example. The caller re-asks those
+//! and then falls back to [`FALLBACK_PROBABILITY`], counting each class.
 
+use std::ops::Range;
 use std::sync::LazyLock;
 
 use regex::Regex;
+use serde::Serialize;
 
 /// The probability given when an answer cannot be read (and the floor of the clamp).
 pub const FALLBACK_PROBABILITY: f64 = 0.01;
 
 static THINK: LazyLock<Regex> =
     LazyLock::new(|| Regex::new(r"(?is)<think>.*?</think>").expect("constant pattern"));
-static PERCENT: LazyLock<Regex> = LazyLock::new(|| {
-    Regex::new(r"(?i)(\d+(?:\.\d+)?|\.\d+)\s*(?:%|percent\b|per\s+cent\b)")
+static NUMBER: LazyLock<Regex> = LazyLock::new(|| {
+    Regex::new(r"(?i)(\d+(?:\.\d+)?|\.\d+)(\s*(?:%|percent\b|per\s+cent\b))?")
         .expect("constant pattern")
 });
-static NUMBER: LazyLock<Regex> =
-    LazyLock::new(|| Regex::new(r"\d+(?:\.\d+)?|\.\d+").expect("constant pattern"));
+static JSON_PERCENT: LazyLock<Regex> =
+    LazyLock::new(|| Regex::new(r#""percent"\s*:\s*"?(\d+(?:\.\d+)?)"#).expect("constant pattern"));
 
 /// The answer without `<think>…</think>` blocks (an unclosed `<think>` hides everything after it).
 pub fn strip_reasoning(text: &str) -> String {
-    let s = THINK.replace_all(text, " ");
-    let lower = s.to_ascii_lowercase();
-    match lower.find("<think>") {
-        Some(i) => s[..i].to_string(),
-        None => s.into_owned(),
+    masked(text).split('\0').collect::<Vec<_>>().join(" ")
+}
+
+/// `text` with reasoning blocks replaced by NUL bytes of the same length, so that byte offsets
+/// into the result are offsets into `text`.
+fn masked(text: &str) -> String {
+    let mut out = text.to_string();
+    let blank = |s: &mut String, r: Range<usize>| {
+        s.replace_range(r.clone(), &"\0".repeat(r.len()));
+    };
+    for m in THINK.find_iter(text) {
+        blank(&mut out, m.range());
+    }
+    if let Some(i) = out.to_ascii_lowercase().find("<think>") {
+        let end = out.len();
+        blank(&mut out, i..end);
+    }
+    out
+}
+
+/// What kind of answer a probability answer is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum AnswerClass {
+    /// Structured output: `{"percent": 70}`.
+    Json,
+    /// Only a number (`70%`, `70`, `**70 %**.`).
+    NumberOnly,
+    /// One number (or one percentage) within prose.
+    NumberInProse,
+    /// Several different percentages (or, without any, several different numbers): not an answer.
+    SeveralNumbers,
+    /// No number at all: not an answer.
+    NoNumber,
+    /// The worked example's value said about the worked example's object: not an answer.
+    ExampleEchoed,
+}
+
+impl AnswerClass {
+    /// Every class, in report order.
+    pub const ALL: [AnswerClass; 6] = [
+        Self::Json,
+        Self::NumberOnly,
+        Self::NumberInProse,
+        Self::SeveralNumbers,
+        Self::NoNumber,
+        Self::ExampleEchoed,
+    ];
+
+    /// True for classes that give a probability.
+    pub fn usable(self) -> bool {
+        matches!(self, Self::Json | Self::NumberOnly | Self::NumberInProse)
+    }
+
+    /// The class in words, as in reports (`number-in-prose`).
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Json => "json",
+            Self::NumberOnly => "number-only",
+            Self::NumberInProse => "number-in-prose",
+            Self::SeveralNumbers => "several-numbers",
+            Self::NoNumber => "no-number",
+            Self::ExampleEchoed => "example-echoed",
+        }
     }
 }
 
-/// The probability an answer states: the first percentage ("around 70 percent" → 0.70), or,
-/// when there is none, the first number if it lies in [0, 1] ("0.7" → 0.7); clamped to
-/// [0.01, 1]. `None` when there is neither ("I cannot say"); the caller then uses
-/// [`FALLBACK_PROBABILITY`] and counts the failure.
-pub fn parse_probability(answer: &str) -> Option<f64> {
-    let text = strip_reasoning(answer);
-    let p = if let Some(c) = PERCENT.captures(&text) {
-        c.get(1)?.as_str().parse::<f64>().ok()? / 100.0
-    } else {
-        let n = NUMBER.find(&text)?.as_str().parse::<f64>().ok()?;
-        if !(0.0..=1.0).contains(&n) {
-            return None;
+/// A prompt's worked example, so that an answer restating it is not taken as an answer. Declared
+/// in a template by a comment `{# ferret:example percent=90 words=egg,eggs #}`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct WorkedExample {
+    /// The example's percentage.
+    pub percent: f64,
+    /// Words naming the example's object (lower case).
+    pub words: Vec<String>,
+}
+
+/// A probability answer read.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ProbabilityReading {
+    /// Its class.
+    pub class: AnswerClass,
+    /// The probability, for usable classes.
+    pub probability: Option<f64>,
+    /// Byte range of the number in the answer text (what log-probabilities are read at).
+    pub number: Option<Range<usize>>,
+}
+
+impl ProbabilityReading {
+    fn unusable(class: AnswerClass) -> Self {
+        Self {
+            class,
+            probability: None,
+            number: None,
         }
-        n
+    }
+}
+
+/// Reads a probability answer (see the module documentation).
+pub fn read_probability(answer: &str, example: Option<&WorkedExample>) -> ProbabilityReading {
+    let text = masked(answer);
+    if let Some(r) = read_json(&text) {
+        return r;
+    }
+    struct Found {
+        value: f64,
+        percent: bool,
+        fraction: bool,
+        span: Range<usize>,
+        whole: Range<usize>,
+    }
+    let found: Vec<Found> = NUMBER
+        .captures_iter(&text)
+        .filter_map(|c| {
+            let n = c.get(1)?;
+            let value: f64 = n.as_str().parse().ok()?;
+            let percent = c.get(2).is_some();
+            Some(Found {
+                value,
+                percent,
+                fraction: !percent && n.as_str().contains('.') && value < 1.0,
+                span: n.range(),
+                whole: c.get(0)?.range(),
+            })
+        })
+        .filter(|f| f.value.is_finite())
+        .collect();
+    let lower = text.to_lowercase();
+    if let Some(ex) = example
+        && found.iter().any(|f| f.value == ex.percent)
+        && ex.words.iter().any(|w| contains_phrase(&lower, w))
+    {
+        return ProbabilityReading::unusable(AnswerClass::ExampleEchoed);
+    }
+    let percents: Vec<&Found> = found.iter().filter(|f| f.percent).collect();
+    let pool: Vec<&Found> = if percents.is_empty() {
+        found.iter().collect()
+    } else {
+        percents
     };
-    p.is_finite().then(|| p.clamp(FALLBACK_PROBABILITY, 1.0))
+    let Some(first) = pool.first() else {
+        return ProbabilityReading::unusable(AnswerClass::NoNumber);
+    };
+    if pool.iter().any(|f| f.value != first.value) {
+        return ProbabilityReading::unusable(AnswerClass::SeveralNumbers);
+    }
+    let p = if first.fraction {
+        first.value
+    } else {
+        first.value / 100.0
+    };
+    let rest = format!("{}{}", &text[..first.whole.start], &text[first.whole.end..]);
+    let only = rest
+        .chars()
+        .all(|c| c.is_whitespace() || c == '\0' || "\"'`*_.,;:!()[]".contains(c));
+    ProbabilityReading {
+        class: if only {
+            AnswerClass::NumberOnly
+        } else {
+            AnswerClass::NumberInProse
+        },
+        probability: Some(p.clamp(FALLBACK_PROBABILITY, 1.0)),
+        number: (!first.fraction).then(|| first.span.clone()),
+    }
+}
+
+/// `{"percent": N}`, possibly in a Markdown code fence.
+fn read_json(text: &str) -> Option<ProbabilityReading> {
+    let t = text.trim_matches(|c: char| c.is_whitespace() || c == '\0');
+    let t = t
+        .strip_prefix("```json")
+        .or_else(|| t.strip_prefix("```"))
+        .map_or(t, |s| s.trim_end().trim_end_matches("```").trim());
+    if !t.starts_with('{') {
+        return None;
+    }
+    let value: serde_json::Value = serde_json::from_str(t).ok()?;
+    let n = value.get("percent")?;
+    let v = n
+        .as_f64()
+        .or_else(|| n.as_str().and_then(|s| s.trim().parse().ok()))?;
+    let span = JSON_PERCENT.captures(text)?.get(1)?.range();
+    v.is_finite().then(|| ProbabilityReading {
+        class: AnswerClass::Json,
+        probability: Some((v / 100.0).clamp(FALLBACK_PROBABILITY, 1.0)),
+        number: Some(span),
+    })
+}
+
+/// The probability an answer states, when it is usable; see [`read_probability`].
+pub fn parse_probability(answer: &str) -> Option<f64> {
+    read_probability(answer, None).probability
 }
 
 /// How a P-DIRECT answer was matched to the list of search locations.
@@ -86,7 +260,13 @@ fn normalise(s: &str) -> String {
 /// (the longest label the answer contains; else the first label containing the answer). `None`
 /// when nothing matches; the caller falls back to the nearest container and counts it.
 pub fn match_location(answer: &str, labels: &[String]) -> Option<(usize, MatchKind)> {
-    let text = strip_reasoning(answer);
+    let mut text = strip_reasoning(answer);
+    // Structured output: {"location": "..."}.
+    if let Ok(v) = serde_json::from_str::<serde_json::Value>(text.trim())
+        && let Some(l) = v.get("location").and_then(|l| l.as_str())
+    {
+        text = l.to_string();
+    }
     let trimmed = text.trim();
     if let Some(i) = labels.iter().position(|l| l == trimmed) {
         return Some((i, MatchKind::Exact));
@@ -116,7 +296,7 @@ pub fn match_location(answer: &str, labels: &[String]) -> Option<(usize, MatchKi
 
 /// True when `needle` occurs in `hay` on word boundaries (so `bed` is not found in `bedroom` and
 /// `countertop 1` not in `countertop 12`).
-fn contains_phrase(hay: &str, needle: &str) -> bool {
+pub(crate) fn contains_phrase(hay: &str, needle: &str) -> bool {
     let boundary = |c: Option<char>| c.is_none_or(|c| !c.is_alphanumeric());
     hay.match_indices(needle).any(|(i, m)| {
         boundary(hay[..i].chars().next_back()) && boundary(hay[i + m.len()..].chars().next())
@@ -128,6 +308,10 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
 
+    fn class(s: &str) -> AnswerClass {
+        read_probability(s, None).class
+    }
+
     #[test]
     fn probabilities_as_design_says() {
         assert_eq!(parse_probability("around 70 percent"), Some(0.70));
@@ -136,22 +320,90 @@ mod tests {
         assert_eq!(parse_probability("85%"), Some(0.85));
         assert_eq!(parse_probability("Likelihood: 12.5 %."), Some(0.125));
         assert_eq!(parse_probability("70 per cent"), Some(0.7));
-        // The first percentage wins over earlier bare numbers.
+        // A percentage wins over bare numbers.
         assert_eq!(
             parse_probability("Between 1 and 100, I'd say 40%"),
             Some(0.4)
         );
         assert_eq!(parse_probability("0%"), Some(0.01));
         assert_eq!(parse_probability("150%"), Some(1.0));
-        assert_eq!(parse_probability("1"), Some(1.0));
+        // A bare number is a percentage: the prompts ask for 1 %–100 %.
+        assert_eq!(parse_probability("70"), Some(0.7));
+        assert_eq!(parse_probability("1"), Some(0.01));
         assert_eq!(parse_probability("0"), Some(0.01));
-        // A bare number outside [0, 1] is not a probability.
-        assert_eq!(parse_probability("70"), None);
         assert_eq!(
             parse_probability("<think>maybe 5%? no</think>60%"),
             Some(0.6)
         );
         assert_eq!(parse_probability("<think>about 5% I guess"), None);
+    }
+
+    #[test]
+    fn every_class() {
+        assert_eq!(class("70%"), AnswerClass::NumberOnly);
+        assert_eq!(class(" **70 %**.\n"), AnswerClass::NumberOnly);
+        assert_eq!(class("70"), AnswerClass::NumberOnly);
+        assert_eq!(
+            class("The likelihood is about 30% because remotes live on sofas."),
+            AnswerClass::NumberInProse
+        );
+        // A stray "(1)" in a cut-off explanation is 1 %, not 100 %.
+        let r = read_probability("It depends on the number of chances (1) and", None);
+        assert_eq!(r.class, AnswerClass::NumberInProse);
+        assert_eq!(r.probability, Some(0.01));
+        assert_eq!(class("30% or maybe 60%"), AnswerClass::SeveralNumbers);
+        assert_eq!(class("somewhere from 3 to 6"), AnswerClass::SeveralNumbers);
+        assert_eq!(class("30% (30 percent)"), AnswerClass::NumberInProse);
+        assert_eq!(class("I cannot say."), AnswerClass::NoNumber);
+        assert_eq!(class(""), AnswerClass::NoNumber);
+        assert_eq!(class("{\"percent\": 35}"), AnswerClass::Json);
+        assert_eq!(
+            read_probability("```json\n{\"percent\": 35}\n```", None).probability,
+            Some(0.35)
+        );
+        let egg = WorkedExample {
+            percent: 90.0,
+            words: vec!["egg".into(), "eggs".into()],
+        };
+        let r = read_probability(
+            "The likelihood of finding an egg in the fridge is 90%.",
+            Some(&egg),
+        );
+        assert_eq!(r.class, AnswerClass::ExampleEchoed);
+        assert_eq!(r.probability, None);
+        // The example's value about something else is an answer.
+        assert_eq!(
+            read_probability("90%", Some(&egg)).class,
+            AnswerClass::NumberOnly
+        );
+        for c in AnswerClass::ALL {
+            assert_eq!(
+                c.usable(),
+                matches!(
+                    c,
+                    AnswerClass::Json | AnswerClass::NumberOnly | AnswerClass::NumberInProse
+                )
+            );
+        }
+    }
+
+    #[test]
+    fn number_spans_point_into_the_original_text() {
+        let text = "<think>5%?</think> I'd say 70%";
+        let r = read_probability(text, None);
+        assert_eq!(&text[r.number.clone().unwrap()], "70");
+        let json = "{\"percent\": 42}";
+        assert_eq!(&json[read_probability(json, None).number.unwrap()], "42");
+        assert_eq!(read_probability("0.7", None).number, None);
+    }
+
+    #[test]
+    fn locations_from_structured_output() {
+        let l = labels();
+        assert_eq!(
+            match_location("{\"location\": \"bed in the bedroom\"}", &l),
+            Some((3, MatchKind::Exact))
+        );
     }
 
     fn labels() -> Vec<String> {

@@ -29,13 +29,16 @@ use sha2::{Digest, Sha256};
 use crate::client::TokenUsage;
 use crate::config::EndpointConfig;
 use crate::error::CacheError;
+use crate::logprobs::TokenLogprob;
 use crate::message::ChatMessage;
+use crate::question::Request;
 
 /// Where `ferret` keeps the cache unless told otherwise (`--llm-cache`).
 pub const DEFAULT_CACHE_PATH: &str = "ferret-llm-cache.sqlite";
 
-/// Schema version in `PRAGMA user_version`.
-const SCHEMA_VERSION: i64 = 1;
+/// Schema version in `PRAGMA user_version`. Version 2 added the `logprobs` column; version 1
+/// files are upgraded in place (their entries keep their keys and answers).
+const SCHEMA_VERSION: i64 = 2;
 
 /// How long a writer waits for another process's lock before failing.
 const BUSY_TIMEOUT: Duration = Duration::from_secs(60);
@@ -51,10 +54,16 @@ struct KeyInput<'a> {
     max_output_tokens: Option<u32>,
     reasoning_effort: Option<&'a async_openai::types::chat::ReasoningEffort>,
     messages: &'a [ChatMessage],
+    // Left out when absent, so that keys of plain text requests are what they were before
+    // structured output and log-probabilities existed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    response_format: Option<&'a serde_json::Value>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    top_logprobs: Option<u8>,
 }
 
-/// The cache key of `messages` sent to an endpoint with settings `config`: 64 hex digits.
-pub fn cache_key(config: &EndpointConfig, messages: &[ChatMessage]) -> String {
+/// The cache key of `request` sent to an endpoint with settings `config`: 64 hex digits.
+pub fn cache_key(config: &EndpointConfig, request: &Request) -> String {
     let input = KeyInput {
         v: 1,
         model: &config.model,
@@ -66,7 +75,9 @@ pub fn cache_key(config: &EndpointConfig, messages: &[ChatMessage]) -> String {
         seed: config.seed,
         max_output_tokens: config.max_output_tokens,
         reasoning_effort: config.reasoning_effort.as_ref(),
-        messages,
+        messages: &request.messages,
+        response_format: request.response_format.as_ref(),
+        top_logprobs: request.top_logprobs,
     };
     // Serialising plain structs, strings and numbers cannot fail.
     let json = serde_json::to_vec(&input).unwrap_or_default();
@@ -94,6 +105,8 @@ pub struct CachedReply {
     pub latency: Duration,
     /// When it was stored, seconds since the Unix epoch.
     pub created_unix: i64,
+    /// Token log-probabilities of the answer, when they were asked for and sent.
+    pub logprobs: Option<Vec<TokenLogprob>>,
 }
 
 /// The response cache file. Safe to share between threads (one connection behind a mutex) and
@@ -151,11 +164,17 @@ impl ResponseCache {
                 completion_tokens INTEGER NOT NULL,
                 cached_tokens     INTEGER,
                 latency_ms        INTEGER NOT NULL,
-                created_unix      INTEGER NOT NULL
-            );
-            PRAGMA user_version = 1;",
+                created_unix      INTEGER NOT NULL,
+                logprobs          TEXT
+            );",
         )
         .map_err(sql)?;
+        if version == 1 {
+            conn.execute_batch("ALTER TABLE responses ADD COLUMN logprobs TEXT;")
+                .map_err(sql)?;
+        }
+        conn.pragma_update(None, "user_version", SCHEMA_VERSION)
+            .map_err(sql)?;
         Ok(Self {
             file: file.to_path_buf(),
             conn: Mutex::new(conn),
@@ -179,7 +198,7 @@ impl ResponseCache {
         let row = conn
             .query_row(
                 "SELECT key, endpoint, model, server, messages, reply, prompt_tokens, completion_tokens,
-                        cached_tokens, latency_ms, created_unix
+                        cached_tokens, latency_ms, created_unix, logprobs
                  FROM responses WHERE key = ?1",
                 [key],
                 |r| {
@@ -195,6 +214,7 @@ impl ResponseCache {
                         r.get::<_, Option<i64>>(8)?,
                         r.get::<_, i64>(9)?,
                         r.get::<_, i64>(10)?,
+                        r.get::<_, Option<String>>(11)?,
                     ))
                 },
             )
@@ -212,6 +232,7 @@ impl ResponseCache {
             cached,
             latency_ms,
             created_unix,
+            logprobs,
         )) = row
         else {
             return Ok(None);
@@ -222,8 +243,19 @@ impl ResponseCache {
                 key: key.clone(),
                 message: format!("messages are not JSON: {e}"),
             })?;
+        let logprobs = match logprobs {
+            None => None,
+            Some(text) => Some(
+                serde_json::from_str(&text).map_err(|e| CacheError::Corrupt {
+                    file: self.file.clone(),
+                    key: key.clone(),
+                    message: format!("logprobs are not JSON: {e}"),
+                })?,
+            ),
+        };
         let n = |v: i64| u64::try_from(v).unwrap_or(0);
         Ok(Some(CachedReply {
+            logprobs,
             key,
             endpoint,
             model,
@@ -252,14 +284,22 @@ impl ResponseCache {
             key: entry.key.clone(),
             message: e.to_string(),
         })?;
+        let logprobs = match &entry.logprobs {
+            None => None,
+            Some(l) => Some(serde_json::to_string(l).map_err(|e| CacheError::Corrupt {
+                file: self.file.clone(),
+                key: entry.key.clone(),
+                message: e.to_string(),
+            })?),
+        };
         let clamp = |v: u64| i64::try_from(v).unwrap_or(i64::MAX);
         {
             let conn = self.lock();
             conn.execute(
                 "INSERT OR IGNORE INTO responses
                     (key, endpoint, model, server, messages, reply, prompt_tokens, completion_tokens,
-                     cached_tokens, latency_ms, created_unix)
-                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11)",
+                     cached_tokens, latency_ms, created_unix, logprobs)
+                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12)",
                 params![
                     entry.key,
                     entry.endpoint,
@@ -272,6 +312,7 @@ impl ResponseCache {
                     entry.usage.cached_tokens.map(clamp),
                     clamp(entry.latency.as_millis() as u64),
                     entry.created_unix,
+                    logprobs,
                 ],
             )
             .map_err(sql)?;
@@ -347,6 +388,15 @@ mod tests {
             },
             latency: Duration::from_millis(12),
             created_unix: 1,
+            logprobs: None,
+        }
+    }
+
+    fn req(messages: &[ChatMessage]) -> Request {
+        Request {
+            messages: messages.to_vec(),
+            response_format: None,
+            top_logprobs: None,
         }
     }
 
@@ -354,14 +404,20 @@ mod tests {
     fn key_depends_on_answer_relevant_settings_only() {
         let m = [ChatMessage::user("where is the remote?")];
         let base = EndpointConfig::new("http://h:8000/v1", "m");
-        let k = cache_key(&base, &m);
+        let k = cache_key(&base, &req(&m));
         assert_eq!(k.len(), 64);
+        // The recipe of plain text requests is unchanged since schema 1 (this is the SHA-256 of the
+        // JSON that version wrote, computed outside ferret): old caches stay valid.
+        assert_eq!(
+            k,
+            "e9aa9e16c4fb4026191408c87f0d8a6942a93764d384051e97c14e3cafa34f6d"
+        );
         let mut same = base.clone();
         same.base_url = "http://h:8000/v1/".into();
         same.concurrency = 9;
         same.timeout_secs = 3.0;
         same.price_input_per_mtok = 1.0;
-        assert_eq!(cache_key(&same, &m), k);
+        assert_eq!(cache_key(&same, &req(&m)), k);
         for change in [
             |c: &mut EndpointConfig| c.model = "n".into(),
             |c: &mut EndpointConfig| c.base_url = "http://other:8000/v1".into(),
@@ -374,22 +430,28 @@ mod tests {
         ] {
             let mut c = base.clone();
             change(&mut c);
-            assert_ne!(cache_key(&c, &m), k);
+            assert_ne!(cache_key(&c, &req(&m)), k);
         }
         assert_ne!(
-            cache_key(&base, &[ChatMessage::user("where is the remote")]),
+            cache_key(&base, &req(&[ChatMessage::user("where is the remote")])),
             k
         );
         assert_ne!(
-            cache_key(&base, &[ChatMessage::system("where is the remote?")]),
+            cache_key(&base, &req(&[ChatMessage::system("where is the remote?")])),
             k
         );
+        let mut with_format = req(&m);
+        with_format.response_format = Some(serde_json::json!({"type": "json_object"}));
+        assert_ne!(cache_key(&base, &with_format), k);
+        let mut with_logprobs = req(&m);
+        with_logprobs.top_logprobs = Some(20);
+        assert_ne!(cache_key(&base, &with_logprobs), k);
         // A shared cache id stands for the server.
         let mut a = base.clone();
         a.cache_id = Some("gpt-oss-120b-bf16".into());
         let mut b = a.clone();
         b.base_url = "http://elsewhere/v1".into();
-        assert_eq!(cache_key(&a, &m), cache_key(&b, &m));
+        assert_eq!(cache_key(&a, &req(&m)), cache_key(&b, &req(&m)));
     }
 
     #[test]
@@ -407,6 +469,40 @@ mod tests {
         assert_eq!(cache.get("other").unwrap(), None);
         assert_eq!(cache.len().unwrap(), 1);
         cache.integrity_check().unwrap();
+    }
+
+    #[test]
+    fn logprobs_round_trip_and_version_1_files_upgrade() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("v1.sqlite");
+        // A file as schema 1 wrote it.
+        let conn = Connection::open(&path).unwrap();
+        conn.execute_batch(
+            "CREATE TABLE responses (key TEXT PRIMARY KEY, endpoint TEXT NOT NULL, model TEXT NOT NULL,
+                server TEXT NOT NULL, messages TEXT NOT NULL, reply TEXT NOT NULL,
+                prompt_tokens INTEGER NOT NULL, completion_tokens INTEGER NOT NULL,
+                cached_tokens INTEGER, latency_ms INTEGER NOT NULL, created_unix INTEGER NOT NULL);
+             INSERT INTO responses VALUES ('old', 'e', 'm', 's', '[]', '40%', 1, 1, NULL, 5, 1);
+             PRAGMA user_version = 1;",
+        )
+        .unwrap();
+        drop(conn);
+        let cache = ResponseCache::open(&path).unwrap();
+        let old = cache.get("old").unwrap().unwrap();
+        assert_eq!((old.reply.as_str(), old.logprobs), ("40%", None));
+        let mut e = entry("new", "70%");
+        e.logprobs = Some(vec![TokenLogprob {
+            token: "70".into(),
+            logprob: Some(-0.2),
+            top_logprobs: vec![],
+        }]);
+        assert_eq!(cache.put(&e).unwrap(), e);
+        drop(cache);
+        let conn = Connection::open(&path).unwrap();
+        let v: i64 = conn
+            .pragma_query_value(None, "user_version", |r| r.get(0))
+            .unwrap();
+        assert_eq!(v, 2);
     }
 
     #[test]

@@ -23,7 +23,8 @@ use tokio::sync::Semaphore;
 
 use crate::config::{Endpoint, MaxTokensParam};
 use crate::error::{LlmError, Result};
-use crate::message::ChatMessage;
+use crate::logprobs::TokenLogprob;
+use crate::question::Request;
 
 /// Characters of a reply body kept in error messages.
 const BODY_SNIPPET_CHARS: usize = 300;
@@ -50,6 +51,8 @@ pub struct Reply {
     pub latency: Duration,
     /// Attempts it took (1 = no retry).
     pub attempts: u32,
+    /// The answer's token log-probabilities, when they were asked for and the server sent them.
+    pub logprobs: Option<Vec<TokenLogprob>>,
 }
 
 /// What one attempt came to.
@@ -104,9 +107,27 @@ impl EndpointClient {
         &self.endpoint
     }
 
-    /// The request body for `messages` under this endpoint's settings.
+    /// The request body for `request` under this endpoint's settings: async-openai's request
+    /// type as JSON, with `response_format` set by ferret (async-openai's type has no place for
+    /// the `json_object` dialect's `schema`) and `logprobs`/`top_logprobs` when asked for.
+    pub fn request_body(&self, request: &Request) -> serde_json::Value {
+        let mut body =
+            serde_json::to_value(self.openai_request(request)).unwrap_or(serde_json::Value::Null);
+        if let Some(map) = body.as_object_mut() {
+            if let Some(format) = &request.response_format {
+                map.insert("response_format".into(), format.clone());
+            }
+            if let Some(n) = request.top_logprobs {
+                map.insert("logprobs".into(), true.into());
+                map.insert("top_logprobs".into(), n.into());
+            }
+        }
+        body
+    }
+
     #[allow(deprecated)] // `seed` and `max_tokens` are deprecated by OpenAI but still what many servers read.
-    pub fn request_body(&self, messages: &[ChatMessage]) -> CreateChatCompletionRequest {
+    fn openai_request(&self, request: &Request) -> CreateChatCompletionRequest {
+        let messages = &request.messages;
         let c = &self.endpoint.config;
         let (max_completion_tokens, max_tokens) = match c.max_tokens_param {
             MaxTokensParam::MaxCompletionTokens => (c.max_output_tokens, None),
@@ -127,7 +148,7 @@ impl EndpointClient {
     /// Asks the endpoint, retrying 429, 5xx, 408, timeouts and cut connections up to
     /// `max_attempts` times with exponential backoff and jitter (or as long as `Retry-After`
     /// says, up to `retry_max_secs`). Waits for a concurrency permit first.
-    pub async fn complete(&self, messages: &[ChatMessage]) -> Result<Reply> {
+    pub async fn complete(&self, request: &Request) -> Result<Reply> {
         let name = &self.endpoint.name;
         let url = self.endpoint.config.normalized_base_url();
         let key = match (&self.endpoint.config.api_key_env, self.endpoint.key()) {
@@ -140,7 +161,7 @@ impl EndpointClient {
             }
             (_, key) => key,
         };
-        let body = self.request_body(messages);
+        let body = self.request_body(request);
         // Holding the permit across backoff sleeps keeps a rate-limited server from being hit by
         // the other waiting requests in the meantime.
         let _permit = self
@@ -183,7 +204,7 @@ impl EndpointClient {
 
     async fn attempt(
         &self,
-        body: &CreateChatCompletionRequest,
+        body: &serde_json::Value,
         key: Option<&secrecy::SecretString>,
         attempt: u32,
     ) -> Attempt {
@@ -233,7 +254,7 @@ impl EndpointClient {
             };
         }
         match parse_completion(&bytes) {
-            Ok((text, usage)) => {
+            Ok((text, usage, logprobs)) => {
                 tracing::debug!(
                     endpoint = %self.endpoint.name,
                     latency_ms = latency.as_millis() as u64,
@@ -247,6 +268,7 @@ impl EndpointClient {
                     usage,
                     latency,
                     attempts: attempt,
+                    logprobs,
                 })
             }
             Err(message) => Attempt::Fatal(LlmError::InvalidReply {
@@ -417,8 +439,13 @@ struct LenientDetails {
     cached_tokens: Option<u64>,
 }
 
-/// The first choice's text and the token usage, or why the body is not a usable completion.
-pub(crate) fn parse_completion(bytes: &[u8]) -> std::result::Result<(String, TokenUsage), String> {
+/// What a completion gives: the first choice's text, the token usage and the token
+/// log-probabilities if any.
+pub(crate) type Completion = (String, TokenUsage, Option<Vec<TokenLogprob>>);
+
+/// The first choice's text, the token usage and any log-probabilities, or why the body is not a
+/// usable completion.
+pub(crate) fn parse_completion(bytes: &[u8]) -> std::result::Result<Completion, String> {
     let value: serde_json::Value = serde_json::from_slice(bytes).map_err(|e| {
         if e.is_eof() {
             format!(
@@ -429,6 +456,13 @@ pub(crate) fn parse_completion(bytes: &[u8]) -> std::result::Result<(String, Tok
             format!("not JSON ({e})")
         }
     })?;
+    // Read apart from async-openai's types: servers differ in what they put beside each token
+    // (llama-cpp-python sends `bytes: null`, some send null `top_logprobs`).
+    let logprobs = value
+        .pointer("/choices/0/logprobs/content")
+        .filter(|v| v.is_array())
+        .and_then(|v| serde_json::from_value::<Vec<TokenLogprob>>(v.clone()).ok())
+        .filter(|v| !v.is_empty());
     let (content, finish_reason, usage) =
         match serde_json::from_value::<CreateChatCompletionResponse>(value.clone()) {
             Ok(r) => {
@@ -471,7 +505,7 @@ pub(crate) fn parse_completion(bytes: &[u8]) -> std::result::Result<(String, Tok
     if text.trim().is_empty() && finish_reason.as_deref() == Some("length") {
         return Err("empty answer: the output-token limit was reached (for reasoning models, raise max_output_tokens or lower reasoning_effort)".into());
     }
-    Ok((text, usage.unwrap_or_default()))
+    Ok((text, usage.unwrap_or_default(), logprobs))
 }
 
 #[cfg(test)]
@@ -522,8 +556,9 @@ mod tests {
         let strict = br#"{"id":"x","object":"chat.completion","created":1,"model":"m",
             "choices":[{"index":0,"message":{"role":"assistant","content":"70%"},"finish_reason":"stop"}],
             "usage":{"prompt_tokens":10,"completion_tokens":2,"total_tokens":12,"prompt_tokens_details":{"cached_tokens":4}}}"#;
-        let (text, usage) = parse_completion(strict).unwrap();
+        let (text, usage, logprobs) = parse_completion(strict).unwrap();
         assert_eq!(text, "70%");
+        assert_eq!(logprobs, None);
         assert_eq!(
             usage,
             TokenUsage {
@@ -534,7 +569,7 @@ mod tests {
         );
         // No id, an unknown finish reason: async-openai refuses it, the lenient reader does not.
         let odd = br#"{"choices":[{"message":{"content":"0.4"},"finish_reason":"eos"}],"usage":{"prompt_tokens":3,"completion_tokens":1}}"#;
-        let (text, usage) = parse_completion(odd).unwrap();
+        let (text, usage, _) = parse_completion(odd).unwrap();
         assert_eq!(text, "0.4");
         assert_eq!(usage.prompt_tokens, 3);
         assert!(
@@ -552,6 +587,14 @@ mod tests {
                 .unwrap_err()
                 .contains("no choices")
         );
+        // llama-cpp-python's shape: bytes null, a logprobs object beside the message.
+        let lp = br#"{"choices":[{"message":{"content":"7"},"finish_reason":"stop",
+            "logprobs":{"content":[{"token":"7","logprob":-0.5,"bytes":null,
+            "top_logprobs":[{"token":"7","logprob":-0.5,"bytes":null},{"token":"3","logprob":-1.2,"bytes":null}]}],"refusal":null}}]}"#;
+        let (_, _, logprobs) = parse_completion(lp).unwrap();
+        let logprobs = logprobs.unwrap();
+        assert_eq!(logprobs[0].token, "7");
+        assert_eq!(logprobs[0].top_logprobs[1].logprob, -1.2);
         let cut = br#"{"choices":[{"message":{"content":""},"finish_reason":"length"}]}"#;
         assert!(
             parse_completion(cut)

@@ -43,6 +43,52 @@ pub enum MaxTokensParam {
     MaxTokens,
 }
 
+/// How the endpoint is asked to shape its answers.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AnswerFormat {
+    /// Free text, read by [`crate::answer`]; the prompt says in words what to answer.
+    #[default]
+    Text,
+    /// `response_format: {"type": "json_schema", ...}` (OpenAI, Gemini's OpenAI-compatible API,
+    /// vLLM, Ollama, llama.cpp's `llama-server`): probability prompts answer
+    /// `{"percent": <integer 1..100>}`, P-DIRECT `{"location": <one of the listed labels>}`.
+    JsonSchema,
+    /// The same schemas in the older dialect `{"type": "json_object", "schema": ...}`, which is
+    /// what llama-cpp-python's server reads (it refuses `json_schema`).
+    JsonObject,
+}
+
+/// Where a probability comes from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ProbabilityFrom {
+    /// The percentage the answer text states.
+    #[default]
+    Text,
+    /// The probability-weighted mean of the percentages the model would have written, from the
+    /// token log-probabilities of the answer's number (see [`crate::logprobs`]); the text when
+    /// the server returns none (counted).
+    Logprobs,
+}
+
+/// How the role text (system messages) reaches the model.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SystemRole {
+    /// As system messages.
+    #[default]
+    System,
+    /// At the top of the first user message, for chat templates without a system turn (Gemma's
+    /// drops system messages silently).
+    Merge,
+}
+
+/// Most alternatives per token OpenAI's API returns.
+pub const MAX_TOP_LOGPROBS: u8 = 20;
+/// Most re-asks allowed per question.
+pub const MAX_REASKS: u32 = 5;
+
 /// One OpenAI-compatible chat-completions endpoint, as written in the config file.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -99,6 +145,27 @@ pub struct EndpointConfig {
     /// on two endpoints that serve the same weights at different addresses to share answers.
     #[serde(default)]
     pub cache_id: Option<String>,
+    /// How answers are requested: free text, or structured output with a JSON schema.
+    #[serde(default)]
+    pub answer_format: AnswerFormat,
+    /// Where probabilities come from: the answer text or the token log-probabilities.
+    #[serde(default)]
+    pub probability_from: ProbabilityFrom,
+    /// Alternatives per token to request with `logprobs` (1..=20). Requested whenever set, and
+    /// 20 when `probability_from = "logprobs"` leaves it unset; endpoints that set the same value
+    /// share cached answers whatever they read from them.
+    #[serde(default)]
+    pub top_logprobs: Option<u8>,
+    /// Times an unusable answer is asked again with a short format reminder (0..=5).
+    #[serde(default = "default_max_reasks")]
+    pub max_reasks: u32,
+    /// How the role text is sent.
+    #[serde(default)]
+    pub system_role: SystemRole,
+}
+
+fn default_max_reasks() -> u32 {
+    1
 }
 
 fn default_concurrency() -> usize {
@@ -138,6 +205,20 @@ impl EndpointConfig {
             price_cached_input_per_mtok: None,
             price_output_per_mtok: 0.0,
             cache_id: None,
+            answer_format: AnswerFormat::default(),
+            probability_from: ProbabilityFrom::default(),
+            top_logprobs: None,
+            max_reasks: default_max_reasks(),
+            system_role: SystemRole::default(),
+        }
+    }
+
+    /// Alternatives per token to request, if log-probabilities are requested at all.
+    pub fn requested_top_logprobs(&self) -> Option<u8> {
+        match (self.top_logprobs, self.probability_from) {
+            (Some(n), _) => Some(n),
+            (None, ProbabilityFrom::Logprobs) => Some(MAX_TOP_LOGPROBS),
+            (None, ProbabilityFrom::Text) => None,
         }
     }
 
@@ -218,6 +299,20 @@ impl EndpointConfig {
             return Err(bad(
                 "timeout_secs",
                 format!("{} is not a positive number of seconds", self.timeout_secs),
+            ));
+        }
+        if let Some(n) = self.top_logprobs
+            && !(1..=MAX_TOP_LOGPROBS).contains(&n)
+        {
+            return Err(bad(
+                "top_logprobs",
+                format!("{n} is outside 1..={MAX_TOP_LOGPROBS}"),
+            ));
+        }
+        if self.max_reasks > MAX_REASKS {
+            return Err(bad(
+                "max_reasks",
+                format!("{} is more than {MAX_REASKS}", self.max_reasks),
             ));
         }
         if self.max_attempts == 0 {

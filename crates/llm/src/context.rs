@@ -153,16 +153,30 @@ impl HouseContext {
     }
 }
 
-/// One probability question: is `target` in a container of this type in a room of this type?
-/// All containers sharing (type, room type) share the question, so it is asked once per house.
+/// One probability question: is `target` in a container of this type in this room? All
+/// containers sharing (type, room) share the question, so it is asked once per house. Rooms are
+/// named as in the house description (`bedroom 2` when a type repeats), so the question speaks of
+/// the same room the listing does.
 #[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct ProbabilityQuery {
     /// What is searched for.
     pub target: ObjectType,
     /// The container type.
     pub container: ObjectType,
-    /// The room type (`None` for a container in no room).
-    pub room: Option<RoomType>,
+    /// The room's label (`living room`, `bedroom 2`; `house` for a container in no room).
+    pub room: String,
+}
+
+impl ProbabilityQuery {
+    /// The question in words, for messages: `remote control in the sofa in the living room`.
+    pub fn describe(&self) -> String {
+        format!(
+            "{} in the {} in the {}",
+            self.target.words(),
+            self.container.words(),
+            self.room
+        )
+    }
 }
 
 /// The distinct questions for a house and target, and which question each container takes its
@@ -178,14 +192,16 @@ pub struct QueryPlan {
 impl QueryPlan {
     /// The questions for `target` in `house`.
     pub fn new(house: &House, target: &ObjectType) -> Self {
+        let labels = HouseContext::new(house);
         let mut queries: Vec<ProbabilityQuery> = Vec::new();
         let mut index: BTreeMap<ProbabilityQuery, usize> = BTreeMap::new();
         let of_container = (0..house.containers.len())
             .map(|c| {
+                let room = house.containers[c].room.filter(|&r| r < house.rooms.len());
                 let q = ProbabilityQuery {
                     target: target.clone(),
                     container: house.containers[c].object_type.clone(),
-                    room: house.container_room(c).map(|r| r.room_type.clone()),
+                    room: labels.room_label(room),
                 };
                 *index.entry(q.clone()).or_insert_with(|| {
                     queries.push(q);
@@ -207,7 +223,7 @@ pub struct ProbabilityContext {
     pub target: String,
     /// The container type in words (`sofa`).
     pub container: String,
-    /// The room type in words (`living room`), `house` for none.
+    /// The room's label (`living room`, `bedroom 2`), `house` for none.
     pub room: String,
     /// Room labels in house order.
     pub rooms: Vec<String>,
@@ -221,10 +237,7 @@ impl ProbabilityContext {
         Self {
             target: query.target.words(),
             container: query.container.words(),
-            room: query
-                .room
-                .as_ref()
-                .map_or_else(|| NO_ROOM.to_string(), RoomType::words),
+            room: query.room.clone(),
             rooms: ctx.room_labels.clone(),
             house: ctx.entries.clone(),
         }
@@ -487,12 +500,20 @@ pub(crate) mod tests {
     }
 
     #[test]
-    fn one_query_per_container_and_room_type() {
+    fn one_query_per_container_type_and_room() {
         let house = small_house();
         let plan = QueryPlan::new(&house, &ObjectType::new("CellPhone"));
-        // fridge@kitchen, countertop@kitchen, bed@bedroom (twice → once), dresser@bedroom
-        assert_eq!(plan.queries.len(), 4);
-        assert_eq!(plan.of_container, [0, 1, 1, 2, 2, 3]);
+        // fridge@kitchen, countertop@kitchen (twice → once), bed@bedroom 1, bed@bedroom 2,
+        // dresser@bedroom 2: the two bedrooms are asked about apart, named as the house listing
+        // names them.
+        assert_eq!(plan.queries.len(), 5);
+        assert_eq!(plan.of_container, [0, 1, 1, 2, 3, 4]);
+        assert_eq!(plan.queries[2].room, "bedroom 1");
+        assert_eq!(plan.queries[3].room, "bedroom 2");
+        assert_eq!(
+            plan.queries[4].describe(),
+            "cell phone in the dresser in the bedroom 2"
+        );
     }
 
     #[test]

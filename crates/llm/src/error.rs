@@ -143,15 +143,27 @@ pub enum LlmError {
         /// The start of the body.
         body: String,
     },
+    /// The endpoint failed earlier in this run after all its retries; nothing more is sent to it.
+    #[error(
+        "LLM `{endpoint}` is not asked again in this run: it failed after all its retries ({reason})"
+    )]
+    EndpointDown {
+        /// Endpoint name.
+        endpoint: String,
+        /// The failure that stopped it.
+        reason: String,
+    },
     /// Offline mode and the prompt is not in the cache.
     #[error(
-        "offline: no cached answer from LLM `{endpoint}` (model {model}) for the prompt beginning: {prompt_start}"
+        "offline: no cached answer from LLM `{endpoint}` (model {model}) for {about}; the prompt begins: {prompt_start}"
     )]
     NotCached {
         /// Endpoint name.
         endpoint: String,
         /// Model.
         model: String,
+        /// Which question it is (house, target, container, room).
+        about: String,
         /// The first characters of the prompt.
         prompt_start: String,
     },

@@ -17,7 +17,7 @@ use std::sync::Mutex;
 
 use serde::Serialize;
 
-use crate::answer::MatchKind;
+use crate::answer::{AnswerClass, MatchKind};
 use crate::client::TokenUsage;
 
 /// Token counts and cost of a set of requests.
@@ -58,13 +58,30 @@ impl TokenCounts {
     }
 }
 
-/// What became of an answer, for the parsing counters.
+/// Whether a probability came from log-probabilities.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LogprobUse {
+    /// The endpoint reads probabilities from the text.
+    NotWanted,
+    /// The expected percentage from the tokens was used.
+    Used,
+    /// Wanted, but the server sent none or they did not fit the answer: the text was used.
+    Missing,
+}
+
+/// What became of an answer, for the parsing counters.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum AnswerOutcome {
-    /// A probability answer, read (`true`) or fallen back to 0.01.
+    /// A probability answer.
     Probability {
-        /// Whether it could be read.
-        parsed: bool,
+        /// The class of the first answer.
+        class: AnswerClass,
+        /// True when the first answer was unusable and the question was asked again.
+        reasked: bool,
+        /// The probability used, `None` when it fell back to 0.01 after every re-ask.
+        value: Option<f64>,
+        /// Where the value came from.
+        logprobs: LogprobUse,
     },
     /// A P-DIRECT answer and how it matched.
     Direct(MatchKind),
@@ -77,8 +94,26 @@ pub enum AnswerOutcome {
 pub struct AnswerCounts {
     /// Probability answers used.
     pub probability_answers: u64,
-    /// Of those, unreadable ones that fell back to 0.01.
+    /// First answers that were structured output (`{"percent": N}`).
+    pub class_json: u64,
+    /// First answers that were only a number.
+    pub class_number_only: u64,
+    /// First answers with one number in prose.
+    pub class_number_in_prose: u64,
+    /// First answers with several different numbers (not an answer).
+    pub class_several_numbers: u64,
+    /// First answers without a number (not an answer).
+    pub class_no_number: u64,
+    /// First answers restating the worked example (not an answer).
+    pub class_example_echoed: u64,
+    /// Questions asked again after an unusable answer.
+    pub reasked: u64,
+    /// Probability answers still unusable after every re-ask, which fell back to 0.01.
     pub probability_fallbacks: u64,
+    /// Probabilities taken from log-probabilities.
+    pub logprob_used: u64,
+    /// Probabilities that should have come from log-probabilities but came from the text.
+    pub logprob_missing: u64,
     /// P-DIRECT answers used.
     pub direct_answers: u64,
     /// Matched exactly.
@@ -94,12 +129,60 @@ pub struct AnswerCounts {
 impl AnswerCounts {
     fn merge(&mut self, o: &AnswerCounts) {
         self.probability_answers += o.probability_answers;
+        self.class_json += o.class_json;
+        self.class_number_only += o.class_number_only;
+        self.class_number_in_prose += o.class_number_in_prose;
+        self.class_several_numbers += o.class_several_numbers;
+        self.class_no_number += o.class_no_number;
+        self.class_example_echoed += o.class_example_echoed;
+        self.reasked += o.reasked;
         self.probability_fallbacks += o.probability_fallbacks;
+        self.logprob_used += o.logprob_used;
+        self.logprob_missing += o.logprob_missing;
         self.direct_answers += o.direct_answers;
         self.direct_exact += o.direct_exact;
         self.direct_case_insensitive += o.direct_case_insensitive;
         self.direct_containment += o.direct_containment;
         self.direct_fallbacks += o.direct_fallbacks;
+    }
+
+    /// First answers of `class`.
+    pub fn class(&self, class: AnswerClass) -> u64 {
+        match class {
+            AnswerClass::Json => self.class_json,
+            AnswerClass::NumberOnly => self.class_number_only,
+            AnswerClass::NumberInProse => self.class_number_in_prose,
+            AnswerClass::SeveralNumbers => self.class_several_numbers,
+            AnswerClass::NoNumber => self.class_no_number,
+            AnswerClass::ExampleEchoed => self.class_example_echoed,
+        }
+    }
+
+    fn class_mut(&mut self, class: AnswerClass) -> &mut u64 {
+        match class {
+            AnswerClass::Json => &mut self.class_json,
+            AnswerClass::NumberOnly => &mut self.class_number_only,
+            AnswerClass::NumberInProse => &mut self.class_number_in_prose,
+            AnswerClass::SeveralNumbers => &mut self.class_several_numbers,
+            AnswerClass::NoNumber => &mut self.class_no_number,
+            AnswerClass::ExampleEchoed => &mut self.class_example_echoed,
+        }
+    }
+
+    /// Answers (probability and P-DIRECT) that fell back.
+    pub fn fallbacks(&self) -> u64 {
+        self.probability_fallbacks + self.direct_fallbacks
+    }
+
+    /// Answers of either kind.
+    pub fn answers(&self) -> u64 {
+        self.probability_answers + self.direct_answers
+    }
+
+    /// The share of answers that fell back, `None` without answers.
+    pub fn fallback_share(&self) -> Option<f64> {
+        let n = self.answers();
+        (n > 0).then(|| self.fallbacks() as f64 / n as f64)
     }
 }
 
@@ -118,7 +201,59 @@ pub struct UsageRow {
     pub distinct: TokenCounts,
     /// Answer parsing, over distinct prompts.
     pub answers: AnswerCounts,
+    /// How often each probability was used (per mille, so 0.1 % apart), over distinct prompts.
+    pub probability_values: BTreeMap<u32, u64>,
 }
+
+impl UsageRow {
+    /// The most frequent probability and the share of probability answers that gave it.
+    pub fn most_common_probability(&self) -> Option<(f64, f64)> {
+        let total: u64 = self.probability_values.values().sum();
+        let (v, n) = self
+            .probability_values
+            .iter()
+            .max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(a.0)))?;
+        (total > 0).then(|| (f64::from(*v) / 1000.0, *n as f64 / total as f64))
+    }
+
+    /// What went wrong with this strategy's answers, if anything went badly: most of them fell
+    /// back, or most probabilities are one value (a model that says "10%" to everything plans
+    /// like `model/uniform`). `None` when neither holds.
+    pub fn warning(&self) -> Option<String> {
+        if let Some(share) = self.answers.fallback_share()
+            && share > WARN_FALLBACK_SHARE
+        {
+            return Some(format!(
+                "{:.0} % of its {} answers could not be read and fell back ({} for probabilities); it plans like {}",
+                100.0 * share,
+                self.answers.answers(),
+                crate::answer::FALLBACK_PROBABILITY,
+                if self.answers.direct_answers > 0 {
+                    "optimistic+greedy"
+                } else {
+                    "model/uniform"
+                }
+            ));
+        }
+        if self.answers.probability_answers >= 10
+            && let Some((v, share)) = self.most_common_probability()
+            && share > WARN_ONE_VALUE_SHARE
+        {
+            return Some(format!(
+                "{:.0} % of its {} probabilities are {:.1} %: the answers barely depend on the question",
+                100.0 * share,
+                self.answers.probability_answers,
+                100.0 * v
+            ));
+        }
+        None
+    }
+}
+
+/// A strategy whose answers fell back more often than this is flagged.
+pub const WARN_FALLBACK_SHARE: f64 = 0.5;
+/// A strategy whose probabilities are one value more often than this is flagged.
+pub const WARN_ONE_VALUE_SHARE: f64 = 0.8;
 
 #[derive(Debug, Default)]
 struct Inner {
@@ -129,6 +264,9 @@ struct Inner {
     /// prompt and LLM under two planner limits) spent its tokens once.
     llm_distinct: BTreeMap<String, TokenCounts>,
     llm_seen: HashSet<(String, String)>,
+    /// (LLM, prompt key) sent or served from the cache in this run: a later read of the same
+    /// answer is neither a request nor a cache hit.
+    fetched: HashSet<(String, String)>,
 }
 
 /// A thread-safe tally, shared by every LLM of a run.
@@ -160,16 +298,30 @@ impl Ledger {
         self.inner.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    /// Counts a request sent to `llm` on behalf of `strategy`.
-    pub fn record_sent(&self, llm: &str, strategy: &str, usage: &TokenUsage, cost_usd: f64) {
-        row(&mut self.lock().rows, llm, strategy)
+    /// Counts a request for prompt `key` sent to `llm` on behalf of `strategy`.
+    pub fn record_sent(
+        &self,
+        llm: &str,
+        strategy: &str,
+        key: &str,
+        usage: &TokenUsage,
+        cost_usd: f64,
+    ) {
+        let mut inner = self.lock();
+        inner.fetched.insert((llm.to_string(), key.to_string()));
+        row(&mut inner.rows, llm, strategy)
             .sent
             .add(usage, cost_usd);
     }
 
-    /// Counts an answer served from the cache.
-    pub fn record_cache_hit(&self, llm: &str, strategy: &str) {
-        row(&mut self.lock().rows, llm, strategy).cache_hits += 1;
+    /// Counts an answer to prompt `key` served from the cache — once per run: reading again an
+    /// answer this run already sent for or fetched (prefetched questions read by trials, replays)
+    /// is not another hit.
+    pub fn record_cache_hit(&self, llm: &str, strategy: &str, key: &str) {
+        let mut inner = self.lock();
+        if inner.fetched.insert((llm.to_string(), key.to_string())) {
+            row(&mut inner.rows, llm, strategy).cache_hits += 1;
+        }
     }
 
     /// Counts the use of the answer to prompt `key` — once per (LLM, strategy, prompt), however
@@ -199,12 +351,27 @@ impl Ledger {
         }
         let r = row(&mut inner.rows, llm, strategy);
         r.distinct.add(usage, cost_usd);
+        if let AnswerOutcome::Probability { value: Some(v), .. } = outcome {
+            *r.probability_values
+                .entry((v * 1000.0).round() as u32)
+                .or_default() += 1;
+        }
         let a = &mut r.answers;
         match outcome {
-            AnswerOutcome::Probability { parsed } => {
+            AnswerOutcome::Probability {
+                class,
+                reasked,
+                value,
+                logprobs,
+            } => {
                 a.probability_answers += 1;
-                if !parsed {
-                    a.probability_fallbacks += 1;
+                *a.class_mut(class) += 1;
+                a.reasked += u64::from(reasked);
+                a.probability_fallbacks += u64::from(value.is_none());
+                match logprobs {
+                    LogprobUse::Used => a.logprob_used += 1,
+                    LogprobUse::Missing => a.logprob_missing += 1,
+                    LogprobUse::NotWanted => {}
                 }
             }
             AnswerOutcome::Direct(kind) => {
@@ -240,7 +407,7 @@ pub struct TokenReport {
 }
 
 /// The header of `tokens.csv`.
-pub const TOKENS_CSV_HEADER: [&str; 18] = [
+pub const TOKENS_CSV_HEADER: [&str; 28] = [
     "llm",
     "strategy",
     "requests",
@@ -259,6 +426,16 @@ pub const TOKENS_CSV_HEADER: [&str; 18] = [
     "direct_case_insensitive",
     "direct_containment",
     "direct_fallbacks",
+    "class_json",
+    "class_number_only",
+    "class_number_in_prose",
+    "class_several_numbers",
+    "class_no_number",
+    "class_example_echoed",
+    "reasked",
+    "logprob_used",
+    "logprob_missing",
+    "warning",
 ];
 
 impl TokenReport {
@@ -316,6 +493,16 @@ impl TokenReport {
                 n(r.answers.direct_case_insensitive),
                 n(r.answers.direct_containment),
                 n(r.answers.direct_fallbacks),
+                n(r.answers.class_json),
+                n(r.answers.class_number_only),
+                n(r.answers.class_number_in_prose),
+                n(r.answers.class_several_numbers),
+                n(r.answers.class_no_number),
+                n(r.answers.class_example_echoed),
+                n(r.answers.reasked),
+                n(r.answers.logprob_used),
+                n(r.answers.logprob_missing),
+                r.warning().unwrap_or_default(),
             ])?;
         }
         w.flush()?;
@@ -350,7 +537,7 @@ impl fmt::Display for TokenReport {
                 r.distinct.cost_usd,
                 r.sent.requests,
                 r.cache_hits,
-                r.answers.probability_fallbacks + r.answers.direct_fallbacks,
+                r.answers.fallbacks(),
             )?;
         }
         // The same columns per strategy, so prompts of one LLM can be compared (paper table V
@@ -376,7 +563,7 @@ impl fmt::Display for TokenReport {
                 r.distinct.cost_usd,
                 r.sent.requests,
                 r.cache_hits,
-                r.answers.probability_fallbacks + r.answers.direct_fallbacks,
+                r.answers.fallbacks(),
             )?;
         }
         Ok(())
@@ -387,6 +574,15 @@ impl fmt::Display for TokenReport {
 mod tests {
     use super::*;
 
+    fn prob(class: AnswerClass, value: Option<f64>) -> AnswerOutcome {
+        AnswerOutcome::Probability {
+            class,
+            reasked: !class.usable(),
+            value,
+            logprobs: LogprobUse::NotWanted,
+        }
+    }
+
     #[test]
     fn tallies_per_llm_and_strategy_and_writes_csv() {
         let l = Ledger::new();
@@ -396,35 +592,23 @@ mod tests {
             completion_tokens: 3,
             cached_tokens: Some(40),
         };
-        l.record_sent("g", m, &u, 0.5);
-        l.record_sent("g", m, &u, 0.5);
+        l.record_sent("g", m, "k1", &u, 0.5);
+        l.record_sent("g", m, "k2", &u, 0.5);
         l.record_answer(
             "g",
             m,
             "k1",
             &u,
             0.5,
-            AnswerOutcome::Probability { parsed: true },
+            prob(AnswerClass::NumberOnly, Some(0.3)),
         );
-        l.record_answer(
-            "g",
-            m,
-            "k2",
-            &u,
-            0.5,
-            AnswerOutcome::Probability { parsed: false },
-        );
-        // The same prompt used again (a replay) is not counted twice.
-        l.record_cache_hit("g", m);
-        l.record_answer(
-            "g",
-            m,
-            "k2",
-            &u,
-            0.5,
-            AnswerOutcome::Probability { parsed: false },
-        );
-        l.record_cache_hit("g", d);
+        l.record_answer("g", m, "k2", &u, 0.5, prob(AnswerClass::NoNumber, None));
+        // Reading again an answer sent in this run is not a cache hit, nor a second use.
+        l.record_cache_hit("g", m, "k2");
+        l.record_answer("g", m, "k2", &u, 0.5, prob(AnswerClass::NoNumber, None));
+        // An answer first served from the cache is one hit, however often it is read.
+        l.record_cache_hit("g", d, "k3");
+        l.record_cache_hit("g", d, "k3");
         l.record_answer(
             "g",
             d,
@@ -454,15 +638,21 @@ mod tests {
             }
         );
         assert_eq!(row_m.distinct.requests, 2);
-        assert_eq!(row_m.cache_hits, 1);
+        assert_eq!(row_m.cache_hits, 0);
+        let a = row_m.answers;
         assert_eq!(
             (
-                row_m.answers.probability_answers,
-                row_m.answers.probability_fallbacks
+                a.probability_answers,
+                a.probability_fallbacks,
+                a.class_number_only,
+                a.class_no_number,
+                a.reasked
             ),
-            (2, 1)
+            (2, 1, 1, 1, 1)
         );
+        assert_eq!(row_m.most_common_probability(), Some((0.3, 1.0)));
         let row_d = r.row("g", d).unwrap();
+        assert_eq!(row_d.cache_hits, 1);
         assert_eq!(
             (
                 row_d.answers.direct_answers,
@@ -474,7 +664,7 @@ mod tests {
         let t = &r.per_llm()[0];
         assert_eq!(
             (t.distinct.input_tokens, t.sent.requests, t.cache_hits),
-            (400, 2, 2)
+            (400, 2, 1)
         );
         let mut csv = Vec::new();
         r.write_csv(&mut csv).unwrap();
@@ -484,7 +674,7 @@ mod tests {
         assert_eq!(lines[0], TOKENS_CSV_HEADER.join(","));
         assert_eq!(
             lines[1],
-            "g,llm+model/p-minimal/g,2,200,6,80,1.000000,1,2,200,6,1.000000,2,1,0,0,0,0"
+            "g,llm+model/p-minimal/g,2,200,6,80,1.000000,0,2,200,6,1.000000,2,1,0,0,0,0,0,1,0,0,1,0,1,0,0,"
         );
         let table = r.to_string();
         assert!(table.lines().nth(1).unwrap().starts_with("g "), "{table}");
@@ -496,7 +686,7 @@ mod tests {
             "k1",
             &u,
             0.5,
-            AnswerOutcome::Probability { parsed: true },
+            prob(AnswerClass::NumberOnly, Some(0.3)),
         );
         let r = l.report();
         assert_eq!(
@@ -507,5 +697,46 @@ mod tests {
             1
         );
         assert_eq!(r.per_llm()[0].distinct.requests, 4);
+    }
+
+    #[test]
+    fn warns_when_answers_fall_back_or_collapse_to_one_value() {
+        let u = TokenUsage::default();
+        let l = Ledger::new();
+        for i in 0..20 {
+            let (class, v) = if i < 11 {
+                (AnswerClass::NoNumber, None)
+            } else {
+                (AnswerClass::NumberOnly, Some(0.5))
+            };
+            l.record_answer("g", "a", &format!("k{i}"), &u, 0.0, prob(class, v));
+        }
+        for i in 0..20 {
+            let v = if i < 17 { 0.1 } else { 0.05 * f64::from(i) };
+            l.record_answer(
+                "g",
+                "b",
+                &format!("k{i}"),
+                &u,
+                0.0,
+                prob(AnswerClass::NumberOnly, Some(v)),
+            );
+        }
+        for i in 0..20 {
+            l.record_answer(
+                "g",
+                "c",
+                &format!("k{i}"),
+                &u,
+                0.0,
+                prob(AnswerClass::NumberOnly, Some(0.01 * f64::from(i + 1))),
+            );
+        }
+        let r = l.report();
+        let a = r.row("g", "a").unwrap().warning().unwrap();
+        assert!(a.contains("55 %") && a.contains("model/uniform"), "{a}");
+        let b = r.row("g", "b").unwrap().warning().unwrap();
+        assert!(b.contains("85 %") && b.contains("10.0 %"), "{b}");
+        assert_eq!(r.row("g", "c").unwrap().warning(), None);
     }
 }

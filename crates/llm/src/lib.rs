@@ -13,7 +13,10 @@
 //! - [`prompts`] and [`context`]: P-CONTEXT-A, P-CONTEXT-B, P-MINIMAL and P-DIRECT as minijinja
 //!   templates compiled into the binary (users add their own by path), rendered from a house in
 //!   words.
-//! - [`answer`]: probability parsing and P-DIRECT matching as DESIGN.md says.
+//! - [`question`]: a question and the request an endpoint receives for it (role text merged for
+//!   models without a system turn, structured output with a JSON schema, log-probabilities).
+//! - [`answer`]: probability parsing into answer classes and P-DIRECT matching as DESIGN.md says;
+//!   [`logprobs`]: the expected percentage from token log-probabilities.
 //! - [`ledger`]: tokens, requests, cache hits and USD per LLM and strategy (`tokens.csv`, the
 //!   paper's table V).
 //! - [`strategy`]: `llm+model/<prompt>/<llm>` and `llm-direct/<prompt>/<llm>` for the plan
@@ -31,23 +34,35 @@ pub mod config;
 pub mod context;
 pub mod error;
 pub mod ledger;
+pub mod logprobs;
 pub mod message;
 pub mod prompts;
+pub mod question;
 pub mod service;
 pub mod strategy;
 
-pub use answer::{FALLBACK_PROBABILITY, MatchKind, match_location, parse_probability};
+pub use answer::{
+    AnswerClass, FALLBACK_PROBABILITY, MatchKind, ProbabilityReading, WorkedExample,
+    match_location, parse_probability, read_probability,
+};
 pub use async_openai::types::chat::ReasoningEffort;
 pub use cache::{CachedReply, DEFAULT_CACHE_PATH, ResponseCache, cache_key};
 pub use client::{EndpointClient, Reply, TokenUsage};
-pub use config::{DEFAULT_CONFIG_FILE, Endpoint, EndpointConfig, LlmConfig, MaxTokensParam};
+pub use config::{
+    AnswerFormat, DEFAULT_CONFIG_FILE, Endpoint, EndpointConfig, LlmConfig, MaxTokensParam,
+    ProbabilityFrom, SystemRole,
+};
 pub use context::{DirectContext, HouseContext, ProbabilityContext, ProbabilityQuery, QueryPlan};
 pub use error::{CacheError, ConfigError, LlmError, Result};
-pub use ledger::{AnswerCounts, AnswerOutcome, Ledger, TokenCounts, TokenReport, UsageRow};
+pub use ledger::{
+    AnswerCounts, AnswerOutcome, Ledger, LogprobUse, TokenCounts, TokenReport, UsageRow,
+};
+pub use logprobs::{TokenLogprob, TopLogprob, expected_percentage};
 pub use message::{ChatMessage, MessageRole};
 pub use prompts::{P_CONTEXT_A, P_CONTEXT_B, P_DIRECT, P_MINIMAL, PromptLibrary};
+pub use question::{Expect, Question, Request};
 pub use service::{Answer, Llm, LlmOptions, LlmService};
 pub use strategy::{
     LLM_DIRECT, LLM_MODEL, LlmDirectPolicy, LlmDirectStrategy, LlmLikelihood, LlmSpec,
-    PrefetchSummary, prefetch_probabilities, register_strategies,
+    PrefetchProgress, PrefetchSummary, Resolved, prefetch_probabilities, register_strategies,
 };

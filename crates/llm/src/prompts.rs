@@ -21,6 +21,7 @@ use std::path::Path;
 use minijinja::{Environment, UndefinedBehavior};
 use serde::Serialize;
 
+use crate::answer::WorkedExample;
 use crate::context::{DirectContext, HouseContext, ProbabilityContext, ProbabilityQuery};
 use crate::error::{LlmError, Result};
 use crate::message::{ChatMessage, MessageRole};
@@ -41,6 +42,13 @@ pub const BUILTIN_TEMPLATES: [(&str, &str); 4] = [
     (P_MINIMAL, include_str!("../prompts/p-minimal.j2")),
     (P_DIRECT, include_str!("../prompts/p-direct.j2")),
 ];
+
+static EXAMPLE: std::sync::LazyLock<regex::Regex> = std::sync::LazyLock::new(|| {
+    regex::Regex::new(
+        r"\{#-?\s*ferret:example\s+percent=(\d+(?:\.\d+)?)\s+words=([^\s#-]+(?:-[^\s#-]+)*)",
+    )
+    .expect("constant pattern")
+});
 
 /// Named prompt templates.
 #[derive(Debug)]
@@ -140,6 +148,23 @@ impl PromptLibrary {
     /// A template's source text.
     pub fn source(&self, name: &str) -> Option<&str> {
         self.sources.get(name).map(String::as_str)
+    }
+
+    /// The worked example template `name` declares with a comment
+    /// `{# ferret:example percent=90 words=egg,eggs #}`, if it declares one: answers restating
+    /// it are not taken as answers.
+    pub fn example(&self, name: &str) -> Option<WorkedExample> {
+        let c = EXAMPLE.captures(self.sources.get(name)?)?;
+        Some(WorkedExample {
+            percent: c.get(1)?.as_str().parse().ok()?,
+            words: c
+                .get(2)?
+                .as_str()
+                .split(',')
+                .map(|w| w.trim().to_lowercase())
+                .filter(|w| !w.is_empty())
+                .collect(),
+        })
     }
 
     /// Renders template `name` with `ctx` into messages.
@@ -243,7 +268,7 @@ mod tests {
         let plan = QueryPlan::new(&house, &ObjectType::new("RemoteControl"));
         let lib = PromptLibrary::new();
         let m = lib
-            .probability_messages(P_CONTEXT_A, &ctx, &plan.queries[3])
+            .probability_messages(P_CONTEXT_A, &ctx, &plan.queries[4])
             .unwrap();
         assert_eq!(m.len(), 2);
         assert_eq!(m[0].role, MessageRole::System);
@@ -264,7 +289,7 @@ mod tests {
             "{u}"
         );
         assert!(
-            u.ends_with("What is the likelihood that I find a remote control in the dresser in the bedroom?\nAnswer with a percentage between 1% and 100% only."),
+            u.ends_with("What is the likelihood that I find a remote control in the dresser in the bedroom 2?\nAnswer with a percentage between 1% and 100% only."),
             "{u}"
         );
     }
@@ -326,6 +351,18 @@ mod tests {
         // A probability template lacks P-DIRECT's variables: strict rendering refuses it.
         let e = lib.render(P_CONTEXT_A, &dc).unwrap_err().to_string();
         assert!(e.contains("p-context-a"), "{e}");
+    }
+
+    #[test]
+    fn worked_examples_are_declared() {
+        let lib = PromptLibrary::new();
+        let a = lib.example(P_CONTEXT_A).unwrap();
+        assert_eq!(a.percent, 90.0);
+        assert!(a.words.contains(&"eggs".to_string()), "{a:?}");
+        let b = lib.example(P_CONTEXT_B).unwrap();
+        assert_eq!(b.percent, 85.0);
+        assert!(b.words.contains(&"bread".to_string()), "{b:?}");
+        assert_eq!(lib.example(P_MINIMAL), None);
     }
 
     #[test]

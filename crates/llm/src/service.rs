@@ -12,8 +12,10 @@ use crate::client::{EndpointClient, TokenUsage};
 use crate::config::{Endpoint, LlmConfig};
 use crate::error::{LlmError, Result};
 use crate::ledger::{Ledger, TokenReport};
-use crate::message::{ChatMessage, prompt_start};
+use crate::logprobs::TokenLogprob;
+use crate::message::prompt_start;
 use crate::prompts::PromptLibrary;
+use crate::question::{Question, Request};
 
 /// Characters of a prompt shown when it is missing from the cache.
 const PROMPT_PREVIEW_CHARS: usize = 160;
@@ -33,6 +35,8 @@ pub struct Answer {
     pub latency: Duration,
     /// Its cache key.
     pub key: String,
+    /// Token log-probabilities, when they were asked for and the server sent them.
+    pub logprobs: Option<Vec<TokenLogprob>>,
 }
 
 /// One LLM endpoint with the response cache in front of it.
@@ -44,6 +48,10 @@ pub struct Llm {
     ledger: Arc<Ledger>,
     /// One lock per prompt being asked, so concurrent askers of the same prompt send it once.
     inflight: Mutex<HashMap<String, Arc<tokio::sync::Mutex<()>>>>,
+    /// Set when a request failed after all its retries in a way that says the endpoint is down
+    /// (refused or cut connections, timeouts, 429/5xx): every later question of the run then
+    /// fails at once instead of going through the same retries again.
+    down: Mutex<Option<String>>,
 }
 
 impl Llm {
@@ -61,6 +69,7 @@ impl Llm {
             offline,
             ledger,
             inflight: Mutex::new(HashMap::new()),
+            down: Mutex::new(None),
         })
     }
 
@@ -79,14 +88,32 @@ impl Llm {
         &self.client
     }
 
+    /// Why the endpoint was given up on in this run, if it was.
+    pub fn down(&self) -> Option<String> {
+        self.down.lock().unwrap_or_else(|p| p.into_inner()).clone()
+    }
+
     /// The ledger it counts into.
     pub fn ledger(&self) -> &Arc<Ledger> {
         &self.ledger
     }
 
-    /// The cache key `messages` have at this endpoint.
-    pub fn key(&self, messages: &[ChatMessage]) -> String {
-        cache_key(&self.endpoint().config, messages)
+    /// The request this endpoint receives for `question`.
+    pub fn request(&self, question: &Question) -> Request {
+        Request::new(&self.endpoint().config, question)
+    }
+
+    /// The cache key `question` has at this endpoint.
+    pub fn key(&self, question: &Question) -> String {
+        cache_key(&self.endpoint().config, &self.request(question))
+    }
+
+    /// True when the answer to `question` is in the cache (nothing is counted).
+    pub fn is_cached(&self, question: &Question) -> Result<bool> {
+        match &self.cache {
+            Some(c) => Ok(c.get(&self.key(question))?.is_some()),
+            None => Ok(false),
+        }
     }
 
     fn cost(&self, usage: &TokenUsage) -> f64 {
@@ -104,8 +131,9 @@ impl Llm {
         // SQLite calls block the thread briefly (an indexed lookup; a busy wait only while another
         // process commits); cheap next to an HTTP request.
         Ok(cache.get(key)?.map(|hit| {
-            self.ledger.record_cache_hit(self.name(), strategy);
+            self.ledger.record_cache_hit(self.name(), strategy, key);
             Answer {
+                logprobs: hit.logprobs,
                 cost_usd: self.cost(&hit.usage),
                 text: hit.reply,
                 usage: hit.usage,
@@ -116,10 +144,11 @@ impl Llm {
         }))
     }
 
-    /// The answer to `messages`, from the cache if it is there, else from the server (then stored
+    /// The answer to `question`, from the cache if it is there, else from the server (then stored
     /// in the cache before it is returned). `strategy` names who asks, for accounting.
-    pub async fn ask(&self, messages: &[ChatMessage], strategy: &str) -> Result<Answer> {
-        let key = self.key(messages);
+    pub async fn ask(&self, question: &Question, strategy: &str) -> Result<Answer> {
+        let request = self.request(question);
+        let key = cache_key(&self.endpoint().config, &request);
         if let Some(hit) = self.cached(&key, strategy)? {
             return Ok(hit);
         }
@@ -127,7 +156,8 @@ impl Llm {
             return Err(LlmError::NotCached {
                 endpoint: self.name().to_string(),
                 model: self.endpoint().config.model.clone(),
-                prompt_start: prompt_start(messages, PROMPT_PREVIEW_CHARS),
+                about: question.about.clone(),
+                prompt_start: prompt_start(&request.messages, PROMPT_PREVIEW_CHARS),
             });
         }
         let gate = {
@@ -139,7 +169,7 @@ impl Llm {
             // Someone may have answered it while we waited.
             match self.cached(&key, strategy)? {
                 Some(hit) => Ok(hit),
-                None => self.ask_server(messages, &key, strategy).await,
+                None => self.ask_server(&request, &key, strategy).await,
             }
         };
         self.inflight
@@ -149,16 +179,33 @@ impl Llm {
         answer
     }
 
-    async fn ask_server(
-        &self,
-        messages: &[ChatMessage],
-        key: &str,
-        strategy: &str,
-    ) -> Result<Answer> {
-        let reply = self.client.complete(messages).await?;
+    async fn ask_server(&self, request: &Request, key: &str, strategy: &str) -> Result<Answer> {
+        if let Some(reason) = self.down() {
+            return Err(LlmError::EndpointDown {
+                endpoint: self.name().to_string(),
+                reason,
+            });
+        }
+        let reply = match self.client.complete(request).await {
+            Ok(r) => r,
+            Err(e) => {
+                let endpoint_down = match &e {
+                    LlmError::Timeout { .. } | LlmError::Connection { .. } => true,
+                    LlmError::Status { status, .. } => {
+                        *status == 429 || *status == 408 || *status >= 500
+                    }
+                    _ => false,
+                };
+                if endpoint_down {
+                    let mut down = self.down.lock().unwrap_or_else(|p| p.into_inner());
+                    down.get_or_insert_with(|| e.to_string());
+                }
+                return Err(e);
+            }
+        };
         let cost = self.cost(&reply.usage);
         self.ledger
-            .record_sent(self.name(), strategy, &reply.usage, cost);
+            .record_sent(self.name(), strategy, key, &reply.usage, cost);
         let mut answer = Answer {
             text: reply.text,
             usage: reply.usage,
@@ -166,6 +213,7 @@ impl Llm {
             from_cache: false,
             latency: reply.latency,
             key: key.to_string(),
+            logprobs: reply.logprobs,
         };
         if let Some(cache) = &self.cache {
             let config = &self.endpoint().config;
@@ -177,15 +225,17 @@ impl Llm {
                     .cache_id
                     .clone()
                     .unwrap_or_else(|| config.normalized_base_url().to_string()),
-                messages: messages.to_vec(),
+                messages: request.messages.clone(),
                 reply: answer.text.clone(),
                 usage: answer.usage,
                 latency: answer.latency,
                 created_unix: now_unix(),
+                logprobs: answer.logprobs.clone(),
             })?;
             // Another process may have stored its answer first; use the stored one so that every
             // run and every replay sees the same answer.
             answer.text = stored.reply;
+            answer.logprobs = stored.logprobs;
         }
         Ok(answer)
     }
@@ -289,6 +339,16 @@ impl LlmService {
         )?);
         llms.insert(name.to_string(), llm.clone());
         Ok(llm)
+    }
+
+    /// The LLMs given up on in this run, with the failure that stopped each.
+    pub fn failed_llms(&self) -> Vec<(String, String)> {
+        self.llms
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .iter()
+            .filter_map(|(name, llm)| llm.down().map(|why| (name.clone(), why)))
+            .collect()
     }
 
     /// The config.

@@ -7,7 +7,7 @@
 //! The plan crate's traits are synchronous (trials run on rayon threads); these types reach the
 //! async client through the [`LlmService`]'s runtime with `block_on`.
 
-use std::collections::{BTreeMap, HashMap, HashSet};
+use std::collections::{HashMap, HashSet};
 use std::sync::{Arc, Mutex};
 
 use ferret_plan::policy::nearest;
@@ -21,11 +21,18 @@ use futures::future::join_all;
 use futures::stream::{self, StreamExt};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::answer::{FALLBACK_PROBABILITY, MatchKind, match_location, parse_probability};
-use crate::context::{DirectContext, HouseContext, QueryPlan};
+use crate::answer::{
+    AnswerClass, FALLBACK_PROBABILITY, MatchKind, WorkedExample, contains_phrase, match_location,
+    read_probability,
+};
+use crate::client::TokenUsage;
+use crate::config::ProbabilityFrom;
+use crate::context::{DirectContext, HouseContext, ProbabilityQuery, QueryPlan};
 use crate::error::{LlmError, Result};
-use crate::ledger::AnswerOutcome;
+use crate::ledger::{AnswerOutcome, LogprobUse};
+use crate::logprobs::expected_percentage;
 use crate::message::ChatMessage;
+use crate::question::{Expect, LOCATION_REMINDER, PROBABILITY_REMINDER, Question};
 use crate::service::{Answer, Llm, LlmService};
 
 /// The strategy kind of the LLM-informed planner.
@@ -90,11 +97,30 @@ fn likelihood_error(source: &str, e: LlmError) -> PlanError {
 /// (house name, house index, container count, target).
 type MemoKey = (String, usize, usize, ObjectType);
 
-/// A question to prefetch: who asks, what, on behalf of which strategy.
+/// A question to prefetch, and the source that asks it.
 struct Job {
-    llm: Arc<Llm>,
-    messages: Vec<ChatMessage>,
-    strategy: String,
+    source: Arc<LlmLikelihood>,
+    question: Question,
+    query: ProbabilityQuery,
+}
+
+/// A probability question answered, re-asks included.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Resolved {
+    /// The first question's cache key (what the ledger counts distinct prompts by).
+    pub key: String,
+    /// Tokens of every exchange.
+    pub usage: TokenUsage,
+    /// USD of every exchange.
+    pub cost_usd: f64,
+    /// The first answer's class.
+    pub class: AnswerClass,
+    /// True when the first answer was unusable and the question was asked again.
+    pub reasked: bool,
+    /// The probability, `None` when every answer was unusable.
+    pub value: Option<f64>,
+    /// Where the value came from.
+    pub logprobs: LogprobUse,
 }
 
 /// `P_S` from an LLM: one question per (target, container type, room type) of a house, asked
@@ -153,35 +179,129 @@ impl LlmLikelihood {
         house: &House,
         target: &ObjectType,
     ) -> Result<(QueryPlan, Vec<Vec<ChatMessage>>)> {
+        let (plan, questions) = self.questions(house, target)?;
+        Ok((plan, questions.into_iter().map(|q| q.messages).collect()))
+    }
+
+    /// The questions for `target` in `house`.
+    pub fn questions(
+        &self,
+        house: &House,
+        target: &ObjectType,
+    ) -> Result<(QueryPlan, Vec<Question>)> {
         let plan = QueryPlan::new(house, target);
         let ctx = HouseContext::new(house);
         let prompts = self.service.prompts();
-        let messages = plan
+        let questions = plan
             .queries
             .iter()
-            .map(|q| prompts.probability_messages(&self.prompt, &ctx, q))
+            .map(|q| {
+                let messages = prompts.probability_messages(&self.prompt, &ctx, q)?;
+                Ok(Question::probability(
+                    messages,
+                    format!("house {} (#{}): {}", house.name, house.index, q.describe()),
+                ))
+            })
             .collect::<Result<Vec<_>>>()?;
-        Ok((plan, messages))
+        Ok((plan, questions))
     }
 
-    /// Reads one answer, counting it.
-    fn read(&self, answer: &Answer) -> Probability {
-        let parsed = parse_probability(&answer.text);
-        if parsed.is_none() {
-            tracing::debug!(source = %self.name, answer = %answer.text, "unreadable probability; using {FALLBACK_PROBABILITY}");
+    /// The prompt's worked example, unless the question is about the example's own object (then
+    /// the example's value may well be the answer).
+    fn example_for(&self, query: &ProbabilityQuery) -> Option<WorkedExample> {
+        let example = self.service.prompts().example(&self.prompt)?;
+        let asked = format!(
+            "{} {}",
+            query.target.words().to_lowercase(),
+            query.container.words().to_lowercase()
+        );
+        (!example.words.iter().any(|w| contains_phrase(&asked, w))).then_some(example)
+    }
+
+    /// Reads one answer: its class, the probability (from the text, or from the tokens'
+    /// log-probabilities when the endpoint says so), and where it came from.
+    fn read(
+        &self,
+        answer: &Answer,
+        example: Option<&WorkedExample>,
+    ) -> (AnswerClass, Option<f64>, LogprobUse) {
+        let r = read_probability(&answer.text, example);
+        let Some(p) = r.probability else {
+            return (r.class, None, LogprobUse::NotWanted);
+        };
+        if self.llm.endpoint().config.probability_from == ProbabilityFrom::Text {
+            return (r.class, Some(p), LogprobUse::NotWanted);
+        }
+        let expected = match (&answer.logprobs, r.number) {
+            (Some(tokens), Some(number)) => expected_percentage(tokens, &answer.text, number).ok(),
+            _ => None,
+        };
+        match expected {
+            Some(e) => (
+                r.class,
+                Some((e / 100.0).clamp(FALLBACK_PROBABILITY, 1.0)),
+                LogprobUse::Used,
+            ),
+            None => (r.class, Some(p), LogprobUse::Missing),
+        }
+    }
+
+    /// Asks `question` (about `query`), and asks again with a format reminder while the answer
+    /// is unusable, up to the endpoint's `max_reasks`. Every exchange goes through the cache.
+    /// Nothing is counted as used here (see [`Self::record`]).
+    pub async fn resolve(&self, question: &Question, query: &ProbabilityQuery) -> Result<Resolved> {
+        let example = self.example_for(query);
+        let first = self.llm.ask(question, &self.strategy).await?;
+        let (class, mut value, mut logprobs) = self.read(&first, example.as_ref());
+        let mut resolved = Resolved {
+            key: first.key.clone(),
+            usage: first.usage,
+            cost_usd: first.cost_usd,
+            class,
+            reasked: false,
+            value,
+            logprobs,
+        };
+        let mut asked = question.clone();
+        let mut answer = first;
+        for _ in 0..self.llm.endpoint().config.max_reasks {
+            if value.is_some() {
+                break;
+            }
+            tracing::debug!(source = %self.name, answer = %answer.text, "unusable probability answer; asking again");
+            resolved.reasked = true;
+            asked = asked.reask(&answer.text, PROBABILITY_REMINDER);
+            answer = self.llm.ask(&asked, &self.strategy).await?;
+            resolved.usage.prompt_tokens += answer.usage.prompt_tokens;
+            resolved.usage.completion_tokens += answer.usage.completion_tokens;
+            resolved.cost_usd += answer.cost_usd;
+            (_, value, logprobs) = self.read(&answer, example.as_ref());
+        }
+        resolved.value = value;
+        resolved.logprobs = logprobs;
+        Ok(resolved)
+    }
+
+    /// Counts a resolved question as used (once per distinct prompt) and returns its probability.
+    fn record(&self, r: &Resolved) -> Probability {
+        if r.value.is_none() {
+            tracing::debug!(source = %self.name, "unreadable probability; using {FALLBACK_PROBABILITY}");
         }
         self.llm.ledger().record_answer(
             self.llm.name(),
             &self.strategy,
-            &answer.key,
-            &answer.usage,
-            answer.cost_usd,
+            &r.key,
+            &r.usage,
+            r.cost_usd,
             AnswerOutcome::Probability {
-                parsed: parsed.is_some(),
+                class: r.class,
+                reasked: r.reasked,
+                value: r.value,
+                logprobs: r.logprobs,
             },
         );
         Probability::clamped(
-            parsed.unwrap_or(FALLBACK_PROBABILITY),
+            r.value.unwrap_or(FALLBACK_PROBABILITY),
             FALLBACK_PROBABILITY,
             1.0,
         )
@@ -193,11 +313,17 @@ impl LlmLikelihood {
         house: &House,
         target: &ObjectType,
     ) -> Result<Vec<Probability>> {
-        let (plan, messages) = self.messages(house, target)?;
-        let answers = join_all(messages.iter().map(|m| self.llm.ask(m, &self.strategy))).await;
+        let (plan, questions) = self.questions(house, target)?;
+        let answers = join_all(
+            questions
+                .iter()
+                .zip(&plan.queries)
+                .map(|(q, query)| self.resolve(q, query)),
+        )
+        .await;
         let per_query = answers
             .into_iter()
-            .map(|a| a.map(|a| self.read(&a)))
+            .map(|a| a.map(|r| self.record(&r)))
             .collect::<Result<Vec<_>>>()?;
         Ok(plan.of_container.iter().map(|&q| per_query[q]).collect())
     }
@@ -346,8 +472,28 @@ impl LlmDirectPolicy<'_> {
                 belief.house.name
             )));
         }
-        let answer = s.service.block_on(s.llm.ask(&messages, &s.name))?;
-        let (choice, kind) = match match_location(&answer.text, &labels) {
+        let mut question = Question {
+            messages,
+            expect: Expect::Location(labels.clone()),
+            about: format!(
+                "house {} (#{}): where to look for {} next",
+                belief.house.name,
+                belief.house.index,
+                belief.target.words()
+            ),
+        };
+        let mut answer = s.service.block_on(s.llm.ask(&question, &s.name))?;
+        let first_key = answer.key.clone();
+        let mut matched = match_location(&answer.text, &labels);
+        for _ in 0..s.llm.endpoint().config.max_reasks {
+            if matched.is_some() {
+                break;
+            }
+            question = question.reask(&answer.text, LOCATION_REMINDER);
+            answer = s.service.block_on(s.llm.ask(&question, &s.name))?;
+            matched = match_location(&answer.text, &labels);
+        }
+        let (choice, kind) = match matched {
             Some((i, kind)) => (order[i], kind),
             None => {
                 let c = nearest(belief, order.iter().copied()).unwrap_or(order[0]);
@@ -358,7 +504,7 @@ impl LlmDirectPolicy<'_> {
         s.llm.ledger().record_answer(
             s.llm.name(),
             &s.name,
-            &answer.key,
+            &first_key,
             &answer.usage,
             answer.cost_usd,
             AnswerOutcome::Direct(kind),
@@ -444,21 +590,31 @@ pub struct PrefetchSummary {
     pub skipped: usize,
 }
 
+/// Reports prefetch progress: called with (questions finished, questions in all) as answers
+/// arrive. The library prints nothing; the CLI draws a progress bar from this.
+pub type PrefetchProgress<'a> = &'a (dyn Fn(usize, usize) + Send + Sync);
+
 /// Asks every probability question the `llm+model` strategies among `specs` will ask on `trials`
-/// (house, target), concurrently (each endpoint within its concurrency limit), so that the trials
-/// then find every answer in the cache. Other specs are ignored. In offline mode nothing is sent;
-/// missing answers are listed in `failures`.
+/// (house, target), concurrently (each endpoint within its concurrency limit), re-asking unusable
+/// answers as the trials would, so that the trials then find every answer in the cache. Other
+/// specs are ignored. In offline mode nothing is sent; missing answers are listed in `failures`.
 ///
 /// Answers are not counted as used here (the trials count what they use); requests sent are.
 pub fn prefetch_probabilities(
     service: &Arc<LlmService>,
     specs: &[String],
     trials: &[(&House, &ObjectType)],
+    progress: PrefetchProgress<'_>,
 ) -> Result<PrefetchSummary> {
-    // (LLM name, cache key) → (LLM, messages, strategy), first asker wins.
-    let mut work: BTreeMap<(String, String), Job> = BTreeMap::new();
+    // Distinct requests (the cache key says everything that decides an answer, so endpoints that
+    // send the same request share it), in the order the trials would ask them: house by house,
+    // so that consecutive requests share the long prefix a house's context prompts have in
+    // common, which servers with prefix caching (llama.cpp, vLLM, OpenAI) then skip.
+    let mut work: Vec<Job> = Vec::new();
+    let mut seen_keys: HashSet<String> = HashSet::new();
     let mut summary = PrefetchSummary::default();
     let mut seen_sources = HashSet::new();
+    let mut sources = Vec::new();
     for raw in specs {
         let Ok(spec) = StrategySpec::parse(raw) else {
             continue;
@@ -473,66 +629,79 @@ pub fn prefetch_probabilities(
         if !seen_sources.insert((parsed.prompt.clone(), parsed.llm.clone())) {
             continue;
         }
-        let source = LlmLikelihood::new(service.clone(), &parsed.prompt, &parsed.llm, raw)?;
+        sources.push(Arc::new(LlmLikelihood::new(
+            service.clone(),
+            &parsed.prompt,
+            &parsed.llm,
+            raw,
+        )?));
+    }
+    for source in &sources {
         for (house, target) in trials {
-            let (_, messages) = source.messages(house, target)?;
-            for m in messages {
+            let (plan, questions) = source.questions(house, target)?;
+            for (question, query) in questions.into_iter().zip(plan.queries) {
                 summary.questions += 1;
-                let key = source.llm.key(&m);
-                work.entry((source.llm.name().to_string(), key))
-                    .or_insert_with(|| Job {
-                        llm: source.llm.clone(),
-                        messages: m,
-                        strategy: raw.clone(),
+                if seen_keys.insert(source.llm.key(&question)) {
+                    work.push(Job {
+                        source: source.clone(),
+                        question,
+                        query,
                     });
+                }
             }
         }
     }
     summary.distinct = work.len();
-    let mut per_llm: BTreeMap<String, Vec<Job>> = BTreeMap::new();
-    for ((llm, key), job) in work {
-        let hit = match service.cache()? {
-            Some(c) => c.get(&key)?.is_some(),
-            None => false,
-        };
-        if hit {
+    // One queue per server: endpoints naming the same server (or cache id) share a queue, so
+    // their requests do not interleave and spoil each other's prefix cache.
+    let mut per_server: Vec<(String, Vec<Job>)> = Vec::new();
+    for job in work {
+        if job.source.llm.is_cached(&job.question)? {
             summary.cached += 1;
-        } else {
-            per_llm.entry(llm).or_default().push(job);
+        }
+        let config = &job.source.llm.endpoint().config;
+        let server = config
+            .cache_id
+            .clone()
+            .unwrap_or_else(|| config.normalized_base_url().to_string());
+        match per_server.iter_mut().find(|(s, _)| *s == server) {
+            Some((_, jobs)) => jobs.push(job),
+            None => per_server.push((server, vec![job])),
         }
     }
-    let results = service.block_on(join_all(per_llm.into_values().map(|jobs| async move {
-        // Questions enter at the endpoint's concurrency, so that a failure can stop the rest: a
-        // failed request has already been retried up to max_attempts, and the remaining ones would
-        // most likely fail the same way, slowly.
-        let width = jobs
-            .first()
-            .map_or(1, |j| j.llm.endpoint().config.concurrency.max(1));
-        let stop = AtomicBool::new(false);
-        let stop = &stop;
-        stream::iter(jobs.iter())
-            .map(
-                |Job {
-                     llm,
-                     messages: m,
-                     strategy,
-                 }| async move {
+    let total = summary.distinct;
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let done = &done;
+    progress(0, total);
+    let results = service.block_on(join_all(per_server.into_iter().map(
+        |(_, jobs)| async move {
+            // Questions enter at the endpoint's concurrency, so that a failure can stop the rest: a
+            // failed request has already been retried up to max_attempts, and the remaining ones would
+            // most likely fail the same way, slowly.
+            let width = jobs
+                .first()
+                .map_or(1, |j| j.source.llm.endpoint().config.concurrency.max(1));
+            let stop = AtomicBool::new(false);
+            let stop = &stop;
+            stream::iter(jobs.iter())
+                .map(|job| async move {
                     if stop.load(Ordering::Relaxed) {
                         return None;
                     }
-                    let r = llm.ask(m, strategy).await;
+                    let r = job.source.resolve(&job.question, &job.query).await;
                     if let Err(e) = &r
                         && !matches!(e, LlmError::NotCached { .. })
                     {
                         stop.store(true, Ordering::Relaxed);
                     }
+                    progress(done.fetch_add(1, Ordering::Relaxed) + 1, total);
                     Some(r)
-                },
-            )
-            .buffer_unordered(width)
-            .collect::<Vec<_>>()
-            .await
-    })));
+                })
+                .buffer_unordered(width)
+                .collect::<Vec<_>>()
+                .await
+        },
+    )));
     for outcome in results.into_iter().flatten() {
         match outcome {
             None => summary.skipped += 1,
@@ -540,6 +709,7 @@ pub fn prefetch_probabilities(
             Some(Err(e)) => summary.failures.push(e.to_string()),
         }
     }
+    summary.asked = summary.asked.saturating_sub(summary.cached);
     if !summary.failures.is_empty() {
         tracing::warn!(
             failed = summary.failures.len(),

@@ -6,17 +6,19 @@ mod common;
 use std::time::{Duration, Instant};
 
 use common::{KEY, completion, config, endpoint, message_content};
-use ferret_llm::{ChatMessage, Endpoint, EndpointClient, LlmError, MaxTokensParam, TokenUsage};
+use ferret_llm::{
+    ChatMessage, Endpoint, EndpointClient, LlmError, MaxTokensParam, Request, TokenUsage,
+};
 use serde_json::{Value, json};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use wiremock::matchers::{bearer_token, body_partial_json, header, method, path};
 use wiremock::{Mock, MockServer, ResponseTemplate};
 
-fn question() -> Vec<ChatMessage> {
-    vec![
+fn question() -> Request {
+    Request::plain(vec![
         ChatMessage::system("You help a robot."),
         ChatMessage::user("Is the remote on the sofa?"),
-    ]
+    ])
 }
 
 #[tokio::test]
@@ -469,9 +471,11 @@ async fn concurrency_limit_holds() {
     let tasks: Vec<_> = (0..4)
         .map(|i| {
             let client = client.clone();
-            tokio::spawn(
-                async move { client.complete(&[ChatMessage::user(format!("q{i}"))]).await },
-            )
+            tokio::spawn(async move {
+                client
+                    .complete(&Request::plain(vec![ChatMessage::user(format!("q{i}"))]))
+                    .await
+            })
         })
         .collect();
     for t in tasks {

@@ -8,7 +8,7 @@ use std::io::Write;
 use std::sync::{Arc, Mutex};
 
 use common::{KEY, completion, endpoint};
-use ferret_llm::{ChatMessage, Ledger, Llm, ResponseCache};
+use ferret_llm::{ChatMessage, Ledger, Llm, Question, ResponseCache};
 use wiremock::matchers::{body_string_contains, method};
 use wiremock::{Mock, MockServer, ResponseTemplate};
 
@@ -69,11 +69,17 @@ async fn key_is_absent_from_cache_file_and_logs() {
     )
     .unwrap();
     for q in ["Is the remote on the sofa?", "Is the egg in the fridge?"] {
-        let a = llm.ask(&[ChatMessage::user(q)], "s").await.unwrap();
+        let a = llm
+            .ask(&Question::free(vec![ChatMessage::user(q)]), "s")
+            .await
+            .unwrap();
         assert_eq!(a.text, "70%");
     }
     let err = llm
-        .ask(&[ChatMessage::user("forbidden question")], "s")
+        .ask(
+            &Question::free(vec![ChatMessage::user("forbidden question")]),
+            "s",
+        )
         .await
         .unwrap_err();
     tracing::error!("run failed: {err}; {err:?}");

@@ -123,25 +123,41 @@ fn llm_model_reads_answers_as_the_design_says() {
         .unwrap();
     // fridge "0.7"; counter tops "around 70 percent"; beds "I cannot say" → 0.01; dresser "85%".
     assert_eq!(probabilities(&p), [0.7, 0.7, 0.7, 0.01, 0.01, 0.85]);
-    // One question per (container type, room type): fridge, counter top, bed, dresser.
+    // One question per (container type, room): fridge, counter top, bed in bedroom 1, bed in
+    // bedroom 2, dresser; the two unusable bed answers are asked once more with a reminder.
     let asked = server.requests();
-    assert_eq!(asked.len(), 4, "{asked:#?}");
+    assert_eq!(asked.len(), 7, "{asked:#?}");
+    for room in ["bedroom 1", "bedroom 2"] {
+        assert_eq!(
+            asked
+                .iter()
+                .filter(|q| q.contains(&format!("in the bed in the {room}?")))
+                .count(),
+            1,
+            "{asked:#?}"
+        );
+    }
     assert_eq!(
         asked
             .iter()
-            .filter(|q| q.contains("in the bed in the bedroom"))
+            .filter(|q| q.as_str() == ferret_llm::question::PROBABILITY_REMINDER)
             .count(),
-        1,
-        "the two beds in two bedrooms share one question"
+        2,
+        "{asked:#?}"
     );
     let report = service.report();
     let row = report.row("mock", strategy).unwrap();
+    let a = row.answers;
     assert_eq!(
         (
-            row.answers.probability_answers,
-            row.answers.probability_fallbacks
+            a.probability_answers,
+            a.probability_fallbacks,
+            a.reasked,
+            a.class_number_only,
+            a.class_number_in_prose,
+            a.class_no_number
         ),
-        (4, 1)
+        (5, 2, 2, 2, 1, 2)
     );
     assert_eq!(
         (
@@ -149,14 +165,14 @@ fn llm_model_reads_answers_as_the_design_says() {
             row.sent.input_tokens,
             row.sent.output_tokens
         ),
-        (4, 480, 12)
+        (7, 840, 21)
     );
-    assert!((row.sent.cost_usd - (480.0 + 120.0) / 1e6).abs() < 1e-12);
+    assert!((row.sent.cost_usd - (840.0 + 210.0) / 1e6).abs() < 1e-12);
     // Asking again (another trial on the house) sends nothing and counts nothing twice.
     source
         .likelihoods(&house, &ObjectType::new("RemoteControl"))
         .unwrap();
-    assert_eq!(server.requests().len(), 4);
+    assert_eq!(server.requests().len(), 7);
     assert_eq!(
         service
             .report()
@@ -164,7 +180,7 @@ fn llm_model_reads_answers_as_the_design_says() {
             .unwrap()
             .answers
             .probability_answers,
-        4
+        5
     );
 }
 
@@ -184,12 +200,14 @@ fn llm_model_strategy_plans_over_llm_probabilities() {
     };
     let out = run_trial(strategy.as_ref(), &house, &truth, &d, &trial).unwrap();
     assert_eq!(out.found, Some(5));
-    // p-context-a questions carry the house.
+    // p-context-a questions carry the house (re-asks carry only the reminder).
+    let asked = server.requests();
     assert!(
-        server
-            .requests()
+        asked
             .iter()
-            .all(|q| q.contains("The kitchen contains: fridge, counter top (2)."))
+            .filter(|q| q.as_str() != ferret_llm::question::PROBABILITY_REMINDER)
+            .all(|q| q.contains("The kitchen contains: fridge, counter top (2).")),
+        "{asked:#?}"
     );
 }
 
@@ -230,8 +248,16 @@ fn llm_direct_follows_the_answer_and_falls_back_to_the_nearest() {
     let out = run_trial(strategy.as_ref(), &house, &truth, &d, &apple).unwrap();
     assert_eq!(out.searched, [5, 4, 3, 2, 1, 0]);
     let asked = server.requests();
-    // 1 question for the remote, 5 for the apple: the last container is taken without asking.
-    assert_eq!(asked.len(), 6, "{asked:#?}");
+    // 1 question for the remote, 5 for the apple (the last container is taken without asking),
+    // and each of the 4 unmatched answers asked once more with a reminder.
+    assert_eq!(asked.len(), 10, "{asked:#?}");
+    assert_eq!(
+        asked
+            .iter()
+            .filter(|q| q.as_str() == ferret_llm::question::LOCATION_REMINDER)
+            .count(),
+        4
+    );
     assert!(
         asked[1].contains("The robot is in the kitchen.")
             && asked[1].contains("Object to find: apple"),
@@ -342,10 +368,10 @@ fn prefetch_asks_every_question_once_then_trials_send_nothing() {
     ]
     .map(String::from)
     .to_vec();
-    let summary = prefetch_probabilities(&service, &specs, &trials).unwrap();
-    // p-minimal has no house in it: 4 questions over all houses (the /exact variant shares them).
-    // p-context-a names the house's rooms, which are the same in these copies: 4 more.
-    assert_eq!(summary.questions, 24);
+    let summary = prefetch_probabilities(&service, &specs, &trials, &|_, _| {}).unwrap();
+    // p-minimal has no house in it: 5 questions over all houses (the /exact variant shares them).
+    // p-context-a names the house's rooms, which are the same in these copies: 5 more.
+    assert_eq!(summary.questions, 30);
     assert_eq!(
         (
             summary.distinct,
@@ -353,13 +379,21 @@ fn prefetch_asks_every_question_once_then_trials_send_nothing() {
             summary.asked,
             summary.skipped
         ),
-        (8, 0, 8, 0)
+        (10, 0, 10, 0)
     );
     assert!(summary.failures.is_empty());
-    assert_eq!(server.requests().len(), 8);
-    // Prefetching again finds everything cached.
-    let again = prefetch_probabilities(&service, &specs, &trials).unwrap();
-    assert_eq!((again.cached, again.asked), (8, 0));
+    // The two unusable bed answers of each prompt are re-asked during the prefetch too.
+    assert_eq!(server.requests().len(), 14);
+    // Progress is reported up to the number of distinct questions.
+    let seen = std::sync::Mutex::new(Vec::new());
+    let again = prefetch_probabilities(&service, &specs, &trials, &|done, total| {
+        seen.lock().unwrap().push((done, total))
+    })
+    .unwrap();
+    assert_eq!((again.cached, again.asked), (10, 0));
+    let seen = seen.into_inner().unwrap();
+    assert_eq!(seen.first(), Some(&(0, 10)));
+    assert_eq!(seen.iter().map(|s| s.0).max(), Some(10));
     // The trials themselves send nothing.
     let r = registry(&service);
     for spec in &specs[..3] {
@@ -372,7 +406,7 @@ fn prefetch_asks_every_question_once_then_trials_send_nothing() {
             run_trial(s.as_ref(), house, truth, &straight_distances(house), &trial).unwrap();
         }
     }
-    assert_eq!(server.requests().len(), 8);
+    assert_eq!(server.requests().len(), 14);
 }
 
 #[test]

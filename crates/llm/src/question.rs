@@ -1,0 +1,252 @@
+//! A question as ferret asks it, and the request an endpoint receives for it.
+//!
+//! The same [`Question`] becomes different requests at different endpoints: the role text may be
+//! merged into the first user message ([`SystemRole::Merge`]), a JSON schema may constrain the
+//! answer ([`AnswerFormat`]), and token log-probabilities may be requested. The [`Request`] is
+//! what is sent and what the response cache keys on, so two endpoints that send the same request
+//! to the same server share answers.
+
+use serde::Serialize;
+use serde_json::{Value, json};
+
+use crate::config::{AnswerFormat, EndpointConfig, SystemRole};
+use crate::message::{ChatMessage, MessageRole};
+
+/// What kind of answer a question expects.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub enum Expect {
+    /// A percentage (the probability prompts).
+    Probability,
+    /// One of these location labels (P-DIRECT).
+    Location(Vec<String>),
+    /// Anything (a ping).
+    Free,
+}
+
+/// One question: the messages a prompt template rendered, what it expects, and words that say
+/// which question it is (house, target, container, room) for error messages.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub struct Question {
+    /// The rendered prompt.
+    pub messages: Vec<ChatMessage>,
+    /// The expected answer.
+    pub expect: Expect,
+    /// Which question this is, in words (`house val-3 (#3), target remote control, sofa in the
+    /// living room`).
+    pub about: String,
+}
+
+impl Question {
+    /// A question expecting a percentage.
+    pub fn probability(messages: Vec<ChatMessage>, about: impl Into<String>) -> Self {
+        Self {
+            messages,
+            expect: Expect::Probability,
+            about: about.into(),
+        }
+    }
+
+    /// A question whose answer is free text (a ping, a test).
+    pub fn free(messages: Vec<ChatMessage>) -> Self {
+        Self {
+            messages,
+            expect: Expect::Free,
+            about: "a free-text question".into(),
+        }
+    }
+
+    /// The same question continued: the model's `answer`, then `reminder` from the user. Used to
+    /// re-ask an unusable answer; the continuation is a question of its own in the cache.
+    pub fn reask(&self, answer: &str, reminder: &str) -> Self {
+        let mut messages = self.messages.clone();
+        messages.push(ChatMessage::assistant(answer));
+        messages.push(ChatMessage::user(reminder));
+        Self {
+            messages,
+            expect: self.expect.clone(),
+            about: format!("{} (asked again)", self.about),
+        }
+    }
+}
+
+/// The format reminder sent with a re-asked probability question.
+pub const PROBABILITY_REMINDER: &str =
+    "Answer with one percentage between 1% and 100% and nothing else, for example: 40%";
+/// The format reminder sent with a re-asked P-DIRECT question.
+pub const LOCATION_REMINDER: &str = "Answer with exactly one search location from the list, written exactly as in the list, and nothing else.";
+
+/// The request an endpoint receives: what decides its answer.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Request {
+    /// The messages as sent (after [`SystemRole::Merge`]).
+    pub messages: Vec<ChatMessage>,
+    /// `response_format`, when structured output is asked for.
+    pub response_format: Option<Value>,
+    /// `top_logprobs` (with `logprobs: true`), when log-probabilities are asked for.
+    pub top_logprobs: Option<u8>,
+}
+
+impl Request {
+    /// A plain text request: these messages, no structured output, no log-probabilities.
+    pub fn plain(messages: Vec<ChatMessage>) -> Self {
+        Self {
+            messages,
+            response_format: None,
+            top_logprobs: None,
+        }
+    }
+
+    /// The request `config`'s endpoint receives for `question`.
+    pub fn new(config: &EndpointConfig, question: &Question) -> Self {
+        let messages = match config.system_role {
+            SystemRole::System => question.messages.clone(),
+            SystemRole::Merge => merge_system(&question.messages),
+        };
+        let schema = match &question.expect {
+            Expect::Probability => Some(("percent", percent_schema())),
+            Expect::Location(labels) => Some(("location", location_schema(labels))),
+            Expect::Free => None,
+        };
+        let response_format = schema.and_then(|(name, schema)| match config.answer_format {
+            AnswerFormat::Text => None,
+            AnswerFormat::JsonSchema => Some(json!({
+                "type": "json_schema",
+                "json_schema": {"name": name, "strict": true, "schema": schema},
+            })),
+            AnswerFormat::JsonObject => Some(json!({"type": "json_object", "schema": schema})),
+        });
+        // A ping's answer is never read for a number: asking for logprobs would only slow it.
+        let top_logprobs = match question.expect {
+            Expect::Free => None,
+            _ => config.requested_top_logprobs(),
+        };
+        Self {
+            messages,
+            response_format,
+            top_logprobs,
+        }
+    }
+}
+
+/// `{"percent": <integer 1..100>}`. An enum rather than minimum/maximum: llama.cpp's grammar
+/// converter (and so llama-cpp-python's server) ignores numeric bounds but compiles enums.
+fn percent_schema() -> Value {
+    let values: Vec<u32> = (1..=100).collect();
+    json!({
+        "type": "object",
+        "properties": {"percent": {"type": "integer", "enum": values}},
+        "required": ["percent"],
+        "additionalProperties": false,
+    })
+}
+
+/// `{"location": <one of the labels>}`.
+fn location_schema(labels: &[String]) -> Value {
+    json!({
+        "type": "object",
+        "properties": {"location": {"type": "string", "enum": labels}},
+        "required": ["location"],
+        "additionalProperties": false,
+    })
+}
+
+/// The messages with every system message's text moved to the top of the first user message
+/// (or into a user message of its own when there is none).
+fn merge_system(messages: &[ChatMessage]) -> Vec<ChatMessage> {
+    let role: Vec<&str> = messages
+        .iter()
+        .filter(|m| m.role == MessageRole::System)
+        .map(|m| m.content.trim_end())
+        .collect();
+    let mut out: Vec<ChatMessage> = messages
+        .iter()
+        .filter(|m| m.role != MessageRole::System)
+        .cloned()
+        .collect();
+    if role.is_empty() {
+        return out;
+    }
+    let role = role.join("\n\n");
+    match out.iter_mut().find(|m| m.role == MessageRole::User) {
+        Some(first) => first.content = format!("{role}\n\n{}", first.content),
+        None => out.insert(0, ChatMessage::user(role)),
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn q() -> Question {
+        Question::probability(
+            vec![
+                ChatMessage::system("You help a robot."),
+                ChatMessage::user("How likely?"),
+            ],
+            "test",
+        )
+    }
+
+    #[test]
+    fn merge_moves_the_role_into_the_first_user_message() {
+        let mut c = EndpointConfig::new("http://x/v1", "m");
+        assert_eq!(Request::new(&c, &q()).messages, q().messages);
+        c.system_role = SystemRole::Merge;
+        let r = Request::new(&c, &q());
+        assert_eq!(
+            r.messages,
+            vec![ChatMessage::user("You help a robot.\n\nHow likely?")]
+        );
+        let only_system = Question::probability(vec![ChatMessage::system("Role.")], "t");
+        assert_eq!(
+            Request::new(&c, &only_system).messages,
+            vec![ChatMessage::user("Role.")]
+        );
+    }
+
+    #[test]
+    fn formats_follow_the_endpoint() {
+        let mut c = EndpointConfig::new("http://x/v1", "m");
+        let r = Request::new(&c, &q());
+        assert_eq!((r.response_format, r.top_logprobs), (None, None));
+        c.answer_format = AnswerFormat::JsonSchema;
+        c.probability_from = crate::config::ProbabilityFrom::Logprobs;
+        let r = Request::new(&c, &q());
+        let f = r.response_format.unwrap();
+        assert_eq!(f["type"], "json_schema");
+        assert_eq!(f["json_schema"]["strict"], true);
+        let e = &f["json_schema"]["schema"]["properties"]["percent"]["enum"];
+        assert_eq!(e.as_array().map(Vec::len), Some(100));
+        assert_eq!(e[0], 1);
+        assert_eq!(e[99], 100);
+        assert_eq!(r.top_logprobs, Some(20));
+        c.answer_format = AnswerFormat::JsonObject;
+        let labels = vec!["sofa in the living room".to_string()];
+        let direct = Question {
+            expect: Expect::Location(labels),
+            ..q()
+        };
+        let f = Request::new(&c, &direct).response_format.unwrap();
+        assert_eq!(f["type"], "json_object");
+        assert_eq!(
+            f["schema"]["properties"]["location"]["enum"][0],
+            "sofa in the living room"
+        );
+        let ping = Question {
+            expect: Expect::Free,
+            ..q()
+        };
+        let r = Request::new(&c, &ping);
+        assert_eq!((r.response_format, r.top_logprobs), (None, None));
+    }
+
+    #[test]
+    fn reask_appends_the_answer_and_the_reminder() {
+        let again = q().reask("I am not sure", PROBABILITY_REMINDER);
+        assert_eq!(again.messages.len(), 4);
+        assert_eq!(again.messages[2], ChatMessage::assistant("I am not sure"));
+        assert_eq!(again.messages[3].content, PROBABILITY_REMINDER);
+        assert_eq!(again.expect, Expect::Probability);
+    }
+}

@@ -5,10 +5,12 @@
 //! oracle), policies that map a belief to the next container ([`Policy`]: the exact expected-cost
 //! [`Planner`], the optimistic greedy baseline, the oracle), named [`Strategy`]s built from spec
 //! strings through a [`StrategyRegistry`], the trial simulator ([`run_trial`]) and offline replay
-//! ([`replay_cost`]). It depends only on the world crate; LLM-backed sources and policies plug in
+//! ([`replay_cost`]), and the [`Calibration`] of a likelihood source against the ground truth.
+//! It depends only on the world crate; LLM-backed sources and policies plug in
 //! from the llm crate through the same traits.
 
 pub mod belief;
+pub mod calibration;
 pub mod error;
 pub mod likelihood;
 pub mod planner;
@@ -19,6 +21,7 @@ pub mod strategy;
 pub mod trial;
 
 pub use belief::Belief;
+pub use calibration::{Calibration, ReliabilityBin};
 pub use error::{BoxError, PlanError};
 pub use likelihood::{LikelihoodSource, OracleLikelihood, Prior, Uniform};
 pub use planner::{Plan, Problem, solve_brute_force, solve_exact};

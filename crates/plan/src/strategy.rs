@@ -38,6 +38,12 @@ pub trait Strategy: Send + Sync {
 
     /// A fresh policy for one trial.
     fn policy<'a>(&'a self, ctx: &TrialContext<'a>) -> Result<Box<dyn Policy + 'a>, PlanError>;
+
+    /// The likelihood source the strategy plans over, if it plans over one (what `ferret
+    /// calibrate` scores).
+    fn likelihood_source(&self) -> Option<&Arc<dyn LikelihoodSource>> {
+        None
+    }
 }
 
 /// A parsed spec string: its kind (first `/`-separated part) and arguments.
@@ -266,6 +272,10 @@ impl ModelStrategy {
 impl Strategy for ModelStrategy {
     fn name(&self) -> &str {
         &self.name
+    }
+
+    fn likelihood_source(&self) -> Option<&Arc<dyn LikelihoodSource>> {
+        Some(&self.source)
     }
 
     fn policy<'a>(&'a self, ctx: &TrialContext<'a>) -> Result<Box<dyn Policy + 'a>, PlanError> {

@@ -36,6 +36,9 @@ enum Command {
     Prior(commands::prior::Command),
     /// Run every strategy on one trial per house and report costs (paper table I).
     Eval(commands::eval::Args),
+    /// Score likelihood sources (uniform, prior, LLM prompts) against the ground truth: Brier,
+    /// log loss, AUROC, reliability diagram.
+    Calibrate(commands::calibrate::Args),
     /// Replay strategies on an eval run and compare UCB with replay selection over deployments.
     Select(commands::select::Args),
     /// Run a live deployment: choose, run, replay, trial after trial.
@@ -60,6 +63,7 @@ fn main() -> std::process::ExitCode {
         Command::Houses(cmd) => commands::houses::run(cmd),
         Command::Prior(cmd) => commands::prior::run(cmd),
         Command::Eval(args) => commands::eval::run(args),
+        Command::Calibrate(args) => commands::calibrate::run(args),
         Command::Select(args) => commands::select::run(args),
         Command::Deploy(args) => commands::deploy::run(args),
         Command::Llm(cmd) => commands::llm::run(cmd),

@@ -235,7 +235,11 @@ pub fn run(args: Args) -> Result<ExitCode> {
         .collect();
     let pairs: Vec<(&ferret_world::House, &ferret_world::ObjectType)> =
         targets.iter().map(|(h, t)| (*h, t)).collect();
-    super::llm_setup::prefetch(&setup.service, &args.strategies, &pairs)?;
+    let dropped = super::llm_setup::prefetch(&setup.service, &args.llm, &args.strategies, &pairs)?;
+    let strategies: Vec<Arc<dyn Strategy>> = strategies
+        .into_iter()
+        .filter(|s| !dropped.iter().any(|d| d == s.name()))
+        .collect();
     let outcome = evaluate(
         &loaded.scenes,
         &maps,
@@ -274,6 +278,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     draw_pictures(&args, &loaded.scenes, &maps, &strategies, &outcome.rows)?;
     println!("{md}");
     super::llm_setup::write_token_report(&setup.service, &args.out)?;
+    super::llm_setup::check_fallback_gate(&setup.service, &args.llm)?;
     println!(
         "{} trials on {} houses in {:.1} s; wrote {}/{{trials.csv,summary.csv,summary.md,costs.png,trajectories.png}}",
         outcome.rows.len(),
@@ -486,8 +491,7 @@ fn draw_pictures(
                 scene,
                 distances,
                 strategies,
-                args.seed,
-                args.reveal_fraction,
+                rows,
                 &args.out.join("trajectories.png"),
             )?;
         }
@@ -495,29 +499,54 @@ fn draw_pictures(
     Ok(())
 }
 
-/// Draws every strategy's trajectory on one house side by side.
+/// Draws every strategy's trajectory on one house side by side, from the trials already run
+/// (`rows`): nothing is run again, so no LLM is asked twice.
 pub fn draw_house_trajectories(
     scene: &Scene,
     distances: &Distances,
     strategies: &[Arc<dyn Strategy>],
-    seed: u64,
-    reveal_fraction: f64,
+    rows: &[TrialRow],
     out: &Path,
 ) -> Result<()> {
-    let trial = draw_trial(&scene.house, &scene.truth, seed, reveal_fraction)?;
-    let goals = scene.truth.goal_containers(&trial.target);
+    let house = &scene.house;
     let mut panels = Vec::new();
+    let mut target = None;
     for s in strategies {
-        let o = run_trial(s.as_ref(), &scene.house, &scene.truth, distances, &trial)?;
+        let Some(row) = rows.iter().find(|r| {
+            r.house_index == house.index && r.house == house.name && r.strategy == s.name()
+        }) else {
+            continue;
+        };
+        let searched: Vec<usize> = row
+            .searched
+            .split_whitespace()
+            .filter_map(|id| house.container_index(id))
+            .collect();
+        let target_type = ferret_world::ObjectType::new(row.target.clone());
+        let o = TrialOutcome {
+            strategy: row.strategy.clone(),
+            target: target_type.clone(),
+            cost: row.cost_m,
+            searched: searched.clone(),
+            found: house.container_index(&row.found_container),
+        };
         panels.push(TrajectoryPanel {
             title: s.name().to_string(),
             cost_m: o.cost,
             path: o.trajectory(distances).unwrap_or_default(),
-            searched: o.searched.clone(),
-            goals: goals.clone(),
+            searched,
+            goals: scene.truth.goal_containers(&target_type),
             color: None,
         });
+        target = Some(target_type);
     }
+    let Some(target) = target else {
+        anyhow::bail!("no trial on {} to draw", house.name);
+    };
+    let trial = TrialSpec {
+        target,
+        revealed: Vec::new(),
+    };
     let opts = TrajectoryOptions {
         title: Some(format!(
             "Finding a {} in {}",

@@ -100,7 +100,12 @@ fn ping(args: &PingArgs) -> Result<ExitCode> {
         .build()
         .context("starting the async runtime")?;
     let started = Instant::now();
-    let reply = rt.block_on(client.complete(&[ChatMessage::user(args.message.clone())]))?;
+    let reply =
+        rt.block_on(
+            client.complete(&ferret_llm::Request::plain(vec![ChatMessage::user(
+                args.message.clone(),
+            )])),
+        )?;
     let total = started.elapsed();
     let u = reply.usage;
     println!(

@@ -25,6 +25,25 @@ pub struct LlmArgs {
     /// Answer LLM queries from the cache only; a missing answer is an error naming the prompt.
     #[arg(long)]
     pub offline: bool,
+    /// When an LLM endpoint fails (after its retries), go on without the strategies that use it
+    /// instead of stopping the run. Answers already received stay in the cache either way.
+    #[arg(long)]
+    pub keep_going: bool,
+    /// Exit with an error when an LLM strategy's share of answers that could not be read (after
+    /// re-asks) exceeds this fraction, e.g. 0.02. Results are written first.
+    #[arg(long, value_name = "SHARE", value_parser = parse_share)]
+    pub max_fallback_share: Option<f64>,
+}
+
+fn parse_share(s: &str) -> std::result::Result<f64, String> {
+    let v: f64 = s
+        .parse()
+        .map_err(|e| format!("`{s}` is not a number: {e}"))?;
+    if (0.0..=1.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{v} is not a share between 0 and 1"))
+    }
 }
 
 /// Strategies and the LLM service behind the LLM ones.
@@ -61,25 +80,104 @@ pub fn full_registry(
 }
 
 /// Asks every probability question of the `llm+model` strategies concurrently before trials run,
-/// so trials answer from the cache. Failures are printed; trials of the failed LLMs then fail
-/// one by one and are reported, while all others run.
+/// with a progress bar, so trials answer from the cache. When an endpoint fails (after its
+/// retries), the run stops with the endpoint's error, or, with `--keep-going`, goes on without the
+/// strategies of `specs` that use a failed LLM: those are returned, for the caller to drop. An
+/// offline miss is not an endpoint failure: the trials that need it fail and are reported.
 pub fn prefetch(
     service: &Arc<LlmService>,
+    llm: &LlmArgs,
     specs: &[String],
     trials: &[(&House, &ObjectType)],
-) -> Result<()> {
+) -> Result<Vec<String>> {
     if !specs.iter().any(|s| s.starts_with(ferret_llm::LLM_MODEL)) {
-        return Ok(());
+        return Ok(Vec::new());
     }
-    let summary = prefetch_probabilities(service, specs, trials)?;
+    let bar = crate::common::progress(0, "LLM questions");
+    let summary = prefetch_probabilities(service, specs, trials, &|done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    })?;
+    bar.finish_and_clear();
     eprintln!(
         "LLM questions: {} distinct ({} cached, {} asked now, {} skipped after a failure)",
         summary.distinct, summary.cached, summary.asked, summary.skipped
     );
-    for f in &summary.failures {
-        eprintln!("LLM failure: {f}");
+    let down = service.failed_llms();
+    if down.is_empty() {
+        for f in &summary.failures {
+            eprintln!("LLM failure: {f}");
+        }
+        return Ok(Vec::new());
     }
-    Ok(())
+    let reasons: Vec<String> = down.iter().map(|(_, why)| why.clone()).collect();
+    if !llm.keep_going {
+        anyhow::bail!(
+            "{}\nanswers received so far are kept in the response cache; rerun to resume, or pass --keep-going to run the other strategies",
+            reasons.join("\n")
+        );
+    }
+    let dropped: Vec<String> = specs
+        .iter()
+        .filter(|s| {
+            ferret_plan::StrategySpec::parse(s)
+                .ok()
+                .and_then(|spec| ferret_llm::LlmSpec::parse(&spec))
+                .and_then(|p| p.ok())
+                .is_some_and(|p| down.iter().any(|(name, _)| *name == p.llm))
+        })
+        .cloned()
+        .collect();
+    for r in &reasons {
+        eprintln!("error: {r}");
+    }
+    eprintln!(
+        "--keep-going: going on without {} (their LLM failed)",
+        dropped.join(", ")
+    );
+    Ok(dropped)
+}
+
+/// Warnings for LLM strategies whose answers mostly fell back or collapsed into one value, by
+/// strategy.
+pub fn answer_warnings(service: &LlmService) -> Vec<(String, String)> {
+    service
+        .report()
+        .rows
+        .iter()
+        .filter_map(|r| r.warning().map(|w| (r.strategy.clone(), w)))
+        .collect()
+}
+
+/// Fails when `--max-fallback-share` is set and an LLM strategy's fallback share exceeds it.
+pub fn check_fallback_gate(service: &LlmService, llm: &LlmArgs) -> Result<()> {
+    let Some(max) = llm.max_fallback_share else {
+        return Ok(());
+    };
+    let over: Vec<String> = service
+        .report()
+        .rows
+        .iter()
+        .filter_map(|r| {
+            let share = r.answers.fallback_share()?;
+            (share > max).then(|| {
+                format!(
+                    "{}: {:.1} % of {} answers fell back",
+                    r.strategy,
+                    100.0 * share,
+                    r.answers.answers()
+                )
+            })
+        })
+        .collect();
+    if over.is_empty() {
+        Ok(())
+    } else {
+        anyhow::bail!(
+            "fallback share above --max-fallback-share {max}:\n  {}",
+            over.join("\n  ")
+        )
+    }
 }
 
 /// Prints the token report (paper table V) and writes `tokens.csv`, when any LLM was used.
@@ -89,11 +187,24 @@ pub fn write_token_report(service: &LlmService, dir: &Path) -> Result<()> {
         return Ok(());
     }
     println!("{report}");
-    // Also in the run's summary, beside the cost table (the paper's table V).
+    let warnings = answer_warnings(service);
+    for (strategy, w) in &warnings {
+        eprintln!("WARNING: {strategy}: {w}");
+    }
+    // Also in the run's summary, beside the cost table (the paper's table V), with the answer
+    // classes and a mark on every row whose answers say little.
     let summary = dir.join("summary.md");
     if summary.exists() {
-        let mut md = std::fs::read_to_string(&summary)?;
+        let md = std::fs::read_to_string(&summary)?;
+        let mut md = mark_rows(&md, &warnings);
         md.push_str(&format!("\n## LLM tokens and cost\n\n```\n{report}```\n"));
+        md.push_str(&answers_markdown(&report));
+        if !warnings.is_empty() {
+            md.push_str("\n## Warnings\n\n");
+            for (strategy, w) in &warnings {
+                md.push_str(&format!("- ⚠ `{strategy}`: {w}\n"));
+            }
+        }
         std::fs::write(&summary, md)?;
     }
     std::fs::create_dir_all(dir)?;
@@ -102,4 +213,72 @@ pub fn write_token_report(service: &LlmService, dir: &Path) -> Result<()> {
         std::fs::File::create(&path).with_context(|| format!("writing {}", path.display()))?;
     report.write_csv(file)?;
     Ok(())
+}
+
+/// `| strategy |` table rows of strategies with a warning get a ⚠ after the name.
+fn mark_rows(md: &str, warnings: &[(String, String)]) -> String {
+    md.lines()
+        .map(|line| {
+            match warnings
+                .iter()
+                .find(|(s, _)| line.starts_with(&format!("| {s} |")))
+            {
+                Some((s, _)) => line.replacen(&format!("| {s} |"), &format!("| {s} ⚠ |"), 1),
+                None => line.to_string(),
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+        + if md.ends_with('\n') { "\n" } else { "" }
+}
+
+/// How each LLM strategy's answers were read: the class of every first answer, re-asks,
+/// fallbacks, log-probabilities, and the most common probability.
+pub fn answers_markdown(report: &ferret_llm::TokenReport) -> String {
+    use ferret_llm::AnswerClass;
+    let rows: Vec<_> = report
+        .rows
+        .iter()
+        .filter(|r| r.answers.answers() > 0)
+        .collect();
+    if rows.is_empty() {
+        return String::new();
+    }
+    let mut md = String::from(
+        "\n## LLM answers\n\nClass of each distinct question's first answer; unusable ones (several numbers, none, the worked example echoed) are asked again, then fall back to 0.01.\n\n| strategy | answers |",
+    );
+    for c in AnswerClass::ALL {
+        md.push_str(&format!(" {} |", c.label()));
+    }
+    md.push_str(" re-asked | fell back | from logprobs | most common p |\n|---|---:|");
+    for _ in AnswerClass::ALL {
+        md.push_str("---:|");
+    }
+    md.push_str("---:|---:|---:|---:|\n");
+    for r in rows {
+        let a = &r.answers;
+        let mut line = format!("| {} | {} |", r.strategy, a.answers());
+        for c in AnswerClass::ALL {
+            line.push_str(&format!(" {} |", a.class(c)));
+        }
+        let common = r.most_common_probability().map_or_else(
+            || "–".into(),
+            |(v, share)| format!("{:.1} % ({:.0} %)", 100.0 * v, 100.0 * share),
+        );
+        let direct = if a.direct_answers > 0 {
+            format!(" ({} P-DIRECT unmatched)", a.direct_fallbacks)
+        } else {
+            String::new()
+        };
+        line.push_str(&format!(
+            " {} | {}{} | {} | {} |\n",
+            a.reasked,
+            a.fallbacks(),
+            direct,
+            a.logprob_used,
+            common
+        ));
+        md.push_str(&line);
+    }
+    md
 }

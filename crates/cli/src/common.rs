@@ -32,7 +32,9 @@ pub fn init_tracing(verbose: u8) {
 #[derive(clap::Args, Clone, Debug)]
 pub struct HouseArgs {
     /// ProcTHOR houses: a .json house, or .jsonl / .jsonl.gz with one house per line. Without it,
-    /// ferret generates houses (see --generate and --house-seed).
+    /// ferret generates houses (see --generate and --house-seed). Limits that keep memory
+    /// bounded, each an error naming file and house: 64 MiB per line (house), 2000 containers
+    /// per house, 16.7 M grid cells per house (see --resolution).
     #[arg(long, value_name = "PATH")]
     pub houses: Option<PathBuf>,
     /// Which houses of the file, by 0-based index: `0..150`, `7`, `3..`, `..10`.

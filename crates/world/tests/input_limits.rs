@@ -176,3 +176,15 @@ fn grids_beyond_the_cell_limit_name_the_house_and_the_limit() {
         other => panic!("{:?}", other.map(|g| g.cell_count())),
     }
 }
+
+#[cfg(unix)]
+#[test]
+fn an_endless_asset_database_is_refused_at_the_limit() {
+    match ferret_world::procthor::AssetDatabase::load(Path::new("/dev/zero")) {
+        Err(WorldError::AssetDatabase { file, message }) => {
+            assert_eq!(file, Path::new("/dev/zero"));
+            assert!(message.contains("64 MiB"), "{message}");
+        }
+        other => panic!("{:?}", other.map(|_| ())),
+    }
+}

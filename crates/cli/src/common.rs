@@ -1,10 +1,11 @@
 //! What several commands share: loading houses (or generating them), building maps in parallel
 //! with a progress bar, and logging.
 
+use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Duration;
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use ferret_world::procthor::{AssetDatabase, HouseRange, LoadOptions, load_scenes};
 use ferret_world::{Distances, GridParams, OccupancyGrid, Scene, WorldError};
 use indicatif::{ParallelProgressIterator, ProgressBar, ProgressStyle};
@@ -19,9 +20,11 @@ pub fn init_tracing(verbose: u8) {
     };
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default));
+    // Colour codes only for a terminal: in a log file or a pipe they are noise.
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
         .try_init();
 }
 
@@ -29,7 +32,9 @@ pub fn init_tracing(verbose: u8) {
 #[derive(clap::Args, Clone, Debug)]
 pub struct HouseArgs {
     /// ProcTHOR houses: a .json house, or .jsonl / .jsonl.gz with one house per line. Without it,
-    /// ferret generates houses (see --generate and --house-seed).
+    /// ferret generates houses (see --generate and --house-seed). Limits that keep memory
+    /// bounded, each an error naming file and house: 64 MiB per line (house), 2000 containers
+    /// per house, 16.7 M grid cells per house (see --resolution).
     #[arg(long, value_name = "PATH")]
     pub houses: Option<PathBuf>,
     /// Which houses of the file, by 0-based index: `0..150`, `7`, `3..`, `..10`.
@@ -108,6 +113,18 @@ impl HouseArgs {
     }
 }
 
+/// Refuses a list option naming the same value twice (`--strategies a,b,a`): its results would
+/// be counted twice or overwrite each other.
+pub fn check_distinct(option: &str, values: &[String]) -> Result<()> {
+    let mut seen = std::collections::HashSet::new();
+    for v in values {
+        if !seen.insert(v.as_str()) {
+            bail!("{option}: `{v}` is given twice");
+        }
+    }
+    Ok(())
+}
+
 /// Occupancy-grid options.
 #[derive(clap::Args, Clone, Debug)]
 pub struct GridArgs {
@@ -123,6 +140,28 @@ pub struct GridArgs {
 }
 
 impl GridArgs {
+    /// Refuses unusable grid options, naming the option, before any house is loaded or any
+    /// output touched.
+    pub fn validate(&self) -> Result<()> {
+        let min = GridParams::MIN_RESOLUTION;
+        if !(self.resolution.is_finite() && self.resolution >= min) {
+            bail!(
+                "--resolution {}: the cell size must be a finite number ≥ {min} m",
+                self.resolution
+            );
+        }
+        // Zero is meaningful for both: a point robot, walls as thin as the cells they cross.
+        for (name, value) in [
+            ("--robot-radius", self.robot_radius),
+            ("--wall-thickness", self.wall_thickness),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                bail!("{name} {value}: must be a finite number ≥ 0 m");
+            }
+        }
+        Ok(())
+    }
+
     /// The grid parameters.
     pub fn params(&self) -> GridParams {
         GridParams {

@@ -527,12 +527,8 @@ pub fn register_strategies(
         "llm+model/<prompt>/<llm>[/k<N>|/exact]",
         move |spec| {
             let parsed = LlmSpec::parse(spec).unwrap_or_else(|| Err(not_llm(spec)))?;
-            let bad = |e: LlmError| PlanError::UnknownStrategy {
-                spec: spec.raw.clone(),
-                reason: e.to_string(),
-            };
             let source = LlmLikelihood::new(s.clone(), &parsed.prompt, &parsed.llm, &spec.raw)
-                .map_err(bad)?;
+                .map_err(|e| build_error(spec, e, false))?;
             let config = match &parsed.limit {
                 None => planner,
                 Some(l) => match parse_limit(l, exact_max) {
@@ -556,12 +552,30 @@ pub fn register_strategies(
         let parsed = LlmSpec::parse(spec).unwrap_or_else(|| Err(not_llm(spec)))?;
         let strategy =
             LlmDirectStrategy::new(service.clone(), &spec.raw, &parsed.prompt, &parsed.llm)
-                .map_err(|e| PlanError::UnknownStrategy {
-                    spec: spec.raw.clone(),
-                    reason: e.to_string(),
-                })?;
+                .map_err(|e| build_error(spec, e, true))?;
         Ok(Arc::new(strategy))
     });
+}
+
+/// Why an LLM strategy could not be built. Only a spec naming no known endpoint or prompt is an
+/// unknown strategy; a cache or configuration failure is reported as what it is, as a failure of
+/// the likelihood source or, for `llm-direct`, of the policy.
+fn build_error(spec: &StrategySpec, e: LlmError, direct: bool) -> PlanError {
+    match e {
+        LlmError::Config(crate::error::ConfigError::UnknownEndpoint { .. })
+        | LlmError::Prompt { .. } => PlanError::UnknownStrategy {
+            spec: spec.raw.clone(),
+            reason: e.to_string(),
+        },
+        other if direct => PlanError::Policy {
+            policy: spec.raw.clone(),
+            error: Box::new(other),
+        },
+        other => PlanError::Likelihood {
+            source_name: spec.raw.clone(),
+            error: Box::new(other),
+        },
+    }
 }
 
 fn not_llm(spec: &StrategySpec) -> PlanError {

@@ -10,6 +10,11 @@ use serde::{Deserialize, Serialize};
 use crate::selector::check_c;
 use crate::{CostTable, DEFAULT_C, Method, ReplaySelection, SelectError, Selector, Ucb};
 
+/// Most deployment trials (`deployments × trials_per_deployment`) one experiment keeps: every
+/// trial is held in memory (about 40 bytes each, so 5 M take 200 MB), and the paper's experiment
+/// needs 50 000.
+pub const MAX_EXPERIMENT_TRIALS: usize = 5_000_000;
+
 /// Parameters of a deployment experiment.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ExperimentOptions {
@@ -132,7 +137,8 @@ impl ExperimentResult {
 /// and the replay costs of all strategies given that choice. Deployments run in parallel, and the
 /// result depends only on the table and the options, not on the number of threads.
 ///
-/// Errors: zero deployments or trials, more trials per deployment than houses, or an invalid `c`.
+/// Errors: zero deployments or trials, more than [`MAX_EXPERIMENT_TRIALS`] trials in all, more
+/// trials per deployment than houses, or an invalid `c`.
 ///
 /// ```
 /// use ferret_select::{CostTable, ExperimentOptions, run_experiment};
@@ -219,6 +225,19 @@ fn check_options(table: &CostTable, opts: &ExperimentOptions) -> Result<(), Sele
         return Err(SelectError::InvalidOption {
             name: "trials-per-deployment",
             reason: "must be at least 1".to_owned(),
+        });
+    }
+    if opts
+        .deployments
+        .checked_mul(opts.trials_per_deployment)
+        .is_none_or(|n| n > MAX_EXPERIMENT_TRIALS)
+    {
+        return Err(SelectError::InvalidOption {
+            name: "deployments",
+            reason: format!(
+                "{} deployments × {} trials exceed the limit of {MAX_EXPERIMENT_TRIALS} trials",
+                opts.deployments, opts.trials_per_deployment
+            ),
         });
     }
     if opts.trials_per_deployment > table.n_houses() {

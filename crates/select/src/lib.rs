@@ -22,8 +22,8 @@ mod table;
 
 pub use error::SelectError;
 pub use experiment::{
-    Deployment, ExperimentOptions, ExperimentResult, MethodRun, MethodSummary, run_experiment,
-    run_selector,
+    Deployment, ExperimentOptions, ExperimentResult, MAX_EXPERIMENT_TRIALS, MethodRun,
+    MethodSummary, run_experiment, run_selector,
 };
 pub use render::{
     ChoiceRow, PAPER_KS, SelectionRow, choice_rows, selection_rows, selection_table_markdown,

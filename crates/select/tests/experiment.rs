@@ -3,7 +3,8 @@
 use std::collections::HashSet;
 
 use ferret_select::{
-    CostTable, ExperimentOptions, ExperimentResult, Method, SelectError, run_experiment,
+    CostTable, ExperimentOptions, ExperimentResult, MAX_EXPERIMENT_TRIALS, Method, SelectError,
+    run_experiment,
 };
 use proptest::prelude::*;
 use rand::{Rng, SeedableRng};
@@ -337,6 +338,30 @@ fn experiment_rejects_bad_options() {
     ));
     // All houses in one deployment is fine.
     assert!(run_experiment(&table, &opts(3, 4, 0)).is_ok());
+}
+
+#[test]
+fn experiments_too_large_for_memory_are_refused_before_running() {
+    let table = small_table();
+    // 100 M deployments used to be allocated, and the process killed for memory.
+    for (deployments, trials) in [
+        (100_000_000, 2),
+        (MAX_EXPERIMENT_TRIALS / 2 + 1, 2),
+        (usize::MAX, 4),
+    ] {
+        match run_experiment(&table, &opts(deployments, trials, 0)) {
+            Err(SelectError::InvalidOption {
+                name: "deployments",
+                reason,
+            }) => assert!(
+                reason.contains(&MAX_EXPERIMENT_TRIALS.to_string()),
+                "{reason}"
+            ),
+            other => panic!("{deployments} × {trials}: expected a limit error, got {other:?}"),
+        }
+    }
+    let result = run_experiment(&table, &opts(MAX_EXPERIMENT_TRIALS / 1000, 1, 0)).unwrap();
+    assert_eq!(result.deployments.len(), MAX_EXPERIMENT_TRIALS / 1000);
 }
 
 #[test]

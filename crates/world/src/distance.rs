@@ -30,6 +30,10 @@ use crate::geometry::Point;
 use crate::grid::{Cell, GridParams, OccupancyGrid, neighbours};
 use crate::house::{House, Scene};
 
+/// Most containers a house may have for its distances to be computed: the matrix holds
+/// (containers + 1)² distances, so 2 000 containers take 32 MB (60 000 would take 28 GB).
+pub const MAX_CONTAINERS: usize = 2000;
+
 /// A place the robot can be: its start, or at (the access cell of) a container.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Place {
@@ -89,7 +93,7 @@ impl Distances {
     /// # Errors
     /// [`WorldError::Unreachable`] naming (with [`House::container_label`]) every container
     /// without an access cell; [`WorldError::Grid`] when `grid` was built for a house with a
-    /// different number of containers.
+    /// different number of containers, or the house has more than [`MAX_CONTAINERS`].
     ///
     /// # Examples
     /// ```
@@ -113,6 +117,15 @@ impl Distances {
     /// # Ok::<(), ferret_world::WorldError>(())
     /// ```
     pub fn compute(house: &House, grid: &OccupancyGrid) -> Result<Distances> {
+        if house.containers.len() > MAX_CONTAINERS {
+            return Err(WorldError::Grid {
+                house: house.name.clone(),
+                message: format!(
+                    "{} containers exceed the limit of {MAX_CONTAINERS} per house",
+                    house.containers.len()
+                ),
+            });
+        }
         if grid.container_count() != house.containers.len() {
             return Err(WorldError::Grid {
                 house: house.name.clone(),

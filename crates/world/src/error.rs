@@ -64,6 +64,21 @@ pub enum WorldError {
         /// What is wrong.
         message: String,
     },
+    /// A file holds no house at all (it is empty or has blank lines only).
+    #[error("{}: the file holds no houses (it is empty or has blank lines only)", file.display())]
+    NoHouses {
+        /// The file.
+        file: PathBuf,
+    },
+    /// A house exceeds one of the input limits that keep memory bounded (line length,
+    /// containers per house).
+    #[error("{at}: {message}")]
+    Limit {
+        /// Which house.
+        at: HouseLocation,
+        /// What exceeds which limit.
+        message: String,
+    },
     /// Containers with no path to them from the start.
     #[error("{house}: {} unreachable container(s): {}", names.len(), names.join(", "))]
     Unreachable {

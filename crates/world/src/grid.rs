@@ -137,9 +137,9 @@ const KIND_MASK: u8 = 0x07;
 /// Set on free cells connected to the start cell.
 const REACHABLE: u8 = 0x80;
 const NO_ROOM: u8 = u8::MAX;
-/// Largest number of cells in a grid (16.7 M, e.g. 200 m × 200 m at 0.05 m): protects against
-/// absurd coordinates in bad input.
-const MAX_CELLS: u64 = 1 << 24;
+/// Largest number of cells in a grid (16.7 M, e.g. 200 m × 200 m at 0.05 m; 2 bytes per cell):
+/// protects against absurd coordinates in bad input and absurdly fine resolutions.
+pub const MAX_CELLS: u64 = 1 << 24;
 
 /// A free/occupied grid over a house, with the robot's start cell and an access cell for every
 /// container.
@@ -217,7 +217,7 @@ impl OccupancyGrid {
         let h = (bounds.depth() / res).ceil() + 2.0 * pad + 1.0;
         if w * h > MAX_CELLS as f64 {
             return Err(err(format!(
-                "a {w}×{h}-cell grid is too large; use a coarser resolution than {res} m"
+                "a {w}×{h}-cell grid exceeds the limit of {MAX_CELLS} cells; use a coarser resolution than {res} m"
             )));
         }
         let (width, height) = (w as u32, h as u32);

@@ -504,7 +504,7 @@ fn ranges_outside_the_file_are_errors() {
     let empty = write(dir.path(), "empty.jsonl", b"");
     assert!(matches!(
         load_scenes(&empty, &opts("..", true)),
-        Err(WorldError::Range { .. })
+        Err(WorldError::NoHouses { .. })
     ));
 }
 

@@ -64,6 +64,15 @@ struct DeployRow {
 
 /// Runs `ferret deploy`.
 pub fn run(args: Args) -> Result<ExitCode> {
+    args.grid.validate()?;
+    args.planning.validate()?;
+    crate::common::check_distinct("--strategies", &args.strategies)?;
+    if args.trials == 0 {
+        bail!("--trials 0: a deployment needs at least one trial");
+    }
+    if !(args.c.is_finite() && args.c >= 0.0) {
+        bail!("--c {}: must be a finite number ≥ 0 m", args.c);
+    }
     let loaded = args.houses.load()?;
     for s in &loaded.skipped {
         eprintln!("skipped: {s}");

@@ -69,7 +69,8 @@ pub struct PlanningArgs {
     /// the 2 nearest plus the most likely, as in the paper (K = 8).
     #[arg(long, value_name = "K", default_value_t = 8)]
     pub max_containers: usize,
-    /// Largest exact problem for `/exact` strategies (2^n·n memory: 16 → 8 MB, 20 → 160 MB).
+    /// Largest exact problem for `/exact` strategies, at most 22 (2^n·n memory: 16 → 8 MB,
+    /// 20 → 160 MB).
     #[arg(long, value_name = "N", default_value_t = 16)]
     pub exact_max: usize,
     /// Search cost R per container, metres (0 in the paper).
@@ -78,6 +79,27 @@ pub struct PlanningArgs {
 }
 
 impl PlanningArgs {
+    /// Refuses unusable planner options, naming the option, before any output is touched.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.search_cost.is_finite() && self.search_cost >= 0.0) {
+            anyhow::bail!(
+                "--search-cost {}: must be a finite number ≥ 0 m",
+                self.search_cost
+            );
+        }
+        if self.max_containers == 0 {
+            anyhow::bail!("--max-containers 0: the planner needs at least one container");
+        }
+        let max = ferret_plan::planner::MAX_EXACT;
+        if !(1..=max).contains(&self.exact_max) {
+            anyhow::bail!(
+                "--exact-max {}: must be between 1 and {max}",
+                self.exact_max
+            );
+        }
+        Ok(())
+    }
+
     /// The prior these arguments name, or the default one.
     pub fn prior(&self) -> Result<Prior> {
         match &self.prior {
@@ -199,21 +221,42 @@ pub struct SummaryRow {
     pub median_m: f64,
     /// Half-width of the 95 % confidence interval of the mean (normal approximation).
     pub ci95_m: f64,
-    /// Improvement of the mean over optimistic+greedy, percent (positive = cheaper).
+    /// Improvement of the mean over optimistic+greedy, percent (positive = cheaper), on the
+    /// paired trials only.
     pub improvement_pct: Option<f64>,
+    /// Trials in the comparison with optimistic+greedy: the houses where every summarized
+    /// strategy finished, so that a strategy is never credited for skipping hard houses.
+    pub paired_trials: usize,
 }
 
 /// Runs `ferret eval`.
 pub fn run(args: Args) -> Result<ExitCode> {
     let started = Instant::now();
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
+    // Every option is checked before anything is loaded or written, so a typo never replaces a
+    // previous run's results.
+    args.grid.validate()?;
+    args.planning.validate()?;
+    if !(0.0..=1.0).contains(&args.reveal_fraction) {
+        anyhow::bail!(
+            "--reveal-fraction {}: must be a fraction between 0 and 1",
+            args.reveal_fraction
+        );
+    }
+    crate::common::check_distinct("--strategies", &args.strategies)?;
     let loaded = args.houses.load()?;
     for s in &loaded.skipped {
         eprintln!("skipped: {s}");
     }
     if loaded.scenes.is_empty() {
         anyhow::bail!("no houses to evaluate in {}", loaded.source);
+    }
+    if let Some(i) = args.show_house
+        && !loaded.scenes.iter().any(|s| s.house.index == i)
+    {
+        anyhow::bail!(
+            "--show-house {i}: no house with that index in {}",
+            loaded.source
+        );
     }
     let setup = super::llm_setup::full_registry(&args.planning, &args.llm, &args.strategies)?;
     let strategies: Vec<Arc<dyn Strategy>> = args
@@ -250,11 +293,19 @@ pub fn run(args: Args) -> Result<ExitCode> {
     for e in &outcome.errors {
         eprintln!("error: {e}");
     }
+    if outcome.rows.is_empty() {
+        anyhow::bail!(
+            "no trial finished; {} was left as it was",
+            args.out.display()
+        );
+    }
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
     write_csv(&args.out.join("trials.csv"), &outcome.rows)?;
     let summary = summarize(&outcome.rows, &args.strategies);
     write_csv(&args.out.join("summary.csv"), &summary)?;
     let md = summary_markdown(&summary, &loaded.source, outcome.houses_run);
-    std::fs::write(args.out.join("summary.md"), &md)?;
+    crate::output::write_bytes(&args.out.join("summary.md"), &md)?;
     let info = RunInfo {
         houses: args.houses.houses.clone(),
         range: args.houses.range.as_ref().map(ToString::to_string),
@@ -271,20 +322,21 @@ pub fn run(args: Args) -> Result<ExitCode> {
         reveal_fraction: args.reveal_fraction,
         strategies: args.strategies.clone(),
     };
-    std::fs::write(
-        args.out.join("run.json"),
+    crate::output::write_bytes(
+        &args.out.join("run.json"),
         serde_json::to_string_pretty(&info)?,
     )?;
-    draw_pictures(&args, &loaded.scenes, &maps, &strategies, &outcome.rows)?;
+    let pictures = draw_pictures(&args, &loaded.scenes, &maps, &strategies, &outcome.rows)?;
     println!("{md}");
     super::llm_setup::write_token_report(&setup.service, &args.out)?;
     super::llm_setup::check_fallback_gate(&setup.service, &args.llm)?;
     println!(
-        "{} trials on {} houses in {:.1} s; wrote {}/{{trials.csv,summary.csv,summary.md,costs.png,trajectories.png}}",
+        "{} trials on {} houses in {:.1} s; wrote {}/{{trials.csv,summary.csv,summary.md,run.json{}}}",
         outcome.rows.len(),
         outcome.houses_run,
         started.elapsed().as_secs_f64(),
-        args.out.display()
+        args.out.display(),
+        pictures.iter().map(|p| format!(",{p}")).collect::<String>()
     );
     if outcome.errors.is_empty() {
         Ok(ExitCode::SUCCESS)
@@ -381,25 +433,42 @@ fn row(scene: &Scene, trial: &TrialSpec, out: &TrialOutcome) -> TrialRow {
     }
 }
 
-/// Writes serde rows as CSV.
-pub fn write_csv<T: Serialize>(path: &Path, rows: &[T]) -> Result<()> {
-    let mut w =
-        csv::Writer::from_path(path).with_context(|| format!("writing {}", path.display()))?;
-    for r in rows {
-        w.serialize(r)?;
-    }
-    w.flush()?;
-    Ok(())
-}
+pub use crate::output::write_csv;
 
-/// Mean, median, 95 % CI and improvement over optimistic+greedy, per strategy in `order`.
+/// Mean, median, 95 % CI and improvement over optimistic+greedy, per strategy in `order`. The
+/// improvement compares means over the paired trials only: the houses where every strategy of
+/// `order` that finished any trial finished its trial.
 pub fn summarize(rows: &[TrialRow], order: &[String]) -> Vec<SummaryRow> {
     let mut by: BTreeMap<&str, Vec<f64>> = BTreeMap::new();
+    let mut by_house: BTreeMap<&str, BTreeMap<usize, f64>> = BTreeMap::new();
     for r in rows {
         by.entry(r.strategy.as_str()).or_default().push(r.cost_m);
+        by_house
+            .entry(r.strategy.as_str())
+            .or_default()
+            .insert(r.house_index, r.cost_m);
     }
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
-    let greedy = by.get("optimistic+greedy").map(|v| mean(v));
+    let compared: Vec<&BTreeMap<usize, f64>> = order
+        .iter()
+        .filter_map(|s| by_house.get(s.as_str()))
+        .collect();
+    let paired: Vec<usize> = compared
+        .first()
+        .map(|first| {
+            first
+                .keys()
+                .copied()
+                .filter(|h| compared.iter().all(|m| m.contains_key(h)))
+                .collect()
+        })
+        .unwrap_or_default();
+    let paired_mean = |s: &str| {
+        let m = by_house.get(s)?;
+        let v: Vec<f64> = paired.iter().filter_map(|h| m.get(h).copied()).collect();
+        (!v.is_empty()).then(|| mean(&v))
+    };
+    let greedy = paired_mean("optimistic+greedy");
     order
         .iter()
         .filter_map(|s| by.get(s.as_str()).map(|v| (s, v)))
@@ -424,7 +493,11 @@ pub fn summarize(rows: &[TrialRow], order: &[String]) -> Vec<SummaryRow> {
                 mean_m: m,
                 median_m: median,
                 ci95_m: 1.96 * (var / n as f64).sqrt(),
-                improvement_pct: greedy.filter(|g| *g > 0.0).map(|g| 100.0 * (g - m) / g),
+                improvement_pct: greedy
+                    .filter(|g| *g > 0.0)
+                    .zip(paired_mean(s))
+                    .map(|(g, m)| 100.0 * (g - m) / g),
+                paired_trials: paired.len(),
             }
         })
         .collect()
@@ -448,16 +521,30 @@ pub fn summary_markdown(summary: &[SummaryRow], source: &str, houses: usize) -> 
             r.strategy, r.trials, r.mean_m, r.ci95_m, r.median_m, imp
         ));
     }
+    let short: Vec<String> = summary
+        .iter()
+        .filter(|r| r.trials < houses)
+        .map(|r| format!("{} finished {} of {houses}", r.strategy, r.trials))
+        .collect();
+    if !short.is_empty() {
+        md.push_str(&format!(
+            "\n**Failed trials:** {}. Means and medians cover each strategy's own trials; \"vs optimistic+greedy\" compares only the {} paired trials (houses where every strategy finished).\n",
+            short.join("; "),
+            summary.first().map_or(0, |r| r.paired_trials)
+        ));
+    }
     md
 }
 
+/// Draws `costs.png` and `trajectories.png`; returns the names of the pictures drawn.
 fn draw_pictures(
     args: &Args,
     scenes: &[Scene],
     maps: &[Mapped],
     strategies: &[Arc<dyn Strategy>],
     rows: &[TrialRow],
-) -> Result<()> {
+) -> Result<Vec<&'static str>> {
+    let mut drawn = Vec::new();
     let series: Vec<(String, Vec<f64>)> = args
         .strategies
         .iter()
@@ -478,25 +565,39 @@ fn draw_pictures(
             seed: args.seed,
             ..ViolinOptions::default()
         };
-        draw_violins(&series, &opts, &args.out.join("costs.png"))?;
+        crate::output::write_with_path(&args.out.join("costs.png"), |p| {
+            Ok(draw_violins(&series, &opts, p)?)
+        })?;
+        drawn.push("costs.png");
     }
-    let pick = scenes
-        .iter()
-        .zip(maps)
-        .position(|(s, m)| m.is_ok() && args.show_house.is_none_or(|i| s.house.index == i));
-    if let Some(i) = pick {
-        let scene = &scenes[i];
-        if let Ok((_, distances)) = &maps[i] {
-            draw_house_trajectories(
-                scene,
-                distances,
-                strategies,
-                rows,
-                &args.out.join("trajectories.png"),
-            )?;
+    // Only a house where every strategy finished its trial can show all trajectories; one whose
+    // trial could not be drawn has already been reported.
+    let finished = |index: usize| {
+        strategies.iter().all(|s| {
+            rows.iter()
+                .any(|r| r.house_index == index && r.strategy == s.name())
+        })
+    };
+    let pick = scenes.iter().zip(maps).position(|(s, m)| {
+        m.is_ok() && args.show_house.is_none_or(|i| s.house.index == i) && finished(s.house.index)
+    });
+    match (pick, args.show_house) {
+        (Some(i), _) => {
+            if let Ok((_, distances)) = &maps[i] {
+                crate::output::write_with_path(&args.out.join("trajectories.png"), |p| {
+                    draw_house_trajectories(&scenes[i], distances, strategies, rows, p)
+                })?;
+                drawn.push("trajectories.png");
+            }
+        }
+        (None, Some(i)) => eprintln!(
+            "--show-house {i}: not every strategy finished a trial on that house; trajectories.png not drawn"
+        ),
+        (None, None) => {
+            eprintln!("no house where every strategy finished; trajectories.png not drawn")
         }
     }
-    Ok(())
+    Ok(drawn)
 }
 
 /// Draws every strategy's trajectory on one house side by side, from the trials already run
@@ -557,4 +658,58 @@ pub fn draw_house_trajectories(
     };
     draw_trajectories(&scene.house, &panels, &opts, out)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn trial(house_index: usize, strategy: &str, cost_m: f64) -> TrialRow {
+        TrialRow {
+            house: format!("h#{house_index}"),
+            house_index,
+            target: "Apple".into(),
+            strategy: strategy.into(),
+            cost_m,
+            searches: 1,
+            found: true,
+            found_container: "1|0".into(),
+            searched: "1|0".into(),
+            goal_containers: 1,
+        }
+    }
+
+    #[test]
+    fn strategies_with_failed_trials_are_compared_on_paired_trials_only() {
+        let order = vec!["optimistic+greedy".to_string(), "model/x".to_string()];
+        // Greedy finished all four houses; model/x failed on house 3, the most expensive one.
+        let mut rows: Vec<TrialRow> = [10.0, 20.0, 30.0, 100.0]
+            .iter()
+            .enumerate()
+            .map(|(h, &c)| trial(h, "optimistic+greedy", c))
+            .collect();
+        rows.extend(
+            [9.0, 18.0, 27.0]
+                .iter()
+                .enumerate()
+                .map(|(h, &c)| trial(h, "model/x", c)),
+        );
+        let summary = summarize(&rows, &order);
+        assert_eq!(summary[0].trials, 4);
+        assert_eq!(summary[1].trials, 3);
+        assert!((summary[0].mean_m - 40.0).abs() < 1e-12);
+        assert!((summary[1].mean_m - 18.0).abs() < 1e-12);
+        // Over the three paired houses greedy averages 20 m, model/x 18 m: 10 % cheaper, not the
+        // 55 % that comparing 18 m with greedy's 40 m over all four houses would claim.
+        assert!((summary[1].improvement_pct.unwrap() - 10.0).abs() < 1e-9);
+        assert!(summary[0].improvement_pct.unwrap().abs() < 1e-9);
+        assert_eq!(summary[1].paired_trials, 3);
+        let md = summary_markdown(&summary, "test houses", 4);
+        assert!(md.contains("model/x finished 3 of 4"), "{md}");
+        assert!(md.contains("only the 3 paired trials"), "{md}");
+        assert!(!md.contains("optimistic+greedy finished"), "{md}");
+        // Complete runs carry no note.
+        let complete = summarize(&rows[..4], &order[..1]);
+        assert!(!summary_markdown(&complete, "test houses", 4).contains("Failed trials"));
+    }
 }

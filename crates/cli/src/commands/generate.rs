@@ -38,7 +38,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         ..GeneratorOptions::default()
     };
     let houses = generate_houses(args.count, args.seed, &opts);
-    write_houses(&args.out, &houses)?;
+    crate::output::write_with_path(&args.out, |p| Ok(write_houses(p, &houses)?))?;
     println!("wrote {} houses to {}", houses.len(), args.out.display());
     Ok(ExitCode::SUCCESS)
 }

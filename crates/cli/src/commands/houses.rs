@@ -96,7 +96,11 @@ struct CheckReport {
 fn check(args: CheckArgs) -> Result<ExitCode> {
     let started = Instant::now();
     // A check reports every bad house, so it never stops at the first.
+    args.grid.validate()?;
     let loaded = args.houses.load_with(true)?;
+    if loaded.scenes.is_empty() && loaded.skipped.is_empty() {
+        bail!("no houses to check in {}", loaded.source);
+    }
     let params = args.grid.params();
     let bar = progress(loaded.scenes.len(), "checking");
     let mut lines: Vec<HouseLine> = loaded
@@ -257,6 +261,7 @@ fn show(args: ShowArgs) -> Result<ExitCode> {
                 .map_err(|e| anyhow::anyhow!("{e}"))?,
         );
     }
+    args.grid.validate()?;
     let loaded = houses.load_with(false)?;
     let scene = loaded
         .scenes
@@ -297,7 +302,10 @@ fn show(args: ShowArgs) -> Result<ExitCode> {
             .as_ref()
             .map(|f| f as &dyn Fn(ferret_world::Point) -> bool);
     }
-    draw_floor_plan(house, &opts, &args.out)?;
+    crate::output::write_with_path(&args.out, |p| {
+        draw_floor_plan(house, &opts, p)?;
+        Ok(())
+    })?;
     println!(
         "wrote {} ({}: {} rooms, {} containers)",
         args.out.display(),

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use ferret_llm::{LlmConfig, LlmOptions, LlmService, prefetch_probabilities, register_strategies};
 use ferret_plan::StrategyRegistry;
 use ferret_world::{House, ObjectType};
@@ -205,13 +205,10 @@ pub fn write_token_report(service: &LlmService, dir: &Path) -> Result<()> {
                 md.push_str(&format!("- ⚠ `{strategy}`: {w}\n"));
             }
         }
-        std::fs::write(&summary, md)?;
+        crate::output::write_bytes(&summary, md)?;
     }
     std::fs::create_dir_all(dir)?;
-    let path = dir.join("tokens.csv");
-    let file =
-        std::fs::File::create(&path).with_context(|| format!("writing {}", path.display()))?;
-    report.write_csv(file)?;
+    crate::output::write_atomic(&dir.join("tokens.csv"), |w| Ok(report.write_csv(w)?))?;
     Ok(())
 }
 

@@ -54,7 +54,7 @@ fn train(args: TrainArgs) -> Result<ExitCode> {
         eprintln!("skipped: {s}");
     }
     let prior = Prior::train(&loaded.scenes, args.smoothing);
-    prior.save(&args.out)?;
+    crate::output::write_with_path(&args.out, |p| Ok(prior.save(p)?))?;
     println!(
         "trained a prior on {} houses ({} containers) and wrote {}",
         prior.houses,

@@ -1,9 +1,10 @@
 //! `ferret select`: the deployment experiment of paper section VI-C over an eval run.
 
 use std::collections::{BTreeMap, HashMap};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use anyhow::{Context, Result, bail};
 use ferret_plan::{Strategy, draw_trial, replay_cost};
@@ -23,15 +24,20 @@ use crate::common::{build_maps, progress};
 /// Replay every strategy on every trial of an eval run (cached in DIR/replay.csv), then run
 /// deployments — random orders of distinct houses — with UCB and with replay selection, and
 /// report average cost and cumulative regret against k (paper table II and figure 4).
+///
+/// The replay cache is keyed to the exact run.json and trials.csv: after a new eval into the same
+/// directory it is recomputed. Each house's replays are appended as soon as they finish, so an
+/// interrupted select resumes where it stopped.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The output directory of `ferret eval` (trials.csv and run.json).
     #[arg(long, value_name = "DIR")]
     trials: PathBuf,
-    /// Number of deployments.
+    /// Number of deployments; deployments × trials per deployment may be at most 5 000 000
+    /// (every trial is kept in memory).
     #[arg(long, default_value_t = 500)]
     deployments: usize,
-    /// Trials per deployment, each in a distinct house.
+    /// Trials per deployment, each in a distinct house (at most the number of houses).
     #[arg(long, default_value_t = 100)]
     trials_per_deployment: usize,
     /// Exploration constant c, metres (the paper's 100 cells of 0.05 m).
@@ -66,18 +72,47 @@ pub struct ReplayRow {
     pub replay_cost_m: f64,
 }
 
+/// Refuses unusable options, naming the option, before any replay runs or output is touched.
+fn validate(args: &Args) -> Result<()> {
+    if args.deployments == 0 {
+        bail!("--deployments 0: must be at least 1");
+    }
+    if args.trials_per_deployment == 0 {
+        bail!("--trials-per-deployment 0: must be at least 1");
+    }
+    let max = ferret_select::MAX_EXPERIMENT_TRIALS;
+    if args
+        .deployments
+        .checked_mul(args.trials_per_deployment)
+        .is_none_or(|n| n > max)
+    {
+        bail!(
+            "--deployments {} × --trials-per-deployment {}: at most {max} deployment trials in all",
+            args.deployments,
+            args.trials_per_deployment
+        );
+    }
+    if !(args.c.is_finite() && args.c >= 0.0) {
+        bail!("--c {}: must be a finite number ≥ 0 m", args.c);
+    }
+    Ok(())
+}
+
 /// Runs `ferret select`.
 pub fn run(args: Args) -> Result<ExitCode> {
-    let info: RunInfo = serde_json::from_str(
-        &std::fs::read_to_string(args.trials.join("run.json")).with_context(|| {
-            format!(
-                "{}: not a `ferret eval` output directory",
-                args.trials.display()
-            )
-        })?,
-    )
-    .context("reading run.json")?;
-    let rows: Vec<TrialRow> = read_csv(&args.trials.join("trials.csv"))?;
+    validate(&args)?;
+    let run_json = std::fs::read(args.trials.join("run.json")).with_context(|| {
+        format!(
+            "{}: not a `ferret eval` output directory",
+            args.trials.display()
+        )
+    })?;
+    let info: RunInfo = serde_json::from_slice(&run_json).context("reading run.json")?;
+    let trials_path = args.trials.join("trials.csv");
+    let trials_csv = std::fs::read(&trials_path)
+        .with_context(|| format!("reading {}", trials_path.display()))?;
+    let rows: Vec<TrialRow> = parse_csv(&trials_csv, &trials_path)?;
+    let key = trials_key(&run_json, &trials_csv);
     let candidates: Vec<String> = info
         .strategies
         .iter()
@@ -100,7 +135,16 @@ pub fn run(args: Args) -> Result<ExitCode> {
     }
     by_house.retain(|_, m| candidates.iter().all(|s| m.contains_key(s.as_str())));
     let replay_path = args.trials.join("replay.csv");
-    let replays = load_or_compute_replays(&info, &args, &candidates, &by_house, &replay_path)?;
+    if by_house.len() < args.trials_per_deployment {
+        bail!(
+            "--trials-per-deployment {}: only {} houses of {} have a trial of every strategy",
+            args.trials_per_deployment,
+            by_house.len(),
+            args.trials.display()
+        );
+    }
+    let replays =
+        load_or_compute_replays(&info, &args, &candidates, &by_house, &replay_path, &key)?;
     let houses: Vec<usize> = by_house.keys().copied().collect();
     let s = candidates.len();
     let mut cost = Vec::with_capacity(houses.len());
@@ -155,7 +199,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         selection_table_markdown(&result, &ks),
         strategy_table_markdown(&result)
     );
-    std::fs::write(args.out.join("selection.md"), &md)?;
+    crate::output::write_bytes(&args.out.join("selection.md"), &md)?;
     draw_selection(&result, &args.out)?;
     println!("{md}");
     println!(
@@ -172,17 +216,196 @@ fn m_label(m: &HashMap<&str, &TrialRow>) -> String {
         .unwrap_or_default()
 }
 
-/// Reads serde rows from a CSV file.
-pub fn read_csv<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<Vec<T>> {
-    let mut r =
-        csv::Reader::from_path(path).with_context(|| format!("reading {}", path.display()))?;
+/// Parses serde rows from the CSV text of `path`; errors name the file and line.
+fn parse_csv<T: for<'de> Deserialize<'de>>(bytes: &[u8], path: &Path) -> Result<Vec<T>> {
+    let mut r = csv::Reader::from_reader(bytes);
     r.deserialize()
         .enumerate()
         .map(|(i, row)| row.with_context(|| format!("{}: row {}", path.display(), i + 2)))
         .collect()
 }
 
+/// The identity of an eval run's trials: SHA-256 of run.json and trials.csv. Replays are only
+/// valid for the exact trials they were computed on.
+fn trials_key(run_json: &[u8], trials_csv: &[u8]) -> String {
+    use sha2::{Digest, Sha256};
+    let mut h = Sha256::new();
+    for part in [run_json, trials_csv] {
+        h.update((part.len() as u64).to_le_bytes());
+        h.update(part);
+    }
+    format!("{:x}", h.finalize())
+}
+
 type ReplayKey = (usize, String, String);
+
+/// First line of replay.csv: the trials the cache belongs to (see [`trials_key`]).
+const CACHE_KEY_PREFIX: &str = "# ferret replay cache for trials sha256:";
+
+/// The header of replay.csv after the key line.
+const CACHE_HEADER: &str = "house_index,deployed,strategy,replay_cost_m\n";
+
+/// What a replay cache held that can be used, and why the rest cannot.
+#[derive(Debug, Default)]
+struct CacheRead {
+    /// Usable replay costs.
+    known: HashMap<ReplayKey, f64>,
+    /// Why the file as a whole was set aside (other trials, no key), if it was.
+    stale: Option<String>,
+    /// One message per dropped row, naming its line.
+    dropped: Vec<String>,
+}
+
+/// Reads the text of a replay cache for the trials `key`. Rows are kept only when they name a
+/// house of `houses`, two different `candidates`, and a finite cost ≥ 0; a key given twice is
+/// dropped altogether (which copy is right cannot be told); a last line without its newline was
+/// cut by an interrupted write and is dropped. Dropped rows are replayed again.
+fn parse_replay_cache(
+    text: &[u8],
+    key: &str,
+    candidates: &[String],
+    houses: &BTreeMap<usize, HashMap<&str, &TrialRow>>,
+) -> CacheRead {
+    let mut read = CacheRead::default();
+    let (first, rest) = match text.iter().position(|&b| b == b'\n') {
+        Some(i) => (&text[..i], &text[i + 1..]),
+        None => (text, &text[text.len()..]),
+    };
+    let first = String::from_utf8_lossy(first);
+    match first.strip_prefix(CACHE_KEY_PREFIX) {
+        Some(k) if k.trim() == key => {}
+        Some(_) => {
+            read.stale =
+                Some("it was computed for other trials (run.json or trials.csv changed)".into());
+            return read;
+        }
+        None => {
+            read.stale = Some("it does not say which trials it was computed for".into());
+            return read;
+        }
+    }
+    let complete = text.ends_with(b"\n");
+    let mut reader = csv::ReaderBuilder::new().flexible(true).from_reader(rest);
+    let headers = match reader.headers() {
+        Ok(h) if h.iter().eq(CACHE_HEADER.trim_end().split(',')) => h.clone(),
+        _ => {
+            read.stale = Some("its header is not the replay header".into());
+            return read;
+        }
+    };
+    let mut rows: Vec<(u64, ReplayRow)> = Vec::new();
+    let mut records = reader.records().peekable();
+    while let Some(record) = records.next() {
+        let is_last = records.peek().is_none();
+        // The key line comes before the CSV text.
+        let line = |r: &csv::StringRecord| r.position().map_or(0, |p| p.line() + 1);
+        let record = match record {
+            Ok(r) => r,
+            Err(e) => {
+                let at = e.position().map_or(0, |p| p.line() + 1);
+                read.dropped.push(format!("line {at}: {e}"));
+                continue;
+            }
+        };
+        let at = line(&record);
+        if is_last && !complete {
+            read.dropped
+                .push(format!("line {at}: cut short by an interrupted write"));
+            continue;
+        }
+        let row: ReplayRow = match record.deserialize(Some(&headers)) {
+            Ok(r) => r,
+            Err(e) => {
+                read.dropped.push(format!("line {at}: {e}"));
+                continue;
+            }
+        };
+        let why = if !houses.contains_key(&row.house_index) {
+            Some(format!(
+                "house {} has no trial of every strategy in trials.csv",
+                row.house_index
+            ))
+        } else if !candidates.contains(&row.deployed) {
+            Some(format!("unknown deployed strategy `{}`", row.deployed))
+        } else if !candidates.contains(&row.strategy) {
+            Some(format!("unknown strategy `{}`", row.strategy))
+        } else if row.deployed == row.strategy {
+            Some(format!("`{}` replayed on its own trial", row.strategy))
+        } else if !(row.replay_cost_m.is_finite() && row.replay_cost_m >= 0.0) {
+            Some(format!(
+                "replay cost {} is not a finite number ≥ 0",
+                row.replay_cost_m
+            ))
+        } else {
+            None
+        };
+        match why {
+            Some(why) => read.dropped.push(format!("line {at}: {why}")),
+            None => rows.push((at, row)),
+        }
+    }
+    let mut lines: HashMap<ReplayKey, Vec<u64>> = HashMap::new();
+    for (at, r) in &rows {
+        lines
+            .entry((r.house_index, r.deployed.clone(), r.strategy.clone()))
+            .or_default()
+            .push(*at);
+    }
+    for (at, r) in rows {
+        let k = (r.house_index, r.deployed, r.strategy);
+        match lines.get(&k) {
+            Some(l) if l.len() > 1 => read.dropped.push(format!(
+                "line {at}: house {}, {} deployed, {} is also on line(s) {}",
+                k.0,
+                k.1,
+                k.2,
+                l.iter()
+                    .filter(|&&x| x != at)
+                    .map(u64::to_string)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )),
+            _ => {
+                read.known.insert(k, r.replay_cost_m);
+            }
+        }
+    }
+    read
+}
+
+/// Serializes replay rows as CSV lines without a header.
+fn replay_lines(rows: &[ReplayRow]) -> Result<Vec<u8>> {
+    let mut w = csv::WriterBuilder::new()
+        .has_headers(false)
+        .from_writer(Vec::new());
+    for r in rows {
+        w.serialize(r)?;
+    }
+    Ok(w.into_inner().map_err(|e| e.into_error())?)
+}
+
+/// Rewrites the replay cache whole (atomically): key line, header and `known`.
+fn rewrite_replay_cache(path: &Path, key: &str, known: &HashMap<ReplayKey, f64>) -> Result<()> {
+    let mut all: Vec<ReplayRow> = known
+        .iter()
+        .map(|((h, d, s), c)| ReplayRow {
+            house_index: *h,
+            deployed: d.clone(),
+            strategy: s.clone(),
+            replay_cost_m: *c,
+        })
+        .collect();
+    all.sort_by(|a, b| {
+        (a.house_index, &a.deployed, &a.strategy).cmp(&(b.house_index, &b.deployed, &b.strategy))
+    });
+    let body = replay_lines(&all)?;
+    crate::output::write_atomic(path, |w| {
+        writeln!(w, "{CACHE_KEY_PREFIX}{key}")?;
+        w.write_all(CACHE_HEADER.as_bytes())?;
+        w.write_all(&body)?;
+        Ok(())
+    })
+}
 
 fn load_or_compute_replays(
     info: &RunInfo,
@@ -190,12 +413,36 @@ fn load_or_compute_replays(
     candidates: &[String],
     by_house: &BTreeMap<usize, HashMap<&str, &TrialRow>>,
     path: &Path,
+    key: &str,
 ) -> Result<HashMap<ReplayKey, f64>> {
-    let mut known: HashMap<ReplayKey, f64> = HashMap::new();
-    if path.exists() {
-        for r in read_csv::<ReplayRow>(path)? {
-            known.insert((r.house_index, r.deployed, r.strategy), r.replay_cost_m);
+    let read = match std::fs::read(path) {
+        Ok(text) => {
+            let read = parse_replay_cache(&text, key, candidates, by_house);
+            if let Some(why) = &read.stale {
+                eprintln!("{}: {why}; replaying again", path.display());
+            }
+            const SHOWN: usize = 10;
+            for d in read.dropped.iter().take(SHOWN) {
+                eprintln!("{}: {d}; row dropped and replayed again", path.display());
+            }
+            if read.dropped.len() > SHOWN {
+                eprintln!(
+                    "{}: {} more rows dropped",
+                    path.display(),
+                    read.dropped.len() - SHOWN
+                );
+            }
+            Some(read)
         }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+        Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
+    };
+    let needs_rewrite = read
+        .as_ref()
+        .is_none_or(|r| r.stale.is_some() || !r.dropped.is_empty());
+    let mut known = read.map(|r| r.known).unwrap_or_default();
+    if needs_rewrite {
+        rewrite_replay_cache(path, key, &known)?;
     }
     let missing = |h: usize| {
         candidates.iter().any(|j| {
@@ -226,6 +473,13 @@ fn load_or_compute_replays(
         .iter()
         .map(|s| setup.registry.build(s))
         .collect::<Result<_, _>>()?;
+    // Each house's replays are appended as soon as they finish, so that a killed run keeps them.
+    let cache = Mutex::new(
+        std::fs::OpenOptions::new()
+            .append(true)
+            .open(path)
+            .with_context(|| format!("opening {}", path.display()))?,
+    );
     let bar = progress(scenes.len(), "replays");
     let results: Vec<Result<Vec<ReplayRow>>> = scenes
         .par_iter()
@@ -233,44 +487,41 @@ fn load_or_compute_replays(
         .progress_with(bar.clone())
         .map(|(scene, map)| {
             let (_, distances) = map.as_ref().map_err(|e| anyhow::anyhow!("{e}"))?;
-            replay_house(
+            let rows = replay_house(
                 scene,
                 distances,
                 &strategies,
                 &by_house[&scene.house.index],
                 info,
-            )
+            )?;
+            // A house is replayed whole; rows already cached are not written twice.
+            let new: Vec<ReplayRow> = rows
+                .iter()
+                .filter(|r| {
+                    !known.contains_key(&(r.house_index, r.deployed.clone(), r.strategy.clone()))
+                })
+                .cloned()
+                .collect();
+            let lines = replay_lines(&new)?;
+            let mut file = cache.lock().unwrap_or_else(|p| p.into_inner());
+            file.write_all(&lines)
+                .and_then(|()| file.flush())
+                .with_context(|| format!("appending to {}", path.display()))?;
+            Ok(rows)
         })
         .collect();
     bar.finish_and_clear();
-    let mut new_rows = Vec::new();
     let mut errors = Vec::new();
     for r in results {
         match r {
-            Ok(rows) => new_rows.extend(rows),
+            Ok(rows) => {
+                for r in rows {
+                    known.insert((r.house_index, r.deployed, r.strategy), r.replay_cost_m);
+                }
+            }
             Err(e) => errors.push(format!("{e:#}")),
         }
     }
-    for r in &new_rows {
-        known.insert(
-            (r.house_index, r.deployed.clone(), r.strategy.clone()),
-            r.replay_cost_m,
-        );
-    }
-    let mut all: Vec<ReplayRow> = known
-        .iter()
-        .map(|((h, d, s), c)| ReplayRow {
-            house_index: *h,
-            deployed: d.clone(),
-            strategy: s.clone(),
-            replay_cost_m: *c,
-        })
-        .collect();
-    all.sort_by(|a, b| {
-        (a.house_index, &a.deployed, &a.strategy).cmp(&(b.house_index, &b.deployed, &b.strategy))
-    });
-    // Written even when some houses failed, so a rerun only replays what is missing.
-    write_csv(path, &all)?;
     super::llm_setup::write_token_report(&setup.service, &args.out)?;
     if !errors.is_empty() {
         bail!(
@@ -372,7 +623,9 @@ fn draw_selection(result: &ferret_select::ExperimentResult, out: &Path) -> Resul
             marks_at: marks,
         },
     ];
-    draw_curve_panels(&panels, &out.join("selection.png"))?;
+    crate::output::write_with_path(&out.join("selection.png"), |p| {
+        Ok(draw_curve_panels(&panels, p)?)
+    })?;
     let x: Vec<f64> = (1..=result.trials()).map(|k| k as f64).collect();
     for method in Method::ALL {
         let s = result.summary(method);
@@ -387,13 +640,187 @@ fn draw_selection(result: &ferret_select::ExperimentResult, out: &Path) -> Resul
                 )
             })
             .collect();
-        draw_choice_shares(
-            &format!("{}: how often each strategy is chosen", method.label()),
-            "trials k",
-            &x,
-            &shares,
-            &out.join(format!("choices-{}.png", method.name())),
-        )?;
+        let title = format!("{}: how often each strategy is chosen", method.label());
+        let path = out.join(format!("choices-{}.png", method.name()));
+        crate::output::write_with_path(&path, |p| {
+            Ok(draw_choice_shares(&title, "trials k", &x, &shares, p)?)
+        })?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    const KEY: &str = "0123abcd";
+
+    fn trial(house_index: usize, strategy: &str) -> TrialRow {
+        TrialRow {
+            house: format!("h#{house_index}"),
+            house_index,
+            target: "Apple".into(),
+            strategy: strategy.into(),
+            cost_m: 1.0,
+            searches: 1,
+            found: true,
+            found_container: "1|0".into(),
+            searched: "1|0".into(),
+            goal_containers: 1,
+        }
+    }
+
+    fn candidates() -> Vec<String> {
+        vec!["a".into(), "b".into(), "c".into()]
+    }
+
+    /// Every (house, deployed, replayed) row of 4 houses and strategies a, b, c, with a cost
+    /// that tells them apart.
+    fn valid_rows() -> Vec<ReplayRow> {
+        let c = candidates();
+        let mut rows = Vec::new();
+        for h in 0..4 {
+            for (j, d) in c.iter().enumerate() {
+                for (i, s) in c.iter().enumerate() {
+                    if i != j {
+                        rows.push(ReplayRow {
+                            house_index: h,
+                            deployed: d.clone(),
+                            strategy: s.clone(),
+                            replay_cost_m: (10 * h + 3 * j + i) as f64 + 0.5,
+                        });
+                    }
+                }
+            }
+        }
+        rows
+    }
+
+    fn line_of(r: &ReplayRow) -> String {
+        format!(
+            "{},{},{},{}",
+            r.house_index, r.deployed, r.strategy, r.replay_cost_m
+        )
+    }
+
+    /// A corruption of one row: the row's text, and whether it is dropped for itself (as
+    /// opposed to only making its key a duplicate).
+    fn corrupt(kind: u8, r: &ReplayRow) -> String {
+        let (h, d, s) = (r.house_index, &r.deployed, &r.strategy);
+        match kind {
+            0 => format!("{h},{d},{s},-1.5"),
+            1 => format!("{h},{d},{s},NaN"),
+            2 => format!("{h},{d},{s},inf"),
+            3 => format!("{h},{d},zzz,2.0"),
+            4 => format!("{h},zzz,{s},2.0"),
+            5 => format!("99,{d},{s},2.0"),
+            6 => format!("{h},{d},{d},2.0"),
+            7 => format!("{h},{d},{s}"),
+            _ => format!("{h},{d},{s},twelve"),
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
+
+        /// Corrupt rows (bad costs, unknown strategies or houses, self replays, short rows,
+        /// duplicates, a line cut by a kill) are dropped with their line number; every other
+        /// row is kept with its exact cost.
+        #[test]
+        fn corrupt_replay_rows_are_dropped_with_their_line(
+            edits in proptest::collection::btree_map(0usize..36, 0u8..10, 0..8),
+            cut in any::<bool>(),
+        ) {
+            let rows = valid_rows();
+            // Each line's text and, when it is a good row, its key and cost.
+            let mut lines: Vec<(String, Option<(ReplayKey, f64)>)> = Vec::new();
+            for (i, r) in rows.iter().enumerate() {
+                let key = (r.house_index, r.deployed.clone(), r.strategy.clone());
+                let good = (line_of(r), Some((key, r.replay_cost_m)));
+                match edits.get(&i) {
+                    // Kind 9: the row twice.
+                    Some(9) => {
+                        lines.push(good.clone());
+                        lines.push(good);
+                    }
+                    Some(&k) => lines.push((corrupt(k, r), None)),
+                    None => lines.push(good),
+                }
+            }
+            let mut text = format!("{CACHE_KEY_PREFIX}{KEY}\n{CACHE_HEADER}");
+            for (l, _) in &lines {
+                text.push_str(l);
+                text.push('\n');
+            }
+            if cut {
+                // Killed while appending the last row: its newline never made it.
+                text.pop();
+                if let Some(last) = lines.last_mut() {
+                    last.1 = None;
+                }
+            }
+            // Line numbers: 1 is the key, 2 the header. A key on two good lines drops both.
+            let mut count: HashMap<ReplayKey, usize> = HashMap::new();
+            for (_, good) in &lines {
+                if let Some((k, _)) = good {
+                    *count.entry(k.clone()).or_default() += 1;
+                }
+            }
+            let mut expected: HashMap<ReplayKey, f64> = HashMap::new();
+            let mut bad_lines = Vec::new();
+            for (n, (_, good)) in lines.iter().enumerate() {
+                match good {
+                    Some((k, c)) if count[k] == 1 => {
+                        expected.insert(k.clone(), *c);
+                    }
+                    _ => bad_lines.push(n as u64 + 3),
+                }
+            }
+            let trials: Vec<TrialRow> = (0..4)
+                .flat_map(|h| candidates().into_iter().map(move |s| trial(h, &s)))
+                .collect();
+            let mut houses: BTreeMap<usize, HashMap<&str, &TrialRow>> = BTreeMap::new();
+            for t in &trials {
+                houses.entry(t.house_index).or_default().insert(t.strategy.as_str(), t);
+            }
+            let read = parse_replay_cache(text.as_bytes(), KEY, &candidates(), &houses);
+            prop_assert!(read.stale.is_none());
+            prop_assert_eq!(&read.known, &expected);
+            let mut reported: Vec<u64> = read
+                .dropped
+                .iter()
+                .map(|m| {
+                    m.strip_prefix("line ")
+                        .and_then(|m| m.split(':').next())
+                        .and_then(|n| n.parse().ok())
+                        .unwrap_or(0)
+                })
+                .collect();
+            reported.sort_unstable();
+            prop_assert_eq!(reported, bad_lines);
+        }
+    }
+
+    #[test]
+    fn a_cache_of_other_trials_or_without_key_is_stale() {
+        let houses = BTreeMap::new();
+        let other = format!("{CACHE_KEY_PREFIX}ffff\n{CACHE_HEADER}");
+        let read = parse_replay_cache(other.as_bytes(), KEY, &candidates(), &houses);
+        assert!(read.stale.unwrap().contains("other trials"));
+        // The format before the key line.
+        let old = format!("{CACHE_HEADER}0,a,b,1.0\n");
+        let read = parse_replay_cache(old.as_bytes(), KEY, &candidates(), &houses);
+        assert!(read.stale.is_some() && read.known.is_empty());
+    }
+
+    #[test]
+    fn the_trials_key_changes_with_either_file() {
+        let k = trials_key(b"{run}", b"trials");
+        assert_eq!(k.len(), 64);
+        assert_ne!(k, trials_key(b"{run}", b"trials2"));
+        assert_ne!(k, trials_key(b"{run2}", b"trials"));
+        // The length prefix keeps the boundary between the files.
+        assert_ne!(trials_key(b"ab", b"c"), trials_key(b"a", b"bc"));
+    }
 }

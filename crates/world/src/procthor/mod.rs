@@ -26,6 +26,6 @@ pub mod types;
 pub use assets::AssetDatabase;
 pub use range::{HouseRange, ParseRangeError};
 pub use reader::{
-    LoadOptions, LoadReport, MAX_COORDINATE, ROOM_TOLERANCE, START_TOLERANCE, load_scenes,
-    parse_house, scene_from_raw,
+    LoadOptions, LoadReport, MAX_CONTAINERS, MAX_COORDINATE, MAX_LINE_BYTES, ROOM_TOLERANCE,
+    START_TOLERANCE, load_scenes, parse_house, scene_from_raw,
 };

@@ -38,6 +38,16 @@ pub const START_TOLERANCE: f64 = 0.05;
 /// Rooms smaller than this (m²) are degenerate.
 const MIN_ROOM_AREA: f64 = 0.01;
 
+/// Longest line (one house) of a JSON Lines file, and largest single-house file, in bytes
+/// (64 MiB; the largest house of ProcTHOR-10k is under 1 MiB). Lines are read through a bounded
+/// reader, so a file without newlines (`/dev/zero`) or a gzip bomb fails with
+/// [`WorldError::Limit`] instead of exhausting memory.
+pub const MAX_LINE_BYTES: usize = 64 << 20;
+
+/// Most containers one house may hold: the distance matrix grows with their square (2 000
+/// containers take 32 MB; ProcTHOR houses have a few dozen).
+pub const MAX_CONTAINERS: usize = crate::distance::MAX_CONTAINERS;
+
 /// Slack (metres) for a door hole reaching past the ends of its wall through rounding.
 const HOLE_SLACK: f64 = 0.02;
 
@@ -68,8 +78,10 @@ pub struct LoadReport {
 ///
 /// Lines are decompressed in order and only those inside `opts.range` are parsed, in parallel.
 /// A range reaching outside the file is a [`WorldError::Range`]; an unreadable file is a
-/// [`WorldError::Io`]. An invalid house is returned as the error (the first in file order) unless
-/// `opts.skip_invalid` is set.
+/// [`WorldError::Io`]; a file holding no house at all (empty, or blank lines only) is
+/// [`WorldError::NoHouses`]; a line longer than [`MAX_LINE_BYTES`] is [`WorldError::Limit`]. An
+/// invalid house (including one with more than [`MAX_CONTAINERS`] containers) is returned as the
+/// error (the first in file order) unless `opts.skip_invalid` is set.
 pub fn load_scenes(path: &Path, opts: &LoadOptions) -> Result<LoadReport> {
     let io_err = |source| WorldError::Io {
         file: path.to_path_buf(),
@@ -90,8 +102,18 @@ pub fn load_scenes(path: &Path, opts: &LoadOptions) -> Result<LoadReport> {
 
     let (mut results, total) = if is_single_house_file(path) {
         let mut bytes = Vec::new();
-        let mut reader = reader;
-        reader.read_to_end(&mut bytes).map_err(io_err)?;
+        reader
+            .take(MAX_LINE_BYTES as u64 + 1)
+            .read_to_end(&mut bytes)
+            .map_err(io_err)?;
+        if bytes.len() > MAX_LINE_BYTES {
+            return Err(line_too_long(at(0)));
+        }
+        if bytes.iter().all(u8::is_ascii_whitespace) {
+            return Err(WorldError::NoHouses {
+                file: path.to_path_buf(),
+            });
+        }
         let results = if opts.range.contains(0) {
             vec![(0, house_from_bytes(bytes, &at(0), db))]
         } else {
@@ -105,13 +127,22 @@ pub fn load_scenes(path: &Path, opts: &LoadOptions) -> Result<LoadReport> {
             range: opts.range,
             error: None,
             buf: Vec::new(),
+            houses: 0,
+            at_end: false,
         };
         let results: Vec<(usize, Result<Scene>)> = (&mut lines)
             .par_bridge()
             .map(|(i, bytes)| (i, house_from_bytes(bytes, &at(i), db)))
             .collect();
-        if let Some(source) = lines.error {
-            return Err(io_err(source));
+        match lines.error {
+            Some(LineError::Io(source)) => return Err(io_err(source)),
+            Some(LineError::TooLong(index)) => return Err(line_too_long(at(index))),
+            None => {}
+        }
+        if lines.at_end && lines.houses == 0 {
+            return Err(WorldError::NoHouses {
+                file: path.to_path_buf(),
+            });
         }
         (results, lines.next)
     };
@@ -150,15 +181,63 @@ fn is_single_house_file(path: &Path) -> bool {
     name.ends_with(".json") || name.ends_with(".json.gz")
 }
 
+fn line_too_long(at: HouseLocation) -> WorldError {
+    WorldError::Limit {
+        at,
+        message: format!(
+            "the line is longer than the limit of {} MiB per house",
+            MAX_LINE_BYTES >> 20
+        ),
+    }
+}
+
+/// Why [`Lines`] stopped early.
+enum LineError {
+    Io(io::Error),
+    /// Line (house index) longer than [`MAX_LINE_BYTES`].
+    TooLong(usize),
+}
+
 /// The lines of a JSON Lines stream inside a range, with their 0-based indices. Stops at the
 /// range's end; remembers a read error instead of yielding it, so that it can feed `par_bridge`.
+/// Lines inside the range are buffered up to [`MAX_LINE_BYTES`]; lines outside it are skipped
+/// without being buffered.
 struct Lines<R> {
     reader: R,
     /// Index of the next line to read; after the end of the file, the number of lines.
     next: usize,
     range: HouseRange,
-    error: Option<io::Error>,
+    error: Option<LineError>,
     buf: Vec<u8>,
+    /// Non-blank lines seen so far, inside the range or before it.
+    houses: usize,
+    /// Whether the end of the stream was reached (rather than the end of the range).
+    at_end: bool,
+}
+
+impl<R: BufRead> Lines<R> {
+    /// Consumes one line without keeping it; false at the end of the stream. A skipped line
+    /// counts as a house unless it is blank.
+    fn skip_line(&mut self) -> io::Result<(bool, bool)> {
+        let mut any = false;
+        let mut blank = true;
+        loop {
+            let chunk = self.reader.fill_buf()?;
+            if chunk.is_empty() {
+                return Ok((any, blank));
+            }
+            any = true;
+            let (used, done) = match chunk.iter().position(|&b| b == b'\n') {
+                Some(p) => (p + 1, true),
+                None => (chunk.len(), false),
+            };
+            blank &= chunk[..used].iter().all(u8::is_ascii_whitespace);
+            self.reader.consume(used);
+            if done {
+                return Ok((true, blank));
+            }
+        }
+    }
 }
 
 impl<R: BufRead> Iterator for Lines<R> {
@@ -169,18 +248,48 @@ impl<R: BufRead> Iterator for Lines<R> {
             if self.range.is_past(self.next) {
                 return None;
             }
+            let index = self.next;
+            if !self.range.contains(index) {
+                match self.skip_line() {
+                    Ok((false, _)) => {
+                        self.at_end = true;
+                        return None;
+                    }
+                    Ok((true, blank)) => {
+                        self.houses += usize::from(!blank);
+                        self.next += 1;
+                        continue;
+                    }
+                    Err(e) => {
+                        self.error = Some(LineError::Io(e));
+                        return None;
+                    }
+                }
+            }
             self.buf.clear();
-            match self.reader.read_until(b'\n', &mut self.buf) {
-                Ok(0) => return None,
+            let limit = MAX_LINE_BYTES as u64 + 1;
+            match (&mut self.reader)
+                .take(limit)
+                .read_until(b'\n', &mut self.buf)
+            {
+                Ok(0) => {
+                    self.at_end = true;
+                    return None;
+                }
                 Ok(_) => {}
                 Err(e) => {
-                    self.error = Some(e);
+                    self.error = Some(LineError::Io(e));
                     return None;
                 }
             }
-            let index = self.next;
+            let content = self.buf.len() - usize::from(self.buf.ends_with(b"\n"));
+            if content > MAX_LINE_BYTES {
+                self.error = Some(LineError::TooLong(index));
+                return None;
+            }
             self.next += 1;
-            if self.range.contains(index) && !self.buf.iter().all(u8::is_ascii_whitespace) {
+            if !self.buf.iter().all(u8::is_ascii_whitespace) {
+                self.houses += 1;
                 return Some((index, std::mem::take(&mut self.buf)));
             }
         }
@@ -385,6 +494,15 @@ pub fn scene_from_raw(
             yaw_deg,
         };
         if is_container_type(&object_type) {
+            if containers.len() == MAX_CONTAINERS {
+                return Err(WorldError::Limit {
+                    at: at.clone(),
+                    message: format!(
+                        "{}: more than the limit of {MAX_CONTAINERS} containers per house",
+                        field("id")
+                    ),
+                });
+            }
             contents.push(
                 o.children
                     .iter()

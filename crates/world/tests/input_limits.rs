@@ -1,0 +1,190 @@
+//! Input that holds no houses or would exhaust memory fails with an error naming the file, the
+//! house and the limit.
+
+#[path = "procthor_fixture/mod.rs"]
+mod fixture;
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use ferret_world::procthor::{LoadOptions, MAX_CONTAINERS, MAX_LINE_BYTES, load_scenes};
+use ferret_world::{GridParams, OccupancyGrid, WorldError};
+use proptest::prelude::*;
+use serde_json::json;
+
+fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, bytes).unwrap();
+    path
+}
+
+fn gzip(bytes: &[u8]) -> Vec<u8> {
+    let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    enc.write_all(bytes).unwrap();
+    enc.finish().unwrap()
+}
+
+fn range(r: &str) -> LoadOptions<'static> {
+    LoadOptions {
+        range: r.parse().unwrap(),
+        ..LoadOptions::default()
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    /// Empty files and files of blank lines only used to load as zero houses, so `houses check`
+    /// passed them.
+    #[test]
+    fn files_of_blank_lines_hold_no_houses(
+        blank in proptest::collection::vec(prop_oneof![Just(b' '), Just(b'\t'), Just(b'\r'), Just(b'\n')], 0..200),
+        compressed in any::<bool>(),
+        name in prop_oneof![Just("h.jsonl"), Just("h.json")],
+    ) {
+        let dir = tempfile::tempdir().unwrap();
+        let bytes = if compressed { gzip(&blank) } else { blank.clone() };
+        let path = write(dir.path(), name, &bytes);
+        match load_scenes(&path, &LoadOptions::default()) {
+            Err(WorldError::NoHouses { file }) => prop_assert_eq!(file, path),
+            other => prop_assert!(false, "{:?}", other),
+        }
+    }
+}
+
+#[test]
+fn a_line_longer_than_the_limit_names_the_house_and_the_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let house = fixture::house_a().to_string();
+    // A line of exactly the limit is read (here: blank, so no house); one byte more is refused.
+    let mut text = house.clone().into_bytes();
+    text.push(b'\n');
+    text.extend(std::iter::repeat_n(b' ', MAX_LINE_BYTES));
+    text.push(b'\n');
+    text.extend(std::iter::repeat_n(b' ', MAX_LINE_BYTES + 1));
+    text.push(b'\n');
+    text.extend_from_slice(house.as_bytes());
+    text.push(b'\n');
+    let path = write(dir.path(), "long.jsonl.gz", &gzip(&text));
+    match load_scenes(&path, &LoadOptions::default()) {
+        Err(WorldError::Limit { at, message }) => {
+            assert_eq!((at.file.as_path(), at.index), (path.as_path(), 2));
+            assert!(message.contains("64 MiB"), "{message}");
+        }
+        other => panic!("{other:?}"),
+    }
+    // Lines outside the range are skipped, however long.
+    let r = load_scenes(&path, &range("3")).unwrap();
+    assert_eq!(r.scenes.len(), 1);
+    assert_eq!(r.scenes[0].house.index, 3);
+    let r = load_scenes(&path, &range("..2")).unwrap();
+    assert_eq!(r.scenes.len(), 1);
+
+    // A stream without any newline, like /dev/zero.
+    let zeros = write(
+        dir.path(),
+        "zeros.jsonl.gz",
+        &gzip(&vec![0u8; MAX_LINE_BYTES + 10]),
+    );
+    assert!(matches!(
+        load_scenes(&zeros, &LoadOptions::default()),
+        Err(WorldError::Limit { at, .. }) if at.index == 0
+    ));
+    // A single-house file is bounded the same way.
+    let big = write(
+        dir.path(),
+        "big.json.gz",
+        &gzip(&vec![b' '; MAX_LINE_BYTES + 1]),
+    );
+    assert!(matches!(
+        load_scenes(&big, &LoadOptions::default()),
+        Err(WorldError::Limit { at, .. }) if at.index == 0
+    ));
+}
+
+/// A house with `n` fridges in its first room (on top of each other: only the count matters).
+fn house_with_containers(n: usize) -> serde_json::Value {
+    let mut h = fixture::house_a();
+    let objects: Vec<serde_json::Value> = (0..n)
+        .map(|i| {
+            json!({"id": format!("1|{}", 100 + i), "assetId": "Fridge_1", "objectType": "Fridge",
+                   "position": {"x": 0.5, "y": 0.9, "z": 0.5}, "rotation": {"x": 0, "y": 0, "z": 0}})
+        })
+        .collect();
+    h["objects"] = json!(objects);
+    h
+}
+
+#[test]
+fn houses_with_too_many_containers_are_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let ok = house_with_containers(MAX_CONTAINERS).to_string();
+    let bad = house_with_containers(MAX_CONTAINERS + 1).to_string();
+    let path = write(
+        dir.path(),
+        "many.jsonl",
+        format!("{ok}\n{bad}\n").as_bytes(),
+    );
+    let r = load_scenes(
+        &path,
+        &LoadOptions {
+            skip_invalid: true,
+            ..LoadOptions::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(r.scenes.len(), 1);
+    assert_eq!(r.scenes[0].house.containers.len(), MAX_CONTAINERS);
+    match &r.skipped[..] {
+        [WorldError::Limit { at, message }] => {
+            assert_eq!(at.index, 1);
+            assert!(message.contains("2000 containers"), "{message}");
+            assert!(
+                message.contains(&format!("objects[{MAX_CONTAINERS}]")),
+                "{message}"
+            );
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn grids_beyond_the_cell_limit_name_the_house_and_the_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(
+        dir.path(),
+        "h.jsonl",
+        format!("{}\n", fixture::house_a()).as_bytes(),
+    );
+    let scene = load_scenes(&path, &LoadOptions::default())
+        .unwrap()
+        .scenes
+        .remove(0);
+    let params = GridParams {
+        resolution: GridParams::MIN_RESOLUTION,
+        robot_radius: 10.0,
+        ..GridParams::default()
+    };
+    match OccupancyGrid::build(&scene.house, &params) {
+        Err(WorldError::Grid { house, message }) => {
+            assert_eq!(house, "h.jsonl#0");
+            assert!(
+                message.contains(&ferret_world::grid::MAX_CELLS.to_string()),
+                "{message}"
+            );
+        }
+        other => panic!("{:?}", other.map(|g| g.cell_count())),
+    }
+}
+
+#[cfg(unix)]
+#[test]
+fn an_endless_asset_database_is_refused_at_the_limit() {
+    match ferret_world::procthor::AssetDatabase::load(Path::new("/dev/zero")) {
+        Err(WorldError::AssetDatabase { file, message }) => {
+            assert_eq!(file, Path::new("/dev/zero"));
+            assert!(message.contains("64 MiB"), "{message}");
+        }
+        other => panic!("{:?}", other.map(|_| ())),
+    }
+}

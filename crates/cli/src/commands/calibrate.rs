@@ -209,10 +209,12 @@ pub fn run(args: Args) -> Result<ExitCode> {
         trials.len(),
         args.targets_per_house,
     );
-    std::fs::write(args.out.join("calibration.md"), &md)?;
+    crate::output::write_bytes(&args.out.join("calibration.md"), &md)?;
     if !scored.is_empty() {
         for ext in ["png", "svg"] {
-            draw_reliability(&scored, &args.out.join(format!("reliability.{ext}")))?;
+            crate::output::write_with_path(&args.out.join(format!("reliability.{ext}")), |p| {
+                draw_reliability(&scored, p)
+            })?;
         }
     }
     println!("{md}");

@@ -3,7 +3,8 @@
 //!
 //! Uses the hand-built test house, a generated house (with its occupancy grid and shortest
 //! paths), synthetic costs and curves, and, when `FERRET_PROCTHOR_DIR` is set, real ProcTHOR
-//! houses.
+//! houses. Invented data is labelled as such (`synthetic A`, ...): no picture made here carries
+//! the name of a model or strategy that did not produce it.
 
 #[path = "../tests/common/mod.rs"]
 mod common;
@@ -93,7 +94,7 @@ fn house_figures(house: &House, dir: &Path, stem: &str, ext: &str) -> BoxResult<
             color: None,
         },
         TrajectoryPanel {
-            title: "llm+model/p-context-a/gpt-5-mini".into(),
+            title: "example: a two-stop search".into(),
             cost_m: two_cost,
             path: walk(&d, &two),
             searched: two,
@@ -129,12 +130,12 @@ fn house_figures(house: &House, dir: &Path, stem: &str, ext: &str) -> BoxResult<
 fn charts(dir: &Path, ext: &str) -> BoxResult<()> {
     let mut rng = ChaCha8Rng::seed_from_u64(7);
     let names = [
-        "optimistic+greedy",
-        "llm-direct/p-direct/gpt-5-mini",
-        "llm+model/p-context-a/gpt-5-mini",
-        "llm+model/p-context-b/gpt-5-mini",
-        "llm+model/p-minimal/gemini-2.5-flash",
-        "model/prior",
+        "synthetic A",
+        "synthetic B",
+        "synthetic C",
+        "synthetic D",
+        "synthetic E",
+        "synthetic F",
     ];
     let series: Vec<(String, Vec<f64>)> = names
         .iter()
@@ -153,7 +154,7 @@ fn charts(dir: &Path, ext: &str) -> BoxResult<()> {
     draw_violins(
         &series,
         &ViolinOptions {
-            title: "Cost per strategy, 150 houses".into(),
+            title: "Synthetic costs (invented data)".into(),
             ..ViolinOptions::default()
         },
         &dir.join(format!("violins.{ext}")),
@@ -176,8 +177,8 @@ fn charts(dir: &Path, ext: &str) -> BoxResult<()> {
             x_label: "trials k".into(),
             y_label: "average cost over trials 1..k (m)".into(),
             series: vec![
-                ("UCB selection".into(), avg(24.7, 30.0)),
-                ("replay selection".into(), avg(23.1, 12.0)),
+                ("synthetic curve 1".into(), avg(24.7, 30.0)),
+                ("synthetic curve 2".into(), avg(23.1, 12.0)),
             ],
             marks_at: vec![20.0, 50.0, 100.0],
         },
@@ -186,8 +187,8 @@ fn charts(dir: &Path, ext: &str) -> BoxResult<()> {
             x_label: "trials k".into(),
             y_label: "cumulative regret (m)".into(),
             series: vec![
-                ("UCB selection".into(), reg(8.0, 40.0)),
-                ("replay selection".into(), reg(6.0, 20.0)),
+                ("synthetic curve 1".into(), reg(8.0, 40.0)),
+                ("synthetic curve 2".into(), reg(6.0, 20.0)),
             ],
             marks_at: vec![20.0, 50.0, 100.0],
         },
@@ -218,7 +219,7 @@ fn charts(dir: &Path, ext: &str) -> BoxResult<()> {
         })
         .collect();
     draw_choice_shares(
-        "Strategy chosen by replay selection",
+        "Synthetic choice shares (invented data)",
         "trials k",
         &k,
         &shares,

@@ -6,6 +6,7 @@
 #
 #   scripts/real-llm.sh            # install (cached), serve, run, stop the server
 #   scripts/real-llm.sh install    # only build/fetch into the cache
+#   scripts/real-llm.sh config     # only write $FERRET_LANE_OUT/ferret.toml (tested in CI)
 #
 # Everything downloaded or built lives in $FERRET_LANE_CACHE (default ~/.cache/ferret-real-llm):
 # the llama-cpp-python wheel (built from PyPI's source, ~11 min on 2 cores, once), a venv and the
@@ -162,6 +163,11 @@ run() {
 
 case "${1:-all}" in
     install) install ;;
+    config)
+        mkdir -p "$OUT"
+        write_config
+        echo "$OUT/ferret.toml"
+        ;;
     all)
         install
         mkdir -p "$OUT"
@@ -170,5 +176,5 @@ case "${1:-all}" in
         serve
         run
         ;;
-    *) echo "usage: $0 [install|all]" >&2; exit 2 ;;
+    *) echo "usage: $0 [install|config|all]" >&2; exit 2 ;;
 esac

@@ -593,6 +593,35 @@ mod tests {
     }
 
     #[test]
+    fn answer_settings_parse_and_are_checked() {
+        let c = parse(
+            "[llm.a]\nbase_url = \"http://x/v1\"\nmodel = \"m\"\nanswer_format = \"json_schema\"\nsystem_role = \"merge\"\nmax_reasks = 2\ntop_logprobs = 5\n",
+        )
+        .unwrap();
+        let a = &c.endpoints["a"];
+        assert_eq!(a.answer_format, AnswerFormat::JsonSchema);
+        assert_eq!(a.system_role, SystemRole::Merge);
+        assert_eq!((a.max_reasks, a.requested_top_logprobs()), (2, Some(5)));
+        for (field, value) in [
+            ("top_logprobs", "0"),
+            ("top_logprobs", "21"),
+            ("max_reasks", "6"),
+        ] {
+            let e = parse(&format!(
+                "[llm.a]\nbase_url = \"http://x/v1\"\nmodel = \"m\"\n{field} = {value}\n"
+            ))
+            .unwrap_err()
+            .to_string();
+            assert!(e.contains(&format!("llm.a.{field}")), "{e}");
+        }
+        let e =
+            parse("[llm.a]\nbase_url = \"http://x/v1\"\nmodel = \"m\"\nanswer_format = \"yaml\"\n")
+                .unwrap_err()
+                .to_string();
+        assert!(e.contains("answer_format") || e.contains("yaml"), "{e}");
+    }
+
+    #[test]
     fn unknown_endpoint_lists_known_ones() {
         let c = parse("[llm.a]\nbase_url = \"http://x\"\nmodel = \"m\"\n").unwrap();
         let e = c.endpoint("b").unwrap_err().to_string();
@@ -609,9 +638,25 @@ mod tests {
                 "gemini-2.5-flash",
                 "gpt-5-mini",
                 "gpt-oss-120b",
-                "llama3.2-3b"
+                "llama3.2-3b",
+                "qwen-local"
             ]
         );
+        let q = &c.endpoints["qwen-local"];
+        assert_eq!(
+            (
+                q.answer_format,
+                q.probability_from,
+                q.requested_top_logprobs()
+            ),
+            (
+                AnswerFormat::JsonObject,
+                ProbabilityFrom::Logprobs,
+                Some(20)
+            )
+        );
+        assert_eq!(c.endpoints["gpt-5-mini"].answer_format, AnswerFormat::Text);
+        assert_eq!(c.endpoints["gpt-5-mini"].max_reasks, 1);
         assert_eq!(
             c.endpoints["gemini-2.5-flash"].completions_url(),
             "https://generativelanguage.googleapis.com/v1beta/openai/chat/completions"

@@ -1,0 +1,359 @@
+//! End-to-end, against loopback servers: what `ferret eval` and `ferret calibrate` say about LLM
+//! answers (classes, warnings, the fallback gate), and how a run ends when an endpoint is dead.
+
+use std::path::Path;
+use std::process::{Command, Output};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use serde_json::{Value, json};
+use wiremock::matchers::method;
+use wiremock::{Mock, MockServer, Request, Respond, ResponseTemplate};
+
+/// A weak model: "10%" to almost everything, nothing readable about beds.
+struct Collapsed {
+    requests: Arc<AtomicUsize>,
+}
+
+fn prompt_of(req: &Request) -> String {
+    let body: Value = serde_json::from_slice(&req.body).unwrap_or_default();
+    body["messages"]
+        .as_array()
+        .map(|m| {
+            m.iter()
+                .filter_map(|x| x["content"].as_str())
+                .collect::<Vec<_>>()
+                .join("\n")
+        })
+        .unwrap_or_default()
+}
+
+fn reply(text: &str) -> ResponseTemplate {
+    ResponseTemplate::new(200).set_body_json(json!({
+        "id": "x", "object": "chat.completion", "created": 1, "model": "m",
+        "choices": [{"index": 0, "message": {"role": "assistant", "content": text}, "finish_reason": "stop"}],
+        "usage": {"prompt_tokens": 40, "completion_tokens": 2, "total_tokens": 42}
+    }))
+}
+
+impl Respond for Collapsed {
+    fn respond(&self, req: &Request) -> ResponseTemplate {
+        self.requests.fetch_add(1, Ordering::SeqCst);
+        let prompt = prompt_of(req);
+        let question = prompt.rsplit("likelihood").next().unwrap_or_default();
+        if question.contains(" bed ") {
+            reply("It depends on the household.")
+        } else {
+            reply("10%")
+        }
+    }
+}
+
+/// An informed model: high for containers that usually hold small things.
+struct Informed {
+    requests: Arc<AtomicUsize>,
+}
+
+impl Respond for Informed {
+    fn respond(&self, req: &Request) -> ResponseTemplate {
+        self.requests.fetch_add(1, Ordering::SeqCst);
+        let prompt = prompt_of(req);
+        let q = prompt.rsplit("likelihood").next().unwrap_or_default();
+        let p = if q.contains("counter") || q.contains("table") || q.contains("shelf") {
+            60
+        } else if q.contains("fridge") {
+            5
+        } else {
+            20
+        };
+        reply(&format!("{p}%"))
+    }
+}
+
+async fn server(r: impl Respond + 'static) -> MockServer {
+    let s = MockServer::start().await;
+    Mock::given(method("POST")).respond_with(r).mount(&s).await;
+    s
+}
+
+fn ferret(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_ferret"))
+        .args(args)
+        .output()
+        .expect("ferret runs")
+}
+
+fn text(o: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("UTF-8 temp path")
+}
+
+fn config(dir: &Path, server: &MockServer, extra: &str) -> std::path::PathBuf {
+    let path = dir.join("ferret.toml");
+    std::fs::write(
+        &path,
+        format!(
+            "[llm.mock]\nbase_url = \"{}/v1\"\nmodel = \"m\"\nretry_base_ms = 10\nmax_attempts = 2\n{extra}",
+            server.uri()
+        ),
+    )
+    .unwrap();
+    path
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn weak_answers_are_classed_marked_and_gated() {
+    let requests = Arc::new(AtomicUsize::new(0));
+    let srv = server(Collapsed {
+        requests: requests.clone(),
+    })
+    .await;
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = config(dir.path(), &srv, "");
+    let out = dir.path().join("out");
+    let cache = dir.path().join("c.sqlite");
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "eval",
+            "--generate",
+            "8",
+            "--house-seed",
+            "5",
+            "--strategies",
+            "optimistic+greedy,llm+model/p-minimal/mock",
+            "--config",
+            s(&cfg),
+            "--llm-cache",
+            s(&cache),
+            "--out",
+            s(&out),
+        ];
+        args.extend_from_slice(extra);
+        ferret(&args)
+    };
+    let o = tokio::task::block_in_place(|| run(&[]));
+    assert!(o.status.success(), "{}", text(&o));
+    let all = text(&o);
+    assert!(
+        all.contains("WARNING: llm+model/p-minimal/mock"),
+        "a loud warning: {all}"
+    );
+    let md = std::fs::read_to_string(out.join("summary.md")).unwrap();
+    assert!(
+        md.contains("| llm+model/p-minimal/mock ⚠ |"),
+        "the row is marked: {md}"
+    );
+    let answers = md.split("## LLM answers").nth(1).expect("answers table");
+    let row = answers
+        .lines()
+        .find(|l| l.starts_with("| llm+model/p-minimal/mock |"))
+        .expect("a row for the strategy");
+    let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+    // | strategy | answers | json | number-only | in prose | several | none | echoed | re-asked | fell back | ...
+    let answers_n: u64 = cells[2].parse().unwrap();
+    let number_only: u64 = cells[4].parse().unwrap();
+    let none: u64 = cells[7].parse().unwrap();
+    let reasked: u64 = cells[9].parse().unwrap();
+    let fell_back: u64 = cells[10]
+        .split_whitespace()
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(none > 0 && number_only > 0, "{row}");
+    assert_eq!(answers_n, number_only + none, "{row}");
+    // Each unreadable bed answer was asked once more, and stayed unreadable.
+    assert_eq!((reasked, fell_back), (none, none), "{row}");
+    assert!(cells[12].starts_with("10.0 %"), "{row}");
+    let tokens = std::fs::read_to_string(out.join("tokens.csv")).unwrap();
+    assert!(tokens.lines().next().unwrap().contains("class_no_number"));
+    assert!(tokens.contains("barely depend on the question"), "{tokens}");
+
+    // The gate: the same run with --max-fallback-share 0 fails after writing its results.
+    let sent = requests.load(Ordering::SeqCst);
+    std::fs::remove_dir_all(&out).unwrap();
+    let o = tokio::task::block_in_place(|| run(&["--max-fallback-share", "0"]));
+    assert!(!o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("--max-fallback-share"), "{}", text(&o));
+    assert!(out.join("trials.csv").exists());
+    assert_eq!(
+        requests.load(Ordering::SeqCst),
+        sent,
+        "all answers came from the cache"
+    );
+    // A generous gate passes.
+    let o = tokio::task::block_in_place(|| run(&["--max-fallback-share", "1"]));
+    assert!(o.status.success(), "{}", text(&o));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_dead_endpoint_stops_the_run_quickly_or_is_left_out_with_keep_going() {
+    let requests = Arc::new(AtomicUsize::new(0));
+    struct Down(Arc<AtomicUsize>);
+    impl Respond for Down {
+        fn respond(&self, _: &Request) -> ResponseTemplate {
+            self.0.fetch_add(1, Ordering::SeqCst);
+            ResponseTemplate::new(502).set_body_string("<html>bad gateway</html>")
+        }
+    }
+    let srv = server(Down(requests.clone())).await;
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = config(dir.path(), &srv, "concurrency = 1\n");
+    let cache = dir.path().join("c.sqlite");
+    let run = |out: &str, extra: &[&str]| {
+        let out = dir.path().join(out);
+        let mut args = vec![
+            "eval",
+            "--generate",
+            "10",
+            "--strategies",
+            "optimistic+greedy,llm+model/p-context-a/mock",
+            "--config",
+            s(&cfg),
+            "--llm-cache",
+            s(&cache),
+            "--out",
+        ];
+        let out = out.to_string_lossy().into_owned();
+        args.push(&out);
+        args.extend_from_slice(extra);
+        ferret(&args)
+    };
+    let o = tokio::task::block_in_place(|| run("a", &[]));
+    assert!(!o.status.success());
+    let t = text(&o);
+    assert!(t.contains("`mock`") && t.contains("502"), "{t}");
+    assert!(t.contains("--keep-going"), "{t}");
+    // One question's two attempts, not two per question of ten houses.
+    assert_eq!(requests.load(Ordering::SeqCst), 2);
+
+    let o = tokio::task::block_in_place(|| run("b", &["--keep-going"]));
+    assert!(o.status.success(), "{}", text(&o));
+    let trials = std::fs::read_to_string(dir.path().join("b/trials.csv")).unwrap();
+    assert_eq!(trials.lines().count(), 1 + 10, "greedy only: {trials}");
+    assert!(!trials.contains("llm+model"));
+    assert_eq!(requests.load(Ordering::SeqCst), 4);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn calibrate_scores_sources_and_asks_each_question_once() {
+    let requests = Arc::new(AtomicUsize::new(0));
+    let srv = server(Informed {
+        requests: requests.clone(),
+    })
+    .await;
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = config(dir.path(), &srv, "");
+    let out = dir.path().join("cal");
+    let run = || {
+        ferret(&[
+            "calibrate",
+            "--generate",
+            "6",
+            "--house-seed",
+            "3",
+            "--sources",
+            "model/uniform,model/prior,llm+model/p-minimal/mock",
+            "--config",
+            s(&cfg),
+            "--llm-cache",
+            s(&dir.path().join("c.sqlite")),
+            "--out",
+            s(&out),
+        ])
+    };
+    let o = tokio::task::block_in_place(run);
+    assert!(o.status.success(), "{}", text(&o));
+    let sent = requests.load(Ordering::SeqCst);
+    assert!(sent > 0);
+    let csv = std::fs::read_to_string(out.join("calibration.csv")).unwrap();
+    let rows: Vec<Vec<String>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(String::from).collect())
+        .collect();
+    assert_eq!(
+        csv.lines().next().unwrap(),
+        "source,pairs,positives,brier,log_loss,auroc,mean_p_pos,mean_p_neg"
+    );
+    assert_eq!(rows.len(), 3);
+    // The same pairs for every source.
+    assert!(
+        rows.iter()
+            .all(|r| r[1] == rows[0][1] && r[2] == rows[0][2])
+    );
+    let auroc = |i: usize| rows[i][5].parse::<f64>().unwrap();
+    assert_eq!(auroc(0), 0.5, "a constant source ranks nothing");
+    assert!(
+        auroc(1) > 0.6,
+        "the trained prior ranks holders higher: {csv}"
+    );
+    for ext in ["png", "svg"] {
+        assert!(
+            std::fs::metadata(out.join(format!("reliability.{ext}")))
+                .unwrap()
+                .len()
+                > 1000
+        );
+    }
+    assert!(
+        std::fs::read_to_string(out.join("calibration.md"))
+            .unwrap()
+            .contains("| model/uniform |")
+    );
+    // A second run answers from the cache.
+    let o = tokio::task::block_in_place(run);
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(requests.load(Ordering::SeqCst), sent);
+}
+
+/// The real-model lane's configuration (written by `scripts/real-llm.sh config`) is one ferret
+/// reads: four endpoints over one server, sharing one cache id, in the four answer modes.
+#[test]
+fn the_real_model_lane_writes_a_config_ferret_reads() {
+    let dir = tempfile::tempdir().unwrap();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/real-llm.sh");
+    let o = Command::new("bash")
+        .arg(&script)
+        .arg("config")
+        .env("FERRET_LANE_OUT", dir.path())
+        .env("FERRET_LANE_PORT", "18999")
+        .output()
+        .expect("bash runs");
+    assert!(o.status.success(), "{}", text(&o));
+    let toml = std::fs::read_to_string(dir.path().join("ferret.toml")).unwrap();
+    assert_eq!(
+        toml.matches("cache_id = \"qwen2.5-coder-1.5b-instruct-q4_k_m\"")
+            .count(),
+        4
+    );
+    assert!(
+        toml.contains("base_url = \"http://127.0.0.1:18999/v1\""),
+        "{toml}"
+    );
+    let o = ferret(&[
+        "llm",
+        "list",
+        "--config",
+        s(&dir.path().join("ferret.toml")),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let listed = text(&o);
+    for name in ["qwen ", "qwen-logprobs", "qwen-json ", "qwen-json-logprobs"] {
+        assert!(listed.contains(name), "{name} missing: {listed}");
+    }
+    // The lane refuses what it does not know, without starting anything.
+    let o = Command::new("bash")
+        .arg(&script)
+        .arg("nonsense")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+}

@@ -1,26 +1,11 @@
 //! End-to-end tests of the `ferret` binary on generated houses and hand-made bad input.
 
+mod common;
+
+use common::{ferret, s, text};
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn ferret(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ferret"))
-        .args(args)
-        .output()
-        .expect("the ferret binary runs")
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("temp paths are UTF-8")
-}
+use std::process::Command;
 
 fn read_csv(path: &Path) -> Vec<std::collections::HashMap<String, String>> {
     let mut r = csv::Reader::from_path(path).expect("csv exists");

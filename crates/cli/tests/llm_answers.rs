@@ -1,8 +1,12 @@
 //! End-to-end, against loopback servers: what `ferret eval` and `ferret calibrate` say about LLM
 //! answers (classes, warnings, the fallback gate), and how a run ends when an endpoint is dead.
 
+mod common;
+
+use common::{ferret, s, text};
+
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Command;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -74,25 +78,6 @@ async fn server(r: impl Respond + 'static) -> MockServer {
     let s = MockServer::start().await;
     Mock::given(method("POST")).respond_with(r).mount(&s).await;
     s
-}
-
-fn ferret(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ferret"))
-        .args(args)
-        .output()
-        .expect("ferret runs")
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("UTF-8 temp path")
 }
 
 fn config(dir: &Path, server: &MockServer, extra: &str) -> std::path::PathBuf {

@@ -1,6 +1,10 @@
 //! End-to-end: `ferret eval` with an llm+model and an llm-direct strategy against a loopback
 //! OpenAI-compatible server, then again `--offline` from the cache.
 
+mod common;
+
+use common::{s, text};
+
 use std::path::Path;
 use std::process::{Command, Output};
 use std::sync::Arc;
@@ -66,18 +70,6 @@ fn ferret(args: &[&str]) -> Output {
         .env("FERRET_E2E_KEY", KEY)
         .output()
         .expect("ferret runs")
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("UTF-8 temp path")
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -1,29 +1,14 @@
 //! End-to-end tests of issue #9: nothing lost, nothing stale, no panics, fast failure.
 
+mod common;
+
+use common::{ferret, s, stderr, text};
+
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 use rand::{Rng, SeedableRng};
-
-fn ferret(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ferret"))
-        .args(args)
-        .output()
-        .expect("the ferret binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn text(o: &Output) -> String {
-    format!("{}{}", String::from_utf8_lossy(&o.stdout), stderr(o))
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("temp paths are UTF-8")
-}
 
 /// Quick strategies: no prior to train.
 const STRATEGIES: &str = "optimistic+greedy,model/uniform,oracle";

@@ -23,6 +23,9 @@ PORT="${FERRET_LANE_PORT:-18080}"
 RANGE="${FERRET_LANE_RANGE:-0..30}"
 MAX_FALLBACK="${FERRET_LANE_MAX_FALLBACK:-0.02}"
 LLAMA_CPP_PYTHON="${FERRET_LANE_LLAMA_CPP_PYTHON:-0.3.36}"
+# llama.cpp's threads wait for each other at every layer: on a machine busy with other work
+# (a build), one thread is faster than two that keep losing their core.
+THREADS="${FERRET_LANE_THREADS:-$(nproc)}"
 PARTS=22
 MODEL="$CACHE/model/qwen2.5-coder-1.5b-instruct-q4_k_m.gguf"
 PY="$CACHE/venv/bin/python"
@@ -108,9 +111,9 @@ serve() {
         exit 1
     fi
     log "serving the model on 127.0.0.1:$PORT"
-    # One request at a time on all cores: on 2 cores, one thread per request was slower.
+    # One request at a time (concurrency 1 in the config) on all cores.
     "$PY" -m llama_cpp.server --model "$MODEL" --host 127.0.0.1 --port "$PORT" \
-        --n_ctx 8192 --n_threads "$(nproc)" --logits_all True \
+        --n_ctx 8192 --n_threads "$THREADS" --logits_all True \
         --model_alias qwen2.5-coder-1.5b >"$OUT/server.log" 2>&1 &
     SERVER_PID=$!
     trap stop_server EXIT

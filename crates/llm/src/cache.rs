@@ -64,13 +64,11 @@ struct KeyInput<'a> {
 
 /// The cache key of `request` sent to an endpoint with settings `config`: 64 hex digits.
 pub fn cache_key(config: &EndpointConfig, request: &Request) -> String {
+    let base = config.normalized_base_url();
     let input = KeyInput {
         v: 1,
         model: &config.model,
-        server: config
-            .cache_id
-            .as_deref()
-            .unwrap_or_else(|| config.normalized_base_url()),
+        server: config.cache_id.as_deref().unwrap_or(&base),
         temperature: config.temperature,
         seed: config.seed,
         max_output_tokens: config.max_output_tokens,

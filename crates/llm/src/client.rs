@@ -28,6 +28,13 @@ use crate::question::Request;
 
 /// Characters of a reply body kept in error messages.
 const BODY_SNIPPET_CHARS: usize = 300;
+/// Largest reply body read; a larger one is an error (a chat completion for ferret's prompts is a
+/// few kilobytes, 20 alternatives per token included).
+pub const MAX_REPLY_BYTES: usize = 8 << 20;
+/// Longest answer text kept (and cached); a longer one is cut here.
+pub const MAX_ANSWER_BYTES: usize = 64 << 10;
+/// Shortest run of a secret's characters that is redacted wherever it shows up.
+const MIN_SECRET_RUN: usize = 8;
 
 /// Token counts of one request, as the server reported them.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -68,9 +75,17 @@ enum Attempt {
 
 /// The last retryable failure, kept to build the final error.
 enum Failure {
-    Status { status: StatusCode, body: String },
+    Status {
+        status: StatusCode,
+        body: String,
+    },
     Timeout,
     Connection(String),
+    /// A success status with a body that is no chat completion (an HTML page from a proxy).
+    Invalid {
+        message: String,
+        body: String,
+    },
 }
 
 /// A client for one endpoint. Cheap to share behind an `Arc`; the concurrency limit applies to
@@ -90,7 +105,7 @@ impl EndpointClient {
             .build()
             .map_err(|e| LlmError::Connection {
                 endpoint: endpoint.name.clone(),
-                url: endpoint.config.normalized_base_url().to_string(),
+                url: endpoint.config.normalized_base_url(),
                 message: format!("cannot build an HTTP client: {e}"),
                 attempts: 0,
             })?;
@@ -209,35 +224,62 @@ impl EndpointClient {
         attempt: u32,
     ) -> Attempt {
         let started = Instant::now();
-        let mut request = self
-            .http
-            .post(self.endpoint.config.completions_url())
-            .json(body);
+        let url = match self.endpoint.config.completions_url() {
+            Ok(u) => u,
+            Err(message) => {
+                return Attempt::Fatal(LlmError::Connection {
+                    endpoint: self.endpoint.name.clone(),
+                    url: self.endpoint.config.normalized_base_url(),
+                    message,
+                    attempts: attempt,
+                });
+            }
+        };
+        let mut request = self.http.post(url).json(body);
         if let Some(key) = key {
             // bearer_auth marks the header sensitive, so reqwest/hyper never print it.
             request = request.bearer_auth(key.expose_secret());
         }
-        let response = match request.send().await {
+        let mut response = match request.send().await {
             Ok(r) => r,
             Err(e) => {
                 return Attempt::Retry {
-                    failure: self.transport_failure(&e),
+                    failure: self.transport_failure(e),
                     retry_after: None,
                 };
             }
         };
         let status = response.status();
         let retry_after = retry_after(response.headers());
-        let bytes = match response.bytes().await {
-            Ok(b) => b,
-            // A body cut off mid-way (or too slow) is a transport failure, not a bad reply.
-            Err(e) => {
-                return Attempt::Retry {
-                    failure: self.transport_failure(&e),
-                    retry_after: None,
-                };
+        // Read chunk by chunk so that a huge (or endless) body stops at MAX_REPLY_BYTES instead
+        // of filling memory.
+        let mut bytes: Vec<u8> = Vec::new();
+        loop {
+            match response.chunk().await {
+                Ok(Some(chunk)) => {
+                    if bytes.len() + chunk.len() > MAX_REPLY_BYTES {
+                        return Attempt::Fatal(LlmError::InvalidReply {
+                            endpoint: self.endpoint.name.clone(),
+                            url: self.endpoint.config.normalized_base_url(),
+                            message: format!(
+                                "the reply body is larger than {} MiB",
+                                MAX_REPLY_BYTES >> 20
+                            ),
+                            body: self.snippet(&bytes),
+                        });
+                    }
+                    bytes.extend_from_slice(&chunk);
+                }
+                Ok(None) => break,
+                // A body cut off mid-way (or too slow) is a transport failure, not a bad reply.
+                Err(e) => {
+                    return Attempt::Retry {
+                        failure: self.transport_failure(e),
+                        retry_after: None,
+                    };
+                }
             }
-        };
+        }
         let latency = started.elapsed();
         if !status.is_success() {
             let body = self.snippet(&bytes);
@@ -254,7 +296,15 @@ impl EndpointClient {
             };
         }
         match parse_completion(&bytes) {
-            Ok((text, usage, logprobs)) => {
+            Ok((mut text, usage, logprobs)) => {
+                if text.len() > MAX_ANSWER_BYTES {
+                    let mut cut = MAX_ANSWER_BYTES;
+                    while !text.is_char_boundary(cut) {
+                        cut -= 1;
+                    }
+                    tracing::warn!(endpoint = %self.endpoint.name, bytes = text.len(), "answer longer than {MAX_ANSWER_BYTES} bytes; keeping its start");
+                    text.truncate(cut);
+                }
                 tracing::debug!(
                     endpoint = %self.endpoint.name,
                     latency_ms = latency.as_millis() as u64,
@@ -271,26 +321,30 @@ impl EndpointClient {
                     logprobs,
                 })
             }
-            Err(message) => Attempt::Fatal(LlmError::InvalidReply {
-                endpoint: self.endpoint.name.clone(),
-                url: self.endpoint.config.normalized_base_url().to_string(),
-                message,
-                body: self.snippet(&bytes),
-            }),
+            // A proxy's HTML page or a half-written reply under a 200: worth another try, like
+            // a 5xx.
+            Err(message) => Attempt::Retry {
+                failure: Failure::Invalid {
+                    message,
+                    body: self.snippet(&bytes),
+                },
+                retry_after: None,
+            },
         }
     }
 
-    fn transport_failure(&self, e: &reqwest::Error) -> Failure {
+    fn transport_failure(&self, e: reqwest::Error) -> Failure {
         if e.is_timeout() {
             Failure::Timeout
         } else {
-            Failure::Connection(self.scrub(&error_chain(e)))
+            // The URL may carry a gateway's key in its query.
+            Failure::Connection(self.scrub(&error_chain(&e.without_url())))
         }
     }
 
     fn final_error(&self, failure: Failure, attempts: u32) -> LlmError {
         let endpoint = self.endpoint.name.clone();
-        let url = self.endpoint.config.normalized_base_url().to_string();
+        let url = self.endpoint.config.normalized_base_url();
         match failure {
             Failure::Status { status, body } => LlmError::Status {
                 endpoint,
@@ -310,6 +364,12 @@ impl EndpointClient {
                 url,
                 message,
                 attempts,
+            },
+            Failure::Invalid { message, body } => LlmError::InvalidReply {
+                endpoint,
+                url,
+                message: format!("{message} (after {attempts} attempts)"),
+                body,
             },
         }
     }
@@ -350,13 +410,22 @@ impl EndpointClient {
         self.scrub(&s)
     }
 
+    /// `text` with anything that looks like a secret blanked out: every run of 8 or more
+    /// characters that also occurs in the API key or in a query value of the base URL, compared
+    /// without case (servers echo keys masked, truncated or lower-cased).
     fn scrub(&self, text: &str) -> String {
-        match self.endpoint.key() {
-            Some(key) if !key.expose_secret().is_empty() => {
-                text.replace(key.expose_secret(), "[redacted]")
-            }
-            _ => text.to_string(),
+        let mut secrets: Vec<String> = Vec::new();
+        if let Some(key) = self.endpoint.key() {
+            secrets.push(key.expose_secret().to_string());
         }
+        if let Some((_, query)) = self.endpoint.config.base_url.split_once('?') {
+            secrets.extend(
+                query
+                    .split('&')
+                    .filter_map(|kv| kv.split_once('=').map(|(_, v)| v.to_string())),
+            );
+        }
+        redact(text, &secrets)
     }
 }
 
@@ -365,7 +434,52 @@ fn failure_summary(f: &Failure) -> String {
         Failure::Status { status, .. } => format!("HTTP {}", status.as_u16()),
         Failure::Timeout => "timeout".into(),
         Failure::Connection(m) => m.clone(),
+        Failure::Invalid { message, .. } => format!("HTTP 200 but {message}"),
     }
+}
+
+/// `text` with every run of at least [`MIN_SECRET_RUN`] characters that also occurs in one of
+/// `secrets` (ignoring case) replaced by `[redacted]`. Hand-written: redaction crates match
+/// whole known strings, not fragments of them.
+pub(crate) fn redact(text: &str, secrets: &[String]) -> String {
+    let chars: Vec<char> = text.chars().collect();
+    let lower: Vec<char> = chars.iter().flat_map(|c| c.to_lowercase()).collect();
+    // Lower-casing changes the length of a few non-ASCII characters; fall back to exact
+    // matching of whole secrets then.
+    if lower.len() != chars.len() {
+        return secrets
+            .iter()
+            .filter(|s| !s.is_empty())
+            .fold(text.to_string(), |t, s| t.replace(s.as_str(), "[redacted]"));
+    }
+    let mut hidden = vec![false; chars.len()];
+    for secret in secrets {
+        let secret: Vec<char> = secret.to_lowercase().chars().collect();
+        if secret.len() < MIN_SECRET_RUN {
+            continue;
+        }
+        let windows: std::collections::HashSet<&[char]> = secret.windows(MIN_SECRET_RUN).collect();
+        for i in 0..lower.len().saturating_sub(MIN_SECRET_RUN - 1) {
+            if windows.contains(&lower[i..i + MIN_SECRET_RUN]) {
+                hidden[i..i + MIN_SECRET_RUN]
+                    .iter_mut()
+                    .for_each(|h| *h = true);
+            }
+        }
+    }
+    let mut out = String::with_capacity(text.len());
+    let mut in_secret = false;
+    for (c, h) in chars.iter().zip(&hidden) {
+        if *h {
+            if !in_secret {
+                out.push_str("[redacted]");
+            }
+        } else {
+            out.push(*c);
+        }
+        in_secret = *h;
+    }
+    out
 }
 
 /// reqwest's top-level message is often just "error sending request"; the cause chain says why.
@@ -511,6 +625,40 @@ pub(crate) fn parse_completion(bytes: &[u8]) -> std::result::Result<Completion, 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn secrets_are_redacted_in_pieces_and_any_case() {
+        let key = vec!["sk-Live-ABCDEFGH12345678".to_string()];
+        assert_eq!(
+            redact("bad key sk-live-abcdefgh12345678 given", &key),
+            "bad key [redacted] given"
+        );
+        // A masked echo keeps 8+ characters of the key: those go too.
+        assert_eq!(
+            redact("Incorrect API key provided: sk-Live-ABCD****5678", &key),
+            "Incorrect API key provided: [redacted]****5678"
+        );
+        assert_eq!(redact("short sk-L is fine", &key), "short sk-L is fine");
+        assert_eq!(redact("nothing here", &[]), "nothing here");
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn no_eight_characters_of_a_secret_survive(
+            secret in "[A-Za-z0-9_-]{8,40}",
+            pre in "[ -~]{0,20}",
+            post in "[ -~]{0,20}",
+            upper in proptest::bool::ANY,
+        ) {
+            let shown = if upper { secret.to_uppercase() } else { secret.clone() };
+            let out = redact(&format!("{pre}{shown}{post}"), std::slice::from_ref(&secret));
+            let lower = out.to_lowercase();
+            let s = secret.to_lowercase();
+            for w in s.as_bytes().windows(8) {
+                proptest::prop_assert!(!lower.contains(std::str::from_utf8(w).unwrap()), "{}", out);
+            }
+        }
+    }
 
     #[test]
     fn retry_after_reads_seconds_dates_and_ms() {

@@ -88,6 +88,16 @@ pub enum SystemRole {
 pub const MAX_TOP_LOGPROBS: u8 = 20;
 /// Most re-asks allowed per question.
 pub const MAX_REASKS: u32 = 5;
+/// Longest time one attempt may be given, seconds (a day).
+pub const MAX_TIMEOUT_SECS: f64 = 86_400.0;
+/// Longest wait between attempts, seconds (an hour).
+pub const MAX_RETRY_MAX_SECS: f64 = 3_600.0;
+/// Most attempts per request.
+pub const MAX_ATTEMPTS: u32 = 20;
+/// Longest first retry delay, milliseconds (ten minutes).
+pub const MAX_RETRY_BASE_MS: u64 = 600_000;
+/// Fields that would hold a secret; refused in the file, and named without their value.
+const SECRET_FIELDS: [&str; 6] = ["api_key", "apikey", "key", "token", "secret", "password"];
 
 /// One OpenAI-compatible chat-completions endpoint, as written in the config file.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -222,19 +232,46 @@ impl EndpointConfig {
         }
     }
 
-    /// The base URL without trailing slashes, as it enters request URLs and the cache key.
-    pub fn normalized_base_url(&self) -> &str {
-        self.base_url.trim_end_matches('/')
+    /// The base URL without trailing slashes and with every query value replaced by
+    /// `[redacted]` (some gateways take their key as `?key=...`): what messages, `ferret llm
+    /// list`, the cache's `server` column and the cache key show. Without a query it is the
+    /// base URL as written, so cache keys made before queries were redacted stay valid.
+    pub fn normalized_base_url(&self) -> String {
+        let (base, query) = match self.base_url.split_once('?') {
+            Some((b, q)) => (b, Some(q)),
+            None => (self.base_url.as_str(), None),
+        };
+        let base = base.trim_end_matches('/');
+        match query {
+            None => base.to_string(),
+            Some(q) => {
+                let redacted: Vec<String> = q
+                    .split('&')
+                    .filter(|kv| !kv.is_empty())
+                    .map(|kv| match kv.split_once('=') {
+                        Some((k, _)) => format!("{k}=[redacted]"),
+                        None => kv.to_string(),
+                    })
+                    .collect();
+                format!("{base}?{}", redacted.join("&"))
+            }
+        }
     }
 
-    /// The chat-completions URL.
-    pub fn completions_url(&self) -> String {
-        format!("{}/chat/completions", self.normalized_base_url())
+    /// The chat-completions URL: `/chat/completions` appended to the base URL's path, its query
+    /// kept (it may hold a gateway's key, so this URL is never shown).
+    pub fn completions_url(&self) -> Result<reqwest::Url, String> {
+        let mut url = reqwest::Url::parse(&self.base_url)
+            .map_err(|e| format!("base_url is not a URL: {e}"))?;
+        let path = format!("{}/chat/completions", url.path().trim_end_matches('/'));
+        url.set_path(&path);
+        Ok(url)
     }
 
-    /// One attempt's time limit.
+    /// One attempt's time limit (validated configs stay far below `Duration`'s range; others
+    /// saturate instead of panicking).
     pub fn timeout(&self) -> Duration {
-        Duration::from_secs_f64(self.timeout_secs)
+        Duration::try_from_secs_f64(self.timeout_secs).unwrap_or(Duration::MAX)
     }
 
     /// USD for a request with these token counts.
@@ -295,10 +332,28 @@ impl EndpointConfig {
         if self.concurrency == 0 {
             return Err(bad("concurrency", "must be at least 1".into()));
         }
-        if !(self.timeout_secs.is_finite() && self.timeout_secs > 0.0) {
+        if !(self.timeout_secs.is_finite()
+            && self.timeout_secs > 0.0
+            && self.timeout_secs <= MAX_TIMEOUT_SECS)
+        {
             return Err(bad(
                 "timeout_secs",
-                format!("{} is not a positive number of seconds", self.timeout_secs),
+                format!(
+                    "{} is not a number of seconds in (0, {MAX_TIMEOUT_SECS}]",
+                    self.timeout_secs
+                ),
+            ));
+        }
+        if self.max_attempts > MAX_ATTEMPTS {
+            return Err(bad(
+                "max_attempts",
+                format!("{} is more than {MAX_ATTEMPTS}", self.max_attempts),
+            ));
+        }
+        if self.retry_base_ms > MAX_RETRY_BASE_MS {
+            return Err(bad(
+                "retry_base_ms",
+                format!("{} is more than {MAX_RETRY_BASE_MS}", self.retry_base_ms),
             ));
         }
         if let Some(n) = self.top_logprobs
@@ -318,10 +373,16 @@ impl EndpointConfig {
         if self.max_attempts == 0 {
             return Err(bad("max_attempts", "must be at least 1".into()));
         }
-        if !(self.retry_max_secs.is_finite() && self.retry_max_secs >= 0.0) {
+        if !(self.retry_max_secs.is_finite()
+            && self.retry_max_secs >= 0.0
+            && self.retry_max_secs <= MAX_RETRY_MAX_SECS)
+        {
             return Err(bad(
                 "retry_max_secs",
-                format!("{} is not a number of seconds", self.retry_max_secs),
+                format!(
+                    "{} is not a number of seconds in [0, {MAX_RETRY_MAX_SECS}]",
+                    self.retry_max_secs
+                ),
             ));
         }
         for (field, price) in [
@@ -448,9 +509,18 @@ impl LlmConfig {
 
     /// Parses config text; `file` names it in errors.
     pub fn parse(text: &str, file: &Path) -> Result<Self, ConfigError> {
+        refuse_secrets(text, file)?;
         let parsed: FileConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
             file: file.to_path_buf(),
-            message: e.to_string(),
+            // The message and position only: toml's own rendering quotes the offending line,
+            // which could hold a secret.
+            message: match e.span() {
+                Some(span) => {
+                    let line = text[..span.start.min(text.len())].lines().count().max(1);
+                    format!("line {line}: {}", e.message())
+                }
+                None => e.message().to_string(),
+            },
         })?;
         for (name, endpoint) in &parsed.llm {
             let key = format!("llm.{name}");
@@ -496,6 +566,25 @@ impl LlmConfig {
                 known: self.endpoints.keys().cloned().collect(),
             })
     }
+}
+
+/// Refuses a secret written into the file (`api_key = "sk-..."` and the like), naming the line
+/// and field but never the value.
+fn refuse_secrets(text: &str, file: &Path) -> Result<(), ConfigError> {
+    for (i, line) in text.lines().enumerate() {
+        let Some((field, _)) = line.split_once('=') else {
+            continue;
+        };
+        let field = field.trim().trim_matches('"').to_ascii_lowercase();
+        if SECRET_FIELDS.contains(&field.as_str()) {
+            return Err(ConfigError::Invalid {
+                file: file.to_path_buf(),
+                key: format!("line {}: {field}", i + 1),
+                message: "API keys never go in the config file: put the key in an environment variable and name that variable in api_key_env (the value was not read)".into(),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// Endpoint names appear in strategy specs (`llm+model/p-context-a/<name>`), so they must not
@@ -550,7 +639,7 @@ mod tests {
         );
         let local = &c.endpoints["local"];
         assert_eq!(
-            local.completions_url(),
+            local.completions_url().unwrap().as_str(),
             "http://localhost:8000/v1/chat/completions"
         );
         assert_eq!(local.concurrency, 4);
@@ -622,6 +711,64 @@ mod tests {
     }
 
     #[test]
+    fn huge_numbers_are_refused_not_panicked_on() {
+        for (field, value) in [
+            ("timeout_secs", "18446744073709551615"),
+            ("timeout_secs", "1e300"),
+            ("retry_max_secs", "1e300"),
+            ("max_attempts", "1000000"),
+            ("retry_base_ms", "18446744073709551615"),
+        ] {
+            let e = parse(&format!(
+                "[llm.a]\nbase_url = \"http://x/v1\"\nmodel = \"m\"\n{field} = {value}\n"
+            ))
+            .unwrap_err()
+            .to_string();
+            assert!(e.contains(&format!("llm.a.{field}")), "{field}: {e}");
+        }
+        let mut c = EndpointConfig::new("http://x/v1", "m");
+        c.timeout_secs = 1e300;
+        assert_eq!(c.timeout(), Duration::MAX);
+    }
+
+    #[test]
+    fn query_keys_are_kept_in_requests_and_redacted_everywhere_else() {
+        let c = EndpointConfig::new("https://gw.example/v1/?key=SECRET123&region=eu", "m");
+        assert_eq!(
+            c.completions_url().unwrap().as_str(),
+            "https://gw.example/v1/chat/completions?key=SECRET123&region=eu"
+        );
+        assert_eq!(
+            c.normalized_base_url(),
+            "https://gw.example/v1?key=[redacted]&region=[redacted]"
+        );
+        let plain = EndpointConfig::new("http://h:8000/v1/", "m");
+        assert_eq!(plain.normalized_base_url(), "http://h:8000/v1");
+    }
+
+    #[test]
+    fn a_key_written_into_the_file_is_refused_without_repeating_it() {
+        for line in [
+            "api_key = \"sk-live-abcdef123456\"",
+            "API_KEY=\"sk-live-abcdef123456\"",
+            "token = \"sk-live-abcdef123456\"",
+        ] {
+            let e = parse(&format!(
+                "[llm.a]\nbase_url = \"http://x/v1\"\nmodel = \"m\"\n{line}\n"
+            ))
+            .unwrap_err()
+            .to_string();
+            assert!(!e.contains("abcdef123456"), "{e}");
+            assert!(e.contains("line 4") && e.contains("api_key_env"), "{e}");
+        }
+        // Other parse errors name the line without quoting it.
+        let e = parse("[llm.a]\nbase_url = \"http://x/v1\nmodel = \"sk-zzzzzzzz999\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(!e.contains("sk-zzzzzzzz999") && e.contains("line"), "{e}");
+    }
+
+    #[test]
     fn unknown_endpoint_lists_known_ones() {
         let c = parse("[llm.a]\nbase_url = \"http://x\"\nmodel = \"m\"\n").unwrap();
         let e = c.endpoint("b").unwrap_err().to_string();
@@ -658,7 +805,10 @@ mod tests {
         assert_eq!(c.endpoints["gpt-5-mini"].answer_format, AnswerFormat::Text);
         assert_eq!(c.endpoints["gpt-5-mini"].max_reasks, 1);
         assert_eq!(
-            c.endpoints["gemini-2.5-flash"].completions_url(),
+            c.endpoints["gemini-2.5-flash"]
+                .completions_url()
+                .unwrap()
+                .as_str(),
             "https://generativelanguage.googleapis.com/v1beta/openai/chat/completions"
         );
         assert_eq!(c.endpoints["llama3.2-3b"].model, "llama3.2:3b");

@@ -224,7 +224,7 @@ impl Llm {
                 server: config
                     .cache_id
                     .clone()
-                    .unwrap_or_else(|| config.normalized_base_url().to_string()),
+                    .unwrap_or_else(|| config.normalized_base_url()),
                 messages: request.messages.clone(),
                 reply: answer.text.clone(),
                 usage: answer.usage,

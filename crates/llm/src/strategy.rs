@@ -677,7 +677,7 @@ pub fn prefetch_probabilities(
         let server = config
             .cache_id
             .clone()
-            .unwrap_or_else(|| config.normalized_base_url().to_string());
+            .unwrap_or_else(|| config.normalized_base_url());
         match per_server.iter_mut().find(|(s, _)| *s == server) {
             Some((_, jobs)) => jobs.push(job),
             None => per_server.push((server, vec![job])),

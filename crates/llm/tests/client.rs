@@ -308,13 +308,14 @@ async fn timeout_then_success() {
 }
 
 #[tokio::test]
-async fn truncated_json_is_a_clear_error_and_not_retried() {
+async fn truncated_json_is_retried_then_a_clear_error() {
     let server = MockServer::start().await;
     let full = completion("70%", 5, 1).to_string();
     let cut = &full[..full.len() / 2];
     Mock::given(method("POST"))
         .respond_with(ResponseTemplate::new(200).set_body_raw(cut.to_string(), "application/json"))
-        .expect(1)
+        // A half-written reply under a 200 is retried like a 5xx, up to max_attempts (5).
+        .expect(5)
         .mount(&server)
         .await;
     let client = EndpointClient::new(endpoint(&server)).unwrap();
@@ -344,6 +345,69 @@ async fn not_a_completion_is_a_clear_error() {
         msg.contains("not JSON") && msg.contains("<html>proxy login"),
         "{msg}"
     );
+}
+
+#[tokio::test]
+async fn a_proxy_page_under_200_is_retried_like_a_server_error() {
+    let server = MockServer::start().await;
+    Mock::given(method("POST"))
+        .respond_with(ResponseTemplate::new(200).set_body_string("<html>proxy hiccup</html>"))
+        .up_to_n_times(1)
+        .mount(&server)
+        .await;
+    Mock::given(method("POST"))
+        .respond_with(ResponseTemplate::new(200).set_body_json(completion("35%", 5, 1)))
+        .mount(&server)
+        .await;
+    let client = EndpointClient::new(endpoint(&server)).unwrap();
+    let reply = client.complete(&question()).await.unwrap();
+    assert_eq!((reply.text.as_str(), reply.attempts), ("35%", 2));
+}
+
+#[tokio::test]
+async fn huge_bodies_and_answers_are_capped() {
+    let server = MockServer::start().await;
+    let huge = "x".repeat(ferret_llm::client::MAX_REPLY_BYTES + 1);
+    Mock::given(method("POST"))
+        .respond_with(ResponseTemplate::new(200).set_body_string(huge))
+        .up_to_n_times(1)
+        .mount(&server)
+        .await;
+    let long_answer = "7".repeat(ferret_llm::client::MAX_ANSWER_BYTES * 3);
+    Mock::given(method("POST"))
+        .respond_with(ResponseTemplate::new(200).set_body_json(completion(&long_answer, 5, 1)))
+        .mount(&server)
+        .await;
+    let client = EndpointClient::new(endpoint(&server)).unwrap();
+    let e = client.complete(&question()).await.unwrap_err();
+    assert!(e.to_string().contains("larger than 8 MiB"), "{e}");
+    let reply = client.complete(&question()).await.unwrap();
+    assert_eq!(reply.text.len(), ferret_llm::client::MAX_ANSWER_BYTES);
+}
+
+#[tokio::test]
+async fn a_key_in_the_query_reaches_the_server_and_nothing_else() {
+    let server = MockServer::start().await;
+    // The gateway echoes its key lower-cased in a 403.
+    Mock::given(method("POST"))
+        .and(path("/v1/chat/completions"))
+        .and(wiremock::matchers::query_param("key", "GwKey-9f8e7d6c5b4a"))
+        .respond_with(
+            ResponseTemplate::new(403).set_body_string("forbidden for key gwkey-9f8e7d6c5b4a"),
+        )
+        .expect(1)
+        .mount(&server)
+        .await;
+    let mut c = config(&server);
+    c.base_url = format!("{}/v1/?key=GwKey-9f8e7d6c5b4a", server.uri());
+    let client = EndpointClient::new(Endpoint::with_key("gw", c, Some(KEY.into()))).unwrap();
+    let e = client.complete(&question()).await.unwrap_err();
+    let msg = format!("{e} {e:?}");
+    assert!(
+        msg.contains("403") && msg.contains("key=[redacted]"),
+        "{msg}"
+    );
+    assert!(!msg.to_lowercase().contains("9f8e7d6c5b4a"), "{msg}");
 }
 
 /// A loopback server that drops the first connection after reading the request (no reply), then

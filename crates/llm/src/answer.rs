@@ -206,9 +206,10 @@ fn read_json(text: &str) -> Option<ProbabilityReading> {
     }
     let value: serde_json::Value = serde_json::from_str(t).ok()?;
     let n = value.get("percent")?;
-    let v = n
-        .as_f64()
-        .or_else(|| n.as_str().and_then(|s| s.trim().parse().ok()))?;
+    let v = n.as_f64().or_else(|| {
+        n.as_str()
+            .and_then(|s| s.trim().trim_end_matches('%').trim().parse().ok())
+    })?;
     let span = JSON_PERCENT.captures(text)?.get(1)?.range();
     v.is_finite().then(|| ProbabilityReading {
         class: AnswerClass::Json,
@@ -357,6 +358,8 @@ mod tests {
         assert_eq!(class("I cannot say."), AnswerClass::NoNumber);
         assert_eq!(class(""), AnswerClass::NoNumber);
         assert_eq!(class("{\"percent\": 35}"), AnswerClass::Json);
+        let r = read_probability("{ \"percent\": \"35%\" }", None);
+        assert_eq!((r.class, r.probability), (AnswerClass::Json, Some(0.35)));
         assert_eq!(
             read_probability("```json\n{\"percent\": 35}\n```", None).probability,
             Some(0.35)
@@ -393,6 +396,8 @@ mod tests {
         let r = read_probability(text, None);
         assert_eq!(&text[r.number.clone().unwrap()], "70");
         let json = "{\"percent\": 42}";
+        assert_eq!(&json[read_probability(json, None).number.unwrap()], "42");
+        let json = "{\"percent\": \"42%\"}";
         assert_eq!(&json[read_probability(json, None).number.unwrap()], "42");
         assert_eq!(read_probability("0.7", None).number, None);
     }

@@ -52,7 +52,7 @@ pub enum AnswerFormat {
     Text,
     /// `response_format: {"type": "json_schema", ...}` (OpenAI, Gemini's OpenAI-compatible API,
     /// vLLM, Ollama, llama.cpp's `llama-server`): probability prompts answer
-    /// `{"percent": <integer 1..100>}`, P-DIRECT `{"location": <one of the listed labels>}`.
+    /// `{"percent": "1%" … "100%"}`, P-DIRECT `{"location": <one of the listed labels>}`.
     JsonSchema,
     /// The same schemas in the older dialect `{"type": "json_object", "schema": ...}`, which is
     /// what llama-cpp-python's server reads (it refuses `json_schema`).

@@ -128,13 +128,17 @@ impl Request {
     }
 }
 
-/// `{"percent": <integer 1..100>}`. An enum rather than minimum/maximum: llama.cpp's grammar
-/// converter (and so llama-cpp-python's server) ignores numeric bounds but compiles enums.
+/// `{"percent": "<1..100>%"}`: one of the strings `1%` … `100%`. Strings with the `%` rather than
+/// an integer because constrained decoding otherwise bends the answer: a model about to write
+/// "10%" may not write `%` inside an integer, and its next choice is often `0`, so "10%" became
+/// 100 for every question (Qwen2.5-Coder-1.5B on llama-cpp-python; see the README's "Real
+/// models"). An enum rather than a pattern: llama.cpp's grammar converter compiles enums
+/// everywhere.
 fn percent_schema() -> Value {
-    let values: Vec<u32> = (1..=100).collect();
+    let values: Vec<String> = (1..=100).map(|p| format!("{p}%")).collect();
     json!({
         "type": "object",
-        "properties": {"percent": {"type": "integer", "enum": values}},
+        "properties": {"percent": {"type": "string", "enum": values}},
         "required": ["percent"],
         "additionalProperties": false,
     })
@@ -218,8 +222,8 @@ mod tests {
         assert_eq!(f["json_schema"]["strict"], true);
         let e = &f["json_schema"]["schema"]["properties"]["percent"]["enum"];
         assert_eq!(e.as_array().map(Vec::len), Some(100));
-        assert_eq!(e[0], 1);
-        assert_eq!(e[99], 100);
+        assert_eq!(e[0], "1%");
+        assert_eq!(e[99], "100%");
         assert_eq!(r.top_logprobs, Some(20));
         c.answer_format = AnswerFormat::JsonObject;
         let labels = vec!["sofa in the living room".to_string()];

@@ -304,7 +304,10 @@ pub fn run(args: Args) -> Result<ExitCode> {
     write_csv(&args.out.join("trials.csv"), &outcome.rows)?;
     let summary = summarize(&outcome.rows, &args.strategies);
     write_csv(&args.out.join("summary.csv"), &summary)?;
-    let md = summary_markdown(&summary, &loaded.source, outcome.houses_run);
+    let paired = paired_comparisons(&outcome.rows, &args.strategies, args.seed);
+    write_csv(&args.out.join("paired.csv"), &paired)?;
+    let md =
+        summary_markdown(&summary, &loaded.source, outcome.houses_run) + &paired_markdown(&paired);
     crate::output::write_bytes(&args.out.join("summary.md"), &md)?;
     let info = RunInfo {
         houses: args.houses.houses.clone(),
@@ -331,7 +334,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     super::llm_setup::write_token_report(&setup.service, &args.out)?;
     super::llm_setup::check_fallback_gate(&setup.service, &args.llm)?;
     println!(
-        "{} trials on {} houses in {:.1} s; wrote {}/{{trials.csv,summary.csv,summary.md,run.json{}}}",
+        "{} trials on {} houses in {:.1} s; wrote {}/{{trials.csv,summary.csv,summary.md,paired.csv,run.json{}}}",
         outcome.rows.len(),
         outcome.houses_run,
         started.elapsed().as_secs_f64(),
@@ -435,25 +438,36 @@ fn row(scene: &Scene, trial: &TrialSpec, out: &TrialOutcome) -> TrialRow {
 
 pub use crate::output::write_csv;
 
+/// A trial's identity across strategies: house index and target. Two strategies' rows with the
+/// same key ran the same trial, so their costs pair.
+pub type TrialKey<'a> = (usize, &'a str);
+
+/// Each strategy's cost per trial.
+fn costs_by_trial(rows: &[TrialRow]) -> BTreeMap<&str, BTreeMap<TrialKey<'_>, f64>> {
+    let mut by: BTreeMap<&str, BTreeMap<TrialKey<'_>, f64>> = BTreeMap::new();
+    for r in rows {
+        by.entry(r.strategy.as_str())
+            .or_default()
+            .insert((r.house_index, r.target.as_str()), r.cost_m);
+    }
+    by
+}
+
 /// Mean, median, 95 % CI and improvement over optimistic+greedy, per strategy in `order`. The
-/// improvement compares means over the paired trials only: the houses where every strategy of
-/// `order` that finished any trial finished its trial.
+/// improvement compares means over the paired trials only: the trials (house and target) that
+/// every strategy of `order` that finished any trial finished.
 pub fn summarize(rows: &[TrialRow], order: &[String]) -> Vec<SummaryRow> {
     let mut by: BTreeMap<&str, Vec<f64>> = BTreeMap::new();
-    let mut by_house: BTreeMap<&str, BTreeMap<usize, f64>> = BTreeMap::new();
+    let by_house = costs_by_trial(rows);
     for r in rows {
         by.entry(r.strategy.as_str()).or_default().push(r.cost_m);
-        by_house
-            .entry(r.strategy.as_str())
-            .or_default()
-            .insert(r.house_index, r.cost_m);
     }
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
-    let compared: Vec<&BTreeMap<usize, f64>> = order
+    let compared: Vec<&BTreeMap<TrialKey<'_>, f64>> = order
         .iter()
         .filter_map(|s| by_house.get(s.as_str()))
         .collect();
-    let paired: Vec<usize> = compared
+    let paired: Vec<TrialKey<'_>> = compared
         .first()
         .map(|first| {
             first
@@ -501,6 +515,148 @@ pub fn summarize(rows: &[TrialRow], order: &[String]) -> Vec<SummaryRow> {
             }
         })
         .collect()
+}
+
+/// Bootstrap resamples of the paired confidence intervals: enough that the interval's ends move
+/// by less than a hundredth of a metre between seeds on 150 trials.
+pub const PAIRED_RESAMPLES: usize = 10_000;
+
+/// One row of `paired.csv`: a strategy against a reference on the trials both finished.
+#[derive(Clone, Debug, Serialize)]
+pub struct PairedRow {
+    /// The strategy compared against.
+    pub reference: String,
+    /// Why it is the reference: `first` (the first strategy named) or `best` (the lowest mean
+    /// on the paired trials, the oracle excepted).
+    pub role: &'static str,
+    /// The strategy.
+    pub strategy: String,
+    /// Trials (house and target) both finished.
+    pub pairs: usize,
+    /// Mean of cost(strategy) − cost(reference), metres; negative = the strategy is cheaper.
+    pub mean_diff_m: f64,
+    /// Lower end of the 95 % bootstrap interval of the mean difference, metres.
+    pub ci95_low_m: f64,
+    /// Upper end of that interval, metres.
+    pub ci95_high_m: f64,
+    /// Two-sided Wilcoxon signed-rank p-value; empty when every pair ties.
+    pub wilcoxon_p: Option<f64>,
+    /// Trials where the strategy is cheaper.
+    pub wins: usize,
+    /// Trials within a nanometre.
+    pub ties: usize,
+    /// Trials where the strategy costs more.
+    pub losses: usize,
+}
+
+/// Every strategy of `order` against the first one, and against the best (lowest mean over the
+/// trials every strategy finished; the oracle is a bound, never the best) when that is another
+/// strategy. Pairs are the trials (house and target) both strategies of a comparison finished.
+/// `seed` seeds the bootstrap, so the table is reproducible.
+pub fn paired_comparisons(rows: &[TrialRow], order: &[String], seed: u64) -> Vec<PairedRow> {
+    let by = costs_by_trial(rows);
+    let present: Vec<&str> = order
+        .iter()
+        .map(String::as_str)
+        .filter(|s| by.contains_key(s))
+        .collect();
+    let Some(&first) = present.first() else {
+        return Vec::new();
+    };
+    let common: Vec<TrialKey<'_>> = by[first]
+        .keys()
+        .copied()
+        .filter(|k| present.iter().all(|s| by[s].contains_key(k)))
+        .collect();
+    let best = present
+        .iter()
+        .copied()
+        .filter(|s| *s != "oracle" && !common.is_empty())
+        .map(|s| (s, common.iter().map(|k| by[s][k]).sum::<f64>()))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(s, _)| s);
+    let mut references = vec![(first, "first")];
+    if let Some(b) = best.filter(|b| *b != first) {
+        references.push((b, "best"));
+    }
+    let mut out = Vec::new();
+    for (reference, role) in references {
+        for &s in present.iter().filter(|s| **s != reference) {
+            let keys: Vec<&TrialKey<'_>> = by[s]
+                .keys()
+                .filter(|k| by[reference].contains_key(*k))
+                .collect();
+            let a: Vec<f64> = keys.iter().map(|k| by[s][*k]).collect();
+            let b: Vec<f64> = keys.iter().map(|k| by[reference][*k]).collect();
+            let Some(c) = ferret_report::paired::compare_paired(&a, &b, PAIRED_RESAMPLES, seed)
+            else {
+                continue;
+            };
+            out.push(PairedRow {
+                reference: reference.to_string(),
+                role,
+                strategy: s.to_string(),
+                pairs: c.n,
+                mean_diff_m: c.mean_diff,
+                ci95_low_m: c.ci95.0,
+                ci95_high_m: c.ci95.1,
+                wilcoxon_p: c.wilcoxon.map(|w| w.p),
+                wins: c.wins,
+                ties: c.ties,
+                losses: c.losses,
+            });
+        }
+    }
+    out
+}
+
+/// A p-value as people read it: three decimals, two significant digits below 0.001, and
+/// `< 1e-6` below that.
+fn format_p(p: Option<f64>) -> String {
+    match p {
+        None => "–".into(),
+        Some(p) if p < 1e-6 => "< 1e-6".into(),
+        Some(p) if p < 0.001 => format!("{p:.1e}"),
+        Some(p) => format!("{p:.3}"),
+    }
+}
+
+/// The paired comparisons as Markdown, one table per reference; empty without comparisons.
+pub fn paired_markdown(paired: &[PairedRow]) -> String {
+    if paired.is_empty() {
+        return String::new();
+    }
+    let mut md = format!(
+        "\n## Paired comparisons\n\nPairs are the trials (house and target) both strategies finished. Difference = strategy − reference, metres (negative: the strategy is cheaper); 95 % CI of its mean by bootstrap ({PAIRED_RESAMPLES} resamples); p from the two-sided Wilcoxon signed-rank test; wins / ties / losses count the trials where the strategy is cheaper / equal / dearer.\n"
+    );
+    let mut current: Option<(&str, &str)> = None;
+    for r in paired {
+        if current != Some((r.reference.as_str(), r.role)) {
+            current = Some((r.reference.as_str(), r.role));
+            let why = if r.role == "first" {
+                "the first strategy"
+            } else {
+                "the lowest mean, oracle excepted"
+            };
+            md.push_str(&format!(
+                "\nAgainst {} ({why}):\n\n| strategy | pairs | mean difference (m) | 95 % CI (m) | Wilcoxon p | wins / ties / losses |\n|---|---:|---:|---:|---:|---:|\n",
+                r.reference
+            ));
+        }
+        md.push_str(&format!(
+            "| {} | {} | {:+.2} | [{:+.2}, {:+.2}] | {} | {} / {} / {} |\n",
+            r.strategy,
+            r.pairs,
+            r.mean_diff_m,
+            r.ci95_low_m,
+            r.ci95_high_m,
+            format_p(r.wilcoxon_p),
+            r.wins,
+            r.ties,
+            r.losses
+        ));
+    }
+    md
 }
 
 /// The paper's table I as Markdown.
@@ -711,5 +867,76 @@ mod tests {
         // Complete runs carry no note.
         let complete = summarize(&rows[..4], &order[..1]);
         assert!(!summary_markdown(&complete, "test houses", 4).contains("Failed trials"));
+    }
+
+    #[test]
+    fn paired_comparisons_pair_by_house_and_target_against_first_and_best() {
+        let order: Vec<String> = ["optimistic+greedy", "model/x", "model/y", "oracle"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        let mut rows = Vec::new();
+        // Two targets in each of three houses; model/x saves 2 m on every trial, model/y 1 m on
+        // all but one (a tie), the oracle 5 m. model/x also has a trial no other strategy ran.
+        for h in 0..3 {
+            for (t, target) in ["Apple", "Book"].iter().enumerate() {
+                let g = 10.0 + 3.0 * h as f64 + t as f64;
+                let mut push = |s: &str, c: f64| {
+                    let mut r = trial(h, s, c);
+                    r.target = target.to_string();
+                    rows.push(r);
+                };
+                push("optimistic+greedy", g);
+                push("model/x", g - 2.0);
+                push("model/y", if h == 0 && t == 0 { g } else { g - 1.0 });
+                push("oracle", g - 5.0);
+            }
+        }
+        let mut extra = trial(9, "model/x", 1.0);
+        extra.target = "Cup".into();
+        rows.push(extra);
+        let paired = paired_comparisons(&rows, &order, 0);
+        // Against greedy: x, y, oracle; against the best (model/x): greedy, y, oracle.
+        assert_eq!(paired.len(), 6);
+        let x = &paired[0];
+        assert_eq!(
+            (x.role, x.strategy.as_str(), x.pairs),
+            ("first", "model/x", 6)
+        );
+        assert!((x.mean_diff_m + 2.0).abs() < 1e-12);
+        assert!((x.ci95_low_m + 2.0).abs() < 1e-12 && (x.ci95_high_m + 2.0).abs() < 1e-12);
+        assert_eq!((x.wins, x.ties, x.losses), (6, 0, 0));
+        // Six equal differences tie in rank: the normal approximation, z = (0 − 10.5 + 0.5)/√(22.75
+        // − 210/48) = −2.33285 → p = 0.0196562 (Python: math.erfc(2.33285 / math.sqrt(2))).
+        assert!(
+            (x.wilcoxon_p.unwrap() - 0.019_656_157).abs() < 1e-8,
+            "{:?}",
+            x.wilcoxon_p
+        );
+        let y = &paired[1];
+        assert_eq!((y.wins, y.ties, y.losses), (5, 1, 0));
+        assert!((y.mean_diff_m + 5.0 / 6.0).abs() < 1e-12);
+        assert_eq!(paired[3].role, "best");
+        assert_eq!(paired[3].reference, "model/x");
+        assert_eq!(paired[3].strategy, "optimistic+greedy");
+        assert!((paired[3].mean_diff_m - 2.0).abs() < 1e-12);
+        assert_eq!(paired[5].strategy, "oracle");
+        let md = paired_markdown(&paired);
+        assert!(
+            md.contains("Against optimistic+greedy (the first strategy)"),
+            "{md}"
+        );
+        assert!(
+            md.contains("Against model/x (the lowest mean, oracle excepted)"),
+            "{md}"
+        );
+        assert!(md.contains("| model/y | 6 | -0.83 | [-1.00, "), "{md}");
+        assert!(
+            md.contains("| optimistic+greedy | 6 | +2.00 | [+2.00, +2.00] | 0.020 | 0 / 0 / 6 |"),
+            "{md}"
+        );
+        assert!(md.contains("| 5 / 1 / 0 |"), "{md}");
+        // The same seed gives the same table.
+        assert_eq!(paired_markdown(&paired_comparisons(&rows, &order, 0)), md);
     }
 }

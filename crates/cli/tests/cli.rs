@@ -508,3 +508,95 @@ fn deploy_runs_chooses_and_replays_every_candidate() {
         );
     }
 }
+
+#[test]
+fn several_targets_per_house_are_trials_of_their_own_for_eval_and_select() {
+    let dir = tempfile::tempdir().unwrap();
+    let one = dir.path().join("one");
+    let base = [
+        "eval",
+        "--generate",
+        "8",
+        "--house-seed",
+        "2",
+        "--strategies",
+    ];
+    let strategies = "optimistic+greedy,model/uniform,model/prior";
+    let o = ferret(&[&base[..], &[strategies, "--out", s(&one)]].concat());
+    assert!(o.status.success(), "{}", text(&o));
+    let run: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(one.join("run.json")).unwrap()).unwrap();
+    assert!(
+        run.get("trials_per_house").is_none(),
+        "the default leaves run.json as before"
+    );
+    let three = dir.path().join("three");
+    let o = ferret(
+        &[
+            &base[..],
+            &[strategies, "--trials-per-house", "3", "--out", s(&three)],
+        ]
+        .concat(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let rows = read_csv(&three.join("trials.csv"));
+    let mut trials: std::collections::BTreeMap<(String, String), Vec<String>> =
+        std::collections::BTreeMap::new();
+    for r in &rows {
+        trials
+            .entry((r["house"].clone(), r["target"].clone()))
+            .or_default()
+            .push(r["strategy"].clone());
+    }
+    // Every trial is run by all three strategies, and houses have up to three distinct targets.
+    assert!(trials.values().all(|v| v.len() == 3), "{trials:?}");
+    let mut per_house: std::collections::BTreeMap<&str, usize> = Default::default();
+    for (h, _) in trials.keys() {
+        *per_house.entry(h.as_str()).or_default() += 1;
+    }
+    assert_eq!(per_house.len(), 8);
+    assert!(per_house.values().all(|&n| (1..=3).contains(&n)));
+    assert!(trials.len() > 8, "several targets on some house");
+    let summary = std::fs::read_to_string(three.join("summary.md")).unwrap();
+    assert!(
+        summary.contains(&format!(
+            "{} trials, up to 3 distinct targets per house",
+            trials.len()
+        )),
+        "{summary}"
+    );
+    assert!(
+        summary.contains(&format!("| model/prior | {} |", trials.len())),
+        "{summary}"
+    );
+    // Selection draws one trial per house in a deployment: 8 houses allow 8 trials, not 9.
+    let sel = dir.path().join("sel");
+    let o = ferret(&[
+        "select",
+        "--trials",
+        s(&three),
+        "--deployments",
+        "20",
+        "--trials-per-deployment",
+        "8",
+        "--out",
+        s(&sel),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let replays = std::fs::read_to_string(three.join("replay.csv")).unwrap();
+    // Header line plus 2 × 1 replays per deployed strategy, 3 deployed, per trial.
+    assert_eq!(replays.lines().count(), 2 + 6 * trials.len(), "{replays}");
+    let o = ferret(&[
+        "select",
+        "--trials",
+        s(&three),
+        "--deployments",
+        "20",
+        "--trials-per-deployment",
+        "9",
+        "--out",
+        s(&sel),
+    ]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("only 8 houses"), "{}", text(&o));
+}

@@ -29,4 +29,4 @@ pub use policy::{CandidateLimit, Greedy, Oracle, Planner, PlannerConfig, Policy}
 pub use probability::Probability;
 pub use replay::{hindsight_truth, replay_cost};
 pub use strategy::{ModelStrategy, Strategy, StrategyRegistry, StrategySpec, TrialContext};
-pub use trial::{TrialOutcome, TrialSpec, draw_trial, run_trial};
+pub use trial::{TrialOutcome, TrialSpec, TrialsPerHouse, draw_trial, draw_trials, run_trial};

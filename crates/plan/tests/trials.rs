@@ -221,3 +221,42 @@ fn unknown_and_malformed_specs_are_clear_errors() {
     assert!(reg.build("model/uniform/exact").is_ok());
     let _ = CandidateLimit::PAPER;
 }
+
+#[test]
+fn trials_per_house_draws_distinct_targets_and_one_is_draw_trial() {
+    use ferret_plan::{TrialsPerHouse, draw_trial, draw_trials};
+    // Three object types spread over four containers.
+    let (house, truth, _) = house(
+        &[(1.0, 0.0), (2.0, 0.0), (3.0, 0.0), (4.0, 0.0)],
+        &[0, 1, 2, 3],
+        &[vec![0], vec![1, 2], vec![], vec![0]],
+    );
+    for seed in 0..20 {
+        let one = draw_trials(&house, &truth, seed, 0.0, TrialsPerHouse::One).unwrap();
+        assert_eq!(one, vec![draw_trial(&house, &truth, seed, 0.0).unwrap()]);
+        let two = draw_trials(&house, &truth, seed, 0.5, TrialsPerHouse::Count(2)).unwrap();
+        assert_eq!(two.len(), 2);
+        assert_ne!(two[0].target, two[1].target);
+        for t in &two {
+            // Half of the containers without the target start out searched, never a goal.
+            let goals = truth.goal_containers(&t.target);
+            assert_eq!(
+                t.revealed.len(),
+                ((4 - goals.len()) as f64 * 0.5).round() as usize
+            );
+            assert!(t.revealed.iter().all(|c| !goals.contains(c)));
+        }
+        // More than the house has, or `all`: every type once, in name order for `all`.
+        let many = draw_trials(&house, &truth, seed, 0.0, TrialsPerHouse::Count(9)).unwrap();
+        assert_eq!(many.len(), 3);
+        let all = draw_trials(&house, &truth, seed, 0.0, TrialsPerHouse::All).unwrap();
+        let names: Vec<&str> = all.iter().map(|t| t.target.as_str()).collect();
+        assert_eq!(names, ["Book", "Egg", "RemoteControl"]);
+    }
+    assert_eq!("all".parse(), Ok(TrialsPerHouse::All));
+    assert_eq!("1".parse(), Ok(TrialsPerHouse::One));
+    assert_eq!("5".parse(), Ok(TrialsPerHouse::Count(5)));
+    assert!("0".parse::<TrialsPerHouse>().is_err());
+    assert!("some".parse::<TrialsPerHouse>().is_err());
+    assert_eq!(TrialsPerHouse::Count(5).to_string(), "5");
+}

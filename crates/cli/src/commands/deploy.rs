@@ -6,10 +6,10 @@ use std::process::ExitCode;
 use std::sync::Arc;
 
 use anyhow::{Result, bail};
-use ferret_plan::{Strategy, draw_trial, replay_cost, run_trial};
+use ferret_plan::{Strategy, TrialsPerHouse, draw_trial, draw_trials, replay_cost, run_trial};
 use ferret_select::{Method, ORACLE};
-use rand::SeedableRng;
 use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
@@ -41,6 +41,10 @@ pub struct Args {
     /// Exploration constant c, metres.
     #[arg(long, default_value_t = ferret_select::DEFAULT_C)]
     c: f64,
+    /// Targets drawn per house (a number or `all`); each trial of the deployment runs one of
+    /// them, picked at random, in a house of its own. 1 is the paper's draw.
+    #[arg(long, value_name = "N|all", default_value = "1")]
+    trials_per_house: TrialsPerHouse,
     /// Seed of the house order, targets and tie breaks.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -116,7 +120,15 @@ pub fn run(args: Args) -> Result<ExitCode> {
                 continue;
             }
         };
-        let trial = draw_trial(&scene.house, &scene.truth, args.seed, 0.0)?;
+        let trial = match args.trials_per_house {
+            TrialsPerHouse::One => draw_trial(&scene.house, &scene.truth, args.seed, 0.0)?,
+            per_house => {
+                let mut trials =
+                    draw_trials(&scene.house, &scene.truth, args.seed, 0.0, per_house)?;
+                let pick = rng.random_range(0..trials.len());
+                trials.swap_remove(pick)
+            }
+        };
         let i = selector.choose(&mut rng);
         let outcome = run_trial(
             candidates[i].as_ref(),

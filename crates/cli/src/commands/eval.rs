@@ -9,7 +9,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use ferret_plan::{
     CandidateLimit, PlannerConfig, Prior, Strategy, StrategyRegistry, TrialOutcome, TrialSpec,
-    draw_trial, run_trial,
+    TrialsPerHouse, draw_trials, run_trial,
 };
 use ferret_report::{
     TrajectoryOptions, TrajectoryPanel, ViolinOptions, draw_trajectories, draw_violins,
@@ -50,6 +50,10 @@ pub struct Args {
     /// Fraction of non-goal containers revealed as searched before each trial.
     #[arg(long, default_value_t = 0.0)]
     pub reveal_fraction: f64,
+    /// Trials per house, each with a distinct target and the same for every strategy: a number,
+    /// or `all` for every target type present. 1 draws one target per house as the paper does.
+    #[arg(long, value_name = "N|all", default_value = "1")]
+    pub trials_per_house: TrialsPerHouse,
     /// House (index) whose trajectories are drawn; the first house when not given.
     #[arg(long)]
     pub show_house: Option<usize>,
@@ -181,8 +185,15 @@ pub struct RunInfo {
     pub seed: u64,
     /// Reveal fraction.
     pub reveal_fraction: f64,
+    /// Trials per house; left out of run.json when 1, so single-trial runs read as before.
+    #[serde(default, skip_serializing_if = "is_one_per_house")]
+    pub trials_per_house: TrialsPerHouse,
     /// Strategies in order.
     pub strategies: Vec<String>,
+}
+
+fn is_one_per_house(t: &TrialsPerHouse) -> bool {
+    *t == TrialsPerHouse::One
 }
 
 impl RunInfo {
@@ -270,10 +281,17 @@ pub fn run(args: Args) -> Result<ExitCode> {
         .iter()
         .zip(&maps)
         .filter(|(_, m)| m.is_ok())
-        .filter_map(|(s, _)| {
-            draw_trial(&s.house, &s.truth, args.seed, args.reveal_fraction)
-                .ok()
-                .map(|t| (&s.house, t.target))
+        .flat_map(|(s, _)| {
+            draw_trials(
+                &s.house,
+                &s.truth,
+                args.seed,
+                args.reveal_fraction,
+                args.trials_per_house,
+            )
+            .unwrap_or_default()
+            .into_iter()
+            .map(|t| (&s.house, t.target))
         })
         .collect();
     let pairs: Vec<(&ferret_world::House, &ferret_world::ObjectType)> =
@@ -289,6 +307,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         &strategies,
         args.seed,
         args.reveal_fraction,
+        args.trials_per_house,
     );
     for e in &outcome.errors {
         eprintln!("error: {e}");
@@ -306,8 +325,13 @@ pub fn run(args: Args) -> Result<ExitCode> {
     write_csv(&args.out.join("summary.csv"), &summary)?;
     let paired = paired_comparisons(&outcome.rows, &args.strategies, args.seed);
     write_csv(&args.out.join("paired.csv"), &paired)?;
-    let md =
-        summary_markdown(&summary, &loaded.source, outcome.houses_run) + &paired_markdown(&paired);
+    let md = summary_markdown(
+        &summary,
+        &loaded.source,
+        outcome.houses_run,
+        args.trials_per_house,
+        outcome.trials_run,
+    ) + &paired_markdown(&paired);
     crate::output::write_bytes(&args.out.join("summary.md"), &md)?;
     let info = RunInfo {
         houses: args.houses.houses.clone(),
@@ -323,6 +347,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         planning: args.planning.clone(),
         seed: args.seed,
         reveal_fraction: args.reveal_fraction,
+        trials_per_house: args.trials_per_house,
         strategies: args.strategies.clone(),
     };
     crate::output::write_bytes(
@@ -360,39 +385,54 @@ pub struct Evaluation {
     pub errors: Vec<String>,
     /// Houses with a map and a target.
     pub houses_run: usize,
+    /// Trials (house and target) drawn on those houses.
+    pub trials_run: usize,
 }
 
-/// Runs every strategy on one trial per house, in parallel over houses.
+/// Runs every strategy on the trials of every house (`per_house` of them), in parallel over
+/// houses.
 pub fn evaluate(
     scenes: &[Scene],
     maps: &[Mapped],
     strategies: &[Arc<dyn Strategy>],
     seed: u64,
     reveal_fraction: f64,
+    per_house: TrialsPerHouse,
 ) -> Evaluation {
     let bar = progress(scenes.len(), "trials");
-    let per_house: Vec<(Vec<TrialRow>, Vec<String>, bool)> = scenes
+    let by_house: Vec<(Vec<TrialRow>, Vec<String>, usize)> = scenes
         .par_iter()
         .zip(maps.par_iter())
         .progress_with(bar.clone())
         .map(|(scene, map)| {
             let (_, distances) = match map {
                 Ok(m) => m,
-                Err(e) => return (vec![], vec![e.to_string()], false),
+                Err(e) => return (vec![], vec![e.to_string()], 0),
             };
-            let trial = match draw_trial(&scene.house, &scene.truth, seed, reveal_fraction) {
-                Ok(t) => t,
-                Err(e) => return (vec![], vec![e.to_string()], false),
-            };
+            let trials =
+                match draw_trials(&scene.house, &scene.truth, seed, reveal_fraction, per_house) {
+                    Ok(t) => t,
+                    Err(e) => return (vec![], vec![e.to_string()], 0),
+                };
             let mut rows = Vec::new();
             let mut errors = Vec::new();
-            for s in strategies {
-                match run_trial(s.as_ref(), &scene.house, &scene.truth, distances, &trial) {
-                    Ok(out) => rows.push(row(scene, &trial, &out)),
-                    Err(e) => errors.push(format!("{}: {}: {e}", scene.house.name, s.name())),
+            for trial in &trials {
+                for s in strategies {
+                    match run_trial(s.as_ref(), &scene.house, &scene.truth, distances, trial) {
+                        Ok(out) => rows.push(row(scene, trial, &out)),
+                        // The target is named only when a house has several trials, so that
+                        // single-trial messages read as before.
+                        Err(e) if trials.len() > 1 => errors.push(format!(
+                            "{}: {}: {}: {e}",
+                            scene.house.name,
+                            trial.target,
+                            s.name()
+                        )),
+                        Err(e) => errors.push(format!("{}: {}: {e}", scene.house.name, s.name())),
+                    }
                 }
             }
-            (rows, errors, true)
+            (rows, errors, trials.len())
         })
         .collect();
     bar.finish_and_clear();
@@ -400,11 +440,13 @@ pub fn evaluate(
         rows: vec![],
         errors: vec![],
         houses_run: 0,
+        trials_run: 0,
     };
-    for (rows, errors, ran) in per_house {
+    for (rows, errors, trials) in by_house {
         ev.rows.extend(rows);
         ev.errors.extend(errors);
-        ev.houses_run += usize::from(ran);
+        ev.houses_run += usize::from(trials > 0);
+        ev.trials_run += trials;
     }
     ev
 }
@@ -659,10 +701,23 @@ pub fn paired_markdown(paired: &[PairedRow]) -> String {
     md
 }
 
-/// The paper's table I as Markdown.
-pub fn summary_markdown(summary: &[SummaryRow], source: &str, houses: usize) -> String {
+/// The paper's table I as Markdown; `trials` trials were drawn on `houses` houses.
+pub fn summary_markdown(
+    summary: &[SummaryRow],
+    source: &str,
+    houses: usize,
+    per_house: TrialsPerHouse,
+    trials: usize,
+) -> String {
+    let drawn = match per_house {
+        TrialsPerHouse::One => "one trial per house".to_string(),
+        TrialsPerHouse::Count(n) => {
+            format!("{trials} trials, up to {n} distinct targets per house")
+        }
+        TrialsPerHouse::All => format!("{trials} trials, every target type of each house"),
+    };
     let mut md = format!(
-        "# Navigation cost per strategy\n\n{houses} houses from {source}; one trial per house, the same for every strategy.\n\n"
+        "# Navigation cost per strategy\n\n{houses} houses from {source}; {drawn}, the same for every strategy.\n\n"
     );
     md.push_str(
         "| strategy | trials | mean cost (m) | 95 % CI | median (m) | vs optimistic+greedy |\n",
@@ -679,8 +734,8 @@ pub fn summary_markdown(summary: &[SummaryRow], source: &str, houses: usize) -> 
     }
     let short: Vec<String> = summary
         .iter()
-        .filter(|r| r.trials < houses)
-        .map(|r| format!("{} finished {} of {houses}", r.strategy, r.trials))
+        .filter(|r| r.trials < trials)
+        .map(|r| format!("{} finished {} of {trials}", r.strategy, r.trials))
         .collect();
     if !short.is_empty() {
         md.push_str(&format!(
@@ -768,9 +823,17 @@ pub fn draw_house_trajectories(
     let house = &scene.house;
     let mut panels = Vec::new();
     let mut target = None;
+    // With several trials per house, the panels show the house's first trial.
+    let shown = rows
+        .iter()
+        .find(|r| r.house_index == house.index && r.house == house.name)
+        .map(|r| r.target.as_str());
     for s in strategies {
         let Some(row) = rows.iter().find(|r| {
-            r.house_index == house.index && r.house == house.name && r.strategy == s.name()
+            r.house_index == house.index
+                && r.house == house.name
+                && r.strategy == s.name()
+                && Some(r.target.as_str()) == shown
         }) else {
             continue;
         };
@@ -860,13 +923,16 @@ mod tests {
         assert!((summary[1].improvement_pct.unwrap() - 10.0).abs() < 1e-9);
         assert!(summary[0].improvement_pct.unwrap().abs() < 1e-9);
         assert_eq!(summary[1].paired_trials, 3);
-        let md = summary_markdown(&summary, "test houses", 4);
+        let md = summary_markdown(&summary, "test houses", 4, TrialsPerHouse::One, 4);
         assert!(md.contains("model/x finished 3 of 4"), "{md}");
         assert!(md.contains("only the 3 paired trials"), "{md}");
         assert!(!md.contains("optimistic+greedy finished"), "{md}");
         // Complete runs carry no note.
         let complete = summarize(&rows[..4], &order[..1]);
-        assert!(!summary_markdown(&complete, "test houses", 4).contains("Failed trials"));
+        assert!(
+            !summary_markdown(&complete, "test houses", 4, TrialsPerHouse::One, 4)
+                .contains("Failed trials")
+        );
     }
 
     #[test]

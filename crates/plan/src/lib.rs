@@ -25,7 +25,7 @@ pub use calibration::{Calibration, ReliabilityBin};
 pub use error::{BoxError, PlanError};
 pub use likelihood::{LikelihoodSource, OracleLikelihood, Prior, Uniform};
 pub use planner::{Plan, Problem, solve_brute_force, solve_exact};
-pub use policy::{CandidateLimit, Greedy, Oracle, Planner, PlannerConfig, Policy};
+pub use policy::{CandidateLimit, CostModel, Greedy, Oracle, Planner, PlannerConfig, Policy};
 pub use probability::Probability;
 pub use replay::{hindsight_truth, replay_cost};
 pub use strategy::{ModelStrategy, Strategy, StrategyRegistry, StrategySpec, TrialContext};

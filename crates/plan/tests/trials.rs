@@ -260,3 +260,43 @@ fn trials_per_house_draws_distinct_targets_and_one_is_draw_trial() {
     assert!("some".parse::<TrialsPerHouse>().is_err());
     assert_eq!(TrialsPerHouse::Count(5).to_string(), "5");
 }
+
+#[test]
+fn authors_cost_specs_parse_and_plan_with_the_extra_term() {
+    use ferret_plan::{CostModel, strategy::planner_config_from};
+    let reg = StrategyRegistry::builtin(None, PlannerConfig::default(), 12);
+    for ok in [
+        "model/uniform/authors",
+        "model/uniform/k3/authors",
+        "model/uniform/exact/authors",
+    ] {
+        assert!(reg.build(ok).is_ok(), "{ok}");
+    }
+    let err = reg
+        .build("model/uniform/authors/k3")
+        .err()
+        .map(|e| e.to_string());
+    assert!(err.unwrap_or_default().contains("too many parts"));
+    let spec = ferret_plan::StrategySpec::parse("model/uniform/k3/authors").unwrap();
+    let config = planner_config_from(&spec, 1, PlannerConfig::default(), 12).unwrap();
+    assert_eq!(config.cost, CostModel::Authors);
+    assert_eq!(config.limit, CandidateLimit::Paper { k: 3 });
+    let plain = ferret_plan::StrategySpec::parse("model/uniform/k3").unwrap();
+    let config = planner_config_from(&plain, 1, PlannerConfig::default(), 12).unwrap();
+    assert_eq!(config.cost, CostModel::Paper);
+
+    // Uniform likelihood p on a line: a likely container 4 m away and another 5 m the other way.
+    // Eq. 3 from the start: 4 + (1−p)·9 vs 5 + (1−p)·9 → the nearer first either way; the
+    // authors' term adds p·4 vs p·5, the same order. Both find the target at 5 m after 4 + 9 m.
+    let (house, truth, distances) = house(&[(4.0, 0.0), (-5.0, 0.0)], &[0, 1], &[vec![], vec![0]]);
+    let trial = TrialSpec {
+        target: ObjectType::new("Egg"),
+        revealed: vec![],
+    };
+    for s in ["model/uniform", "model/uniform/authors"] {
+        let strategy = reg.build(s).unwrap();
+        let out = run_trial(strategy.as_ref(), &house, &truth, &distances, &trial).unwrap();
+        assert_eq!(out.searched, vec![0, 1], "{s}");
+        assert!((out.cost - 13.0).abs() < 1e-9, "{s}: {}", out.cost);
+    }
+}

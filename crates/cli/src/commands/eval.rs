@@ -39,7 +39,8 @@ pub struct Args {
     #[command(flatten)]
     pub llm: super::llm_setup::LlmArgs,
     /// Strategies, comma separated: optimistic+greedy, model/uniform, model/prior,
-    /// model/prior/exact, model/prior/k<N>, oracle, and with an LLM configuration
+    /// model/prior/exact, model/prior/k<N>, oracle (a model spec ending in /authors plans with the
+    /// paper reference code's cost), and with an LLM configuration
     /// llm+model/<prompt>/<llm>[/exact] and llm-direct/p-direct/<llm> (prompts: p-context-a,
     /// p-context-b, p-minimal, p-direct, or a template path).
     #[arg(long, value_delimiter = ',', default_value = DEFAULT_STRATEGIES)]
@@ -119,6 +120,7 @@ impl PlanningArgs {
             limit: CandidateLimit::Paper {
                 k: self.max_containers.max(1),
             },
+            cost: ferret_plan::CostModel::Paper,
         }
     }
 

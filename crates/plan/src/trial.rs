@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::belief::Belief;
 use crate::error::PlanError;
+use crate::protocol::{InitialBelief, Protocol, TargetSet};
 use crate::strategy::{Strategy, TrialContext};
 
 /// One house, one target, one start pose (the house's), and containers revealed beforehand.
@@ -123,17 +124,102 @@ pub fn draw_trials(
     reveal_fraction: f64,
     per_house: TrialsPerHouse,
 ) -> Result<Vec<TrialSpec>, PlanError> {
-    let mut types: Vec<ObjectType> = truth.target_types().into_iter().collect();
-    let n = match per_house {
-        TrialsPerHouse::One => return Ok(vec![draw_trial(house, truth, seed, reveal_fraction)?]),
-        TrialsPerHouse::Count(n) => n,
-        TrialsPerHouse::All => types.len(),
+    draw_trials_with(
+        house,
+        truth,
+        seed,
+        reveal_fraction,
+        per_house,
+        &Protocol::FERRET,
+    )
+}
+
+/// [`draw_trials`] under a protocol's target set and initial belief. Under ferret's protocol it
+/// is exactly [`draw_trials`]. The paper's target set leaves out types that are also top-level
+/// objects of the house (containers or other furniture); the paper's initial belief marks
+/// searched, besides any `reveal_fraction`, all but a random number — between half and all but
+/// one — of the containers that do not hold the target (drawn from a stream of its own).
+pub fn draw_trials_with(
+    house: &House,
+    truth: &GroundTruth,
+    seed: u64,
+    reveal_fraction: f64,
+    per_house: TrialsPerHouse,
+    protocol: &Protocol,
+) -> Result<Vec<TrialSpec>, PlanError> {
+    let mut trials = match protocol.targets {
+        TargetSet::Pickupable => draw_targets(
+            house,
+            truth.target_types().into_iter().collect(),
+            truth,
+            seed,
+            reveal_fraction,
+            per_house,
+        )?,
+        TargetSet::Paper => {
+            let furniture: std::collections::BTreeSet<&ObjectType> = house
+                .containers
+                .iter()
+                .map(|c| &c.object_type)
+                .chain(house.obstacles.iter().map(|o| &o.object_type))
+                .collect();
+            let types = truth
+                .target_types()
+                .into_iter()
+                .filter(|t| !furniture.contains(t))
+                .collect();
+            draw_targets(house, types, truth, seed, reveal_fraction, per_house)?
+        }
     };
+    if protocol.initial_belief == InitialBelief::Paper {
+        let mut rng = house_rng(seed, house.index, 4);
+        for t in &mut trials {
+            let mut others: Vec<usize> = (0..house.containers.len())
+                .filter(|&c| !truth.holds(c, &t.target))
+                .collect();
+            let m = others.len();
+            if m == 0 {
+                continue;
+            }
+            // Keep between half and all but one of the others unsearched.
+            let keep = rng.random_range((m / 2).min(m - 1)..=m - 1);
+            for _ in 0..keep {
+                let i = rng.random_range(0..others.len());
+                others.swap_remove(i);
+            }
+            t.revealed.extend(others);
+            t.revealed.sort_unstable();
+            t.revealed.dedup();
+        }
+    }
+    Ok(trials)
+}
+
+/// The trials of a house among target `types` (in name order).
+fn draw_targets(
+    house: &House,
+    mut types: Vec<ObjectType>,
+    truth: &GroundTruth,
+    seed: u64,
+    reveal_fraction: f64,
+    per_house: TrialsPerHouse,
+) -> Result<Vec<TrialSpec>, PlanError> {
     if types.is_empty() {
         return Err(PlanError::NoTarget {
             house: house.name.clone(),
         });
     }
+    let n = match per_house {
+        TrialsPerHouse::One => {
+            // The same stream and draws as `draw_trial`.
+            let mut rng = house_rng(seed, house.index, 1);
+            let target = types[rng.random_range(0..types.len())].clone();
+            let revealed = reveal(house, truth, &target, reveal_fraction, &mut rng);
+            return Ok(vec![TrialSpec { target, revealed }]);
+        }
+        TrialsPerHouse::Count(n) => n,
+        TrialsPerHouse::All => types.len(),
+    };
     let mut rng = house_rng(seed, house.index, 2);
     if per_house != TrialsPerHouse::All {
         rand::seq::SliceRandom::shuffle(types.as_mut_slice(), &mut rng);

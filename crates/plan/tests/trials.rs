@@ -9,7 +9,7 @@ use ferret_world::{
     Container, Distances, Footprint, GroundTruth, House, ObjectType, Point, Polygon, Pose, Room,
     RoomType, Scene, SmallObject,
 };
-use proptest::prelude::{ProptestConfig, prop, prop_assert, prop_assert_eq, proptest};
+use proptest::prelude::{ProptestConfig, prop, prop_assert, prop_assert_eq, prop_assume, proptest};
 use proptest::strategy::Strategy as _;
 
 /// A one-room house with containers at `points`, Euclidean travel, and the given contents.
@@ -299,4 +299,105 @@ fn authors_cost_specs_parse_and_plan_with_the_extra_term() {
         assert_eq!(out.searched, vec![0, 1], "{s}");
         assert!((out.cost - 13.0).abs() < 1e-9, "{s}: {}", out.cost);
     }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// The counterfactual replay (the reference code's) stops at any goal container, so it never
+    /// costs more than the pessimistic one, equals the true run of the replayed strategy, and the
+    /// two agree when only one container holds the target.
+    #[test]
+    fn counterfactual_replay_is_at_most_pessimistic_on_every_trial(
+        (pts, kinds, contents) in arb_house(),
+        seed in 0u64..50,
+    ) {
+        use ferret_plan::{InitialBelief, Protocol, ReplayMode, TrialsPerHouse, draw_trials_with, replay_cost_with};
+        let (house, truth, distances) = house(&pts, &kinds, &contents);
+        prop_assume!(!truth.target_types().is_empty());
+        let scene = Scene { house: house.clone(), truth: truth.clone() };
+        let reg = registry(std::slice::from_ref(&scene));
+        for belief in [InitialBelief::Empty, InitialBelief::Paper] {
+            let protocol = Protocol { initial_belief: belief, ..Protocol::FERRET };
+            let trials = draw_trials_with(&house, &truth, seed, 0.0, TrialsPerHouse::All, &protocol).unwrap();
+            for trial in &trials {
+                let single_goal = truth.goal_containers(&trial.target).len() == 1;
+                for deployed in SPECS.iter().filter(|s| **s != "oracle") {
+                    let d = reg.build(deployed).unwrap();
+                    let found = run_trial(d.as_ref(), &house, &truth, &distances, trial).unwrap().found.unwrap();
+                    for other in SPECS.iter().filter(|s| **s != "oracle") {
+                        let o = reg.build(other).unwrap();
+                        let pess = replay_cost_with(ReplayMode::Pessimistic, o.as_ref(), &house, &truth, &distances, trial, found).unwrap();
+                        let cf = replay_cost_with(ReplayMode::Counterfactual, o.as_ref(), &house, &truth, &distances, trial, found).unwrap();
+                        let real = run_trial(o.as_ref(), &house, &truth, &distances, trial).unwrap().cost;
+                        prop_assert!(cf <= pess + 1e-9, "{}: counterfactual {} > pessimistic {}", other, cf, pess);
+                        prop_assert!((cf - real).abs() < 1e-9);
+                        if single_goal {
+                            prop_assert!((cf - pess).abs() < 1e-9);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The paper's initial belief marks no goal container searched, leaves between half and all
+    /// but one of the others unsearched, and changes nothing else of the draw.
+    #[test]
+    fn paper_belief_never_marks_a_goal_searched(
+        (pts, kinds, contents) in arb_house(),
+        seed in 0u64..50,
+    ) {
+        use ferret_plan::{InitialBelief, Protocol, TrialsPerHouse, draw_trials, draw_trials_with};
+        let (house, truth, _) = house(&pts, &kinds, &contents);
+        prop_assume!(!truth.target_types().is_empty());
+        let paper = Protocol { initial_belief: InitialBelief::Paper, ..Protocol::FERRET };
+        for per_house in [TrialsPerHouse::One, TrialsPerHouse::All] {
+            let plain = draw_trials(&house, &truth, seed, 0.0, per_house).unwrap();
+            prop_assert_eq!(&draw_trials_with(&house, &truth, seed, 0.0, per_house, &Protocol::FERRET).unwrap(), &plain);
+            let with = draw_trials_with(&house, &truth, seed, 0.0, per_house, &paper).unwrap();
+            prop_assert_eq!(with.len(), plain.len());
+            for (a, b) in plain.iter().zip(&with) {
+                prop_assert_eq!(&a.target, &b.target);
+                prop_assert!(a.revealed.is_empty());
+                let goals = truth.goal_containers(&b.target);
+                prop_assert!(b.revealed.iter().all(|c| !goals.contains(c)));
+                let others = house.containers.len() - goals.len();
+                let kept = others - b.revealed.len();
+                if others > 0 {
+                    prop_assert!(kept >= (others / 2).min(others - 1) && kept < others, "kept {} of {}", kept, others);
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn paper_targets_leave_out_types_that_are_also_furniture() {
+    use ferret_plan::{Protocol, TargetSet, TrialsPerHouse, draw_trials_with};
+    // Containers are Fridge, Bed; contents Egg, Book and a "Bed" (a child that is furniture too).
+    let (house, mut truth, _) = house(&[(1.0, 0.0), (2.0, 0.0)], &[0, 1], &[vec![0], vec![1]]);
+    truth = GroundTruth::new(vec![
+        truth.contents(0).to_vec(),
+        vec![
+            truth.contents(1)[0].clone(),
+            SmallObject {
+                id: "small|bed".into(),
+                object_type: ObjectType::new("Bed"),
+            },
+        ],
+    ]);
+    let all = |targets| {
+        let p = Protocol {
+            targets,
+            ..Protocol::FERRET
+        };
+        draw_trials_with(&house, &truth, 0, 0.0, TrialsPerHouse::All, &p)
+            .unwrap()
+            .into_iter()
+            .map(|t| t.target.to_string())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(all(TargetSet::Pickupable), ["Bed", "Book", "Egg"]);
+    assert_eq!(all(TargetSet::Paper), ["Book", "Egg"]);
 }

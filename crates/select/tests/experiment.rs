@@ -469,6 +469,7 @@ proptest! {
             c,
             seed,
             replay_untried_first,
+            with_replacement: false,
         };
         let result = run_experiment(&table, &opts).unwrap();
         check_invariants(&table, &result);
@@ -522,4 +523,43 @@ fn grouped_tables_draw_one_trial_per_house_per_deployment() {
     assert_eq!(a.ucb.avg_cost, b.ucb.avg_cost);
     assert_eq!(a.replay.avg_cost, b.replay.avg_cost);
     assert!(table.grouped(vec![0; 3]).is_err());
+}
+
+#[test]
+fn with_replacement_draws_repeat_houses_and_may_outnumber_them() {
+    let table = gaussian_table(&[10.0, 12.0], 3.0, 5, 8);
+    let opts = ExperimentOptions {
+        deployments: 50,
+        trials_per_deployment: 8,
+        seed: 3,
+        with_replacement: true,
+        ..ExperimentOptions::default()
+    };
+    let result = run_experiment(&table, &opts).unwrap();
+    for d in &result.deployments {
+        assert_eq!(d.houses.len(), 8);
+        let distinct: HashSet<usize> = d.houses.iter().copied().collect();
+        assert!(distinct.len() < 8, "8 draws from 5 houses repeat one");
+    }
+    // Without replacement, 8 trials cannot be drawn from 5 houses.
+    let distinct = ExperimentOptions {
+        with_replacement: false,
+        ..opts
+    };
+    assert!(matches!(
+        run_experiment(&table, &distinct),
+        Err(SelectError::TooManyTrials { .. })
+    ));
+    // Same seed, 4 trials: draws differ from the distinct ones in some deployment (repeats).
+    let four = ExperimentOptions {
+        trials_per_deployment: 4,
+        ..opts
+    };
+    let result = run_experiment(&table, &four).unwrap();
+    assert!(
+        result
+            .deployments
+            .iter()
+            .any(|d| { d.houses.iter().collect::<HashSet<_>>().len() < d.houses.len() })
+    );
 }

@@ -8,8 +8,8 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use ferret_plan::{
-    CandidateLimit, PlannerConfig, Prior, Strategy, StrategyRegistry, TrialOutcome, TrialSpec,
-    TrialsPerHouse, draw_trials, run_trial,
+    CandidateLimit, PlannerConfig, Prior, Protocol, Strategy, StrategyRegistry, TrialOutcome,
+    TrialSpec, TrialsPerHouse, draw_trials_with, run_trial,
 };
 use ferret_report::{
     TrajectoryOptions, TrajectoryPanel, ViolinOptions, draw_trajectories, draw_violins,
@@ -19,7 +19,7 @@ use indicatif::ParallelProgressIterator;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::common::{GridArgs, HouseArgs, Mapped, build_maps, progress};
+use crate::common::{GridArgs, HouseArgs, Mapped, ProtocolArgs, build_maps, progress};
 
 /// The strategies evaluated when none are named.
 pub const DEFAULT_STRATEGIES: &str =
@@ -38,6 +38,8 @@ pub struct Args {
     pub planning: PlanningArgs,
     #[command(flatten)]
     pub llm: super::llm_setup::LlmArgs,
+    #[command(flatten)]
+    pub protocol: ProtocolArgs,
     /// Strategies, comma separated: optimistic+greedy, model/uniform, model/prior,
     /// model/prior/exact, model/prior/k<N>, oracle (a model spec ending in /authors plans with the
     /// paper reference code's cost), and with an LLM configuration
@@ -190,8 +192,15 @@ pub struct RunInfo {
     /// Trials per house; left out of run.json when 1, so single-trial runs read as before.
     #[serde(default, skip_serializing_if = "is_one_per_house")]
     pub trials_per_house: TrialsPerHouse,
+    /// The protocol; left out of run.json when it is ferret's, so default runs read as before.
+    #[serde(default, skip_serializing_if = "is_ferret_protocol")]
+    pub protocol: Protocol,
     /// Strategies in order.
     pub strategies: Vec<String>,
+}
+
+fn is_ferret_protocol(p: &Protocol) -> bool {
+    *p == Protocol::FERRET
 }
 
 fn is_one_per_house(t: &TrialsPerHouse) -> bool {
@@ -256,6 +265,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         );
     }
     crate::common::check_distinct("--strategies", &args.strategies)?;
+    let protocol = args.protocol.resolve(Protocol::FERRET)?;
     let loaded = args.houses.load()?;
     for s in &loaded.skipped {
         eprintln!("skipped: {s}");
@@ -284,12 +294,13 @@ pub fn run(args: Args) -> Result<ExitCode> {
         .zip(&maps)
         .filter(|(_, m)| m.is_ok())
         .flat_map(|(s, _)| {
-            draw_trials(
+            draw_trials_with(
                 &s.house,
                 &s.truth,
                 args.seed,
                 args.reveal_fraction,
                 args.trials_per_house,
+                &protocol,
             )
             .unwrap_or_default()
             .into_iter()
@@ -310,6 +321,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         args.seed,
         args.reveal_fraction,
         args.trials_per_house,
+        &protocol,
     );
     for e in &outcome.errors {
         eprintln!("error: {e}");
@@ -350,6 +362,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         seed: args.seed,
         reveal_fraction: args.reveal_fraction,
         trials_per_house: args.trials_per_house,
+        protocol,
         strategies: args.strategies.clone(),
     };
     crate::output::write_bytes(
@@ -400,6 +413,7 @@ pub fn evaluate(
     seed: u64,
     reveal_fraction: f64,
     per_house: TrialsPerHouse,
+    protocol: &Protocol,
 ) -> Evaluation {
     let bar = progress(scenes.len(), "trials");
     let by_house: Vec<(Vec<TrialRow>, Vec<String>, usize)> = scenes
@@ -411,11 +425,17 @@ pub fn evaluate(
                 Ok(m) => m,
                 Err(e) => return (vec![], vec![e.to_string()], 0),
             };
-            let trials =
-                match draw_trials(&scene.house, &scene.truth, seed, reveal_fraction, per_house) {
-                    Ok(t) => t,
-                    Err(e) => return (vec![], vec![e.to_string()], 0),
-                };
+            let trials = match draw_trials_with(
+                &scene.house,
+                &scene.truth,
+                seed,
+                reveal_fraction,
+                per_house,
+                protocol,
+            ) {
+                Ok(t) => t,
+                Err(e) => return (vec![], vec![e.to_string()], 0),
+            };
             let mut rows = Vec::new();
             let mut errors = Vec::new();
             for trial in &trials {

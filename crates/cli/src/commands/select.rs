@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
 
 use anyhow::{Context, Result, bail};
-use ferret_plan::{Strategy, draw_trials, replay_cost};
+use ferret_plan::{DrawMode, ReplayMode, Strategy, draw_trials_with, replay_cost_with};
 use ferret_report::{CurvePanel, draw_choice_shares, draw_curve_panels};
 use ferret_select::{
     CostTable, ExperimentOptions, Method, ORACLE, PAPER_KS, choice_rows, run_experiment,
@@ -56,6 +56,11 @@ pub struct Args {
     out: PathBuf,
     #[command(flatten)]
     llm: super::llm_setup::LlmArgs,
+    /// Protocol switches: by default the eval run's. `--replay` and `--draw` act here; the
+    /// others decide the trials and must match the run's (a run is never mixed with another
+    /// protocol's trials).
+    #[command(flatten)]
+    protocol: crate::common::ProtocolArgs,
 }
 
 /// One row of `replay.csv`: the replay cost of `strategy` on the trial of `house_index` and
@@ -110,11 +115,33 @@ pub fn run(args: Args) -> Result<ExitCode> {
         )
     })?;
     let info: RunInfo = serde_json::from_slice(&run_json).context("reading run.json")?;
+    let protocol = args.protocol.resolve(info.protocol)?;
+    if protocol.trial_settings() != info.protocol.trial_settings() {
+        bail!(
+            "{} was made with initial belief {}, containers {}, targets {}; select asks for {}, {}, {}: \
+             selecting over trials of another protocol would mix them (run eval again instead)",
+            args.trials.display(),
+            info.protocol.initial_belief,
+            info.protocol.containers,
+            info.protocol.targets,
+            protocol.initial_belief,
+            protocol.containers,
+            protocol.targets
+        );
+    }
     let trials_path = args.trials.join("trials.csv");
     let trials_csv = std::fs::read(&trials_path)
         .with_context(|| format!("reading {}", trials_path.display()))?;
     let rows: Vec<TrialRow> = parse_csv(&trials_csv, &trials_path)?;
-    let key = trials_key(&run_json, &trials_csv);
+    // Counterfactual replays are other numbers than pessimistic ones: they are cached under a key
+    // of their own (the pessimistic key is unchanged, so existing caches stay valid).
+    let key = match protocol.replay {
+        ReplayMode::Pessimistic => trials_key(&run_json, &trials_csv),
+        ReplayMode::Counterfactual => trials_key(
+            &[&run_json[..], b"\nreplay=counterfactual"].concat(),
+            &trials_csv,
+        ),
+    };
     let candidates: Vec<String> = info
         .strategies
         .iter()
@@ -142,7 +169,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         .map(|k| k.0)
         .collect::<std::collections::BTreeSet<_>>()
         .len();
-    if distinct_houses < args.trials_per_deployment {
+    if protocol.draw == DrawMode::Distinct && distinct_houses < args.trials_per_deployment {
         bail!(
             "--trials-per-deployment {}: only {} houses of {} have a trial of every strategy",
             args.trials_per_deployment,
@@ -150,8 +177,15 @@ pub fn run(args: Args) -> Result<ExitCode> {
             args.trials.display()
         );
     }
-    let replays =
-        load_or_compute_replays(&info, &args, &candidates, &by_house, &replay_path, &key)?;
+    let replays = load_or_compute_replays(
+        &info,
+        &args,
+        &candidates,
+        &by_house,
+        &replay_path,
+        &key,
+        protocol.replay,
+    )?;
     let houses: Vec<TrialId> = by_house.keys().cloned().collect();
     let s = candidates.len();
     let mut cost = Vec::with_capacity(houses.len());
@@ -205,6 +239,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         c: args.c,
         seed: args.seed,
         replay_untried_first: args.replay_untried_first,
+        with_replacement: protocol.draw == DrawMode::Replacement,
     };
     let result = run_experiment(&table, &opts)?;
     std::fs::create_dir_all(&args.out)?;
@@ -467,6 +502,7 @@ fn load_or_compute_replays(
     by_house: &Trials<'_>,
     path: &Path,
     key: &str,
+    mode: ReplayMode,
 ) -> Result<HashMap<ReplayKey, f64>> {
     let read = match std::fs::read(path) {
         Ok(text) => {
@@ -551,7 +587,7 @@ fn load_or_compute_replays(
                 .filter(|(k, _)| k.0 == scene.house.index)
                 .map(|(k, m)| (&k.1, m))
                 .collect();
-            let rows = replay_house(scene, distances, &strategies, &trials, info)?;
+            let rows = replay_house(scene, distances, &strategies, &trials, info, mode)?;
             // A house is replayed whole; rows already cached are not written twice.
             let new: Vec<ReplayRow> = rows
                 .iter()
@@ -609,14 +645,16 @@ pub fn replay_house(
     strategies: &[Arc<dyn Strategy>],
     trials: &[(&String, &HashMap<&str, &TrialRow>)],
     info: &RunInfo,
+    mode: ReplayMode,
 ) -> Result<Vec<ReplayRow>> {
     let house = &scene.house;
-    let drawn = draw_trials(
+    let drawn = draw_trials_with(
         house,
         &scene.truth,
         info.seed,
         info.reveal_fraction,
         info.trials_per_house,
+        &info.protocol,
     )?;
     let mut out = Vec::new();
     for (target, rows) in trials {
@@ -626,20 +664,22 @@ pub fn replay_house(
                 house.name
             );
         };
-        replay_trial(house, distances, strategies, rows, trial, &mut out)?;
+        replay_trial(scene, distances, strategies, rows, trial, mode, &mut out)?;
     }
     Ok(out)
 }
 
 /// The replay costs of every strategy on one trial, for every deployed strategy.
 fn replay_trial(
-    house: &ferret_world::House,
+    scene: &Scene,
     distances: &Distances,
     strategies: &[Arc<dyn Strategy>],
     rows: &HashMap<&str, &TrialRow>,
     trial: &ferret_plan::TrialSpec,
+    mode: ReplayMode,
     out: &mut Vec<ReplayRow>,
 ) -> Result<()> {
+    let house = &scene.house;
     for deployed in strategies {
         let row = rows
             .get(deployed.name())
@@ -664,7 +704,15 @@ fn replay_trial(
             if s.name() == deployed.name() {
                 continue;
             }
-            let c = replay_cost(s.as_ref(), house, distances, trial, found)?;
+            let c = replay_cost_with(
+                mode,
+                s.as_ref(),
+                house,
+                &scene.truth,
+                distances,
+                trial,
+                found,
+            )?;
             out.push(ReplayRow {
                 house_index: house.index,
                 target: trial.target.to_string(),

@@ -750,3 +750,54 @@ fn protocol_switches_change_what_they_should_and_select_refuses_to_mix() {
         rows.iter().map(|r| r["house"].as_str()).collect();
     assert!(houses.len() < 14);
 }
+
+#[test]
+fn cells_report_costs_in_the_papers_unit_too() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("cells");
+    let o = ferret(&[
+        "eval",
+        "--generate",
+        "4",
+        "--strategies",
+        "optimistic+greedy,oracle",
+        "--cells",
+        "--out",
+        s(&out),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    for r in read_csv(&out.join("trials.csv")) {
+        let (m, c): (f64, f64) = (
+            r["cost_m"].parse().unwrap(),
+            r["cost_cells"].parse().unwrap(),
+        );
+        assert!((c - m / 0.05).abs() < 1e-6, "{m} m is not {c} cells");
+    }
+    let summary = read_csv(&out.join("summary.csv"));
+    let (m, c): (f64, f64) = (
+        summary[0]["mean_m"].parse().unwrap(),
+        summary[0]["mean_cells"].parse().unwrap(),
+    );
+    assert!((c - 20.0 * m).abs() < 1e-6);
+    let md = std::fs::read_to_string(out.join("summary.md")).unwrap();
+    assert!(
+        md.contains("| strategy | trials | mean cost (cells) |"),
+        "{md}"
+    );
+    assert!(md.contains(&format!("| {:.1} |", 20.0 * m)), "{md}");
+    // select still reads the trials with the extra column.
+    let o = ferret(&["eval", "--generate", "4", "--out", s(&out), "--cells"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let o = ferret(&[
+        "select",
+        "--trials",
+        s(&out),
+        "--deployments",
+        "3",
+        "--trials-per-deployment",
+        "3",
+        "--out",
+        s(&dir.path().join("sel")),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+}

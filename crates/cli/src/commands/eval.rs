@@ -57,6 +57,11 @@ pub struct Args {
     /// or `all` for every target type present. 1 draws one target per house as the paper does.
     #[arg(long, value_name = "N|all", default_value = "1")]
     pub trials_per_house: TrialsPerHouse,
+    /// Also report costs in the paper's unit, grid cells of 0.05 m (metres / 0.05): a
+    /// `cost_cells` column in trials.csv, `*_cells` columns in summary.csv and a table in cells
+    /// in summary.md.
+    #[arg(long)]
+    pub cells: bool,
     /// House (index) whose trajectories are drawn; the first house when not given.
     #[arg(long)]
     pub show_house: Option<usize>,
@@ -166,7 +171,14 @@ pub struct TrialRow {
     pub searched: String,
     /// Number of containers holding the target.
     pub goal_containers: usize,
+    /// Distance travelled in the paper's 0.05 m grid cells, with `--cells` only (absent
+    /// otherwise, so the default file is as before).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cost_cells: Option<f64>,
 }
+
+/// The paper's unit of cost: a grid cell of 0.05 m (its table I is in these cells).
+pub const CELL_M: f64 = 0.05;
 
 /// What `select` needs to rebuild the houses and strategies of an eval run.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -249,6 +261,45 @@ pub struct SummaryRow {
     /// Trials in the comparison with optimistic+greedy: the houses where every summarized
     /// strategy finished, so that a strategy is never credited for skipping hard houses.
     pub paired_trials: usize,
+    /// Mean cost in 0.05 m cells (`--cells` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mean_cells: Option<f64>,
+    /// Median cost in 0.05 m cells (`--cells` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub median_cells: Option<f64>,
+    /// Half-width of the 95 % interval in 0.05 m cells (`--cells` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ci95_cells: Option<f64>,
+}
+
+impl SummaryRow {
+    /// Fills in the costs in 0.05 m cells.
+    pub fn with_cells(self) -> Self {
+        Self {
+            mean_cells: Some(self.mean_m / CELL_M),
+            median_cells: Some(self.median_m / CELL_M),
+            ci95_cells: Some(self.ci95_m / CELL_M),
+            ..self
+        }
+    }
+}
+
+/// The summary in 0.05 m cells as Markdown: the paper's unit, for comparison with its table I.
+pub fn cells_markdown(summary: &[SummaryRow]) -> String {
+    let mut md = String::from(
+        "\n## In the paper's unit\n\nThe same costs in grid cells of 0.05 m (metres / 0.05), the unit of the paper's table I.\n\n| strategy | trials | mean cost (cells) | 95 % CI | median (cells) |\n|---|---:|---:|---:|---:|\n",
+    );
+    for r in summary {
+        md.push_str(&format!(
+            "| {} | {} | {:.1} | ±{:.1} | {:.1} |\n",
+            r.strategy,
+            r.trials,
+            r.mean_m / CELL_M,
+            r.ci95_m / CELL_M,
+            r.median_m / CELL_M
+        ));
+    }
+    md
 }
 
 /// Runs `ferret eval`.
@@ -334,8 +385,17 @@ pub fn run(args: Args) -> Result<ExitCode> {
     }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    write_csv(&args.out.join("trials.csv"), &outcome.rows)?;
-    let summary = summarize(&outcome.rows, &args.strategies);
+    let mut rows = outcome.rows.clone();
+    if args.cells {
+        for r in &mut rows {
+            r.cost_cells = Some(r.cost_m / CELL_M);
+        }
+    }
+    write_csv(&args.out.join("trials.csv"), &rows)?;
+    let mut summary = summarize(&outcome.rows, &args.strategies);
+    if args.cells {
+        summary = summary.into_iter().map(SummaryRow::with_cells).collect();
+    }
     write_csv(&args.out.join("summary.csv"), &summary)?;
     let paired = paired_comparisons(&outcome.rows, &args.strategies, args.seed);
     write_csv(&args.out.join("paired.csv"), &paired)?;
@@ -345,7 +405,11 @@ pub fn run(args: Args) -> Result<ExitCode> {
         outcome.houses_run,
         args.trials_per_house,
         outcome.trials_run,
-    ) + &paired_markdown(&paired);
+    ) + &if args.cells {
+        cells_markdown(&summary)
+    } else {
+        String::new()
+    } + &paired_markdown(&paired);
     crate::output::write_bytes(&args.out.join("summary.md"), &md)?;
     let info = RunInfo {
         houses: args.houses.houses.clone(),
@@ -497,6 +561,7 @@ fn row(scene: &Scene, trial: &TrialSpec, out: &TrialOutcome) -> TrialRow {
             .collect::<Vec<_>>()
             .join(" "),
         goal_containers: scene.truth.goal_containers(&trial.target).len(),
+        cost_cells: None,
     }
 }
 
@@ -576,6 +641,9 @@ pub fn summarize(rows: &[TrialRow], order: &[String]) -> Vec<SummaryRow> {
                     .zip(paired_mean(s))
                     .map(|(g, m)| 100.0 * (g - m) / g),
                 paired_trials: paired.len(),
+                mean_cells: None,
+                median_cells: None,
+                ci95_cells: None,
             }
         })
         .collect()
@@ -917,6 +985,7 @@ mod tests {
             found_container: "1|0".into(),
             searched: "1|0".into(),
             goal_containers: 1,
+            cost_cells: None,
         }
     }
 
@@ -946,6 +1015,12 @@ mod tests {
         assert!(summary[0].improvement_pct.unwrap().abs() < 1e-9);
         assert_eq!(summary[1].paired_trials, 3);
         let md = summary_markdown(&summary, "test houses", 4, TrialsPerHouse::One, 4);
+        // In cells: 18 m is 360 cells of 0.05 m.
+        let cells = cells_markdown(&summary);
+        assert!(cells.contains("| model/x | 3 | 360.0 | ±"), "{cells}");
+        let with = summary[1].clone().with_cells();
+        assert!((with.median_cells.unwrap() - 360.0).abs() < 1e-9);
+        assert!((with.ci95_cells.unwrap() - with.ci95_m * 20.0).abs() < 1e-9);
         assert!(md.contains("model/x finished 3 of 4"), "{md}");
         assert!(md.contains("only the 3 paired trials"), "{md}");
         assert!(!md.contains("optimistic+greedy finished"), "{md}");

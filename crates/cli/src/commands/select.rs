@@ -812,6 +812,7 @@ mod tests {
             found_container: "1|0".into(),
             searched: "1|0".into(),
             goal_containers: 1,
+            cost_cells: None,
         }
     }
 

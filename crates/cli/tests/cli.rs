@@ -493,3 +493,296 @@ fn deploy_runs_chooses_and_replays_every_candidate() {
         );
     }
 }
+
+#[test]
+fn several_targets_per_house_are_trials_of_their_own_for_eval_and_select() {
+    let dir = tempfile::tempdir().unwrap();
+    let one = dir.path().join("one");
+    let base = [
+        "eval",
+        "--generate",
+        "8",
+        "--house-seed",
+        "2",
+        "--strategies",
+    ];
+    let strategies = "optimistic+greedy,model/uniform,model/prior";
+    let o = ferret(&[&base[..], &[strategies, "--out", s(&one)]].concat());
+    assert!(o.status.success(), "{}", text(&o));
+    let run: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(one.join("run.json")).unwrap()).unwrap();
+    assert!(
+        run.get("trials_per_house").is_none(),
+        "the default leaves run.json as before"
+    );
+    let three = dir.path().join("three");
+    let o = ferret(
+        &[
+            &base[..],
+            &[strategies, "--trials-per-house", "3", "--out", s(&three)],
+        ]
+        .concat(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let rows = read_csv(&three.join("trials.csv"));
+    let mut trials: std::collections::BTreeMap<(String, String), Vec<String>> =
+        std::collections::BTreeMap::new();
+    for r in &rows {
+        trials
+            .entry((r["house"].clone(), r["target"].clone()))
+            .or_default()
+            .push(r["strategy"].clone());
+    }
+    // Every trial is run by all three strategies, and houses have up to three distinct targets.
+    assert!(trials.values().all(|v| v.len() == 3), "{trials:?}");
+    let mut per_house: std::collections::BTreeMap<&str, usize> = Default::default();
+    for (h, _) in trials.keys() {
+        *per_house.entry(h.as_str()).or_default() += 1;
+    }
+    assert_eq!(per_house.len(), 8);
+    assert!(per_house.values().all(|&n| (1..=3).contains(&n)));
+    assert!(trials.len() > 8, "several targets on some house");
+    let summary = std::fs::read_to_string(three.join("summary.md")).unwrap();
+    assert!(
+        summary.contains(&format!(
+            "{} trials, up to 3 distinct targets per house",
+            trials.len()
+        )),
+        "{summary}"
+    );
+    assert!(
+        summary.contains(&format!("| model/prior | {} |", trials.len())),
+        "{summary}"
+    );
+    // Selection draws one trial per house in a deployment: 8 houses allow 8 trials, not 9.
+    let sel = dir.path().join("sel");
+    let o = ferret(&[
+        "select",
+        "--trials",
+        s(&three),
+        "--deployments",
+        "20",
+        "--trials-per-deployment",
+        "8",
+        "--out",
+        s(&sel),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let replays = std::fs::read_to_string(three.join("replay.csv")).unwrap();
+    // Header line plus 2 × 1 replays per deployed strategy, 3 deployed, per trial.
+    assert_eq!(replays.lines().count(), 2 + 6 * trials.len(), "{replays}");
+    let o = ferret(&[
+        "select",
+        "--trials",
+        s(&three),
+        "--deployments",
+        "20",
+        "--trials-per-deployment",
+        "9",
+        "--out",
+        s(&sel),
+    ]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("only 8 houses"), "{}", text(&o));
+}
+
+/// Replay costs of replay.csv by (house, target, deployed, strategy).
+fn replay_costs(dir: &Path) -> std::collections::BTreeMap<(String, String, String, String), f64> {
+    let text = std::fs::read_to_string(dir.join("replay.csv")).unwrap();
+    let body: String = text.lines().skip(1).map(|l| format!("{l}\n")).collect();
+    let mut r = csv::Reader::from_reader(body.as_bytes());
+    r.records()
+        .map(|rec| {
+            let rec = rec.unwrap();
+            (
+                (
+                    rec[0].to_string(),
+                    rec[1].to_string(),
+                    rec[2].to_string(),
+                    rec[3].to_string(),
+                ),
+                rec[4].parse().unwrap(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn protocol_switches_change_what_they_should_and_select_refuses_to_mix() {
+    let dir = tempfile::tempdir().unwrap();
+    let strategies = "optimistic+greedy,model/uniform,model/prior,oracle";
+    let eval = |out: &Path, extra: &[&str]| {
+        let base = [
+            "eval",
+            "--generate",
+            "10",
+            "--house-seed",
+            "4",
+            "--strategies",
+            strategies,
+            "--out",
+            s(out),
+        ];
+        ferret(&[&base[..], extra].concat())
+    };
+    let plain = dir.path().join("plain");
+    assert!(eval(&plain, &[]).status.success());
+    // The paper's initial belief: the same targets, the oracle's cost unchanged (it goes
+    // straight to a goal, which is never marked searched), run.json records every setting.
+    let belief = dir.path().join("belief");
+    let o = eval(&belief, &["--initial-belief", "paper"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let (a, b) = (
+        read_csv(&plain.join("trials.csv")),
+        read_csv(&belief.join("trials.csv")),
+    );
+    assert_eq!(a.len(), b.len());
+    for (x, y) in a.iter().zip(&b) {
+        assert_eq!((&x["house"], &x["target"]), (&y["house"], &y["target"]));
+        if x["strategy"] == "oracle" {
+            assert_eq!(x["cost_m"], y["cost_m"]);
+        }
+    }
+    let run: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(belief.join("run.json")).unwrap()).unwrap();
+    assert_eq!(
+        run["protocol"],
+        serde_json::json!({"initial_belief": "paper", "containers": "receptacles",
+            "targets": "pickupable", "replay": "pessimistic", "draw": "distinct"})
+    );
+    // Selecting over the plain run with the paper's belief would mix protocols: refused.
+    let sel = dir.path().join("sel");
+    let select = |trials: &Path, extra: &[&str]| {
+        let base = [
+            "select",
+            "--trials",
+            s(trials),
+            "--deployments",
+            "10",
+            "--trials-per-deployment",
+            "6",
+            "--out",
+            s(&sel),
+        ];
+        ferret(&[&base[..], extra].concat())
+    };
+    let o = select(&plain, &["--initial-belief", "paper"]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("mix"), "{}", text(&o));
+    // Counterfactual replays never exceed pessimistic ones, trial by trial.
+    assert!(select(&plain, &[]).status.success());
+    let pessimistic = replay_costs(&plain);
+    let o = select(&plain, &["--replay", "counterfactual"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let counterfactual = replay_costs(&plain);
+    assert_eq!(pessimistic.len(), counterfactual.len());
+    assert!(!pessimistic.is_empty());
+    for (k, p) in &pessimistic {
+        assert!(
+            counterfactual[k] <= p + 1e-9,
+            "{k:?}: {} > {p}",
+            counterfactual[k]
+        );
+    }
+    // With replacement a deployment may be longer than the number of houses.
+    let o = ferret(&[
+        "select",
+        "--trials",
+        s(&plain),
+        "--deployments",
+        "10",
+        "--trials-per-deployment",
+        "15",
+        "--draw",
+        "replacement",
+        "--out",
+        s(&sel),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    // --protocol paper needs the unimplemented container set, and says so.
+    let paper = dir.path().join("paper");
+    let o = eval(&paper, &["--protocol", "paper"]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("--containers furniture"), "{}", text(&o));
+    assert!(!paper.exists(), "a refused run writes nothing");
+    let o = eval(
+        &paper,
+        &["--protocol", "paper", "--containers", "receptacles"],
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let run: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(paper.join("run.json")).unwrap()).unwrap();
+    assert_eq!(run["protocol"]["replay"], "counterfactual");
+    assert_eq!(run["protocol"]["draw"], "replacement");
+    // deploy draws with replacement: 14 trials from 10 houses repeat a house.
+    let o = ferret(&[
+        "deploy",
+        "--generate",
+        "10",
+        "--trials",
+        "14",
+        "--strategies",
+        strategies,
+        "--draw",
+        "replacement",
+        "--out",
+        s(&dir.path().join("deploy")),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let rows = read_csv(&dir.path().join("deploy").join("deploy.csv"));
+    assert_eq!(rows.len(), 14);
+    let houses: std::collections::BTreeSet<&str> =
+        rows.iter().map(|r| r["house"].as_str()).collect();
+    assert!(houses.len() < 14);
+}
+
+#[test]
+fn cells_report_costs_in_the_papers_unit_too() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("cells");
+    let o = ferret(&[
+        "eval",
+        "--generate",
+        "4",
+        "--strategies",
+        "optimistic+greedy,oracle",
+        "--cells",
+        "--out",
+        s(&out),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    for r in read_csv(&out.join("trials.csv")) {
+        let (m, c): (f64, f64) = (
+            r["cost_m"].parse().unwrap(),
+            r["cost_cells"].parse().unwrap(),
+        );
+        assert!((c - m / 0.05).abs() < 1e-6, "{m} m is not {c} cells");
+    }
+    let summary = read_csv(&out.join("summary.csv"));
+    let (m, c): (f64, f64) = (
+        summary[0]["mean_m"].parse().unwrap(),
+        summary[0]["mean_cells"].parse().unwrap(),
+    );
+    assert!((c - 20.0 * m).abs() < 1e-6);
+    let md = std::fs::read_to_string(out.join("summary.md")).unwrap();
+    assert!(
+        md.contains("| strategy | trials | mean cost (cells) |"),
+        "{md}"
+    );
+    assert!(md.contains(&format!("| {:.1} |", 20.0 * m)), "{md}");
+    // select still reads the trials with the extra column.
+    let o = ferret(&["eval", "--generate", "4", "--out", s(&out), "--cells"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let o = ferret(&[
+        "select",
+        "--trials",
+        s(&out),
+        "--deployments",
+        "3",
+        "--trials-per-deployment",
+        "3",
+        "--out",
+        s(&dir.path().join("sel")),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+}

@@ -82,6 +82,7 @@ fn rerunning_eval_replaces_output_files_instead_of_rewriting_them() {
         "trials.csv",
         "summary.csv",
         "summary.md",
+        "paired.csv",
         "run.json",
         "costs.png",
         "trajectories.png",

@@ -16,6 +16,7 @@ pub mod likelihood;
 pub mod planner;
 pub mod policy;
 pub mod probability;
+pub mod protocol;
 pub mod replay;
 pub mod strategy;
 pub mod trial;
@@ -25,8 +26,13 @@ pub use calibration::{Calibration, ReliabilityBin};
 pub use error::{BoxError, PlanError};
 pub use likelihood::{LikelihoodSource, OracleLikelihood, Prior, Uniform};
 pub use planner::{Plan, Problem, solve_brute_force, solve_exact};
-pub use policy::{CandidateLimit, Greedy, Oracle, Planner, PlannerConfig, Policy};
+pub use policy::{CandidateLimit, CostModel, Greedy, Oracle, Planner, PlannerConfig, Policy};
 pub use probability::Probability;
-pub use replay::{hindsight_truth, replay_cost};
+pub use protocol::{
+    ContainerSet, DrawMode, InitialBelief, Protocol, ProtocolName, ReplayMode, TargetSet,
+};
+pub use replay::{hindsight_truth, replay_cost, replay_cost_with};
 pub use strategy::{ModelStrategy, Strategy, StrategyRegistry, StrategySpec, TrialContext};
-pub use trial::{TrialOutcome, TrialSpec, draw_trial, run_trial};
+pub use trial::{
+    TrialOutcome, TrialSpec, TrialsPerHouse, draw_trial, draw_trials, draw_trials_with, run_trial,
+};

@@ -28,6 +28,10 @@ pub struct Problem {
     pub p: Vec<Probability>,
     /// Search cost `R` added to every leg, metres.
     pub search_cost: f64,
+    /// A cost added to every leg that ends at candidate `i`, weighted like the leg; empty for
+    /// eq. 3. [`CostModel::Authors`](crate::CostModel::Authors) puts `p_i · D(robot, i)` here.
+    /// Because it depends only on the leg's end, the Held–Karp recursion stays exact.
+    pub leg_extra: Vec<f64>,
 }
 
 impl Problem {
@@ -45,6 +49,10 @@ impl Problem {
         self.between[a * self.len() + b]
     }
 
+    fn extra(&self, x: usize) -> f64 {
+        self.leg_extra.get(x).copied().unwrap_or(0.0)
+    }
+
     /// The expected cost of searching in `order` (local indices) from the robot's position, paper
     /// eq. 3. Leftover probability after the last container costs nothing.
     pub fn expected_cost(&self, order: &[usize]) -> f64 {
@@ -56,7 +64,7 @@ impl Problem {
                 None => self.from_robot[x],
                 Some(l) => self.d(l, x),
             };
-            total += weight * (leg + self.search_cost);
+            total += weight * (leg + self.search_cost + self.extra(x));
             weight *= 1.0 - self.p[x].get();
             at = Some(x);
         }
@@ -83,6 +91,7 @@ impl Problem {
                 .map(|_| Probability::clamped(rng.random_range(0.01..0.5), 0.0, 1.0))
                 .collect(),
             search_cost: 0.0,
+            leg_extra: Vec::new(),
         }
     }
 }
@@ -155,7 +164,8 @@ pub fn solve_exact(problem: &Problem) -> Option<(Plan, Solution)> {
             while free != 0 {
                 let x = free.trailing_zeros() as usize;
                 free &= free - 1;
-                let v = w * (row[x] + problem.search_cost) + h[(s | (1 << x)) * n + x];
+                let v = w * (row[x] + problem.search_cost + problem.extra(x))
+                    + h[(s | (1 << x)) * n + x];
                 if v < best {
                     best = v;
                 }
@@ -191,7 +201,7 @@ impl Solution {
                 None => problem.from_robot[x],
                 Some(l) => problem.d(l, x),
             };
-            let v = self.weight[searched] * (leg + problem.search_cost)
+            let v = self.weight[searched] * (leg + problem.search_cost + problem.extra(x))
                 + self.h[(searched | (1 << x)) * n + x];
             if best.is_none_or(|(b, _)| v < b) {
                 best = Some((v, x));
@@ -268,6 +278,7 @@ mod tests {
                 .map(|&x| Probability::clamped(x, 0.0, 1.0))
                 .collect(),
             search_cost: r,
+            leg_extra: Vec::new(),
         }
     }
 
@@ -282,6 +293,25 @@ mod tests {
     }
 
     #[test]
+    fn authors_cost_sometimes_chooses_differently_from_eq_3() {
+        // Random instances of 6 containers: the extra p·D(robot, a) penalises likely far
+        // containers, so the first choice changes on some instances but not on most.
+        let mut differ = 0;
+        for seed in 0..200 {
+            let eq3 = Problem::random(6, seed);
+            let mut authors = eq3.clone();
+            authors.leg_extra = (0..6).map(|i| eq3.p[i].get() * eq3.from_robot[i]).collect();
+            let a = solve_exact(&eq3).unwrap().0.order[0];
+            let b = solve_exact(&authors).unwrap().0.order[0];
+            differ += usize::from(a != b);
+        }
+        assert!(
+            (1..100).contains(&differ),
+            "{differ} of 200 first choices differ"
+        );
+    }
+
+    #[test]
     fn too_large_problems_are_refused() {
         let n = MAX_EXACT + 1;
         let pr = Problem {
@@ -289,6 +319,7 @@ mod tests {
             between: vec![1.0; n * n],
             p: vec![Probability::ONE; n],
             search_cost: 0.0,
+            leg_extra: Vec::new(),
         };
         assert!(solve_exact(&pr).is_none());
     }
@@ -331,10 +362,36 @@ mod tests {
                 between: raw[6..6 + n * n].to_vec(),
                 p: ps[..n].iter().map(|&x| Probability::clamped(x, 0.0, 1.0)).collect(),
                 search_cost: 0.5,
+                leg_extra: Vec::new(),
             };
             let (dp, _) = solve_exact(&pr).unwrap();
             let bf = solve_brute_force(&pr);
             prop_assert!((dp.expected_cost - bf.expected_cost).abs() <= 1e-9 * bf.expected_cost.max(1.0));
+        }
+
+        /// The reference code's objective (an extra p·D(robot, a) on every leg ending at a) is
+        /// solved exactly too: the DP equals brute force of that objective.
+        #[test]
+        fn authors_cost_dp_equals_its_own_brute_force(
+            pts in prop::collection::vec((-10.0f64..10.0, -10.0f64..10.0), 1..=7),
+            ps in prop::collection::vec(0.0f64..=1.0, 7),
+        ) {
+            let n = pts.len();
+            let mut pr = problem(n, &pts, &ps[..n], 0.0);
+            pr.leg_extra = (0..n).map(|i| pr.p[i].get() * pr.from_robot[i]).collect();
+            let (dp, _) = solve_exact(&pr).unwrap();
+            let bf = solve_brute_force(&pr);
+            prop_assert!((dp.expected_cost - bf.expected_cost).abs() <= 1e-9 * bf.expected_cost.max(1.0),
+                "dp {} vs brute force {}", dp.expected_cost, bf.expected_cost);
+            // The objective really is eq. 3 plus Σ weight · p_a · D(robot, a).
+            let eq3 = Problem { leg_extra: Vec::new(), ..pr.clone() };
+            let mut w = 1.0;
+            let mut extra = 0.0;
+            for &a in &dp.order {
+                extra += w * pr.p[a].get() * pr.from_robot[a];
+                w *= 1.0 - pr.p[a].get();
+            }
+            prop_assert!((pr.expected_cost(&dp.order) - eq3.expected_cost(&dp.order) - extra).abs() < 1e-9);
         }
     }
 }

@@ -65,6 +65,19 @@ impl CandidateLimit {
     pub const PAPER: CandidateLimit = CandidateLimit::Paper { k: 8 };
 }
 
+/// The objective the planner minimises.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum CostModel {
+    /// The paper's eq. 3.
+    #[default]
+    Paper,
+    /// The paper's reference code: eq. 3 plus `p_a · D(robot, a)` on every leg that ends at
+    /// container `a`, weighted like the leg, with the robot's position at the time of the
+    /// decision. (In that code a leg's success cost is measured from an unset destination, which
+    /// amounts to this term.) Kept to measure how much the difference matters.
+    Authors,
+}
+
 /// Planner settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PlannerConfig {
@@ -72,6 +85,8 @@ pub struct PlannerConfig {
     pub search_cost: f64,
     /// Candidate selection.
     pub limit: CandidateLimit,
+    /// The objective.
+    pub cost: CostModel,
 }
 
 impl Default for PlannerConfig {
@@ -79,6 +94,7 @@ impl Default for PlannerConfig {
         Self {
             search_cost: 0.0,
             limit: CandidateLimit::PAPER,
+            cost: CostModel::Paper,
         }
     }
 }
@@ -164,8 +180,17 @@ impl Planner {
     fn problem(&self, belief: &Belief<'_>, candidates: &[usize]) -> Problem {
         let n = candidates.len();
         let d = belief.distances;
+        let from_robot: Vec<f64> = candidates.iter().map(|&c| belief.distance_to(c)).collect();
+        let leg_extra = match self.config.cost {
+            CostModel::Paper => Vec::new(),
+            CostModel::Authors => candidates
+                .iter()
+                .zip(&from_robot)
+                .map(|(&c, d)| self.p(c) * d)
+                .collect(),
+        };
         Problem {
-            from_robot: candidates.iter().map(|&c| belief.distance_to(c)).collect(),
+            from_robot,
             between: (0..n * n)
                 .map(|k| {
                     d.between(
@@ -179,6 +204,7 @@ impl Planner {
                 .map(|&c| self.p.get(c).copied().unwrap_or(Probability::ZERO))
                 .collect(),
             search_cost: self.config.search_cost,
+            leg_extra,
         }
     }
 
@@ -222,7 +248,11 @@ impl Policy for Planner {
                 .copied()
                 .ok_or_else(|| no_container("model"));
         }
-        if let Some(c) = self.cached_next(belief, &candidates) {
+        // The authors' extra term is measured from where the robot stands now, so a plan made
+        // elsewhere is not their continuation: replan at every decision.
+        if self.config.cost == CostModel::Paper
+            && let Some(c) = self.cached_next(belief, &candidates)
+        {
             return Ok(c);
         }
         let problem = self.problem(belief, &candidates);

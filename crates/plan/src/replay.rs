@@ -8,6 +8,7 @@
 use ferret_world::{Distances, GroundTruth, House, ObjectType, SmallObject};
 
 use crate::error::PlanError;
+use crate::protocol::ReplayMode;
 use crate::strategy::Strategy;
 use crate::trial::{TrialSpec, run_trial};
 
@@ -29,6 +30,33 @@ pub fn hindsight_truth(
         object_type: target.clone(),
     });
     Ok(GroundTruth::new(contents))
+}
+
+/// The replay cost under `mode`: [`replay_cost`] when pessimistic; when counterfactual (the
+/// paper's reference code), the strategy is run on the true world `truth` and stops at the first
+/// container that truly holds the target, whichever was found in the trial.
+pub fn replay_cost_with(
+    mode: ReplayMode,
+    strategy: &dyn Strategy,
+    house: &House,
+    truth: &GroundTruth,
+    distances: &Distances,
+    trial: &TrialSpec,
+    found: usize,
+) -> Result<f64, PlanError> {
+    match mode {
+        ReplayMode::Pessimistic => replay_cost(strategy, house, distances, trial, found),
+        ReplayMode::Counterfactual => {
+            let outcome = run_trial(strategy, house, truth, distances, trial)?;
+            match outcome.found {
+                Some(_) => Ok(outcome.cost),
+                None => Err(PlanError::Replay {
+                    house: house.name.clone(),
+                    message: format!("{} never found {}", strategy.name(), trial.target),
+                }),
+            }
+        }
+    }
 }
 
 /// The replay cost of `strategy` on a trial whose target was found in container `found`: the

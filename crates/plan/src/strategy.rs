@@ -9,7 +9,7 @@ use ferret_world::{Distances, GroundTruth, House, ObjectType};
 
 use crate::error::PlanError;
 use crate::likelihood::{LikelihoodSource, Prior, Uniform};
-use crate::policy::{CandidateLimit, Greedy, Oracle, Planner, PlannerConfig, Policy};
+use crate::policy::{CandidateLimit, CostModel, Greedy, Oracle, Planner, PlannerConfig, Policy};
 
 /// What a strategy needs to start a trial.
 #[derive(Clone, Copy, Debug)]
@@ -149,7 +149,7 @@ impl StrategyRegistry {
             no_args(spec)?;
             Ok(Arc::new(OracleStrategy))
         });
-        r.register("model", "model/<uniform|prior>[/k<N>|/exact]", move |spec| {
+        r.register("model", "model/<uniform|prior>[/k<N>|/exact][/authors]", move |spec| {
             let source: Arc<dyn LikelihoodSource> = match spec.args.first().map(String::as_str) {
                 Some("uniform") => Arc::new(Uniform::default()),
                 Some("prior") => match &prior {
@@ -187,16 +187,27 @@ fn no_args(spec: &StrategySpec) -> Result<(), PlanError> {
     }
 }
 
-/// The planner settings of a spec whose optional limit suffix sits at `spec.args[at]`.
+/// The planner settings of a spec whose optional limit suffix sits at `spec.args[at]`, followed
+/// by an optional `authors` (the reference code's cost, [`CostModel::Authors`]).
 pub fn planner_config_from(
     spec: &StrategySpec,
     at: usize,
     default: PlannerConfig,
     exact_max: usize,
 ) -> Result<PlannerConfig, PlanError> {
-    match spec.args.get(at) {
+    let (args, default) = match spec.args.split_last() {
+        Some((last, rest)) if last == "authors" && rest.len() >= at => (
+            rest,
+            PlannerConfig {
+                cost: CostModel::Authors,
+                ..default
+            },
+        ),
+        _ => (spec.args.as_slice(), default),
+    };
+    match args.get(at) {
         None => Ok(default),
-        Some(arg) if spec.args.len() == at + 1 => match parse_limit(arg, exact_max) {
+        Some(arg) if args.len() == at + 1 => match parse_limit(arg, exact_max) {
             Some(limit) => Ok(PlannerConfig { limit, ..default }),
             None => Err(PlanError::UnknownStrategy {
                 spec: spec.raw.clone(),

@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::belief::Belief;
 use crate::error::PlanError;
+use crate::protocol::{InitialBelief, Protocol, TargetSet};
 use crate::strategy::{Strategy, TrialContext};
 
 /// One house, one target, one start pose (the house's), and containers revealed beforehand.
@@ -44,10 +45,22 @@ pub fn draw_trial(
     }
     let mut rng = house_rng(seed, house.index, 1);
     let target = types[rng.random_range(0..types.len())].clone();
+    let revealed = reveal(house, truth, &target, reveal_fraction, &mut rng);
+    Ok(TrialSpec { target, revealed })
+}
+
+/// The containers that start out searched: `reveal_fraction` of those not holding `target`.
+fn reveal(
+    house: &House,
+    truth: &GroundTruth,
+    target: &ObjectType,
+    reveal_fraction: f64,
+    rng: &mut ChaCha8Rng,
+) -> Vec<usize> {
     let mut revealed = Vec::new();
     if reveal_fraction > 0.0 {
         let empty: Vec<usize> = (0..house.containers.len())
-            .filter(|&c| !truth.holds(c, &target))
+            .filter(|&c| !truth.holds(c, target))
             .collect();
         let k = ((empty.len() as f64) * reveal_fraction.clamp(0.0, 1.0)).round() as usize;
         let mut pool = empty;
@@ -57,7 +70,168 @@ pub fn draw_trial(
         }
         revealed.sort_unstable();
     }
-    Ok(TrialSpec { target, revealed })
+    revealed
+}
+
+/// How many trials (distinct targets) to run per house.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TrialsPerHouse {
+    /// One target drawn per house: [`draw_trial`], the paper's protocol and ferret's default.
+    #[default]
+    One,
+    /// Up to this many distinct targets per house (every target type when the house has fewer).
+    Count(usize),
+    /// Every target type present in the house, once each.
+    All,
+}
+
+impl std::str::FromStr for TrialsPerHouse {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim() {
+            "all" => Ok(Self::All),
+            n => match n.parse::<usize>() {
+                Ok(0) => Err("must be at least 1, or `all`".into()),
+                Ok(1) => Ok(Self::One),
+                Ok(n) => Ok(Self::Count(n)),
+                Err(_) => Err(format!("`{s}`: expected a number ≥ 1 or `all`")),
+            },
+        }
+    }
+}
+
+impl std::fmt::Display for TrialsPerHouse {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::One => write!(f, "1"),
+            Self::Count(n) => write!(f, "{n}"),
+            Self::All => write!(f, "all"),
+        }
+    }
+}
+
+/// Draws the trials of a house, each with a distinct target. [`TrialsPerHouse::One`] is exactly
+/// [`draw_trial`]. Otherwise the target types are shuffled by a generator of the house and
+/// `seed` (a stream of its own, so the single-trial draw is untouched) and the first `n` kept —
+/// the first of them is not necessarily [`draw_trial`]'s target; `All` keeps every type in name
+/// order. Each trial's revealed containers are drawn as in [`draw_trial`].
+pub fn draw_trials(
+    house: &House,
+    truth: &GroundTruth,
+    seed: u64,
+    reveal_fraction: f64,
+    per_house: TrialsPerHouse,
+) -> Result<Vec<TrialSpec>, PlanError> {
+    draw_trials_with(
+        house,
+        truth,
+        seed,
+        reveal_fraction,
+        per_house,
+        &Protocol::FERRET,
+    )
+}
+
+/// [`draw_trials`] under a protocol's target set and initial belief. Under ferret's protocol it
+/// is exactly [`draw_trials`]. The paper's target set leaves out types that are also top-level
+/// objects of the house (containers or other furniture); the paper's initial belief marks
+/// searched, besides any `reveal_fraction`, all but a random number — between half and all but
+/// one — of the containers that do not hold the target (drawn from a stream of its own).
+pub fn draw_trials_with(
+    house: &House,
+    truth: &GroundTruth,
+    seed: u64,
+    reveal_fraction: f64,
+    per_house: TrialsPerHouse,
+    protocol: &Protocol,
+) -> Result<Vec<TrialSpec>, PlanError> {
+    let mut trials = match protocol.targets {
+        TargetSet::Pickupable => draw_targets(
+            house,
+            truth.target_types().into_iter().collect(),
+            truth,
+            seed,
+            reveal_fraction,
+            per_house,
+        )?,
+        TargetSet::Paper => {
+            let furniture: std::collections::BTreeSet<&ObjectType> = house
+                .containers
+                .iter()
+                .map(|c| &c.object_type)
+                .chain(house.obstacles.iter().map(|o| &o.object_type))
+                .collect();
+            let types = truth
+                .target_types()
+                .into_iter()
+                .filter(|t| !furniture.contains(t))
+                .collect();
+            draw_targets(house, types, truth, seed, reveal_fraction, per_house)?
+        }
+    };
+    if protocol.initial_belief == InitialBelief::Paper {
+        let mut rng = house_rng(seed, house.index, 4);
+        for t in &mut trials {
+            let mut others: Vec<usize> = (0..house.containers.len())
+                .filter(|&c| !truth.holds(c, &t.target))
+                .collect();
+            let m = others.len();
+            if m == 0 {
+                continue;
+            }
+            // Keep between half and all but one of the others unsearched.
+            let keep = rng.random_range((m / 2).min(m - 1)..=m - 1);
+            for _ in 0..keep {
+                let i = rng.random_range(0..others.len());
+                others.swap_remove(i);
+            }
+            t.revealed.extend(others);
+            t.revealed.sort_unstable();
+            t.revealed.dedup();
+        }
+    }
+    Ok(trials)
+}
+
+/// The trials of a house among target `types` (in name order).
+fn draw_targets(
+    house: &House,
+    mut types: Vec<ObjectType>,
+    truth: &GroundTruth,
+    seed: u64,
+    reveal_fraction: f64,
+    per_house: TrialsPerHouse,
+) -> Result<Vec<TrialSpec>, PlanError> {
+    if types.is_empty() {
+        return Err(PlanError::NoTarget {
+            house: house.name.clone(),
+        });
+    }
+    let n = match per_house {
+        TrialsPerHouse::One => {
+            // The same stream and draws as `draw_trial`.
+            let mut rng = house_rng(seed, house.index, 1);
+            let target = types[rng.random_range(0..types.len())].clone();
+            let revealed = reveal(house, truth, &target, reveal_fraction, &mut rng);
+            return Ok(vec![TrialSpec { target, revealed }]);
+        }
+        TrialsPerHouse::Count(n) => n,
+        TrialsPerHouse::All => types.len(),
+    };
+    let mut rng = house_rng(seed, house.index, 2);
+    if per_house != TrialsPerHouse::All {
+        rand::seq::SliceRandom::shuffle(types.as_mut_slice(), &mut rng);
+        types.truncate(n);
+    }
+    Ok(types
+        .into_iter()
+        .map(|target| {
+            let revealed = reveal(house, truth, &target, reveal_fraction, &mut rng);
+            TrialSpec { target, revealed }
+        })
+        .collect())
 }
 
 /// What happened in a trial.

@@ -9,7 +9,7 @@ use ferret_world::{
     Container, Distances, Footprint, GroundTruth, House, ObjectType, Point, Polygon, Pose, Room,
     RoomType, Scene, SmallObject,
 };
-use proptest::prelude::{ProptestConfig, prop, prop_assert, prop_assert_eq, proptest};
+use proptest::prelude::{ProptestConfig, prop, prop_assert, prop_assert_eq, prop_assume, proptest};
 use proptest::strategy::Strategy as _;
 
 /// A one-room house with containers at `points`, Euclidean travel, and the given contents.
@@ -220,4 +220,184 @@ fn unknown_and_malformed_specs_are_clear_errors() {
     assert!(msg("oracle/extra").contains("takes no arguments"));
     assert!(reg.build("model/uniform/exact").is_ok());
     let _ = CandidateLimit::PAPER;
+}
+
+#[test]
+fn trials_per_house_draws_distinct_targets_and_one_is_draw_trial() {
+    use ferret_plan::{TrialsPerHouse, draw_trial, draw_trials};
+    // Three object types spread over four containers.
+    let (house, truth, _) = house(
+        &[(1.0, 0.0), (2.0, 0.0), (3.0, 0.0), (4.0, 0.0)],
+        &[0, 1, 2, 3],
+        &[vec![0], vec![1, 2], vec![], vec![0]],
+    );
+    for seed in 0..20 {
+        let one = draw_trials(&house, &truth, seed, 0.0, TrialsPerHouse::One).unwrap();
+        assert_eq!(one, vec![draw_trial(&house, &truth, seed, 0.0).unwrap()]);
+        let two = draw_trials(&house, &truth, seed, 0.5, TrialsPerHouse::Count(2)).unwrap();
+        assert_eq!(two.len(), 2);
+        assert_ne!(two[0].target, two[1].target);
+        for t in &two {
+            // Half of the containers without the target start out searched, never a goal.
+            let goals = truth.goal_containers(&t.target);
+            assert_eq!(
+                t.revealed.len(),
+                ((4 - goals.len()) as f64 * 0.5).round() as usize
+            );
+            assert!(t.revealed.iter().all(|c| !goals.contains(c)));
+        }
+        // More than the house has, or `all`: every type once, in name order for `all`.
+        let many = draw_trials(&house, &truth, seed, 0.0, TrialsPerHouse::Count(9)).unwrap();
+        assert_eq!(many.len(), 3);
+        let all = draw_trials(&house, &truth, seed, 0.0, TrialsPerHouse::All).unwrap();
+        let names: Vec<&str> = all.iter().map(|t| t.target.as_str()).collect();
+        assert_eq!(names, ["Book", "Egg", "RemoteControl"]);
+    }
+    assert_eq!("all".parse(), Ok(TrialsPerHouse::All));
+    assert_eq!("1".parse(), Ok(TrialsPerHouse::One));
+    assert_eq!("5".parse(), Ok(TrialsPerHouse::Count(5)));
+    assert!("0".parse::<TrialsPerHouse>().is_err());
+    assert!("some".parse::<TrialsPerHouse>().is_err());
+    assert_eq!(TrialsPerHouse::Count(5).to_string(), "5");
+}
+
+#[test]
+fn authors_cost_specs_parse_and_plan_with_the_extra_term() {
+    use ferret_plan::{CostModel, strategy::planner_config_from};
+    let reg = StrategyRegistry::builtin(None, PlannerConfig::default(), 12);
+    for ok in [
+        "model/uniform/authors",
+        "model/uniform/k3/authors",
+        "model/uniform/exact/authors",
+    ] {
+        assert!(reg.build(ok).is_ok(), "{ok}");
+    }
+    let err = reg
+        .build("model/uniform/authors/k3")
+        .err()
+        .map(|e| e.to_string());
+    assert!(err.unwrap_or_default().contains("too many parts"));
+    let spec = ferret_plan::StrategySpec::parse("model/uniform/k3/authors").unwrap();
+    let config = planner_config_from(&spec, 1, PlannerConfig::default(), 12).unwrap();
+    assert_eq!(config.cost, CostModel::Authors);
+    assert_eq!(config.limit, CandidateLimit::Paper { k: 3 });
+    let plain = ferret_plan::StrategySpec::parse("model/uniform/k3").unwrap();
+    let config = planner_config_from(&plain, 1, PlannerConfig::default(), 12).unwrap();
+    assert_eq!(config.cost, CostModel::Paper);
+
+    // Uniform likelihood p on a line: a likely container 4 m away and another 5 m the other way.
+    // Eq. 3 from the start: 4 + (1−p)·9 vs 5 + (1−p)·9 → the nearer first either way; the
+    // authors' term adds p·4 vs p·5, the same order. Both find the target at 5 m after 4 + 9 m.
+    let (house, truth, distances) = house(&[(4.0, 0.0), (-5.0, 0.0)], &[0, 1], &[vec![], vec![0]]);
+    let trial = TrialSpec {
+        target: ObjectType::new("Egg"),
+        revealed: vec![],
+    };
+    for s in ["model/uniform", "model/uniform/authors"] {
+        let strategy = reg.build(s).unwrap();
+        let out = run_trial(strategy.as_ref(), &house, &truth, &distances, &trial).unwrap();
+        assert_eq!(out.searched, vec![0, 1], "{s}");
+        assert!((out.cost - 13.0).abs() < 1e-9, "{s}: {}", out.cost);
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// The counterfactual replay (the reference code's) stops at any goal container, so it never
+    /// costs more than the pessimistic one, equals the true run of the replayed strategy, and the
+    /// two agree when only one container holds the target.
+    #[test]
+    fn counterfactual_replay_is_at_most_pessimistic_on_every_trial(
+        (pts, kinds, contents) in arb_house(),
+        seed in 0u64..50,
+    ) {
+        use ferret_plan::{InitialBelief, Protocol, ReplayMode, TrialsPerHouse, draw_trials_with, replay_cost_with};
+        let (house, truth, distances) = house(&pts, &kinds, &contents);
+        prop_assume!(!truth.target_types().is_empty());
+        let scene = Scene { house: house.clone(), truth: truth.clone() };
+        let reg = registry(std::slice::from_ref(&scene));
+        for belief in [InitialBelief::Empty, InitialBelief::Paper] {
+            let protocol = Protocol { initial_belief: belief, ..Protocol::FERRET };
+            let trials = draw_trials_with(&house, &truth, seed, 0.0, TrialsPerHouse::All, &protocol).unwrap();
+            for trial in &trials {
+                let single_goal = truth.goal_containers(&trial.target).len() == 1;
+                for deployed in SPECS.iter().filter(|s| **s != "oracle") {
+                    let d = reg.build(deployed).unwrap();
+                    let found = run_trial(d.as_ref(), &house, &truth, &distances, trial).unwrap().found.unwrap();
+                    for other in SPECS.iter().filter(|s| **s != "oracle") {
+                        let o = reg.build(other).unwrap();
+                        let pess = replay_cost_with(ReplayMode::Pessimistic, o.as_ref(), &house, &truth, &distances, trial, found).unwrap();
+                        let cf = replay_cost_with(ReplayMode::Counterfactual, o.as_ref(), &house, &truth, &distances, trial, found).unwrap();
+                        let real = run_trial(o.as_ref(), &house, &truth, &distances, trial).unwrap().cost;
+                        prop_assert!(cf <= pess + 1e-9, "{}: counterfactual {} > pessimistic {}", other, cf, pess);
+                        prop_assert!((cf - real).abs() < 1e-9);
+                        if single_goal {
+                            prop_assert!((cf - pess).abs() < 1e-9);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The paper's initial belief marks no goal container searched, leaves between half and all
+    /// but one of the others unsearched, and changes nothing else of the draw.
+    #[test]
+    fn paper_belief_never_marks_a_goal_searched(
+        (pts, kinds, contents) in arb_house(),
+        seed in 0u64..50,
+    ) {
+        use ferret_plan::{InitialBelief, Protocol, TrialsPerHouse, draw_trials, draw_trials_with};
+        let (house, truth, _) = house(&pts, &kinds, &contents);
+        prop_assume!(!truth.target_types().is_empty());
+        let paper = Protocol { initial_belief: InitialBelief::Paper, ..Protocol::FERRET };
+        for per_house in [TrialsPerHouse::One, TrialsPerHouse::All] {
+            let plain = draw_trials(&house, &truth, seed, 0.0, per_house).unwrap();
+            prop_assert_eq!(&draw_trials_with(&house, &truth, seed, 0.0, per_house, &Protocol::FERRET).unwrap(), &plain);
+            let with = draw_trials_with(&house, &truth, seed, 0.0, per_house, &paper).unwrap();
+            prop_assert_eq!(with.len(), plain.len());
+            for (a, b) in plain.iter().zip(&with) {
+                prop_assert_eq!(&a.target, &b.target);
+                prop_assert!(a.revealed.is_empty());
+                let goals = truth.goal_containers(&b.target);
+                prop_assert!(b.revealed.iter().all(|c| !goals.contains(c)));
+                let others = house.containers.len() - goals.len();
+                let kept = others - b.revealed.len();
+                if others > 0 {
+                    prop_assert!(kept >= (others / 2).min(others - 1) && kept < others, "kept {} of {}", kept, others);
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn paper_targets_leave_out_types_that_are_also_furniture() {
+    use ferret_plan::{Protocol, TargetSet, TrialsPerHouse, draw_trials_with};
+    // Containers are Fridge, Bed; contents Egg, Book and a "Bed" (a child that is furniture too).
+    let (house, mut truth, _) = house(&[(1.0, 0.0), (2.0, 0.0)], &[0, 1], &[vec![0], vec![1]]);
+    truth = GroundTruth::new(vec![
+        truth.contents(0).to_vec(),
+        vec![
+            truth.contents(1)[0].clone(),
+            SmallObject {
+                id: "small|bed".into(),
+                object_type: ObjectType::new("Bed"),
+            },
+        ],
+    ]);
+    let all = |targets| {
+        let p = Protocol {
+            targets,
+            ..Protocol::FERRET
+        };
+        draw_trials_with(&house, &truth, 0, 0.0, TrialsPerHouse::All, &p)
+            .unwrap()
+            .into_iter()
+            .map(|t| t.target.to_string())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(all(TargetSet::Pickupable), ["Bed", "Book", "Egg"]);
+    assert_eq!(all(TargetSet::Paper), ["Book", "Egg"]);
 }

@@ -2,7 +2,7 @@
 //! sequence of distinct houses, run once with UCB and once with replay selection.
 
 use rand::seq::index;
-use rand::{RngCore, SeedableRng};
+use rand::{Rng, RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -30,6 +30,11 @@ pub struct ExperimentOptions {
     /// [`ReplaySelection::untried_first`]). Default `false`: the paper's replay selection.
     #[serde(default)]
     pub replay_untried_first: bool,
+    /// Draw each deployment's houses with replacement, as the paper's reference code does, so
+    /// a house may come twice and a deployment may be longer than the number of houses.
+    /// Default `false`: distinct houses, as the paper's text says.
+    #[serde(default)]
+    pub with_replacement: bool,
 }
 
 impl Default for ExperimentOptions {
@@ -40,6 +45,7 @@ impl Default for ExperimentOptions {
             c: DEFAULT_C,
             seed: 0,
             replay_untried_first: false,
+            with_replacement: false,
         }
     }
 }
@@ -56,7 +62,8 @@ pub struct MethodRun {
 /// One deployment: its house order, shared by both methods, and what each method did.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Deployment {
-    /// House of trial `k` (index `k − 1`); distinct.
+    /// Row of the cost table used by trial `k` (index `k − 1`): distinct rows from distinct
+    /// houses (when the table is [grouped](CostTable::grouped)), unless drawn with replacement.
     pub houses: Vec<usize>,
     /// UCB selection on these houses.
     pub ucb: MethodRun,
@@ -240,10 +247,10 @@ fn check_options(table: &CostTable, opts: &ExperimentOptions) -> Result<(), Sele
             ),
         });
     }
-    if opts.trials_per_deployment > table.n_houses() {
+    if !opts.with_replacement && opts.trials_per_deployment > table.n_groups() {
         return Err(SelectError::TooManyTrials {
             trials: opts.trials_per_deployment,
-            houses: table.n_houses(),
+            houses: table.n_groups(),
         });
     }
     check_c(opts.c)
@@ -262,12 +269,30 @@ fn run_deployment(
     base: &ChaCha8Rng,
     d: usize,
 ) -> Result<Deployment, SelectError> {
-    let houses = index::sample(
-        &mut stream(base, d, 0),
-        table.n_houses(),
-        opts.trials_per_deployment,
-    )
-    .into_vec();
+    let groups = table.groups();
+    let drawn = if opts.with_replacement {
+        let mut rng = stream(base, d, 0);
+        (0..opts.trials_per_deployment)
+            .map(|_| rng.random_range(0..groups.len()))
+            .collect()
+    } else {
+        index::sample(
+            &mut stream(base, d, 0),
+            groups.len(),
+            opts.trials_per_deployment,
+        )
+        .into_vec()
+    };
+    // One trial of each drawn house; a house with one trial draws nothing more, so tables of
+    // one trial per house give the same deployments as before grouping existed.
+    let mut pick = stream(base, d, 3);
+    let houses: Vec<usize> = drawn
+        .into_iter()
+        .map(|g| match groups[g].as_slice() {
+            [only] => *only,
+            rows => rows[pick.random_range(0..rows.len())],
+        })
+        .collect();
     let ucb = run_selector(
         &mut Ucb::new(table.n_strategies(), opts.c)?,
         table,

@@ -30,6 +30,9 @@ pub struct CostTable {
     cost: Vec<f64>,
     /// Row-major `[house][deployed][strategy]`.
     replay: Vec<f64>,
+    /// The house each row's trial was run in, when rows are trials of several targets per house
+    /// (see [`CostTable::grouped`]); `None` when every row is a house of its own.
+    groups: Option<Vec<usize>>,
 }
 
 impl CostTable {
@@ -97,7 +100,51 @@ impl CostTable {
             houses,
             cost: flat_cost,
             replay: flat_replay,
+            groups: None,
         })
+    }
+
+    /// Marks rows as trials of the same house: `groups[row]` is the row's house number. A
+    /// deployment then draws distinct houses and one trial of each (a robot is not sent to the
+    /// same house twice in a deployment), instead of distinct rows.
+    ///
+    /// Errors: `groups` of the wrong length.
+    pub fn grouped(mut self, groups: Vec<usize>) -> Result<Self, SelectError> {
+        check_len("row groups", self.houses.len(), groups.len())?;
+        self.groups = Some(groups);
+        Ok(self)
+    }
+
+    /// The rows of each house, in order of the house's first row: one row each unless the table
+    /// is [`grouped`](CostTable::grouped).
+    pub fn groups(&self) -> Vec<Vec<usize>> {
+        match &self.groups {
+            None => (0..self.houses.len()).map(|h| vec![h]).collect(),
+            Some(g) => {
+                let mut order: Vec<usize> = Vec::new();
+                let mut rows: std::collections::HashMap<usize, Vec<usize>> =
+                    std::collections::HashMap::new();
+                for (row, &house) in g.iter().enumerate() {
+                    let entry = rows.entry(house).or_default();
+                    if entry.is_empty() {
+                        order.push(house);
+                    }
+                    entry.push(row);
+                }
+                order
+                    .into_iter()
+                    .map(|h| rows.remove(&h).unwrap_or_default())
+                    .collect()
+            }
+        }
+    }
+
+    /// Number of distinct houses: rows, unless the table is grouped.
+    pub fn n_groups(&self) -> usize {
+        match &self.groups {
+            None => self.houses.len(),
+            Some(g) => g.iter().collect::<HashSet<_>>().len(),
+        }
     }
 
     /// Builds a table whose replay costs equal the real costs (`replay[h][j][i] = cost[h][i]`):
@@ -121,6 +168,7 @@ impl CostTable {
             houses,
             cost: flat_cost,
             replay,
+            groups: None,
         })
     }
 

@@ -469,8 +469,97 @@ proptest! {
             c,
             seed,
             replay_untried_first,
+            with_replacement: false,
         };
         let result = run_experiment(&table, &opts).unwrap();
         check_invariants(&table, &result);
     }
+}
+
+#[test]
+fn grouped_tables_draw_one_trial_per_house_per_deployment() {
+    // 12 rows: 4 houses with 3 trials (targets) each.
+    let table = gaussian_table(&[10.0, 12.0], 3.0, 12, 4);
+    let groups: Vec<usize> = (0..12).map(|r| r / 3).collect();
+    let grouped = table.clone().grouped(groups.clone()).unwrap();
+    assert_eq!(grouped.n_groups(), 4);
+    assert_eq!(grouped.groups()[1], vec![3, 4, 5]);
+    let opts = ExperimentOptions {
+        deployments: 200,
+        trials_per_deployment: 4,
+        seed: 9,
+        ..ExperimentOptions::default()
+    };
+    let result = run_experiment(&grouped, &opts).unwrap();
+    let mut used = HashSet::new();
+    for d in &result.deployments {
+        let houses: HashSet<usize> = d.houses.iter().map(|&r| groups[r]).collect();
+        assert_eq!(
+            houses.len(),
+            4,
+            "a house twice in one deployment: {:?}",
+            d.houses
+        );
+        used.extend(d.houses.iter().copied());
+    }
+    assert_eq!(used.len(), 12, "every trial is drawn in some deployment");
+    // Five houses cannot be drawn from four.
+    let too_many = ExperimentOptions {
+        trials_per_deployment: 5,
+        ..opts
+    };
+    assert!(matches!(
+        run_experiment(&grouped, &too_many),
+        Err(SelectError::TooManyTrials { houses: 4, .. })
+    ));
+    // One trial per house: grouping changes nothing.
+    let singletons = table.clone().grouped((0..12).collect()).unwrap();
+    let opts = ExperimentOptions {
+        trials_per_deployment: 6,
+        ..opts
+    };
+    let a = run_experiment(&table, &opts).unwrap();
+    let b = run_experiment(&singletons, &opts).unwrap();
+    assert_eq!(a.ucb.avg_cost, b.ucb.avg_cost);
+    assert_eq!(a.replay.avg_cost, b.replay.avg_cost);
+    assert!(table.grouped(vec![0; 3]).is_err());
+}
+
+#[test]
+fn with_replacement_draws_repeat_houses_and_may_outnumber_them() {
+    let table = gaussian_table(&[10.0, 12.0], 3.0, 5, 8);
+    let opts = ExperimentOptions {
+        deployments: 50,
+        trials_per_deployment: 8,
+        seed: 3,
+        with_replacement: true,
+        ..ExperimentOptions::default()
+    };
+    let result = run_experiment(&table, &opts).unwrap();
+    for d in &result.deployments {
+        assert_eq!(d.houses.len(), 8);
+        let distinct: HashSet<usize> = d.houses.iter().copied().collect();
+        assert!(distinct.len() < 8, "8 draws from 5 houses repeat one");
+    }
+    // Without replacement, 8 trials cannot be drawn from 5 houses.
+    let distinct = ExperimentOptions {
+        with_replacement: false,
+        ..opts
+    };
+    assert!(matches!(
+        run_experiment(&table, &distinct),
+        Err(SelectError::TooManyTrials { .. })
+    ));
+    // Same seed, 4 trials: draws differ from the distinct ones in some deployment (repeats).
+    let four = ExperimentOptions {
+        trials_per_deployment: 4,
+        ..opts
+    };
+    let result = run_experiment(&table, &four).unwrap();
+    assert!(
+        result
+            .deployments
+            .iter()
+            .any(|d| { d.houses.iter().collect::<HashSet<_>>().len() < d.houses.len() })
+    );
 }

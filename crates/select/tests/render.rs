@@ -30,6 +30,7 @@ fn paper_like_result() -> ExperimentResult {
             c: 5.0,
             seed: 0,
             replay_untried_first: false,
+            with_replacement: false,
         },
         strategies: vec!["a".into(), "b".into(), "c".into()],
         mean_costs: vec![230.0, 240.0, 250.0],

@@ -6,16 +6,18 @@ use std::process::ExitCode;
 use std::sync::Arc;
 
 use anyhow::{Result, bail};
-use ferret_plan::{Strategy, draw_trial, replay_cost, run_trial};
+use ferret_plan::{
+    DrawMode, Protocol, Strategy, TrialsPerHouse, draw_trials_with, replay_cost_with, run_trial,
+};
 use ferret_select::{Method, ORACLE};
-use rand::SeedableRng;
 use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
 use super::eval::{DEFAULT_STRATEGIES, PlanningArgs, write_csv};
 use super::llm_setup::{LlmArgs, full_registry};
-use crate::common::{GridArgs, HouseArgs};
+use crate::common::{GridArgs, HouseArgs, ProtocolArgs};
 
 /// Run a deployment: N trials in distinct houses (random order), choosing a strategy before each
 /// trial with UCB or replay selection, replaying the others after it. Writes DIR/deploy.csv.
@@ -29,6 +31,8 @@ pub struct Args {
     planning: PlanningArgs,
     #[command(flatten)]
     llm: LlmArgs,
+    #[command(flatten)]
+    protocol: ProtocolArgs,
     /// Candidate strategies, comma separated (the oracle is never a candidate).
     #[arg(long, value_delimiter = ',', default_value = DEFAULT_STRATEGIES)]
     strategies: Vec<String>,
@@ -41,6 +45,10 @@ pub struct Args {
     /// Exploration constant c, metres.
     #[arg(long, default_value_t = ferret_select::DEFAULT_C)]
     c: f64,
+    /// Targets drawn per house (a number or `all`); each trial of the deployment runs one of
+    /// them, picked at random, in a house of its own. 1 is the paper's draw.
+    #[arg(long, value_name = "N|all", default_value = "1")]
+    trials_per_house: TrialsPerHouse,
     /// Seed of the house order, targets and tie breaks.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -67,6 +75,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     args.grid.validate()?;
     args.planning.validate()?;
     crate::common::check_distinct("--strategies", &args.strategies)?;
+    let protocol = args.protocol.resolve(Protocol::FERRET)?;
     if args.trials == 0 {
         bail!("--trials 0: a deployment needs at least one trial");
     }
@@ -87,7 +96,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     if candidates.len() < 2 {
         bail!("a deployment needs at least two candidate strategies");
     }
-    if args.trials > loaded.scenes.len() {
+    if protocol.draw == DrawMode::Distinct && args.trials > loaded.scenes.len() {
         bail!(
             "{} trials need {} distinct houses; {} has {}",
             args.trials,
@@ -97,8 +106,16 @@ pub fn run(args: Args) -> Result<ExitCode> {
         );
     }
     let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
-    let mut order: Vec<usize> = (0..loaded.scenes.len()).collect();
-    order.shuffle(&mut rng);
+    let order: Vec<usize> = match protocol.draw {
+        DrawMode::Distinct => {
+            let mut order: Vec<usize> = (0..loaded.scenes.len()).collect();
+            order.shuffle(&mut rng);
+            order
+        }
+        DrawMode::Replacement => (0..args.trials)
+            .map(|_| rng.random_range(0..loaded.scenes.len()))
+            .collect(),
+    };
     let mut selector = args.method.selector(candidates.len(), args.c)?;
     let params = args.grid.params();
     let mut rows = Vec::new();
@@ -116,7 +133,21 @@ pub fn run(args: Args) -> Result<ExitCode> {
                 continue;
             }
         };
-        let trial = draw_trial(&scene.house, &scene.truth, args.seed, 0.0)?;
+        let mut trials = draw_trials_with(
+            &scene.house,
+            &scene.truth,
+            args.seed,
+            0.0,
+            args.trials_per_house,
+            &protocol,
+        )?;
+        // One trial is the paper's draw; the generator is touched only when there is a choice,
+        // so single-target deployments are as before.
+        let pick = match args.trials_per_house {
+            TrialsPerHouse::One => 0,
+            _ => rng.random_range(0..trials.len()),
+        };
+        let trial = trials.swap_remove(pick);
         let i = selector.choose(&mut rng);
         let outcome = run_trial(
             candidates[i].as_ref(),
@@ -139,7 +170,15 @@ pub fn run(args: Args) -> Result<ExitCode> {
                 if j == i {
                     Ok(outcome.cost)
                 } else {
-                    replay_cost(s.as_ref(), &scene.house, &distances, &trial, found)
+                    replay_cost_with(
+                        protocol.replay,
+                        s.as_ref(),
+                        &scene.house,
+                        &scene.truth,
+                        &distances,
+                        &trial,
+                        found,
+                    )
                 }
             })
             .collect::<Result<_, _>>()?;

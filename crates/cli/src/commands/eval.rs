@@ -8,8 +8,8 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use ferret_plan::{
-    CandidateLimit, PlannerConfig, Prior, Strategy, StrategyRegistry, TrialOutcome, TrialSpec,
-    draw_trial, run_trial,
+    CandidateLimit, PlannerConfig, Prior, Protocol, Strategy, StrategyRegistry, TrialOutcome,
+    TrialSpec, TrialsPerHouse, draw_trials_with, run_trial,
 };
 use ferret_report::{
     TrajectoryOptions, TrajectoryPanel, ViolinOptions, draw_trajectories, draw_violins,
@@ -19,7 +19,7 @@ use indicatif::ParallelProgressIterator;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::common::{GridArgs, HouseArgs, Mapped, build_maps, progress};
+use crate::common::{GridArgs, HouseArgs, Mapped, ProtocolArgs, build_maps, progress};
 
 /// The strategies evaluated when none are named.
 pub const DEFAULT_STRATEGIES: &str =
@@ -38,8 +38,11 @@ pub struct Args {
     pub planning: PlanningArgs,
     #[command(flatten)]
     pub llm: super::llm_setup::LlmArgs,
+    #[command(flatten)]
+    pub protocol: ProtocolArgs,
     /// Strategies, comma separated: optimistic+greedy, model/uniform, model/prior,
-    /// model/prior/exact, model/prior/k<N>, oracle, and with an LLM configuration
+    /// model/prior/exact, model/prior/k<N>, oracle (a model spec ending in /authors plans with the
+    /// paper reference code's cost), and with an LLM configuration
     /// llm+model/<prompt>/<llm>[/exact] and llm-direct/p-direct/<llm> (prompts: p-context-a,
     /// p-context-b, p-minimal, p-direct, or a template path).
     #[arg(long, value_delimiter = ',', default_value = DEFAULT_STRATEGIES)]
@@ -50,6 +53,15 @@ pub struct Args {
     /// Fraction of non-goal containers revealed as searched before each trial.
     #[arg(long, default_value_t = 0.0)]
     pub reveal_fraction: f64,
+    /// Trials per house, each with a distinct target and the same for every strategy: a number,
+    /// or `all` for every target type present. 1 draws one target per house as the paper does.
+    #[arg(long, value_name = "N|all", default_value = "1")]
+    pub trials_per_house: TrialsPerHouse,
+    /// Also report costs in the paper's unit, grid cells of 0.05 m (metres / 0.05): a
+    /// `cost_cells` column in trials.csv, `*_cells` columns in summary.csv and a table in cells
+    /// in summary.md.
+    #[arg(long)]
+    pub cells: bool,
     /// House (index) whose trajectories are drawn; the first house when not given.
     #[arg(long)]
     pub show_house: Option<usize>,
@@ -115,6 +127,7 @@ impl PlanningArgs {
             limit: CandidateLimit::Paper {
                 k: self.max_containers.max(1),
             },
+            cost: ferret_plan::CostModel::Paper,
         }
     }
 
@@ -158,7 +171,14 @@ pub struct TrialRow {
     pub searched: String,
     /// Number of containers holding the target.
     pub goal_containers: usize,
+    /// Distance travelled in the paper's 0.05 m grid cells, with `--cells` only (absent
+    /// otherwise, so the default file is as before).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cost_cells: Option<f64>,
 }
+
+/// The paper's unit of cost: a grid cell of 0.05 m (its table I is in these cells).
+pub const CELL_M: f64 = 0.05;
 
 /// What `select` needs to rebuild the houses and strategies of an eval run.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -181,8 +201,22 @@ pub struct RunInfo {
     pub seed: u64,
     /// Reveal fraction.
     pub reveal_fraction: f64,
+    /// Trials per house; left out of run.json when 1, so single-trial runs read as before.
+    #[serde(default, skip_serializing_if = "is_one_per_house")]
+    pub trials_per_house: TrialsPerHouse,
+    /// The protocol; left out of run.json when it is ferret's, so default runs read as before.
+    #[serde(default, skip_serializing_if = "is_ferret_protocol")]
+    pub protocol: Protocol,
     /// Strategies in order.
     pub strategies: Vec<String>,
+}
+
+fn is_ferret_protocol(p: &Protocol) -> bool {
+    *p == Protocol::FERRET
+}
+
+fn is_one_per_house(t: &TrialsPerHouse) -> bool {
+    *t == TrialsPerHouse::One
 }
 
 impl RunInfo {
@@ -227,6 +261,45 @@ pub struct SummaryRow {
     /// Trials in the comparison with optimistic+greedy: the houses where every summarized
     /// strategy finished, so that a strategy is never credited for skipping hard houses.
     pub paired_trials: usize,
+    /// Mean cost in 0.05 m cells (`--cells` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mean_cells: Option<f64>,
+    /// Median cost in 0.05 m cells (`--cells` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub median_cells: Option<f64>,
+    /// Half-width of the 95 % interval in 0.05 m cells (`--cells` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ci95_cells: Option<f64>,
+}
+
+impl SummaryRow {
+    /// Fills in the costs in 0.05 m cells.
+    pub fn with_cells(self) -> Self {
+        Self {
+            mean_cells: Some(self.mean_m / CELL_M),
+            median_cells: Some(self.median_m / CELL_M),
+            ci95_cells: Some(self.ci95_m / CELL_M),
+            ..self
+        }
+    }
+}
+
+/// The summary in 0.05 m cells as Markdown: the paper's unit, for comparison with its table I.
+pub fn cells_markdown(summary: &[SummaryRow]) -> String {
+    let mut md = String::from(
+        "\n## In the paper's unit\n\nThe same costs in grid cells of 0.05 m (metres / 0.05), the unit of the paper's table I.\n\n| strategy | trials | mean cost (cells) | 95 % CI | median (cells) |\n|---|---:|---:|---:|---:|\n",
+    );
+    for r in summary {
+        md.push_str(&format!(
+            "| {} | {} | {:.1} | ±{:.1} | {:.1} |\n",
+            r.strategy,
+            r.trials,
+            r.mean_m / CELL_M,
+            r.ci95_m / CELL_M,
+            r.median_m / CELL_M
+        ));
+    }
+    md
 }
 
 /// Runs `ferret eval`.
@@ -243,6 +316,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         );
     }
     crate::common::check_distinct("--strategies", &args.strategies)?;
+    let protocol = args.protocol.resolve(Protocol::FERRET)?;
     let loaded = args.houses.load()?;
     for s in &loaded.skipped {
         eprintln!("skipped: {s}");
@@ -270,10 +344,18 @@ pub fn run(args: Args) -> Result<ExitCode> {
         .iter()
         .zip(&maps)
         .filter(|(_, m)| m.is_ok())
-        .filter_map(|(s, _)| {
-            draw_trial(&s.house, &s.truth, args.seed, args.reveal_fraction)
-                .ok()
-                .map(|t| (&s.house, t.target))
+        .flat_map(|(s, _)| {
+            draw_trials_with(
+                &s.house,
+                &s.truth,
+                args.seed,
+                args.reveal_fraction,
+                args.trials_per_house,
+                &protocol,
+            )
+            .unwrap_or_default()
+            .into_iter()
+            .map(|t| (&s.house, t.target))
         })
         .collect();
     let pairs: Vec<(&ferret_world::House, &ferret_world::ObjectType)> =
@@ -289,6 +371,8 @@ pub fn run(args: Args) -> Result<ExitCode> {
         &strategies,
         args.seed,
         args.reveal_fraction,
+        args.trials_per_house,
+        &protocol,
     );
     for e in &outcome.errors {
         eprintln!("error: {e}");
@@ -301,10 +385,31 @@ pub fn run(args: Args) -> Result<ExitCode> {
     }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    write_csv(&args.out.join("trials.csv"), &outcome.rows)?;
-    let summary = summarize(&outcome.rows, &args.strategies);
+    let mut rows = outcome.rows.clone();
+    if args.cells {
+        for r in &mut rows {
+            r.cost_cells = Some(r.cost_m / CELL_M);
+        }
+    }
+    write_csv(&args.out.join("trials.csv"), &rows)?;
+    let mut summary = summarize(&outcome.rows, &args.strategies);
+    if args.cells {
+        summary = summary.into_iter().map(SummaryRow::with_cells).collect();
+    }
     write_csv(&args.out.join("summary.csv"), &summary)?;
-    let md = summary_markdown(&summary, &loaded.source, outcome.houses_run);
+    let paired = paired_comparisons(&outcome.rows, &args.strategies, args.seed);
+    write_csv(&args.out.join("paired.csv"), &paired)?;
+    let md = summary_markdown(
+        &summary,
+        &loaded.source,
+        outcome.houses_run,
+        args.trials_per_house,
+        outcome.trials_run,
+    ) + &if args.cells {
+        cells_markdown(&summary)
+    } else {
+        String::new()
+    } + &paired_markdown(&paired);
     crate::output::write_bytes(&args.out.join("summary.md"), &md)?;
     let info = RunInfo {
         houses: args.houses.houses.clone(),
@@ -320,6 +425,8 @@ pub fn run(args: Args) -> Result<ExitCode> {
         planning: args.planning.clone(),
         seed: args.seed,
         reveal_fraction: args.reveal_fraction,
+        trials_per_house: args.trials_per_house,
+        protocol,
         strategies: args.strategies.clone(),
     };
     crate::output::write_bytes(
@@ -331,7 +438,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     super::llm_setup::write_token_report(&setup.service, &args.out)?;
     super::llm_setup::check_fallback_gate(&setup.service, &args.llm)?;
     println!(
-        "{} trials on {} houses in {:.1} s; wrote {}/{{trials.csv,summary.csv,summary.md,run.json{}}}",
+        "{} trials on {} houses in {:.1} s; wrote {}/{{trials.csv,summary.csv,summary.md,paired.csv,run.json{}}}",
         outcome.rows.len(),
         outcome.houses_run,
         started.elapsed().as_secs_f64(),
@@ -357,39 +464,61 @@ pub struct Evaluation {
     pub errors: Vec<String>,
     /// Houses with a map and a target.
     pub houses_run: usize,
+    /// Trials (house and target) drawn on those houses.
+    pub trials_run: usize,
 }
 
-/// Runs every strategy on one trial per house, in parallel over houses.
+/// Runs every strategy on the trials of every house (`per_house` of them), in parallel over
+/// houses.
 pub fn evaluate(
     scenes: &[Scene],
     maps: &[Mapped],
     strategies: &[Arc<dyn Strategy>],
     seed: u64,
     reveal_fraction: f64,
+    per_house: TrialsPerHouse,
+    protocol: &Protocol,
 ) -> Evaluation {
     let bar = progress(scenes.len(), "trials");
-    let per_house: Vec<(Vec<TrialRow>, Vec<String>, bool)> = scenes
+    let by_house: Vec<(Vec<TrialRow>, Vec<String>, usize)> = scenes
         .par_iter()
         .zip(maps.par_iter())
         .progress_with(bar.clone())
         .map(|(scene, map)| {
             let (_, distances) = match map {
                 Ok(m) => m,
-                Err(e) => return (vec![], vec![e.to_string()], false),
+                Err(e) => return (vec![], vec![e.to_string()], 0),
             };
-            let trial = match draw_trial(&scene.house, &scene.truth, seed, reveal_fraction) {
+            let trials = match draw_trials_with(
+                &scene.house,
+                &scene.truth,
+                seed,
+                reveal_fraction,
+                per_house,
+                protocol,
+            ) {
                 Ok(t) => t,
-                Err(e) => return (vec![], vec![e.to_string()], false),
+                Err(e) => return (vec![], vec![e.to_string()], 0),
             };
             let mut rows = Vec::new();
             let mut errors = Vec::new();
-            for s in strategies {
-                match run_trial(s.as_ref(), &scene.house, &scene.truth, distances, &trial) {
-                    Ok(out) => rows.push(row(scene, &trial, &out)),
-                    Err(e) => errors.push(format!("{}: {}: {e}", scene.house.name, s.name())),
+            for trial in &trials {
+                for s in strategies {
+                    match run_trial(s.as_ref(), &scene.house, &scene.truth, distances, trial) {
+                        Ok(out) => rows.push(row(scene, trial, &out)),
+                        // The target is named only when a house has several trials, so that
+                        // single-trial messages read as before.
+                        Err(e) if trials.len() > 1 => errors.push(format!(
+                            "{}: {}: {}: {e}",
+                            scene.house.name,
+                            trial.target,
+                            s.name()
+                        )),
+                        Err(e) => errors.push(format!("{}: {}: {e}", scene.house.name, s.name())),
+                    }
                 }
             }
-            (rows, errors, true)
+            (rows, errors, trials.len())
         })
         .collect();
     bar.finish_and_clear();
@@ -397,11 +526,13 @@ pub fn evaluate(
         rows: vec![],
         errors: vec![],
         houses_run: 0,
+        trials_run: 0,
     };
-    for (rows, errors, ran) in per_house {
+    for (rows, errors, trials) in by_house {
         ev.rows.extend(rows);
         ev.errors.extend(errors);
-        ev.houses_run += usize::from(ran);
+        ev.houses_run += usize::from(trials > 0);
+        ev.trials_run += trials;
     }
     ev
 }
@@ -430,30 +561,42 @@ fn row(scene: &Scene, trial: &TrialSpec, out: &TrialOutcome) -> TrialRow {
             .collect::<Vec<_>>()
             .join(" "),
         goal_containers: scene.truth.goal_containers(&trial.target).len(),
+        cost_cells: None,
     }
 }
 
 pub use crate::output::write_csv;
 
+/// A trial's identity across strategies: house index and target. Two strategies' rows with the
+/// same key ran the same trial, so their costs pair.
+pub type TrialKey<'a> = (usize, &'a str);
+
+/// Each strategy's cost per trial.
+fn costs_by_trial(rows: &[TrialRow]) -> BTreeMap<&str, BTreeMap<TrialKey<'_>, f64>> {
+    let mut by: BTreeMap<&str, BTreeMap<TrialKey<'_>, f64>> = BTreeMap::new();
+    for r in rows {
+        by.entry(r.strategy.as_str())
+            .or_default()
+            .insert((r.house_index, r.target.as_str()), r.cost_m);
+    }
+    by
+}
+
 /// Mean, median, 95 % CI and improvement over optimistic+greedy, per strategy in `order`. The
-/// improvement compares means over the paired trials only: the houses where every strategy of
-/// `order` that finished any trial finished its trial.
+/// improvement compares means over the paired trials only: the trials (house and target) that
+/// every strategy of `order` that finished any trial finished.
 pub fn summarize(rows: &[TrialRow], order: &[String]) -> Vec<SummaryRow> {
     let mut by: BTreeMap<&str, Vec<f64>> = BTreeMap::new();
-    let mut by_house: BTreeMap<&str, BTreeMap<usize, f64>> = BTreeMap::new();
+    let by_house = costs_by_trial(rows);
     for r in rows {
         by.entry(r.strategy.as_str()).or_default().push(r.cost_m);
-        by_house
-            .entry(r.strategy.as_str())
-            .or_default()
-            .insert(r.house_index, r.cost_m);
     }
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
-    let compared: Vec<&BTreeMap<usize, f64>> = order
+    let compared: Vec<&BTreeMap<TrialKey<'_>, f64>> = order
         .iter()
         .filter_map(|s| by_house.get(s.as_str()))
         .collect();
-    let paired: Vec<usize> = compared
+    let paired: Vec<TrialKey<'_>> = compared
         .first()
         .map(|first| {
             first
@@ -498,15 +641,173 @@ pub fn summarize(rows: &[TrialRow], order: &[String]) -> Vec<SummaryRow> {
                     .zip(paired_mean(s))
                     .map(|(g, m)| 100.0 * (g - m) / g),
                 paired_trials: paired.len(),
+                mean_cells: None,
+                median_cells: None,
+                ci95_cells: None,
             }
         })
         .collect()
 }
 
-/// The paper's table I as Markdown.
-pub fn summary_markdown(summary: &[SummaryRow], source: &str, houses: usize) -> String {
+/// Bootstrap resamples of the paired confidence intervals: enough that the interval's ends move
+/// by less than a hundredth of a metre between seeds on 150 trials.
+pub const PAIRED_RESAMPLES: usize = 10_000;
+
+/// One row of `paired.csv`: a strategy against a reference on the trials both finished.
+#[derive(Clone, Debug, Serialize)]
+pub struct PairedRow {
+    /// The strategy compared against.
+    pub reference: String,
+    /// Why it is the reference: `first` (the first strategy named) or `best` (the lowest mean
+    /// on the paired trials, the oracle excepted).
+    pub role: &'static str,
+    /// The strategy.
+    pub strategy: String,
+    /// Trials (house and target) both finished.
+    pub pairs: usize,
+    /// Mean of cost(strategy) − cost(reference), metres; negative = the strategy is cheaper.
+    pub mean_diff_m: f64,
+    /// Lower end of the 95 % bootstrap interval of the mean difference, metres.
+    pub ci95_low_m: f64,
+    /// Upper end of that interval, metres.
+    pub ci95_high_m: f64,
+    /// Two-sided Wilcoxon signed-rank p-value; empty when every pair ties.
+    pub wilcoxon_p: Option<f64>,
+    /// Trials where the strategy is cheaper.
+    pub wins: usize,
+    /// Trials within a nanometre.
+    pub ties: usize,
+    /// Trials where the strategy costs more.
+    pub losses: usize,
+}
+
+/// Every strategy of `order` against the first one, and against the best (lowest mean over the
+/// trials every strategy finished; the oracle is a bound, never the best) when that is another
+/// strategy. Pairs are the trials (house and target) both strategies of a comparison finished.
+/// `seed` seeds the bootstrap, so the table is reproducible.
+pub fn paired_comparisons(rows: &[TrialRow], order: &[String], seed: u64) -> Vec<PairedRow> {
+    let by = costs_by_trial(rows);
+    let present: Vec<&str> = order
+        .iter()
+        .map(String::as_str)
+        .filter(|s| by.contains_key(s))
+        .collect();
+    let Some(&first) = present.first() else {
+        return Vec::new();
+    };
+    let common: Vec<TrialKey<'_>> = by[first]
+        .keys()
+        .copied()
+        .filter(|k| present.iter().all(|s| by[s].contains_key(k)))
+        .collect();
+    let best = present
+        .iter()
+        .copied()
+        .filter(|s| *s != "oracle" && !common.is_empty())
+        .map(|s| (s, common.iter().map(|k| by[s][k]).sum::<f64>()))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(s, _)| s);
+    let mut references = vec![(first, "first")];
+    if let Some(b) = best.filter(|b| *b != first) {
+        references.push((b, "best"));
+    }
+    let mut out = Vec::new();
+    for (reference, role) in references {
+        for &s in present.iter().filter(|s| **s != reference) {
+            let keys: Vec<&TrialKey<'_>> = by[s]
+                .keys()
+                .filter(|k| by[reference].contains_key(*k))
+                .collect();
+            let a: Vec<f64> = keys.iter().map(|k| by[s][*k]).collect();
+            let b: Vec<f64> = keys.iter().map(|k| by[reference][*k]).collect();
+            let Some(c) = ferret_report::paired::compare_paired(&a, &b, PAIRED_RESAMPLES, seed)
+            else {
+                continue;
+            };
+            out.push(PairedRow {
+                reference: reference.to_string(),
+                role,
+                strategy: s.to_string(),
+                pairs: c.n,
+                mean_diff_m: c.mean_diff,
+                ci95_low_m: c.ci95.0,
+                ci95_high_m: c.ci95.1,
+                wilcoxon_p: c.wilcoxon.map(|w| w.p),
+                wins: c.wins,
+                ties: c.ties,
+                losses: c.losses,
+            });
+        }
+    }
+    out
+}
+
+/// A p-value as people read it: three decimals, two significant digits below 0.001, and
+/// `< 1e-6` below that.
+fn format_p(p: Option<f64>) -> String {
+    match p {
+        None => "–".into(),
+        Some(p) if p < 1e-6 => "< 1e-6".into(),
+        Some(p) if p < 0.001 => format!("{p:.1e}"),
+        Some(p) => format!("{p:.3}"),
+    }
+}
+
+/// The paired comparisons as Markdown, one table per reference; empty without comparisons.
+pub fn paired_markdown(paired: &[PairedRow]) -> String {
+    if paired.is_empty() {
+        return String::new();
+    }
     let mut md = format!(
-        "# Navigation cost per strategy\n\n{houses} houses from {source}; one trial per house, the same for every strategy.\n\n"
+        "\n## Paired comparisons\n\nPairs are the trials (house and target) both strategies finished. Difference = strategy − reference, metres (negative: the strategy is cheaper); 95 % CI of its mean by bootstrap ({PAIRED_RESAMPLES} resamples); p from the two-sided Wilcoxon signed-rank test; wins / ties / losses count the trials where the strategy is cheaper / equal / dearer.\n"
+    );
+    let mut current: Option<(&str, &str)> = None;
+    for r in paired {
+        if current != Some((r.reference.as_str(), r.role)) {
+            current = Some((r.reference.as_str(), r.role));
+            let why = if r.role == "first" {
+                "the first strategy"
+            } else {
+                "the lowest mean, oracle excepted"
+            };
+            md.push_str(&format!(
+                "\nAgainst {} ({why}):\n\n| strategy | pairs | mean difference (m) | 95 % CI (m) | Wilcoxon p | wins / ties / losses |\n|---|---:|---:|---:|---:|---:|\n",
+                r.reference
+            ));
+        }
+        md.push_str(&format!(
+            "| {} | {} | {:+.2} | [{:+.2}, {:+.2}] | {} | {} / {} / {} |\n",
+            r.strategy,
+            r.pairs,
+            r.mean_diff_m,
+            r.ci95_low_m,
+            r.ci95_high_m,
+            format_p(r.wilcoxon_p),
+            r.wins,
+            r.ties,
+            r.losses
+        ));
+    }
+    md
+}
+
+/// The paper's table I as Markdown; `trials` trials were drawn on `houses` houses.
+pub fn summary_markdown(
+    summary: &[SummaryRow],
+    source: &str,
+    houses: usize,
+    per_house: TrialsPerHouse,
+    trials: usize,
+) -> String {
+    let drawn = match per_house {
+        TrialsPerHouse::One => "one trial per house".to_string(),
+        TrialsPerHouse::Count(n) => {
+            format!("{trials} trials, up to {n} distinct targets per house")
+        }
+        TrialsPerHouse::All => format!("{trials} trials, every target type of each house"),
+    };
+    let mut md = format!(
+        "# Navigation cost per strategy\n\n{houses} houses from {source}; {drawn}, the same for every strategy.\n\n"
     );
     md.push_str(
         "| strategy | trials | mean cost (m) | 95 % CI | median (m) | vs optimistic+greedy |\n",
@@ -523,8 +824,8 @@ pub fn summary_markdown(summary: &[SummaryRow], source: &str, houses: usize) -> 
     }
     let short: Vec<String> = summary
         .iter()
-        .filter(|r| r.trials < houses)
-        .map(|r| format!("{} finished {} of {houses}", r.strategy, r.trials))
+        .filter(|r| r.trials < trials)
+        .map(|r| format!("{} finished {} of {trials}", r.strategy, r.trials))
         .collect();
     if !short.is_empty() {
         md.push_str(&format!(
@@ -612,9 +913,17 @@ pub fn draw_house_trajectories(
     let house = &scene.house;
     let mut panels = Vec::new();
     let mut target = None;
+    // With several trials per house, the panels show the house's first trial.
+    let shown = rows
+        .iter()
+        .find(|r| r.house_index == house.index && r.house == house.name)
+        .map(|r| r.target.as_str());
     for s in strategies {
         let Some(row) = rows.iter().find(|r| {
-            r.house_index == house.index && r.house == house.name && r.strategy == s.name()
+            r.house_index == house.index
+                && r.house == house.name
+                && r.strategy == s.name()
+                && Some(r.target.as_str()) == shown
         }) else {
             continue;
         };
@@ -676,6 +985,7 @@ mod tests {
             found_container: "1|0".into(),
             searched: "1|0".into(),
             goal_containers: 1,
+            cost_cells: None,
         }
     }
 
@@ -704,12 +1014,92 @@ mod tests {
         assert!((summary[1].improvement_pct.unwrap() - 10.0).abs() < 1e-9);
         assert!(summary[0].improvement_pct.unwrap().abs() < 1e-9);
         assert_eq!(summary[1].paired_trials, 3);
-        let md = summary_markdown(&summary, "test houses", 4);
+        let md = summary_markdown(&summary, "test houses", 4, TrialsPerHouse::One, 4);
+        // In cells: 18 m is 360 cells of 0.05 m.
+        let cells = cells_markdown(&summary);
+        assert!(cells.contains("| model/x | 3 | 360.0 | ±"), "{cells}");
+        let with = summary[1].clone().with_cells();
+        assert!((with.median_cells.unwrap() - 360.0).abs() < 1e-9);
+        assert!((with.ci95_cells.unwrap() - with.ci95_m * 20.0).abs() < 1e-9);
         assert!(md.contains("model/x finished 3 of 4"), "{md}");
         assert!(md.contains("only the 3 paired trials"), "{md}");
         assert!(!md.contains("optimistic+greedy finished"), "{md}");
         // Complete runs carry no note.
         let complete = summarize(&rows[..4], &order[..1]);
-        assert!(!summary_markdown(&complete, "test houses", 4).contains("Failed trials"));
+        assert!(
+            !summary_markdown(&complete, "test houses", 4, TrialsPerHouse::One, 4)
+                .contains("Failed trials")
+        );
+    }
+
+    #[test]
+    fn paired_comparisons_pair_by_house_and_target_against_first_and_best() {
+        let order: Vec<String> = ["optimistic+greedy", "model/x", "model/y", "oracle"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        let mut rows = Vec::new();
+        // Two targets in each of three houses; model/x saves 2 m on every trial, model/y 1 m on
+        // all but one (a tie), the oracle 5 m. model/x also has a trial no other strategy ran.
+        for h in 0..3 {
+            for (t, target) in ["Apple", "Book"].iter().enumerate() {
+                let g = 10.0 + 3.0 * h as f64 + t as f64;
+                let mut push = |s: &str, c: f64| {
+                    let mut r = trial(h, s, c);
+                    r.target = target.to_string();
+                    rows.push(r);
+                };
+                push("optimistic+greedy", g);
+                push("model/x", g - 2.0);
+                push("model/y", if h == 0 && t == 0 { g } else { g - 1.0 });
+                push("oracle", g - 5.0);
+            }
+        }
+        let mut extra = trial(9, "model/x", 1.0);
+        extra.target = "Cup".into();
+        rows.push(extra);
+        let paired = paired_comparisons(&rows, &order, 0);
+        // Against greedy: x, y, oracle; against the best (model/x): greedy, y, oracle.
+        assert_eq!(paired.len(), 6);
+        let x = &paired[0];
+        assert_eq!(
+            (x.role, x.strategy.as_str(), x.pairs),
+            ("first", "model/x", 6)
+        );
+        assert!((x.mean_diff_m + 2.0).abs() < 1e-12);
+        assert!((x.ci95_low_m + 2.0).abs() < 1e-12 && (x.ci95_high_m + 2.0).abs() < 1e-12);
+        assert_eq!((x.wins, x.ties, x.losses), (6, 0, 0));
+        // Six equal differences tie in rank: the normal approximation, z = (0 − 10.5 + 0.5)/√(22.75
+        // − 210/48) = −2.33285 → p = 0.0196562 (Python: math.erfc(2.33285 / math.sqrt(2))).
+        assert!(
+            (x.wilcoxon_p.unwrap() - 0.019_656_157).abs() < 1e-8,
+            "{:?}",
+            x.wilcoxon_p
+        );
+        let y = &paired[1];
+        assert_eq!((y.wins, y.ties, y.losses), (5, 1, 0));
+        assert!((y.mean_diff_m + 5.0 / 6.0).abs() < 1e-12);
+        assert_eq!(paired[3].role, "best");
+        assert_eq!(paired[3].reference, "model/x");
+        assert_eq!(paired[3].strategy, "optimistic+greedy");
+        assert!((paired[3].mean_diff_m - 2.0).abs() < 1e-12);
+        assert_eq!(paired[5].strategy, "oracle");
+        let md = paired_markdown(&paired);
+        assert!(
+            md.contains("Against optimistic+greedy (the first strategy)"),
+            "{md}"
+        );
+        assert!(
+            md.contains("Against model/x (the lowest mean, oracle excepted)"),
+            "{md}"
+        );
+        assert!(md.contains("| model/y | 6 | -0.83 | [-1.00, "), "{md}");
+        assert!(
+            md.contains("| optimistic+greedy | 6 | +2.00 | [+2.00, +2.00] | 0.020 | 0 / 0 / 6 |"),
+            "{md}"
+        );
+        assert!(md.contains("| 5 / 1 / 0 |"), "{md}");
+        // The same seed gives the same table.
+        assert_eq!(paired_markdown(&paired_comparisons(&rows, &order, 0)), md);
     }
 }

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
 
 use anyhow::{Context, Result, bail};
-use ferret_plan::{Strategy, draw_trial, replay_cost};
+use ferret_plan::{DrawMode, ReplayMode, Strategy, draw_trials_with, replay_cost_with};
 use ferret_report::{CurvePanel, draw_choice_shares, draw_curve_panels};
 use ferret_select::{
     CostTable, ExperimentOptions, Method, ORACLE, PAPER_KS, choice_rows, run_experiment,
@@ -56,14 +56,21 @@ pub struct Args {
     out: PathBuf,
     #[command(flatten)]
     llm: super::llm_setup::LlmArgs,
+    /// Protocol switches: by default the eval run's. `--replay` and `--draw` act here; the
+    /// others decide the trials and must match the run's (a run is never mixed with another
+    /// protocol's trials).
+    #[command(flatten)]
+    protocol: crate::common::ProtocolArgs,
 }
 
-/// One row of `replay.csv`: the replay cost of `strategy` on the trial of `house_index` where
-/// `deployed` was run.
+/// One row of `replay.csv`: the replay cost of `strategy` on the trial of `house_index` and
+/// `target` where `deployed` was run.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ReplayRow {
     /// House index.
     pub house_index: usize,
+    /// Target of the trial (a house has several trials under `--trials-per-house`).
+    pub target: String,
     /// The deployed strategy.
     pub deployed: String,
     /// The replayed strategy.
@@ -108,11 +115,33 @@ pub fn run(args: Args) -> Result<ExitCode> {
         )
     })?;
     let info: RunInfo = serde_json::from_slice(&run_json).context("reading run.json")?;
+    let protocol = args.protocol.resolve(info.protocol)?;
+    if protocol.trial_settings() != info.protocol.trial_settings() {
+        bail!(
+            "{} was made with initial belief {}, containers {}, targets {}; select asks for {}, {}, {}: \
+             selecting over trials of another protocol would mix them (run eval again instead)",
+            args.trials.display(),
+            info.protocol.initial_belief,
+            info.protocol.containers,
+            info.protocol.targets,
+            protocol.initial_belief,
+            protocol.containers,
+            protocol.targets
+        );
+    }
     let trials_path = args.trials.join("trials.csv");
     let trials_csv = std::fs::read(&trials_path)
         .with_context(|| format!("reading {}", trials_path.display()))?;
     let rows: Vec<TrialRow> = parse_csv(&trials_csv, &trials_path)?;
-    let key = trials_key(&run_json, &trials_csv);
+    // Counterfactual replays are other numbers than pessimistic ones: they are cached under a key
+    // of their own (the pessimistic key is unchanged, so existing caches stay valid).
+    let key = match protocol.replay {
+        ReplayMode::Pessimistic => trials_key(&run_json, &trials_csv),
+        ReplayMode::Counterfactual => trials_key(
+            &[&run_json[..], b"\nreplay=counterfactual"].concat(),
+            &trials_csv,
+        ),
+    };
     let candidates: Vec<String> = info
         .strategies
         .iter()
@@ -125,32 +154,44 @@ pub fn run(args: Args) -> Result<ExitCode> {
             args.trials.display()
         );
     }
-    // Houses on which every candidate finished.
-    let mut by_house: BTreeMap<usize, HashMap<&str, &TrialRow>> = BTreeMap::new();
+    // Trials (house and target) that every candidate finished.
+    let mut by_house: Trials<'_> = BTreeMap::new();
     for r in &rows {
         by_house
-            .entry(r.house_index)
+            .entry((r.house_index, r.target.clone()))
             .or_default()
             .insert(r.strategy.as_str(), r);
     }
     by_house.retain(|_, m| candidates.iter().all(|s| m.contains_key(s.as_str())));
     let replay_path = args.trials.join("replay.csv");
-    if by_house.len() < args.trials_per_deployment {
+    let distinct_houses = by_house
+        .keys()
+        .map(|k| k.0)
+        .collect::<std::collections::BTreeSet<_>>()
+        .len();
+    if protocol.draw == DrawMode::Distinct && distinct_houses < args.trials_per_deployment {
         bail!(
             "--trials-per-deployment {}: only {} houses of {} have a trial of every strategy",
             args.trials_per_deployment,
-            by_house.len(),
+            distinct_houses,
             args.trials.display()
         );
     }
-    let replays =
-        load_or_compute_replays(&info, &args, &candidates, &by_house, &replay_path, &key)?;
-    let houses: Vec<usize> = by_house.keys().copied().collect();
+    let replays = load_or_compute_replays(
+        &info,
+        &args,
+        &candidates,
+        &by_house,
+        &replay_path,
+        &key,
+        protocol.replay,
+    )?;
+    let houses: Vec<TrialId> = by_house.keys().cloned().collect();
     let s = candidates.len();
     let mut cost = Vec::with_capacity(houses.len());
     let mut replay = Vec::with_capacity(houses.len());
-    for &h in &houses {
-        let m = &by_house[&h];
+    for h in &houses {
+        let m = &by_house[h];
         cost.push(
             candidates
                 .iter()
@@ -163,22 +204,42 @@ pub fn run(args: Args) -> Result<ExitCode> {
                 by_deployed[j][i] = if i == j {
                     m[si.as_str()].cost_m
                 } else {
-                    *replays.get(&(h, dj.clone(), si.clone())).with_context(|| {
-                        format!("replay.csv lacks house {h}, {dj} deployed, {si}")
-                    })?
+                    *replays
+                        .get(&(h.0, h.1.clone(), dj.clone(), si.clone()))
+                        .with_context(|| {
+                            format!(
+                                "replay.csv lacks house {}, target {}, {dj} deployed, {si}",
+                                h.0, h.1
+                            )
+                        })?
                 };
             }
         }
         replay.push(by_deployed);
     }
-    let labels = houses.iter().map(|&h| m_label(&by_house[&h])).collect();
+    // Labels must be distinct: a house with several trials is labelled per target.
+    let several = houses.len() > distinct_houses;
+    let labels = houses
+        .iter()
+        .map(|h| {
+            let l = m_label(&by_house[h]);
+            if several { format!("{l}/{}", h.1) } else { l }
+        })
+        .collect();
     let table = CostTable::new(candidates.clone(), labels, cost, replay)?;
+    // One trial per house and deployment: a deployment draws distinct houses.
+    let table = if several {
+        table.grouped(houses.iter().map(|h| h.0).collect())?
+    } else {
+        table
+    };
     let opts = ExperimentOptions {
         deployments: args.deployments,
         trials_per_deployment: args.trials_per_deployment,
         c: args.c,
         seed: args.seed,
         replay_untried_first: args.replay_untried_first,
+        with_replacement: protocol.draw == DrawMode::Replacement,
     };
     let result = run_experiment(&table, &opts)?;
     std::fs::create_dir_all(&args.out)?;
@@ -190,10 +251,18 @@ pub fn run(args: Args) -> Result<ExitCode> {
         .filter(|&k| k <= result.trials())
         .collect();
     let md = format!(
-        "# Strategy selection\n\n{} deployments × {} trials over {} houses, c = {} m, seed {}.\n\n{}\n{}",
+        "# Strategy selection\n\n{} deployments × {} trials over {} houses{}, c = {} m, seed {}.\n\n{}\n{}",
         opts.deployments,
         opts.trials_per_deployment,
-        houses.len(),
+        distinct_houses,
+        if several {
+            format!(
+                " ({} trials; one per house in each deployment)",
+                houses.len()
+            )
+        } else {
+            String::new()
+        },
         opts.c,
         opts.seed,
         selection_table_markdown(&result, &ks),
@@ -237,13 +306,20 @@ fn trials_key(run_json: &[u8], trials_csv: &[u8]) -> String {
     format!("{:x}", h.finalize())
 }
 
-type ReplayKey = (usize, String, String);
+/// A trial of an eval run: house index and target.
+type TrialId = (usize, String);
+
+/// The rows of every trial, by strategy.
+type Trials<'a> = BTreeMap<TrialId, HashMap<&'a str, &'a TrialRow>>;
+
+/// House index, target, deployed strategy, replayed strategy.
+type ReplayKey = (usize, String, String, String);
 
 /// First line of replay.csv: the trials the cache belongs to (see [`trials_key`]).
 const CACHE_KEY_PREFIX: &str = "# ferret replay cache for trials sha256:";
 
 /// The header of replay.csv after the key line.
-const CACHE_HEADER: &str = "house_index,deployed,strategy,replay_cost_m\n";
+const CACHE_HEADER: &str = "house_index,target,deployed,strategy,replay_cost_m\n";
 
 /// What a replay cache held that can be used, and why the rest cannot.
 #[derive(Debug, Default)]
@@ -264,7 +340,7 @@ fn parse_replay_cache(
     text: &[u8],
     key: &str,
     candidates: &[String],
-    houses: &BTreeMap<usize, HashMap<&str, &TrialRow>>,
+    houses: &Trials<'_>,
 ) -> CacheRead {
     let mut read = CacheRead::default();
     let (first, rest) = match text.iter().position(|&b| b == b'\n') {
@@ -320,10 +396,10 @@ fn parse_replay_cache(
                 continue;
             }
         };
-        let why = if !houses.contains_key(&row.house_index) {
+        let why = if !houses.contains_key(&(row.house_index, row.target.clone())) {
             Some(format!(
-                "house {} has no trial of every strategy in trials.csv",
-                row.house_index
+                "house {}, target {} has no trial of every strategy in trials.csv",
+                row.house_index, row.target
             ))
         } else if !candidates.contains(&row.deployed) {
             Some(format!("unknown deployed strategy `{}`", row.deployed))
@@ -347,18 +423,24 @@ fn parse_replay_cache(
     let mut lines: HashMap<ReplayKey, Vec<u64>> = HashMap::new();
     for (at, r) in &rows {
         lines
-            .entry((r.house_index, r.deployed.clone(), r.strategy.clone()))
+            .entry((
+                r.house_index,
+                r.target.clone(),
+                r.deployed.clone(),
+                r.strategy.clone(),
+            ))
             .or_default()
             .push(*at);
     }
     for (at, r) in rows {
-        let k = (r.house_index, r.deployed, r.strategy);
+        let k = (r.house_index, r.target, r.deployed, r.strategy);
         match lines.get(&k) {
             Some(l) if l.len() > 1 => read.dropped.push(format!(
-                "line {at}: house {}, {} deployed, {} is also on line(s) {}",
+                "line {at}: house {}, target {}, {} deployed, {} is also on line(s) {}",
                 k.0,
                 k.1,
                 k.2,
+                k.3,
                 l.iter()
                     .filter(|&&x| x != at)
                     .map(u64::to_string)
@@ -388,15 +470,21 @@ fn replay_lines(rows: &[ReplayRow]) -> Result<Vec<u8>> {
 fn rewrite_replay_cache(path: &Path, key: &str, known: &HashMap<ReplayKey, f64>) -> Result<()> {
     let mut all: Vec<ReplayRow> = known
         .iter()
-        .map(|((h, d, s), c)| ReplayRow {
+        .map(|((h, t, d, s), c)| ReplayRow {
             house_index: *h,
+            target: t.clone(),
             deployed: d.clone(),
             strategy: s.clone(),
             replay_cost_m: *c,
         })
         .collect();
     all.sort_by(|a, b| {
-        (a.house_index, &a.deployed, &a.strategy).cmp(&(b.house_index, &b.deployed, &b.strategy))
+        (a.house_index, &a.target, &a.deployed, &a.strategy).cmp(&(
+            b.house_index,
+            &b.target,
+            &b.deployed,
+            &b.strategy,
+        ))
     });
     let body = replay_lines(&all)?;
     crate::output::write_atomic(path, |w| {
@@ -411,9 +499,10 @@ fn load_or_compute_replays(
     info: &RunInfo,
     args: &Args,
     candidates: &[String],
-    by_house: &BTreeMap<usize, HashMap<&str, &TrialRow>>,
+    by_house: &Trials<'_>,
     path: &Path,
     key: &str,
+    mode: ReplayMode,
 ) -> Result<HashMap<ReplayKey, f64>> {
     let read = match std::fs::read(path) {
         Ok(text) => {
@@ -444,14 +533,20 @@ fn load_or_compute_replays(
     if needs_rewrite {
         rewrite_replay_cache(path, key, &known)?;
     }
-    let missing = |h: usize| {
+    let missing = |h: &TrialId| {
         candidates.iter().any(|j| {
             candidates
                 .iter()
-                .any(|i| i != j && !known.contains_key(&(h, j.clone(), i.clone())))
+                .any(|i| i != j && !known.contains_key(&(h.0, h.1.clone(), j.clone(), i.clone())))
         })
     };
-    let todo: Vec<usize> = by_house.keys().copied().filter(|&h| missing(h)).collect();
+    let todo: Vec<usize> = by_house
+        .keys()
+        .filter(|h| missing(h))
+        .map(|h| h.0)
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect();
     if todo.is_empty() {
         return Ok(known);
     }
@@ -487,18 +582,22 @@ fn load_or_compute_replays(
         .progress_with(bar.clone())
         .map(|(scene, map)| {
             let (_, distances) = map.as_ref().map_err(|e| anyhow::anyhow!("{e}"))?;
-            let rows = replay_house(
-                scene,
-                distances,
-                &strategies,
-                &by_house[&scene.house.index],
-                info,
-            )?;
+            let trials: Vec<(&String, &HashMap<&str, &TrialRow>)> = by_house
+                .iter()
+                .filter(|(k, _)| k.0 == scene.house.index)
+                .map(|(k, m)| (&k.1, m))
+                .collect();
+            let rows = replay_house(scene, distances, &strategies, &trials, info, mode)?;
             // A house is replayed whole; rows already cached are not written twice.
             let new: Vec<ReplayRow> = rows
                 .iter()
                 .filter(|r| {
-                    !known.contains_key(&(r.house_index, r.deployed.clone(), r.strategy.clone()))
+                    !known.contains_key(&(
+                        r.house_index,
+                        r.target.clone(),
+                        r.deployed.clone(),
+                        r.strategy.clone(),
+                    ))
                 })
                 .cloned()
                 .collect();
@@ -516,7 +615,10 @@ fn load_or_compute_replays(
         match r {
             Ok(rows) => {
                 for r in rows {
-                    known.insert((r.house_index, r.deployed, r.strategy), r.replay_cost_m);
+                    known.insert(
+                        (r.house_index, r.target, r.deployed, r.strategy),
+                        r.replay_cost_m,
+                    );
                 }
             }
             Err(e) => errors.push(format!("{e:#}")),
@@ -534,17 +636,50 @@ fn load_or_compute_replays(
     Ok(known)
 }
 
-/// The replay costs of every strategy on one house's trial, for every deployed strategy.
+/// The replay costs of every strategy on one house's trials (`trials`: target and the rows of
+/// its trial), for every deployed strategy. The trials are drawn again from the run's settings,
+/// and each must be one the run drew.
 pub fn replay_house(
     scene: &Scene,
     distances: &Distances,
     strategies: &[Arc<dyn Strategy>],
-    rows: &HashMap<&str, &TrialRow>,
+    trials: &[(&String, &HashMap<&str, &TrialRow>)],
     info: &RunInfo,
+    mode: ReplayMode,
 ) -> Result<Vec<ReplayRow>> {
     let house = &scene.house;
-    let trial = draw_trial(house, &scene.truth, info.seed, info.reveal_fraction)?;
+    let drawn = draw_trials_with(
+        house,
+        &scene.truth,
+        info.seed,
+        info.reveal_fraction,
+        info.trials_per_house,
+        &info.protocol,
+    )?;
     let mut out = Vec::new();
+    for (target, rows) in trials {
+        let Some(trial) = drawn.iter().find(|t| t.target.as_str() == target.as_str()) else {
+            bail!(
+                "{}: trials.csv has target {target}, the run's seed does not draw it; was run.json edited?",
+                house.name
+            );
+        };
+        replay_trial(scene, distances, strategies, rows, trial, mode, &mut out)?;
+    }
+    Ok(out)
+}
+
+/// The replay costs of every strategy on one trial, for every deployed strategy.
+fn replay_trial(
+    scene: &Scene,
+    distances: &Distances,
+    strategies: &[Arc<dyn Strategy>],
+    rows: &HashMap<&str, &TrialRow>,
+    trial: &ferret_plan::TrialSpec,
+    mode: ReplayMode,
+    out: &mut Vec<ReplayRow>,
+) -> Result<()> {
+    let house = &scene.house;
     for deployed in strategies {
         let row = rows
             .get(deployed.name())
@@ -569,16 +704,25 @@ pub fn replay_house(
             if s.name() == deployed.name() {
                 continue;
             }
-            let c = replay_cost(s.as_ref(), house, distances, &trial, found)?;
+            let c = replay_cost_with(
+                mode,
+                s.as_ref(),
+                house,
+                &scene.truth,
+                distances,
+                trial,
+                found,
+            )?;
             out.push(ReplayRow {
                 house_index: house.index,
+                target: trial.target.to_string(),
                 deployed: deployed.name().to_string(),
                 strategy: s.name().to_string(),
                 replay_cost_m: c,
             });
         }
     }
-    Ok(out)
+    Ok(())
 }
 
 fn draw_selection(result: &ferret_select::ExperimentResult, out: &Path) -> Result<()> {
@@ -668,6 +812,7 @@ mod tests {
             found_container: "1|0".into(),
             searched: "1|0".into(),
             goal_containers: 1,
+            cost_cells: None,
         }
     }
 
@@ -686,6 +831,7 @@ mod tests {
                     if i != j {
                         rows.push(ReplayRow {
                             house_index: h,
+                            target: "Apple".into(),
                             deployed: d.clone(),
                             strategy: s.clone(),
                             replay_cost_m: (10 * h + 3 * j + i) as f64 + 0.5,
@@ -699,25 +845,25 @@ mod tests {
 
     fn line_of(r: &ReplayRow) -> String {
         format!(
-            "{},{},{},{}",
-            r.house_index, r.deployed, r.strategy, r.replay_cost_m
+            "{},{},{},{},{}",
+            r.house_index, r.target, r.deployed, r.strategy, r.replay_cost_m
         )
     }
 
     /// A corruption of one row: the row's text, and whether it is dropped for itself (as
     /// opposed to only making its key a duplicate).
     fn corrupt(kind: u8, r: &ReplayRow) -> String {
-        let (h, d, s) = (r.house_index, &r.deployed, &r.strategy);
+        let (h, t, d, s) = (r.house_index, &r.target, &r.deployed, &r.strategy);
         match kind {
-            0 => format!("{h},{d},{s},-1.5"),
-            1 => format!("{h},{d},{s},NaN"),
-            2 => format!("{h},{d},{s},inf"),
-            3 => format!("{h},{d},zzz,2.0"),
-            4 => format!("{h},zzz,{s},2.0"),
-            5 => format!("99,{d},{s},2.0"),
-            6 => format!("{h},{d},{d},2.0"),
-            7 => format!("{h},{d},{s}"),
-            _ => format!("{h},{d},{s},twelve"),
+            0 => format!("{h},{t},{d},{s},-1.5"),
+            1 => format!("{h},{t},{d},{s},NaN"),
+            2 => format!("{h},{t},{d},{s},inf"),
+            3 => format!("{h},{t},{d},zzz,2.0"),
+            4 => format!("{h},{t},zzz,{s},2.0"),
+            5 => format!("99,{t},{d},{s},2.0"),
+            6 => format!("{h},{t},{d},{d},2.0"),
+            7 => format!("{h},{t},{d},{s}"),
+            _ => format!("{h},{t},{d},{s},twelve"),
         }
     }
 
@@ -736,7 +882,12 @@ mod tests {
             // Each line's text and, when it is a good row, its key and cost.
             let mut lines: Vec<(String, Option<(ReplayKey, f64)>)> = Vec::new();
             for (i, r) in rows.iter().enumerate() {
-                let key = (r.house_index, r.deployed.clone(), r.strategy.clone());
+                let key = (
+                    r.house_index,
+                    r.target.clone(),
+                    r.deployed.clone(),
+                    r.strategy.clone(),
+                );
                 let good = (line_of(r), Some((key, r.replay_cost_m)));
                 match edits.get(&i) {
                     // Kind 9: the row twice.
@@ -780,9 +931,12 @@ mod tests {
             let trials: Vec<TrialRow> = (0..4)
                 .flat_map(|h| candidates().into_iter().map(move |s| trial(h, &s)))
                 .collect();
-            let mut houses: BTreeMap<usize, HashMap<&str, &TrialRow>> = BTreeMap::new();
+            let mut houses: Trials<'_> = BTreeMap::new();
             for t in &trials {
-                houses.entry(t.house_index).or_default().insert(t.strategy.as_str(), t);
+                houses
+                    .entry((t.house_index, t.target.clone()))
+                    .or_default()
+                    .insert(t.strategy.as_str(), t);
             }
             let read = parse_replay_cache(text.as_bytes(), KEY, &candidates(), &houses);
             prop_assert!(read.stale.is_none());

@@ -108,7 +108,7 @@ fn json_schema_and_logprobs_requests_carry_the_right_fields() {
         assert_eq!(values.len(), 100);
         assert_eq!(
             (values[0].clone(), values[99].clone()),
-            (json!(1), json!(100))
+            (json!("1%"), json!("100%"))
         );
         assert_eq!(b["logprobs"], true);
         assert_eq!(b["top_logprobs"], 20);

@@ -192,7 +192,12 @@ pub struct QueryPlan {
 impl QueryPlan {
     /// The questions for `target` in `house`.
     pub fn new(house: &House, target: &ObjectType) -> Self {
-        let labels = HouseContext::new(house);
+        Self::with_context(house, &HouseContext::new(house), target)
+    }
+
+    /// The questions for `target` in `house`, whose words `labels` already describe (so the
+    /// caller that renders the prompts describes the house once).
+    pub fn with_context(house: &House, labels: &HouseContext, target: &ObjectType) -> Self {
         let mut queries: Vec<ProbabilityQuery> = Vec::new();
         let mut index: BTreeMap<ProbabilityQuery, usize> = BTreeMap::new();
         let of_container = (0..house.containers.len())

@@ -137,6 +137,8 @@ pub struct LlmLikelihood {
     /// Results per (house name, house index, container count, target): trials and replays on
     /// the same house reuse them without rendering or looking anything up again.
     memo: Mutex<HashMap<MemoKey, Vec<Probability>>>,
+    /// The prompt's worked example, read from its template once.
+    example: Option<WorkedExample>,
 }
 
 impl std::fmt::Debug for LlmLikelihood {
@@ -153,6 +155,7 @@ impl LlmLikelihood {
     pub fn new(service: Arc<LlmService>, prompt: &str, llm: &str, strategy: &str) -> Result<Self> {
         let prompt = service.resolve_prompt(prompt)?;
         let llm = service.llm(llm)?;
+        let example = service.prompts().example(&prompt);
         Ok(Self {
             name: format!("{prompt}/{}", llm.name()),
             service,
@@ -160,6 +163,7 @@ impl LlmLikelihood {
             prompt,
             strategy: strategy.to_string(),
             memo: Mutex::new(HashMap::new()),
+            example,
         })
     }
 
@@ -189,8 +193,8 @@ impl LlmLikelihood {
         house: &House,
         target: &ObjectType,
     ) -> Result<(QueryPlan, Vec<Question>)> {
-        let plan = QueryPlan::new(house, target);
         let ctx = HouseContext::new(house);
+        let plan = QueryPlan::with_context(house, &ctx, target);
         let prompts = self.service.prompts();
         let questions = plan
             .queries
@@ -209,7 +213,7 @@ impl LlmLikelihood {
     /// The prompt's worked example, unless the question is about the example's own object (then
     /// the example's value may well be the answer).
     fn example_for(&self, query: &ProbabilityQuery) -> Option<WorkedExample> {
-        let example = self.service.prompts().example(&self.prompt)?;
+        let example = self.example.clone()?;
         let asked = format!(
             "{} {}",
             query.target.words().to_lowercase(),

@@ -450,6 +450,7 @@ pub(crate) mod tests {
                 size_z: 1.0,
                 yaw_deg: 0.0,
             },
+            access: None,
         };
         House {
             name: "test#0".into(),
@@ -470,6 +471,7 @@ pub(crate) mod tests {
                 position: Point::new(0.5, 0.5),
                 yaw_deg: 0.0,
             },
+            map: None,
         }
     }
 

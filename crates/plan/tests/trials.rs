@@ -44,6 +44,7 @@ fn house(
                 size_z: 0.5,
                 yaw_deg: 0.0,
             },
+            access: None,
         })
         .collect();
     let start = Point::new(0.0, 0.0);
@@ -80,6 +81,7 @@ fn house(
             position: start,
             yaw_deg: 0.0,
         },
+        map: None,
     };
     (house, truth, distances)
 }

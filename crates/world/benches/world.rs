@@ -145,6 +145,7 @@ fn small_house(c: &mut Criterion) {
             size_z: 0.5,
             yaw_deg: 30.0 * i as f64,
         },
+        access: None,
     })
     .collect();
     let house = House {
@@ -165,6 +166,7 @@ fn small_house(c: &mut Criterion) {
             position: Point::new(0.5, 4.5),
             yaw_deg: 0.0,
         },
+        map: None,
     };
     let params = GridParams::default();
     c.bench_function("small house: grid+distances", |b| {

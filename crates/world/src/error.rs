@@ -87,6 +87,26 @@ pub enum WorldError {
         /// Human names of the unreachable containers.
         names: Vec<String>,
     },
+    /// A ROS map (YAML + image) cannot be used.
+    #[error("{}: {field}: {message}", file.display())]
+    Map {
+        /// The YAML or image file.
+        file: PathBuf,
+        /// The field, e.g. `resolution` or `image`.
+        field: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A scene file is malformed or inconsistent.
+    #[error("{}: {field}: {message}", file.display())]
+    Scene {
+        /// The scene file.
+        file: PathBuf,
+        /// The field path, e.g. `containers[3].room`.
+        field: String,
+        /// What is wrong.
+        message: String,
+    },
     /// The occupancy grid cannot be built (e.g. the start is not on any floor).
     #[error("{house}: {message}")]
     Grid {

@@ -16,6 +16,7 @@ use tracing::{debug, warn};
 use crate::error::{Result, WorldError};
 use crate::geometry::{Footprint, Point, Rect};
 use crate::house::House;
+use crate::map::{MapCell, OccupancyMap};
 
 /// Parameters of the occupancy grid.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -192,6 +193,9 @@ impl OccupancyGrid {
     /// [`WorldError::Grid`] for bad parameters, a house without rooms, non-finite geometry, a grid
     /// too large for memory, more than 254 rooms, or a start off the grid or without any free cell.
     pub fn build(house: &House, params: &GridParams) -> Result<OccupancyGrid> {
+        if let Some(map) = &house.map {
+            return Self::build_on_map(house, params, map);
+        }
         params.check(&house.name)?;
         let err = |message: String| WorldError::Grid {
             house: house.name.clone(),
@@ -236,29 +240,83 @@ impl OccupancyGrid {
             access: Vec::new(),
             closed_doors: Vec::new(),
         };
-        g.fill_floors(house);
+        g.fill_floors(house, true);
         g.draw_walls(house);
         g.draw_furniture(house);
-        g.inflate_outside(radius_cells);
-        g.free = g
-            .cells
-            .iter()
-            .filter(|&&c| c == CellKind::Free as u8)
-            .count();
-        g.place_start(house)?;
-        g.reachable = g.flood_from_start();
-        g.closed_doors = g.find_closed_doors(house);
-        g.access = house
-            .containers
-            .iter()
-            .map(|c| g.nearest_reachable(&c.footprint, c.room))
-            .collect();
-        for (i, a) in g.access.iter().enumerate() {
-            if a.is_none() {
-                debug!(house = %house.name, container = %house.container_label(i), "no reachable access cell");
+        g.inflate_outside(radius_cells, false);
+        g.finish(house)
+    }
+
+    /// The grid of a house that carries a robot's occupancy map: the map's cells (free, occupied
+    /// as walls, unknown as outside) at the map's own resolution, rooms named by the polygons,
+    /// furniture footprints drawn on top, everything inflated by the robot radius.
+    fn build_on_map(
+        house: &House,
+        params: &GridParams,
+        map: &OccupancyMap,
+    ) -> Result<OccupancyGrid> {
+        let err = |message: String| WorldError::Grid {
+            house: house.name.clone(),
+            message,
+        };
+        if !map.is_consistent() {
+            return Err(err(format!("the map {} is inconsistent", map.source)));
+        }
+        // The map fixes the cell size: resampling a robot's map would move its walls.
+        let params = GridParams {
+            resolution: map.resolution,
+            ..*params
+        };
+        params.check(&house.name)?;
+        if house.rooms.len() >= NO_ROOM as usize {
+            return Err(err(format!(
+                "{} rooms; the grid handles at most 254",
+                house.rooms.len()
+            )));
+        }
+        check_finite(house).map_err(err)?;
+        let res = params.resolution;
+        let pad = ((params.robot_radius / res).ceil() + 2.0) as u32;
+        let (width, height) = (map.width + 2 * pad, map.height + 2 * pad);
+        if u64::from(width) * u64::from(height) > MAX_CELLS {
+            return Err(err(format!(
+                "the map {} is {}×{} cells, over the limit of {MAX_CELLS}",
+                map.source, map.width, map.height
+            )));
+        }
+        let origin = Point::new(
+            map.origin.x - f64::from(pad) * res,
+            map.origin.z - f64::from(pad) * res,
+        );
+        let n = width as usize * height as usize;
+        let mut g = Inner {
+            params,
+            origin,
+            width,
+            height,
+            cells: vec![CellKind::Outside as u8; n],
+            rooms: vec![NO_ROOM; n],
+            free: 0,
+            reachable: 0,
+            start: 0,
+            start_moved: false,
+            access: Vec::new(),
+            closed_doors: Vec::new(),
+        };
+        for z in 0..map.height {
+            for x in 0..map.width {
+                let kind = match map.cells[z as usize * map.width as usize + x as usize] {
+                    MapCell::Free => CellKind::Free,
+                    MapCell::Occupied => CellKind::Wall,
+                    MapCell::Unknown => CellKind::Outside,
+                };
+                g.cells[(z + pad) as usize * width as usize + (x + pad) as usize] = kind as u8;
             }
         }
-        Ok(OccupancyGrid { inner: Arc::new(g) })
+        g.fill_floors(house, false);
+        g.draw_furniture(house);
+        g.inflate_outside(params.robot_radius / res, true);
+        g.finish(house)
     }
 
     /// The parameters the grid was built with.
@@ -508,6 +566,49 @@ fn footprint_distance(f: &Footprint, p: Point) -> f64 {
 }
 
 impl Inner {
+    /// The steps after the cells are drawn: counts, start, reachability, doors, access cells.
+    fn finish(mut self, house: &House) -> Result<OccupancyGrid> {
+        self.free = self
+            .cells
+            .iter()
+            .filter(|&&c| c == CellKind::Free as u8)
+            .count();
+        self.place_start(house)?;
+        self.reachable = self.flood_from_start();
+        self.closed_doors = self.find_closed_doors(house);
+        self.access = house
+            .containers
+            .iter()
+            .map(|c| match c.access {
+                Some(p) => self.access_at(p, &c.footprint),
+                None => self.nearest_reachable(&c.footprint, c.room),
+            })
+            .collect();
+        for (i, a) in self.access.iter().enumerate() {
+            if a.is_none() {
+                debug!(house = %house.name, container = %house.container_label(i), "no reachable access cell");
+            }
+        }
+        Ok(OccupancyGrid {
+            inner: Arc::new(self),
+        })
+    }
+
+    /// The access cell at a given standing point: its own cell, which must be reachable.
+    fn access_at(&self, p: Point, f: &Footprint) -> Option<Access> {
+        let res = self.params.resolution;
+        let x = ((p.x - self.origin.x) / res).floor();
+        let z = ((p.z - self.origin.z) / res).floor();
+        if !(x >= 0.0 && z >= 0.0 && x < f64::from(self.width) && z < f64::from(self.height)) {
+            return None;
+        }
+        let i = z as usize * self.width as usize + x as usize;
+        (self.cells[i] & REACHABLE != 0).then(|| Access {
+            cell: i as u32,
+            gap: footprint_distance(f, self.center(x as u32, z as u32)),
+        })
+    }
+
     fn center(&self, x: u32, z: u32) -> Point {
         let res = self.params.resolution;
         Point::new(
@@ -549,7 +650,7 @@ impl Inner {
 
     /// Marks every cell whose centre is on a floor as free floor of that room, by scanlines: the
     /// same even-odd rule as `Polygon::contains`, one row at a time.
-    fn fill_floors(&mut self, house: &House) {
+    fn fill_floors(&mut self, house: &House, mark_free: bool) {
         let res = self.params.resolution;
         let mut crossings = Vec::new();
         for (ri, room) in house.rooms.iter().enumerate() {
@@ -580,7 +681,9 @@ impl Inner {
                     for i in row + lo..row + hi.max(lo) {
                         if self.rooms[i] == NO_ROOM {
                             self.rooms[i] = ri as u8;
-                            self.cells[i] = CellKind::Free as u8;
+                            if mark_free {
+                                self.cells[i] = CellKind::Free as u8;
+                            }
                         }
                     }
                 }
@@ -726,7 +829,10 @@ impl Inner {
     /// got their clearance exactly when drawn.) Stamping a disc around the outside cells that
     /// touch the floor suffices: the outside cell nearest to any free cell has a non-outside
     /// neighbour (one step towards the free cell is closer still).
-    fn inflate_outside(&mut self, radius_cells: f64) {
+    ///
+    /// With `walls_too` (a robot's map, whose walls are cells rather than drawn lines) wall cells
+    /// get the same disc.
+    fn inflate_outside(&mut self, radius_cells: f64, walls_too: bool) {
         let r = radius_cells.floor() as i64;
         let r_sq = radius_cells * radius_cells;
         let w = self.width as i64;
@@ -739,6 +845,7 @@ impl Inner {
             return;
         }
         let outside = CellKind::Outside as u8;
+        let wall = CellKind::Wall as u8;
         let (w, h) = (self.width as usize, self.height as usize);
         // The margin of Outside cells is wider than the disc and border cells are skipped (they
         // touch no floor), so no offset leaves the grid. The boundary is collected before
@@ -747,7 +854,7 @@ impl Inner {
         for z in 1..h.saturating_sub(1) {
             for x in 1..w.saturating_sub(1) {
                 let i = z * w + x;
-                if self.cells[i] == outside
+                if (self.cells[i] == outside || (walls_too && self.cells[i] == wall))
                     && [
                         i - 1,
                         i + 1,

@@ -145,6 +145,10 @@ pub struct Container {
     pub position: Point,
     /// Its footprint on the floor.
     pub footprint: Footprint,
+    /// Where the robot stands to search it, when the scene says so; otherwise the grid picks the
+    /// reachable cell nearest to the footprint.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub access: Option<Point>,
 }
 
 /// Furniture that is not a container: an obstacle on the map (floor lamps, chairs, ...).
@@ -189,6 +193,10 @@ pub struct House {
     pub obstacles: Vec<Obstacle>,
     /// The robot's start pose.
     pub start: Pose,
+    /// A robot's occupancy map, when the house came from a scene with one: the grid is then
+    /// built from the map's cells instead of the walls.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub map: Option<std::sync::Arc<crate::map::OccupancyMap>>,
 }
 
 impl House {

@@ -13,7 +13,9 @@ pub mod generate;
 pub mod geometry;
 pub mod grid;
 pub mod house;
+pub mod map;
 pub mod procthor;
+pub mod scene;
 
 pub use distance::{Distances, Place};
 pub use error::{HouseLocation, Result, WorldError};
@@ -23,3 +25,5 @@ pub use house::{
     Container, Door, GroundTruth, House, ObjectType, Obstacle, Pose, Room, RoomType, Scene,
     SmallObject, Wall,
 };
+pub use map::{MapCell, OccupancyMap};
+pub use scene::SceneFile;

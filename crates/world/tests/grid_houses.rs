@@ -55,6 +55,7 @@ fn container(
             size_z,
             yaw_deg,
         },
+        access: None,
     }
 }
 
@@ -77,6 +78,7 @@ fn house(
             position: start,
             yaw_deg: 0.0,
         },
+        map: None,
     }
 }
 

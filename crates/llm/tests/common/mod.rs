@@ -85,6 +85,7 @@ pub fn small_scene(name: &str) -> (House, GroundTruth) {
             size_z: 0.5,
             yaw_deg: 0.0,
         },
+        access: None,
     };
     let house = House {
         name: name.into(),
@@ -105,6 +106,7 @@ pub fn small_scene(name: &str) -> (House, GroundTruth) {
             position: Point::new(0.5, 2.0),
             yaw_deg: 0.0,
         },
+        map: None,
     };
     let o = |t: &str| SmallObject {
         id: format!("{t}|1"),

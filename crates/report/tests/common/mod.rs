@@ -54,6 +54,7 @@ fn container(id: &str, t: &str, room: usize, f: Footprint) -> Container {
         room: Some(room),
         position: f.center,
         footprint: f,
+        access: None,
     }
 }
 
@@ -110,6 +111,7 @@ pub fn small_house() -> House {
             position: Point::new(5.5, 2.0),
             yaw_deg: 90.0,
         },
+        map: None,
     }
 }
 

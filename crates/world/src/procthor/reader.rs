@@ -521,6 +521,7 @@ pub fn scene_from_raw(
                 room: Some(room),
                 position,
                 footprint,
+                access: None,
             });
         } else {
             obstacles.push(Obstacle {
@@ -566,6 +567,7 @@ pub fn scene_from_raw(
         containers,
         obstacles,
         start: Pose { position, yaw_deg },
+        map: None,
     };
     Ok(Scene {
         house,

@@ -1,16 +1,21 @@
 #!/usr/bin/env bash
-# The real-model lane: a real OpenAI-compatible server (llama-cpp-python's) and a small real
-# instruct model (Qwen2.5-Coder-1.5B-Instruct, Q4_K_M, shipped on PyPI in 22 chunk packages),
-# served on 127.0.0.1, driving ferret on real ProcTHOR houses: `llm ping`, `calibrate` and `eval`
-# with all four prompts, then the same eval `--offline`, which must be identical.
+# The real-model lane: a real OpenAI-compatible server and a small real instruct model
+# (Qwen2.5-Coder-1.5B-Instruct, Q4_K_M, shipped on PyPI in 22 chunk packages), served on
+# 127.0.0.1, driving ferret on real ProcTHOR houses: `llm ping`, `calibrate` and `eval` with all
+# four prompts, then the same eval `--offline`, which must be identical.
+#
+# The server is llama.cpp's own `llama-server` (default), built from the llama.cpp sources that
+# PyPI's llama-cpp-python sdist vendors, with cmake and ninja from PyPI; or, with
+# FERRET_LANE_SERVER=llama-cpp-python, that package's Python server (about 3× slower per answer
+# on 2 cores: it computes logprobs in Python over all 152 k tokens of the vocabulary).
 #
 #   scripts/real-llm.sh            # install (cached), serve, run, stop the server
 #   scripts/real-llm.sh install    # only build/fetch into the cache
 #   scripts/real-llm.sh config     # only write $FERRET_LANE_OUT/ferret.toml (tested in CI)
 #
 # Everything downloaded or built lives in $FERRET_LANE_CACHE (default ~/.cache/ferret-real-llm):
-# the llama-cpp-python wheel (built from PyPI's source, ~11 min on 2 cores, once), a venv and the
-# assembled GGUF. Outputs go to $FERRET_LANE_OUT (default ferret-lane/). The lane fails on any
+# llama-server (~8 min on 2 cores, once), the llama-cpp-python wheel when that server is chosen
+# (~6–11 min, once), a venv and the assembled GGUF. Outputs go to $FERRET_LANE_OUT (default ferret-lane/). The lane fails on any
 # request error and when a strategy's fallback share exceeds $FERRET_LANE_MAX_FALLBACK (default
 # 0.02, the bound the issue sets for json_schema answers; see README "Real models").
 set -euo pipefail
@@ -26,25 +31,70 @@ LLAMA_CPP_PYTHON="${FERRET_LANE_LLAMA_CPP_PYTHON:-0.3.36}"
 # llama.cpp's threads wait for each other at every layer: on a machine busy with other work
 # (a build), one thread is faster than two that keep losing their core.
 THREADS="${FERRET_LANE_THREADS:-$(nproc)}"
+SERVER="${FERRET_LANE_SERVER:-llama-cpp}"
+INDEX="${PIP_INDEX_URL:-https://pypi.org/simple}"
 PARTS=22
 MODEL="$CACHE/model/qwen2.5-coder-1.5b-instruct-q4_k_m.gguf"
 PY="$CACHE/venv/bin/python"
 
 log() { printf '[lane %s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }
 
+# llama.cpp's C++ server, built from the sources llama-cpp-python's sdist vendors.
+install_llama_server() {
+    [ -x "$CACHE/bin/llama-server" ] && return 0
+    local src="$CACHE/src/llama_cpp_python-$LLAMA_CPP_PYTHON"
+    if [ ! -d "$src/vendor/llama.cpp" ]; then
+        log "fetching llama-cpp-python $LLAMA_CPP_PYTHON's sdist (it vendors llama.cpp)"
+        mkdir -p "$CACHE/src"
+        # The sdist's address and digest from the package index's simple page (pip download
+        # would first build the package's metadata, which means a full cmake configure).
+        local link
+        link="$(python3 - "$INDEX" "$LLAMA_CPP_PYTHON" <<'PY'
+import re, sys, urllib.request
+index, version = sys.argv[1].rstrip("/"), sys.argv[2]
+page = urllib.request.urlopen(f"{index}/llama-cpp-python/").read().decode()
+for href in re.findall(r'href="([^"]+)"', page):
+    if f"llama_cpp_python-{version}.tar.gz" in href:
+        print(urllib.parse.urljoin(f"{index}/llama-cpp-python/", href.replace("&amp;", "&")))
+        break
+PY
+)"
+        [ -n "$link" ] || { log "no sdist of llama-cpp-python $LLAMA_CPP_PYTHON on $INDEX"; exit 1; }
+        local tgz="$CACHE/src/llama_cpp_python-$LLAMA_CPP_PYTHON.tar.gz"
+        curl -sSfL -o "$tgz" "${link%%#*}"
+        local want="${link##*sha256=}"
+        echo "$want  $tgz" | sha256sum -c --quiet - || { log "sdist digest mismatch"; exit 1; }
+        tar xzf "$tgz" -C "$CACHE/src"
+    fi
+    "$PY" -m pip install -q cmake ninja
+    log "building llama-server (about 8 min on 2 cores, once)"
+    "$CACHE/venv/bin/cmake" -S "$src/vendor/llama.cpp" -B "$CACHE/llama-build" -G Ninja \
+        -DCMAKE_MAKE_PROGRAM="$CACHE/venv/bin/ninja" -DCMAKE_BUILD_TYPE=Release \
+        -DLLAMA_BUILD_UI=OFF -DLLAMA_USE_PREBUILT_UI=OFF -DLLAMA_CURL=OFF -DLLAMA_OPENSSL=OFF \
+        -DLLAMA_BUILD_TESTS=OFF -DLLAMA_BUILD_EXAMPLES=OFF -DGGML_NATIVE=ON \
+        -DBUILD_SHARED_LIBS=OFF >"$CACHE/logs/llama-server.log" 2>&1 \
+        && "$CACHE/venv/bin/cmake" --build "$CACHE/llama-build" --target llama-server \
+            -j "$(nproc)" >>"$CACHE/logs/llama-server.log" 2>&1 \
+        || { tail -20 "$CACHE/logs/llama-server.log" >&2; exit 1; }
+    mkdir -p "$CACHE/bin"
+    cp "$CACHE/llama-build/bin/llama-server" "$CACHE/bin/llama-server"
+}
+
 install() {
     mkdir -p "$CACHE/wheels" "$CACHE/dl" "$CACHE/model" "$CACHE/logs"
-    if ! ls "$CACHE"/wheels/llama_cpp_python-"$LLAMA_CPP_PYTHON"-*.whl >/dev/null 2>&1; then
+    if [ ! -x "$PY" ]; then
+        log "creating the venv"
+        python3 -m venv "$CACHE/venv"
+    fi
+    if [ "$SERVER" = llama-cpp ]; then
+        install_llama_server
+    elif ! ls "$CACHE"/wheels/llama_cpp_python-"$LLAMA_CPP_PYTHON"-*.whl >/dev/null 2>&1; then
         log "building llama-cpp-python $LLAMA_CPP_PYTHON from source (about 11 min on 2 cores, once)"
         CMAKE_BUILD_PARALLEL_LEVEL="$(nproc)" python3 -m pip wheel --no-deps -w "$CACHE/wheels" \
             "llama-cpp-python==$LLAMA_CPP_PYTHON" >"$CACHE/logs/wheel.log" 2>&1 \
             || { tail -20 "$CACHE/logs/wheel.log" >&2; exit 1; }
     fi
-    if [ ! -x "$PY" ]; then
-        log "creating the venv"
-        python3 -m venv "$CACHE/venv"
-    fi
-    if ! "$PY" -c 'import llama_cpp.server' 2>/dev/null; then
+    if [ "$SERVER" = llama-cpp-python ] && ! "$PY" -c 'import llama_cpp.server' 2>/dev/null; then
         log "installing the server into the venv"
         "$PY" -m pip install -q "$CACHE"/wheels/llama_cpp_python-"$LLAMA_CPP_PYTHON"-*.whl
         "$PY" -m pip install -q "llama-cpp-python[server]==$LLAMA_CPP_PYTHON" \
@@ -110,11 +160,23 @@ serve() {
         log "port $PORT already answers; set FERRET_LANE_PORT to another port"
         exit 1
     fi
-    log "serving the model on 127.0.0.1:$PORT"
-    # One request at a time (concurrency 1 in the config) on all cores.
-    "$PY" -m llama_cpp.server --model "$MODEL" --host 127.0.0.1 --port "$PORT" \
-        --n_ctx 8192 --n_threads "$THREADS" --logits_all True \
-        --model_alias qwen2.5-coder-1.5b >"$OUT/server.log" 2>&1 &
+    log "serving the model on 127.0.0.1:$PORT with $SERVER ($THREADS threads)"
+    # One request at a time (concurrency 1 in the config, one slot), so consecutive questions
+    # about one house reuse the cached prefix (system text and house description).
+    case "$SERVER" in
+        llama-cpp)
+            "$CACHE/bin/llama-server" --model "$MODEL" --host 127.0.0.1 --port "$PORT" \
+                --ctx-size 8192 --threads "$THREADS" --parallel 1 --jinja \
+                --alias qwen2.5-coder-1.5b >"$OUT/server.log" 2>&1 &
+            ;;
+        llama-cpp-python)
+            # Logprobs need --logits_all True (HTTP 500 otherwise).
+            "$PY" -m llama_cpp.server --model "$MODEL" --host 127.0.0.1 --port "$PORT" \
+                --n_ctx 8192 --n_threads "$THREADS" --logits_all True \
+                --model_alias qwen2.5-coder-1.5b >"$OUT/server.log" 2>&1 &
+            ;;
+        *) log "FERRET_LANE_SERVER=$SERVER: use llama-cpp or llama-cpp-python"; exit 2 ;;
+    esac
     SERVER_PID=$!
     trap stop_server EXIT
     for _ in $(seq 1 120); do

@@ -98,7 +98,7 @@ impl Request {
 
     /// The request `config`'s endpoint receives for `question`.
     pub fn new(config: &EndpointConfig, question: &Question) -> Self {
-        let messages = match config.system_role {
+        let mut messages = match config.system_role {
             SystemRole::System => question.messages.clone(),
             SystemRole::Merge => merge_system(&question.messages),
         };
@@ -107,6 +107,20 @@ impl Request {
             Expect::Location(labels) => Some(("location", location_schema(labels))),
             Expect::Free => None,
         };
+        // A model that is not told to write JSON is pushed into it token by token by the
+        // grammar, from wherever its own answer would have started: Qwen2.5-Coder-1.5B on
+        // llama-server opened with forced spaces and then wrote "100%" where its text answer was
+        // "10%". Saying the format in words, after the prompt's own instruction, lets it write
+        // the JSON it is constrained to.
+        if config.answer_format != AnswerFormat::Text
+            && let Some((field, _)) = &schema
+            && let Some(last) = messages
+                .iter_mut()
+                .rev()
+                .find(|m| m.role == MessageRole::User)
+        {
+            last.content.push_str(&json_instruction(field));
+        }
         let response_format = schema.and_then(|(name, schema)| match config.answer_format {
             AnswerFormat::Text => None,
             AnswerFormat::JsonSchema => Some(json!({
@@ -125,6 +139,18 @@ impl Request {
             response_format,
             top_logprobs,
         }
+    }
+}
+
+/// The line appended to the question in JSON answer formats.
+pub fn json_instruction(field: &str) -> String {
+    match field {
+        "percent" => {
+            "\nReply with JSON only: {\"percent\": \"<a percentage from 1% to 100%>\"}".into()
+        }
+        _ => format!(
+            "\nReply with JSON only: {{\"{field}\": \"<one {field} from the list, written as in the list>\"}}"
+        ),
     }
 }
 
@@ -243,6 +269,34 @@ mod tests {
         };
         let r = Request::new(&c, &ping);
         assert_eq!((r.response_format, r.top_logprobs), (None, None));
+    }
+
+    #[test]
+    fn json_formats_say_the_format_in_words_and_text_does_not() {
+        let mut c = EndpointConfig::new("http://x/v1", "m");
+        assert_eq!(Request::new(&c, &q()).messages, q().messages);
+        for format in [AnswerFormat::JsonSchema, AnswerFormat::JsonObject] {
+            c.answer_format = format;
+            let r = Request::new(&c, &q());
+            assert_eq!(r.messages[0], q().messages[0], "the role text is untouched");
+            assert!(
+                r.messages[1]
+                    .content
+                    .starts_with("How likely?\nReply with JSON only: {\"percent\"")
+            );
+            let direct = Question {
+                expect: Expect::Location(vec!["bed in the bedroom".into()]),
+                ..q()
+            };
+            let m = Request::new(&c, &direct).messages;
+            assert!(m[1].content.contains("{\"location\":"), "{}", m[1].content);
+            // A ping is never constrained, so it is not told to write JSON.
+            let ping = Question {
+                expect: Expect::Free,
+                ..q()
+            };
+            assert_eq!(Request::new(&c, &ping).messages, q().messages);
+        }
     }
 
     #[test]

@@ -4,7 +4,8 @@
 //! give `P_S(target, container)` ([`LikelihoodSource`]: a learned [`Prior`], [`Uniform`], the
 //! oracle), policies that map a belief to the next container ([`Policy`]: the exact expected-cost
 //! [`Planner`], the optimistic greedy baseline, the oracle), named [`Strategy`]s built from spec
-//! strings through a [`StrategyRegistry`], the trial simulator ([`run_trial`]) and offline replay
+//! strings through a [`StrategyRegistry`], a trial step by step ([`Search`], what a robot loop
+//! drives), the trial simulator built on it ([`run_trial`]) and offline replay
 //! ([`replay_cost`]), and the [`Calibration`] of a likelihood source against the ground truth.
 //! It depends only on the world crate; LLM-backed sources and policies plug in
 //! from the llm crate through the same traits.
@@ -31,8 +32,9 @@ pub use probability::Probability;
 pub use protocol::{
     ContainerSet, DrawMode, InitialBelief, Protocol, ProtocolName, ReplayMode, TargetSet,
 };
-pub use replay::{hindsight_truth, replay_cost, replay_cost_with};
+pub use replay::{hindsight_truth, replay_cost, replay_cost_with, replay_costs};
 pub use strategy::{ModelStrategy, Strategy, StrategyRegistry, StrategySpec, TrialContext};
 pub use trial::{
-    TrialOutcome, TrialSpec, TrialsPerHouse, draw_trial, draw_trials, draw_trials_with, run_trial,
+    Search, TrialOutcome, TrialSpec, TrialsPerHouse, draw_trial, draw_trials, draw_trials_with,
+    run_trial,
 };

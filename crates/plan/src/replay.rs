@@ -78,3 +78,31 @@ pub fn replay_cost(
         }),
     }
 }
+
+/// The replay costs of every candidate on a finished trial, as selection needs them after each
+/// deployment: entry `chosen` is the deployed strategy's own `cost`, the others are replayed
+/// under `mode`. `ferret deploy` and `ferret serve` both call this.
+#[allow(clippy::too_many_arguments)]
+pub fn replay_costs(
+    mode: ReplayMode,
+    candidates: &[std::sync::Arc<dyn Strategy>],
+    chosen: usize,
+    cost: f64,
+    house: &House,
+    truth: &GroundTruth,
+    distances: &Distances,
+    trial: &TrialSpec,
+    found: usize,
+) -> Result<Vec<f64>, PlanError> {
+    candidates
+        .iter()
+        .enumerate()
+        .map(|(j, s)| {
+            if j == chosen {
+                Ok(cost)
+            } else {
+                replay_cost_with(mode, s.as_ref(), house, truth, distances, trial, found)
+            }
+        })
+        .collect()
+}

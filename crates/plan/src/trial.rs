@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::belief::Belief;
 use crate::error::PlanError;
+use crate::policy::Policy;
 use crate::protocol::{InitialBelief, Protocol, TargetSet};
 use crate::strategy::{Strategy, TrialContext};
 
@@ -269,6 +270,99 @@ impl TrialOutcome {
     }
 }
 
+/// One trial in progress, one search at a time: what a robot loop drives (ask for the next
+/// container, go there, report what was seen). The simulator [`run_trial`] is this loop with the
+/// ground truth answering, so a robot and a simulation cannot plan differently.
+pub struct Search<'a> {
+    strategy: &'a dyn Strategy,
+    policy: Box<dyn Policy + 'a>,
+    belief: Belief<'a>,
+}
+
+impl<'a> Search<'a> {
+    /// Starts `strategy` on a trial for `target` from the house's start. `revealed` are
+    /// containers known before the trial, with what they hold. `truth` is read only by
+    /// strategies that declare [`needs_ground_truth`](Strategy::needs_ground_truth) (the oracle);
+    /// such a strategy fails without it.
+    pub fn start(
+        strategy: &'a dyn Strategy,
+        house: &'a House,
+        distances: &'a Distances,
+        target: &'a ObjectType,
+        truth: Option<&'a GroundTruth>,
+        revealed: impl IntoIterator<Item = (usize, Vec<ObjectType>)>,
+    ) -> Result<Self, PlanError> {
+        let ctx = TrialContext {
+            house,
+            distances,
+            target,
+            truth: if strategy.needs_ground_truth() {
+                Some(truth.ok_or_else(|| PlanError::BadChoice {
+                    policy: strategy.name().into(),
+                    container: 0,
+                    why: "unusable: the strategy needs the ground truth and none is known",
+                })?)
+            } else {
+                None
+            },
+        };
+        let policy = strategy.policy(&ctx)?;
+        let mut belief = Belief::new(house, distances, target);
+        for (c, contents) in revealed {
+            belief.reveal(c, contents);
+        }
+        Ok(Self {
+            strategy,
+            policy,
+            belief,
+        })
+    }
+
+    /// The container to search next, or `None` when every container has been searched.
+    ///
+    /// # Errors
+    /// The policy's own failures, and a choice of a container that does not exist or was
+    /// already searched.
+    pub fn next_container(&mut self) -> Result<Option<usize>, PlanError> {
+        if self.belief.unsearched_count() == 0 {
+            return Ok(None);
+        }
+        let c = self.policy.choose(&self.belief)?;
+        self.check(c)?;
+        Ok(Some(c))
+    }
+
+    /// Records that container `c` was searched and held `seen`; returns the distance of the leg
+    /// on the map, metres. The robot may search another container than the one proposed.
+    ///
+    /// # Errors
+    /// [`PlanError::BadChoice`] for a container that does not exist or was already searched.
+    pub fn record(&mut self, c: usize, seen: Vec<ObjectType>) -> Result<f64, PlanError> {
+        self.check(c)?;
+        Ok(self.belief.search(c, seen))
+    }
+
+    /// What is known so far.
+    pub fn belief(&self) -> &Belief<'a> {
+        &self.belief
+    }
+
+    fn check(&self, c: usize) -> Result<(), PlanError> {
+        let why = if c >= self.belief.house.containers.len() {
+            "not in the house"
+        } else if self.belief.is_searched(c) {
+            "already searched"
+        } else {
+            return Ok(());
+        };
+        Err(PlanError::BadChoice {
+            policy: self.strategy.name().into(),
+            container: c,
+            why,
+        })
+    }
+}
+
 /// Runs `strategy` on one trial: replans after every search until a container holding the target
 /// is searched or none is left.
 pub fn run_trial(
@@ -278,35 +372,18 @@ pub fn run_trial(
     distances: &Distances,
     trial: &TrialSpec,
 ) -> Result<TrialOutcome, PlanError> {
-    let ctx = TrialContext {
+    let revealed = trial.revealed.iter().map(|&c| (c, contents_of(truth, c)));
+    let mut search = Search::start(
+        strategy,
         house,
         distances,
-        target: &trial.target,
-        truth: strategy.needs_ground_truth().then_some(truth),
-    };
-    let mut policy = strategy.policy(&ctx)?;
-    let mut belief = Belief::new(house, distances, &trial.target);
-    for &c in &trial.revealed {
-        belief.reveal(c, contents_of(truth, c));
-    }
+        &trial.target,
+        Some(truth),
+        revealed,
+    )?;
     let mut found = None;
-    while belief.unsearched_count() > 0 {
-        let c = policy.choose(&belief)?;
-        if c >= house.containers.len() {
-            return Err(PlanError::BadChoice {
-                policy: strategy.name().into(),
-                container: c,
-                why: "not in the house",
-            });
-        }
-        if belief.is_searched(c) {
-            return Err(PlanError::BadChoice {
-                policy: strategy.name().into(),
-                container: c,
-                why: "already searched",
-            });
-        }
-        belief.search(c, contents_of(truth, c));
+    while let Some(c) = search.next_container()? {
+        search.record(c, contents_of(truth, c))?;
         if truth.holds(c, &trial.target) {
             found = Some(c);
             break;
@@ -315,8 +392,8 @@ pub fn run_trial(
     Ok(TrialOutcome {
         strategy: strategy.name().to_string(),
         target: trial.target.clone(),
-        cost: belief.travelled(),
-        searched: belief.searched_in_order().to_vec(),
+        cost: search.belief().travelled(),
+        searched: search.belief().searched_in_order().to_vec(),
         found,
     })
 }

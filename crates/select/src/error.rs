@@ -9,6 +9,9 @@ use thiserror::Error;
 #[derive(Debug, Clone, PartialEq, Error)]
 #[non_exhaustive]
 pub enum SelectError {
+    /// A live deployment cannot be rebuilt from its stored trials, or is used out of order.
+    #[error("live deployment: {0}")]
+    Live(String),
     /// A cost table or selector needs at least one candidate strategy.
     #[error("no candidate strategies")]
     NoStrategies,

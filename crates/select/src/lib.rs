@@ -8,6 +8,8 @@
 //!   [`Selector::observe`] its cost and the replay costs. Implemented by [`Ucb`] (paper eq. 2) and
 //!   [`ReplaySelection`] (paper eq. 5). The same trait drives the live robot loop and the
 //!   experiment, so they cannot drift apart.
+//! * [`LiveDeployment`]: the selector between a robot's trials, rebuilt exactly from its stored
+//!   finished trials after a restart (`ferret deploy` and `ferret serve`).
 //! * [`CostTable`]: real and replay costs of every candidate on one trial per house.
 //! * [`run_experiment`]: the paper's deployment experiment (section VI-C) on a table: average cost
 //!   and cumulative regret against the best single strategy, per trial count `k`.
@@ -16,6 +18,7 @@
 
 mod error;
 mod experiment;
+mod live;
 mod render;
 mod selector;
 mod table;
@@ -25,6 +28,7 @@ pub use experiment::{
     Deployment, ExperimentOptions, ExperimentResult, MAX_EXPERIMENT_TRIALS, MethodRun,
     MethodSummary, run_experiment, run_selector,
 };
+pub use live::{FinishedTrial, LiveDeployment, StrategyStats, TrialEnd};
 pub use render::{
     ChoiceRow, PAPER_KS, SelectionRow, choice_rows, selection_rows, selection_table_markdown,
     strategy_table_markdown,

@@ -380,7 +380,11 @@ impl Selector for ReplaySelection {
 
 /// Index of the smallest `score(i)` for `i in 0..n`; exact ties are broken uniformly with `rng`,
 /// which is drawn from only when there is a tie. NaN scores are never chosen unless all are NaN.
-fn argmin_random_tie(n: usize, score: impl Fn(usize) -> f64, rng: &mut dyn RngCore) -> usize {
+pub(crate) fn argmin_random_tie(
+    n: usize,
+    score: impl Fn(usize) -> f64,
+    rng: &mut dyn RngCore,
+) -> usize {
     let mut best: Option<(f64, usize)> = None;
     let mut ties = 0usize;
     for i in 0..n {

@@ -7,9 +7,11 @@ use std::sync::Arc;
 
 use anyhow::{Result, bail};
 use ferret_plan::{
-    DrawMode, Protocol, Strategy, TrialsPerHouse, draw_trials_with, replay_cost_with, run_trial,
+    DrawMode, Protocol, Strategy, TrialSpec, TrialsPerHouse, draw_trials_with, replay_costs,
+    run_trial,
 };
-use ferret_select::{Method, ORACLE};
+use ferret_select::{LiveDeployment, Method, ORACLE};
+use ferret_world::ObjectType;
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -36,9 +38,9 @@ pub struct Args {
     /// Candidate strategies, comma separated (the oracle is never a candidate).
     #[arg(long, value_delimiter = ',', default_value = DEFAULT_STRATEGIES)]
     strategies: Vec<String>,
-    /// Number of trials.
-    #[arg(long, default_value_t = 20)]
-    trials: usize,
+    /// Number of trials [default: 20, or the number of types to --find].
+    #[arg(long)]
+    trials: Option<usize>,
     /// Selection method: `replay` or `ucb`.
     #[arg(long, default_value = "replay")]
     method: Method,
@@ -49,7 +51,14 @@ pub struct Args {
     /// them, picked at random, in a house of its own. 1 is the paper's draw.
     #[arg(long, value_name = "N|all", default_value = "1")]
     trials_per_house: TrialsPerHouse,
-    /// Seed of the house order, targets and tie breaks.
+    /// Object types to find, in order, comma separated (e.g. `Blanket,CellPhone`): trial k looks
+    /// for the k-th in house k (cycling through the houses in file order), as a robot in one home
+    /// would. `--trials` defaults to their number. Without it, houses are shuffled and targets
+    /// drawn.
+    #[arg(long, value_delimiter = ',', value_name = "TYPES")]
+    find: Vec<String>,
+    /// Seed of the house order and targets, and of the selector's tie breaks (its own stream,
+    /// as in `ferret serve`).
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Output directory.
@@ -76,8 +85,19 @@ pub fn run(args: Args) -> Result<ExitCode> {
     args.planning.validate()?;
     crate::common::check_distinct("--strategies", &args.strategies)?;
     let protocol = args.protocol.resolve(Protocol::FERRET)?;
-    if args.trials == 0 {
+    let trials = args.trials.unwrap_or(if args.find.is_empty() {
+        20
+    } else {
+        args.find.len()
+    });
+    if trials == 0 {
         bail!("--trials 0: a deployment needs at least one trial");
+    }
+    if !args.find.is_empty() && trials > args.find.len() {
+        bail!(
+            "--trials {trials} but only {} types to --find: give one per trial",
+            args.find.len()
+        );
     }
     if !(args.c.is_finite() && args.c >= 0.0) {
         bail!("--c {}: must be a finite number ≥ 0 m", args.c);
@@ -96,27 +116,32 @@ pub fn run(args: Args) -> Result<ExitCode> {
     if candidates.len() < 2 {
         bail!("a deployment needs at least two candidate strategies");
     }
-    if protocol.draw == DrawMode::Distinct && args.trials > loaded.scenes.len() {
+    let given_targets = !args.find.is_empty();
+    if !given_targets && protocol.draw == DrawMode::Distinct && trials > loaded.scenes.len() {
         bail!(
             "{} trials need {} distinct houses; {} has {}",
-            args.trials,
-            args.trials,
+            trials,
+            trials,
             loaded.source,
             loaded.scenes.len()
         );
     }
     let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
-    let order: Vec<usize> = match protocol.draw {
-        DrawMode::Distinct => {
-            let mut order: Vec<usize> = (0..loaded.scenes.len()).collect();
-            order.shuffle(&mut rng);
-            order
+    let order: Vec<usize> = if given_targets {
+        (0..trials).map(|k| k % loaded.scenes.len()).collect()
+    } else {
+        match protocol.draw {
+            DrawMode::Distinct => {
+                let mut order: Vec<usize> = (0..loaded.scenes.len()).collect();
+                order.shuffle(&mut rng);
+                order
+            }
+            DrawMode::Replacement => (0..trials)
+                .map(|_| rng.random_range(0..loaded.scenes.len()))
+                .collect(),
         }
-        DrawMode::Replacement => (0..args.trials)
-            .map(|_| rng.random_range(0..loaded.scenes.len()))
-            .collect(),
     };
-    let mut selector = args.method.selector(candidates.len(), args.c)?;
+    let mut deployment = LiveDeployment::new(args.method, candidates.len(), args.c, args.seed)?;
     let params = args.grid.params();
     let mut rows = Vec::new();
     let mut total = 0.0;
@@ -124,7 +149,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         "{:>3}  {:<36} {:<16} {:<34} {:>8} {:>9}",
         "k", "house", "target", "chosen", "cost m", "avg m"
     );
-    for (k, &h) in order.iter().take(args.trials).enumerate() {
+    for (k, &h) in order.iter().take(trials).enumerate() {
         let scene = &loaded.scenes[h];
         let (_, distances) = match ferret_world::distance::build(&scene.house, &params) {
             Ok(m) => m,
@@ -133,22 +158,37 @@ pub fn run(args: Args) -> Result<ExitCode> {
                 continue;
             }
         };
-        let mut trials = draw_trials_with(
-            &scene.house,
-            &scene.truth,
-            args.seed,
-            0.0,
-            args.trials_per_house,
-            &protocol,
-        )?;
-        // One trial is the paper's draw; the generator is touched only when there is a choice,
-        // so single-target deployments are as before.
-        let pick = match args.trials_per_house {
-            TrialsPerHouse::One => 0,
-            _ => rng.random_range(0..trials.len()),
+        let trial = if given_targets {
+            let target = ObjectType::new(args.find[k].trim());
+            if scene.truth.goal_containers(&target).is_empty() {
+                bail!(
+                    "{}: no container holds {target}, so trial {} cannot end",
+                    scene.house.name,
+                    k + 1
+                );
+            }
+            TrialSpec {
+                target,
+                revealed: Vec::new(),
+            }
+        } else {
+            let mut drawn = draw_trials_with(
+                &scene.house,
+                &scene.truth,
+                args.seed,
+                0.0,
+                args.trials_per_house,
+                &protocol,
+            )?;
+            // One trial is the paper's draw; the generator is touched only when there is a
+            // choice, so single-target deployments are as before.
+            let pick = match args.trials_per_house {
+                TrialsPerHouse::One => 0,
+                _ => rng.random_range(0..drawn.len()),
+            };
+            drawn.swap_remove(pick)
         };
-        let trial = trials.swap_remove(pick);
-        let i = selector.choose(&mut rng);
+        let i = deployment.choose();
         let outcome = run_trial(
             candidates[i].as_ref(),
             &scene.house,
@@ -163,26 +203,18 @@ pub fn run(args: Args) -> Result<ExitCode> {
                 trial.target
             );
         };
-        let replays: Vec<f64> = candidates
-            .iter()
-            .enumerate()
-            .map(|(j, s)| {
-                if j == i {
-                    Ok(outcome.cost)
-                } else {
-                    replay_cost_with(
-                        protocol.replay,
-                        s.as_ref(),
-                        &scene.house,
-                        &scene.truth,
-                        &distances,
-                        &trial,
-                        found,
-                    )
-                }
-            })
-            .collect::<Result<_, _>>()?;
-        selector.observe(i, outcome.cost, &replays)?;
+        let replays = replay_costs(
+            protocol.replay,
+            &candidates,
+            i,
+            outcome.cost,
+            &scene.house,
+            &scene.truth,
+            &distances,
+            &trial,
+            found,
+        )?;
+        deployment.finish(outcome.cost, &replays)?;
         total += outcome.cost;
         let row = DeployRow {
             k: k + 1,

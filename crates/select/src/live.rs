@@ -1,0 +1,292 @@
+//! A live deployment: the selector between a robot's trials. It picks the strategy for the next
+//! trial and learns from each finished one (its cost and every candidate's replay cost).
+//!
+//! Everything it knows is the list of finished trials and its seed, so it can be rebuilt exactly
+//! from storage after a restart: [`LiveDeployment::restore`] replays the same choices, drawing the
+//! same tie-breaks from the same random stream. `ferret deploy` and `ferret serve` both drive it.
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::SelectError;
+use crate::selector::{Method, Selector};
+
+/// A finished trial as selection sees it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FinishedTrial {
+    /// Index of the deployed strategy.
+    pub chosen: usize,
+    /// Its cost, metres.
+    pub cost: f64,
+    /// Every candidate's replay cost on this trial (entry `chosen` equals `cost`).
+    pub replays: Vec<f64>,
+}
+
+/// How a trial of a live deployment ended.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum TrialEnd {
+    /// The target was found; selection learned from it.
+    Finished(FinishedTrial),
+    /// It ended without a cost to learn from (the target was nowhere); only its choice is kept,
+    /// since making that choice may have drawn a tie-break.
+    Abandoned {
+        /// Index of the strategy that was chosen.
+        chosen: usize,
+    },
+}
+
+/// Per-strategy statistics of a deployment.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StrategyStats {
+    /// Trials in which this strategy was deployed (`n_i`).
+    pub deployed: usize,
+    /// Mean cost over those trials, metres; `None` before its first.
+    pub mean_cost: Option<f64>,
+    /// Mean over all trials of its real cost where deployed and its replay cost elsewhere
+    /// (`None` before the first trial).
+    pub replay_mean: Option<f64>,
+    /// Its selection score for the next trial (lower is chosen; `-inf` means "must be tried",
+    /// serialized as `null` in JSON).
+    pub score: f64,
+}
+
+/// A live deployment's selector state.
+pub struct LiveDeployment {
+    method: Method,
+    c: f64,
+    seed: u64,
+    selector: Box<dyn Selector + Send>,
+    rng: ChaCha8Rng,
+    finished: Vec<FinishedTrial>,
+    history: Vec<TrialEnd>,
+    /// The choice made for the trial in progress, if any.
+    pending: Option<usize>,
+}
+
+impl std::fmt::Debug for LiveDeployment {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LiveDeployment")
+            .field("method", &self.method)
+            .field("c", &self.c)
+            .field("seed", &self.seed)
+            .field("finished", &self.finished.len())
+            .field("pending", &self.pending)
+            .finish()
+    }
+}
+
+impl LiveDeployment {
+    /// A new deployment over `strategies` candidates.
+    ///
+    /// # Errors
+    /// No strategies, or `c` negative or not finite.
+    pub fn new(method: Method, strategies: usize, c: f64, seed: u64) -> Result<Self, SelectError> {
+        Ok(Self {
+            method,
+            c,
+            seed,
+            selector: method.selector(strategies, c)?,
+            rng: ChaCha8Rng::seed_from_u64(seed),
+            finished: Vec::new(),
+            history: Vec::new(),
+            pending: None,
+        })
+    }
+
+    /// Rebuilds a deployment from how its trials ended (in order) and, if one is in progress,
+    /// the strategy chosen for it. The choices are made again and must match the stored ones.
+    ///
+    /// # Errors
+    /// [`SelectError::Live`] when a stored choice differs from the one the selector makes now
+    /// (the stored data or the code changed), and the errors of [`LiveDeployment::finish`].
+    pub fn restore(
+        method: Method,
+        strategies: usize,
+        c: f64,
+        seed: u64,
+        history: &[TrialEnd],
+        pending: Option<usize>,
+    ) -> Result<Self, SelectError> {
+        let mut d = Self::new(method, strategies, c, seed)?;
+        for (k, end) in history.iter().enumerate() {
+            let again = d.choose();
+            let stored = match end {
+                TrialEnd::Finished(t) => t.chosen,
+                TrialEnd::Abandoned { chosen } => *chosen,
+            };
+            if again != stored {
+                return Err(SelectError::Live(format!(
+                    "trial {}: stored choice {stored} but the selector now chooses {again}",
+                    k + 1
+                )));
+            }
+            match end {
+                TrialEnd::Finished(t) => d.finish(t.cost, &t.replays)?,
+                TrialEnd::Abandoned { .. } => d.abandon()?,
+            }
+        }
+        if let Some(p) = pending {
+            let again = d.choose();
+            if again != p {
+                return Err(SelectError::Live(format!(
+                    "open trial: stored choice {p} but the selector now chooses {again}"
+                )));
+            }
+        }
+        Ok(d)
+    }
+
+    /// Ends the trial in progress without learning from it.
+    ///
+    /// # Errors
+    /// No trial in progress.
+    pub fn abandon(&mut self) -> Result<(), SelectError> {
+        let chosen = self.pending.take().ok_or_else(|| {
+            SelectError::Live("no trial in progress: choose a strategy first".into())
+        })?;
+        self.history.push(TrialEnd::Abandoned { chosen });
+        Ok(())
+    }
+
+    /// How every trial so far ended, in order.
+    pub fn history(&self) -> &[TrialEnd] {
+        &self.history
+    }
+
+    /// The strategy for the next trial. Asking again before [`finish`](Self::finish) returns the
+    /// same choice.
+    pub fn choose(&mut self) -> usize {
+        if let Some(p) = self.pending {
+            return p;
+        }
+        let i = self.selector.choose(&mut self.rng);
+        self.pending = Some(i);
+        i
+    }
+
+    /// What [`choose`](Self::choose) would return, without committing to it.
+    pub fn peek(&self) -> usize {
+        match self.pending {
+            Some(p) => p,
+            None => {
+                let mut rng = self.rng.clone();
+                crate::selector::argmin_random_tie(
+                    self.selector.n_strategies(),
+                    |i| self.selector.score(i),
+                    &mut rng,
+                )
+            }
+        }
+    }
+
+    /// Records the trial in progress: its strategy cost `cost` metres and the candidates' replay
+    /// costs (`replays[chosen]` is ignored in favour of `cost`).
+    ///
+    /// # Errors
+    /// No trial in progress, a non-finite cost, replays of the wrong length.
+    pub fn finish(&mut self, cost: f64, replays: &[f64]) -> Result<(), SelectError> {
+        let chosen = self.pending.ok_or_else(|| {
+            SelectError::Live("no trial in progress: choose a strategy first".into())
+        })?;
+        self.selector.observe(chosen, cost, replays)?;
+        let mut replays = replays.to_vec();
+        if let Some(r) = replays.get_mut(chosen) {
+            *r = cost;
+        }
+        let trial = FinishedTrial {
+            chosen,
+            cost,
+            replays,
+        };
+        self.history.push(TrialEnd::Finished(trial.clone()));
+        self.finished.push(trial);
+        self.pending = None;
+        Ok(())
+    }
+
+    /// The selection method.
+    pub fn method(&self) -> Method {
+        self.method
+    }
+
+    /// The exploration constant, metres.
+    pub fn c(&self) -> f64 {
+        self.c
+    }
+
+    /// The seed of the tie-breaking stream.
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    /// The finished trials, in order.
+    pub fn finished(&self) -> &[FinishedTrial] {
+        &self.finished
+    }
+
+    /// The choice of the trial in progress.
+    pub fn pending(&self) -> Option<usize> {
+        self.pending
+    }
+
+    /// Per-strategy statistics and scores for the next choice.
+    pub fn stats(&self) -> Vec<StrategyStats> {
+        let n = self.selector.n_strategies();
+        let k = self.finished.len();
+        (0..n)
+            .map(|i| {
+                let own: Vec<f64> = self
+                    .finished
+                    .iter()
+                    .filter(|t| t.chosen == i)
+                    .map(|t| t.cost)
+                    .collect();
+                let replay_sum: f64 = self
+                    .finished
+                    .iter()
+                    .map(|t| t.replays.get(i).copied().unwrap_or(f64::NAN))
+                    .sum();
+                StrategyStats {
+                    deployed: own.len(),
+                    mean_cost: (!own.is_empty())
+                        .then(|| own.iter().sum::<f64>() / own.len() as f64),
+                    replay_mean: (k > 0).then(|| replay_sum / k as f64),
+                    score: self.selector.score(i),
+                }
+            })
+            .collect()
+    }
+
+    /// Why [`peek`](Self::peek) picks what it picks, in one sentence.
+    pub fn why(&self, names: &[String]) -> String {
+        let next = self.peek();
+        let name = names.get(next).map_or("?", String::as_str);
+        if self.pending.is_some() {
+            return format!("{name} was chosen for the trial in progress");
+        }
+        let stats = self.stats();
+        let s = &stats[next];
+        if self.finished.is_empty() {
+            return format!(
+                "{name}: nothing is known before the first trial, so the choice is uniform"
+            );
+        }
+        match (self.method, s.score) {
+            (Method::Ucb, score) if score == f64::NEG_INFINITY => {
+                format!("{name}: UCB deploys every strategy once, and it has not been deployed")
+            }
+            (Method::Ucb, score) => format!(
+                "{name}: lowest UCB score {score:.2} m (mean cost {:.2} m over {} trial(s), less the exploration bonus)",
+                s.mean_cost.unwrap_or(f64::NAN),
+                s.deployed
+            ),
+            (Method::ReplaySelection, score) => format!(
+                "{name}: lowest replay-selection score {score:.2} m (replay mean {:.2} m over {} trial(s); deployed {} time(s))",
+                s.replay_mean.unwrap_or(f64::NAN),
+                self.finished.len(),
+                s.deployed
+            ),
+        }
+    }
+}

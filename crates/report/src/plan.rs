@@ -487,11 +487,13 @@ fn short_id(id: &str, type_name: &str) -> String {
 /// The name a container is labelled with: type words and short id.
 pub(crate) fn container_name(house: &House, i: usize) -> String {
     let c = &house.containers[i];
-    format!(
-        "{} {}",
-        c.object_type.words(),
-        short_id(&c.id, c.object_type.as_str())
-    )
+    let words = c.object_type.words();
+    // Scene files name containers in words (`dining_table`): the type alone says it.
+    let id_words = c.id.replace(['_', '-'], " ").to_lowercase();
+    if id_words == words || id_words == words.replace(' ', "") {
+        return words;
+    }
+    format!("{words} {}", short_id(&c.id, c.object_type.as_str()))
 }
 
 fn wrap_items(

@@ -214,8 +214,8 @@ impl SceneFile {
         file.to_scene(path, map)
     }
 
-    /// The scene as ferret's house and ground truth. `file` names the scene in errors and becomes
-    /// the house's name prefix; `map` is the loaded map when the scene names one.
+    /// The scene as ferret's house (named as the scene) and ground truth. `file` names the scene
+    /// in errors; `map` is the loaded map when the scene names one.
     ///
     /// # Errors
     /// [`WorldError::Scene`] naming the field: duplicate or empty ids, polygons with fewer than
@@ -448,7 +448,7 @@ impl SceneFile {
             ));
         }
         let house = House {
-            name: format!("{} ({})", self.name, file.display()),
+            name: self.name.clone(),
             index: 0,
             rooms,
             walls,
@@ -457,7 +457,7 @@ impl SceneFile {
             obstacles,
             start: Pose {
                 position: start,
-                yaw_deg: -self.start[2],
+                yaw_deg: heading_from_ros(self.start[2]),
             },
             map,
         };
@@ -504,6 +504,17 @@ fn footprint(pose: [f64; 3], size: Option<[f64; 2]>) -> std::result::Result<Foot
         size_z: sz,
         yaw_deg: -pose[2],
     })
+}
+
+/// A robot heading in ferret's (ProcTHOR's) convention, degrees clockwise from +z, from a map
+/// frame yaw, degrees counter-clockwise from +x.
+pub fn heading_from_ros(yaw_deg: f64) -> f64 {
+    90.0 - yaw_deg
+}
+
+/// The map-frame yaw of a ferret heading (the inverse of [`heading_from_ros`]).
+pub fn heading_to_ros(heading_deg: f64) -> f64 {
+    90.0 - heading_deg
 }
 
 /// True when `p` lies on segment `a`–`b` (within 1 cm).

@@ -1,0 +1,546 @@
+//! The service's memory: one SQLite file in WAL mode with `synchronous = FULL`, so a row is on
+//! disk before the reply that reports it leaves the server. Everything the service knows is
+//! derived from these rows (a trial's belief from its observations, a deployment's selector from
+//! its finished trials), which is what makes a `kill -9` harmless.
+
+use std::path::Path;
+use std::sync::{Mutex, MutexGuard};
+use std::time::Duration;
+
+use ferret_select::Method;
+use rusqlite::{Connection, OptionalExtension, Transaction, params};
+use serde::{Deserialize, Serialize};
+
+/// Storage failures (the disk, not the request).
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    /// SQLite refused.
+    #[error("database {file}: {source}")]
+    Sql {
+        /// The database file.
+        file: String,
+        /// SQLite's error.
+        #[source]
+        source: rusqlite::Error,
+    },
+    /// A stored row does not parse (the file was edited or written by another version).
+    #[error("database {file}: {what}")]
+    Corrupt {
+        /// The database file.
+        file: String,
+        /// What is wrong.
+        what: String,
+    },
+}
+
+/// How a deployment was created.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DeploymentSpec {
+    /// Candidate strategies, by name.
+    pub strategies: Vec<String>,
+    /// Selection method.
+    pub selector: Method,
+    /// Exploration constant, metres.
+    pub c: f64,
+    /// Seed of the selector's tie breaks.
+    pub seed: u64,
+}
+
+/// A stored deployment.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DeploymentRow {
+    /// Its id.
+    pub id: i64,
+    /// How it was created.
+    pub spec: DeploymentSpec,
+}
+
+/// Where a trial stands.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum TrialStatus {
+    /// The robot is searching.
+    Searching,
+    /// The target was found; the trial counts for selection.
+    Done,
+    /// Every container was searched without finding the target; the trial does not count.
+    Exhausted,
+}
+
+impl TrialStatus {
+    fn as_str(self) -> &'static str {
+        match self {
+            TrialStatus::Searching => "searching",
+            TrialStatus::Done => "done",
+            TrialStatus::Exhausted => "exhausted",
+        }
+    }
+
+    fn parse(s: &str) -> Option<Self> {
+        match s {
+            "searching" => Some(TrialStatus::Searching),
+            "done" => Some(TrialStatus::Done),
+            "exhausted" => Some(TrialStatus::Exhausted),
+            _ => None,
+        }
+    }
+}
+
+/// A stored trial.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrialRow {
+    /// Its id.
+    pub id: i64,
+    /// Its deployment.
+    pub deployment: i64,
+    /// 1-based position in the deployment.
+    pub k: i64,
+    /// The scene's name.
+    pub scene: String,
+    /// The target type.
+    pub target: String,
+    /// The robot's pose at the start, when given (else the scene's start).
+    pub pose: Option<[f64; 3]>,
+    /// Index of the chosen strategy in the deployment's list.
+    pub chosen: usize,
+    /// Where it stands.
+    pub status: TrialStatus,
+    /// Map-distance cost, metres, once ended.
+    pub cost: Option<f64>,
+    /// Every candidate's replay cost (entry `chosen` = `cost`), once done.
+    pub replays: Option<Vec<f64>>,
+}
+
+/// One search reported by the robot.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ObservationRow {
+    /// The container's id.
+    pub container: String,
+    /// Whether the target was there.
+    pub found: bool,
+    /// Other object types seen in it.
+    pub objects: Vec<String>,
+    /// The robot's own odometry for the leg, when reported.
+    pub travelled: Option<f64>,
+    /// The leg's map distance, metres.
+    pub leg: f64,
+}
+
+/// A stored reply to a request with a `request_id`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StoredReply {
+    /// SHA-256 of route and body, to tell a retry from a reuse of the id.
+    pub fingerprint: String,
+    /// HTTP status.
+    pub status: u16,
+    /// JSON body.
+    pub body: String,
+}
+
+/// The database.
+pub struct Store {
+    conn: Mutex<Connection>,
+    file: String,
+}
+
+const SCHEMA: &str = "
+CREATE TABLE IF NOT EXISTS scenes (
+    name TEXT PRIMARY KEY, body TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS deployments (
+    id INTEGER PRIMARY KEY AUTOINCREMENT, spec TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS trials (
+    id INTEGER PRIMARY KEY AUTOINCREMENT,
+    deployment INTEGER NOT NULL REFERENCES deployments(id),
+    k INTEGER NOT NULL, scene TEXT NOT NULL, target TEXT NOT NULL, pose TEXT,
+    chosen INTEGER NOT NULL, status TEXT NOT NULL, cost REAL, replays TEXT,
+    UNIQUE (deployment, k));
+CREATE TABLE IF NOT EXISTS observations (
+    trial INTEGER NOT NULL REFERENCES trials(id), seq INTEGER NOT NULL,
+    container TEXT NOT NULL, found INTEGER NOT NULL, objects TEXT NOT NULL,
+    travelled REAL, leg REAL NOT NULL,
+    PRIMARY KEY (trial, seq));
+CREATE TABLE IF NOT EXISTS requests (
+    id TEXT PRIMARY KEY, fingerprint TEXT NOT NULL, status INTEGER NOT NULL, body TEXT NOT NULL);
+";
+
+impl Store {
+    /// Opens (creating if needed) the database at `path`.
+    ///
+    /// # Errors
+    /// The file cannot be opened or is not a ferret database.
+    pub fn open(path: &Path) -> Result<Store, StoreError> {
+        let file = path.display().to_string();
+        let conn = Connection::open(path).map_err(|source| StoreError::Sql {
+            file: file.clone(),
+            source,
+        })?;
+        Self::init(conn, file)
+    }
+
+    /// A database in memory (tests, benchmarks).
+    ///
+    /// # Errors
+    /// SQLite cannot allocate it.
+    pub fn in_memory() -> Result<Store, StoreError> {
+        let conn = Connection::open_in_memory().map_err(|source| StoreError::Sql {
+            file: ":memory:".into(),
+            source,
+        })?;
+        Self::init(conn, ":memory:".into())
+    }
+
+    fn init(conn: Connection, file: String) -> Result<Store, StoreError> {
+        let sql = |source| StoreError::Sql {
+            file: file.clone(),
+            source,
+        };
+        conn.busy_timeout(Duration::from_secs(10)).map_err(sql)?;
+        if file != ":memory:" {
+            let mode: String = conn
+                .pragma_update_and_check(None, "journal_mode", "WAL", |row| row.get(0))
+                .map_err(sql)?;
+            if !mode.eq_ignore_ascii_case("wal") {
+                return Err(StoreError::Corrupt {
+                    file,
+                    what: format!("journal mode {mode}, WAL needed"),
+                });
+            }
+        }
+        // FULL: a committed row survives a crash of the machine, not only of the process.
+        conn.pragma_update(None, "synchronous", "FULL")
+            .map_err(sql)?;
+        conn.pragma_update(None, "foreign_keys", "ON")
+            .map_err(sql)?;
+        conn.execute_batch(SCHEMA).map_err(sql)?;
+        Ok(Store {
+            conn: Mutex::new(conn),
+            file,
+        })
+    }
+
+    fn lock(&self) -> MutexGuard<'_, Connection> {
+        // A panic while holding the lock cannot leave a half-written transaction (it rolls back
+        // on drop), so the connection is still good.
+        self.conn
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    fn sql(&self, source: rusqlite::Error) -> StoreError {
+        StoreError::Sql {
+            file: self.file.clone(),
+            source,
+        }
+    }
+
+    fn corrupt(&self, what: String) -> StoreError {
+        StoreError::Corrupt {
+            file: self.file.clone(),
+            what,
+        }
+    }
+
+    /// Reads with the connection.
+    pub fn read<T>(
+        &self,
+        f: impl FnOnce(&Reader<'_>) -> Result<T, StoreError>,
+    ) -> Result<T, StoreError> {
+        let conn = self.lock();
+        f(&Reader {
+            conn: &conn,
+            store: self,
+        })
+    }
+
+    /// Runs `f` in one transaction, committed when it returns `Ok`, rolled back otherwise.
+    pub fn write<T, E: From<StoreError>>(
+        &self,
+        f: impl FnOnce(&Writer<'_>) -> Result<T, E>,
+    ) -> Result<T, E> {
+        let mut conn = self.lock();
+        let tx = conn.transaction().map_err(|e| self.sql(e))?;
+        let out = f(&Writer {
+            tx: &tx,
+            store: self,
+        })?;
+        tx.commit().map_err(|e| self.sql(e))?;
+        Ok(out)
+    }
+}
+
+/// Read access inside [`Store::read`] (also available to writers).
+pub struct Reader<'a> {
+    conn: &'a Connection,
+    store: &'a Store,
+}
+
+/// Write access inside [`Store::write`].
+pub struct Writer<'a> {
+    tx: &'a Transaction<'a>,
+    store: &'a Store,
+}
+
+impl Writer<'_> {
+    /// Reads inside the transaction.
+    pub fn reader(&self) -> Reader<'_> {
+        Reader {
+            conn: self.tx,
+            store: self.store,
+        }
+    }
+
+    /// Stores a scene's text under its name.
+    pub fn insert_scene(&self, name: &str, body: &str) -> Result<(), StoreError> {
+        self.tx
+            .execute(
+                "INSERT INTO scenes (name, body) VALUES (?1, ?2)",
+                params![name, body],
+            )
+            .map_err(|e| self.store.sql(e))?;
+        Ok(())
+    }
+
+    /// Stores a new deployment; returns its id.
+    pub fn insert_deployment(&self, spec: &DeploymentSpec) -> Result<i64, StoreError> {
+        let json = serde_json::to_string(spec).map_err(|e| self.store.corrupt(e.to_string()))?;
+        self.tx
+            .execute("INSERT INTO deployments (spec) VALUES (?1)", params![json])
+            .map_err(|e| self.store.sql(e))?;
+        Ok(self.tx.last_insert_rowid())
+    }
+
+    /// Stores a new trial (status searching); returns its id.
+    pub fn insert_trial(
+        &self,
+        deployment: i64,
+        k: i64,
+        scene: &str,
+        target: &str,
+        pose: Option<[f64; 3]>,
+        chosen: usize,
+    ) -> Result<i64, StoreError> {
+        let pose = pose.map(|p| serde_json::json!(p).to_string());
+        self.tx
+            .execute(
+                "INSERT INTO trials (deployment, k, scene, target, pose, chosen, status)
+                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, 'searching')",
+                params![deployment, k, scene, target, pose, chosen as i64],
+            )
+            .map_err(|e| self.store.sql(e))?;
+        Ok(self.tx.last_insert_rowid())
+    }
+
+    /// Appends an observation as number `seq` (0-based) of `trial`.
+    pub fn insert_observation(
+        &self,
+        trial: i64,
+        seq: usize,
+        o: &ObservationRow,
+    ) -> Result<(), StoreError> {
+        let objects = serde_json::json!(o.objects).to_string();
+        self.tx
+            .execute(
+                "INSERT INTO observations (trial, seq, container, found, objects, travelled, leg)
+                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+                params![
+                    trial,
+                    seq as i64,
+                    o.container,
+                    o.found,
+                    objects,
+                    o.travelled,
+                    o.leg
+                ],
+            )
+            .map_err(|e| self.store.sql(e))?;
+        Ok(())
+    }
+
+    /// Ends a trial.
+    pub fn end_trial(
+        &self,
+        trial: i64,
+        status: TrialStatus,
+        cost: f64,
+        replays: Option<&[f64]>,
+    ) -> Result<(), StoreError> {
+        let replays = replays.map(|r| serde_json::json!(r).to_string());
+        self.tx
+            .execute(
+                "UPDATE trials SET status = ?2, cost = ?3, replays = ?4 WHERE id = ?1",
+                params![trial, status.as_str(), cost, replays],
+            )
+            .map_err(|e| self.store.sql(e))?;
+        Ok(())
+    }
+
+    /// Stores the reply to a request id.
+    pub fn insert_reply(&self, id: &str, reply: &StoredReply) -> Result<(), StoreError> {
+        self.tx
+            .execute(
+                "INSERT INTO requests (id, fingerprint, status, body) VALUES (?1, ?2, ?3, ?4)",
+                params![id, reply.fingerprint, reply.status, reply.body],
+            )
+            .map_err(|e| self.store.sql(e))?;
+        Ok(())
+    }
+}
+
+impl Reader<'_> {
+    /// Every stored scene: `(name, body)`.
+    pub fn scenes(&self) -> Result<Vec<(String, String)>, StoreError> {
+        let mut stmt = self
+            .conn
+            .prepare("SELECT name, body FROM scenes ORDER BY name")
+            .map_err(|e| self.store.sql(e))?;
+        let rows = stmt
+            .query_map([], |r| Ok((r.get(0)?, r.get(1)?)))
+            .map_err(|e| self.store.sql(e))?;
+        rows.collect::<Result<_, _>>()
+            .map_err(|e| self.store.sql(e))
+    }
+
+    /// A deployment by id.
+    pub fn deployment(&self, id: i64) -> Result<Option<DeploymentRow>, StoreError> {
+        let spec: Option<String> = self
+            .conn
+            .query_row("SELECT spec FROM deployments WHERE id = ?1", [id], |r| {
+                r.get(0)
+            })
+            .optional()
+            .map_err(|e| self.store.sql(e))?;
+        spec.map(|s| {
+            serde_json::from_str(&s)
+                .map(|spec| DeploymentRow { id, spec })
+                .map_err(|e| self.store.corrupt(format!("deployment {id}: {e}")))
+        })
+        .transpose()
+    }
+
+    /// Every deployment id.
+    pub fn deployment_ids(&self) -> Result<Vec<i64>, StoreError> {
+        let mut stmt = self
+            .conn
+            .prepare("SELECT id FROM deployments ORDER BY id")
+            .map_err(|e| self.store.sql(e))?;
+        let rows = stmt
+            .query_map([], |r| r.get(0))
+            .map_err(|e| self.store.sql(e))?;
+        rows.collect::<Result<_, _>>()
+            .map_err(|e| self.store.sql(e))
+    }
+
+    fn trials_where(&self, clause: &str, key: i64) -> Result<Vec<TrialRow>, StoreError> {
+        let mut stmt = self
+            .conn
+            .prepare(&format!(
+                "SELECT id, deployment, k, scene, target, pose, chosen, status, cost, replays
+                 FROM trials WHERE {clause} ORDER BY k"
+            ))
+            .map_err(|e| self.store.sql(e))?;
+        let rows = stmt
+            .query_map([key], |r| {
+                Ok((
+                    r.get::<_, i64>(0)?,
+                    r.get::<_, i64>(1)?,
+                    r.get::<_, i64>(2)?,
+                    r.get::<_, String>(3)?,
+                    r.get::<_, String>(4)?,
+                    r.get::<_, Option<String>>(5)?,
+                    r.get::<_, i64>(6)?,
+                    r.get::<_, String>(7)?,
+                    r.get::<_, Option<f64>>(8)?,
+                    r.get::<_, Option<String>>(9)?,
+                ))
+            })
+            .map_err(|e| self.store.sql(e))?;
+        let mut out = Vec::new();
+        for row in rows {
+            let (id, deployment, k, scene, target, pose, chosen, status, cost, replays) =
+                row.map_err(|e| self.store.sql(e))?;
+            let bad = |what: &str| self.store.corrupt(format!("trial {id}: {what}"));
+            out.push(TrialRow {
+                id,
+                deployment,
+                k,
+                scene,
+                target,
+                pose: pose
+                    .map(|p| serde_json::from_str(&p))
+                    .transpose()
+                    .map_err(|_| bad("pose"))?,
+                chosen: usize::try_from(chosen).map_err(|_| bad("chosen"))?,
+                status: TrialStatus::parse(&status).ok_or_else(|| bad("status"))?,
+                cost,
+                replays: replays
+                    .map(|p| serde_json::from_str(&p))
+                    .transpose()
+                    .map_err(|_| bad("replays"))?,
+            });
+        }
+        Ok(out)
+    }
+
+    /// A deployment's trials, in order.
+    pub fn trials_of(&self, deployment: i64) -> Result<Vec<TrialRow>, StoreError> {
+        self.trials_where("deployment = ?1", deployment)
+    }
+
+    /// A trial by id.
+    pub fn trial(&self, id: i64) -> Result<Option<TrialRow>, StoreError> {
+        Ok(self.trials_where("id = ?1", id)?.into_iter().next())
+    }
+
+    /// A trial's observations, in order.
+    pub fn observations(&self, trial: i64) -> Result<Vec<ObservationRow>, StoreError> {
+        let mut stmt = self
+            .conn
+            .prepare(
+                "SELECT container, found, objects, travelled, leg FROM observations
+                 WHERE trial = ?1 ORDER BY seq",
+            )
+            .map_err(|e| self.store.sql(e))?;
+        let rows = stmt
+            .query_map([trial], |r| {
+                Ok((
+                    r.get::<_, String>(0)?,
+                    r.get::<_, bool>(1)?,
+                    r.get::<_, String>(2)?,
+                    r.get::<_, Option<f64>>(3)?,
+                    r.get::<_, f64>(4)?,
+                ))
+            })
+            .map_err(|e| self.store.sql(e))?;
+        let mut out = Vec::new();
+        for row in rows {
+            let (container, found, objects, travelled, leg) = row.map_err(|e| self.store.sql(e))?;
+            out.push(ObservationRow {
+                container,
+                found,
+                objects: serde_json::from_str(&objects)
+                    .map_err(|_| self.store.corrupt(format!("trial {trial}: objects")))?,
+                travelled,
+                leg,
+            });
+        }
+        Ok(out)
+    }
+
+    /// The stored reply to request `id`.
+    pub fn reply(&self, id: &str) -> Result<Option<StoredReply>, StoreError> {
+        self.conn
+            .query_row(
+                "SELECT fingerprint, status, body FROM requests WHERE id = ?1",
+                [id],
+                |r| {
+                    Ok(StoredReply {
+                        fingerprint: r.get(0)?,
+                        status: r.get(1)?,
+                        body: r.get(2)?,
+                    })
+                },
+            )
+            .optional()
+            .map_err(|e| self.store.sql(e))
+    }
+}

@@ -1,0 +1,582 @@
+//! The HTTP API on a real socket (127.0.0.1, an ephemeral port): a deployment driven through it
+//! costs what the same trials cost in the simulator; bad input gets a 4xx naming the field;
+//! retries are idempotent; a restarted service resumes from its database.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use ferret_plan::{
+    PlannerConfig, ReplayMode, Strategy, StrategyRegistry, TrialSpec, replay_costs, run_trial,
+};
+use ferret_select::{LiveDeployment, Method};
+use ferret_serve::{HttpOptions, Service, Store};
+use ferret_world::{GridParams, ObjectType, SceneFile};
+use serde_json::{Value, json};
+
+/// Three rooms in a row with doors, seven containers, targets in several places.
+const SCENE: &str = r#"{
+  "ferret_scene": 1, "name": "flat",
+  "rooms": [
+    {"name": "kitchen", "type": "Kitchen", "polygon": [[0,0],[4,0],[4,4],[0,4]]},
+    {"name": "living room", "type": "LivingRoom", "polygon": [[4,0],[9,0],[9,4],[4,4]]},
+    {"name": "bedroom", "type": "Bedroom", "polygon": [[9,0],[13,0],[13,4],[9,4]]}
+  ],
+  "doors": [{"from": [4, 1], "to": [4, 2]}, {"from": [9, 2.5], "to": [9, 3.5]}],
+  "containers": [
+    {"id": "fridge", "type": "Fridge", "pose": [0.5, 3.4, 0], "size": [0.7, 0.7], "contents": ["Egg", "Apple"]},
+    {"id": "counter", "type": "CounterTop", "pose": [2.5, 3.6, 0], "size": [1.5, 0.6], "contents": ["Mug", "CellPhone"]},
+    {"id": "sofa", "type": "Sofa", "pose": [6.5, 3.5, 0], "size": [2.0, 0.8], "contents": ["Pillow", "RemoteControl"]},
+    {"id": "table", "type": "CoffeeTable", "pose": [6.5, 1.5, 0], "size": [1.0, 0.6], "contents": ["Book", "RemoteControl"]},
+    {"id": "tv", "type": "TVStand", "pose": [8.6, 1.0, 90], "size": [1.2, 0.4], "contents": []},
+    {"id": "bed", "type": "Bed", "pose": [11.5, 2.0, 0], "size": [2.0, 1.6], "contents": ["Pillow", "CellPhone"]},
+    {"id": "dresser", "type": "Dresser", "pose": [12.6, 0.5, 0], "size": [0.6, 0.5], "contents": ["Wallet"]}
+  ],
+  "start": [5.0, 2.0, 0]
+}"#;
+
+const TARGETS: [&str; 5] = [
+    "CellPhone",
+    "RemoteControl",
+    "Pillow",
+    "Wallet",
+    "CellPhone",
+];
+
+fn strategies() -> Vec<Arc<dyn Strategy>> {
+    let registry = StrategyRegistry::builtin(None, PlannerConfig::default(), 10);
+    ["optimistic+greedy", "model/uniform", "model/uniform/k2"]
+        .iter()
+        .map(|s| registry.build(s).unwrap())
+        .collect()
+}
+
+struct Server {
+    url: String,
+    client: reqwest::Client,
+    handle: tokio::task::JoinHandle<()>,
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        self.handle.abort();
+    }
+}
+
+async fn start(db: Option<&Path>, token: Option<&str>) -> Server {
+    let store = match db {
+        Some(p) => Store::open(p).unwrap(),
+        None => Store::in_memory().unwrap(),
+    };
+    let service = Service::new(store, GridParams::default(), strategies()).unwrap();
+    let scene = SceneFile::parse(SCENE, Path::new("flat.json"))
+        .unwrap()
+        .to_scene(Path::new("flat.json"), None)
+        .unwrap();
+    service.add_scene("flat", scene).unwrap();
+    let options = HttpOptions {
+        token: token.map(str::to_string),
+        cors_origins: vec![],
+    };
+    let app = ferret_serve::router(Arc::new(service), &options).unwrap();
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let url = format!("http://{}", listener.local_addr().unwrap());
+    let handle = tokio::spawn(async move {
+        axum::serve(listener, app).await.unwrap();
+    });
+    Server {
+        url,
+        client: reqwest::Client::new(),
+        handle,
+    }
+}
+
+impl Server {
+    async fn post(&self, path: &str, body: Value) -> (u16, Value) {
+        let r = self
+            .client
+            .post(format!("{}{path}", self.url))
+            .json(&body)
+            .send()
+            .await
+            .unwrap();
+        (r.status().as_u16(), r.json().await.unwrap())
+    }
+
+    async fn post_raw(&self, path: &str, body: &'static str) -> (u16, Value) {
+        let r = self
+            .client
+            .post(format!("{}{path}", self.url))
+            .header("content-type", "application/json")
+            .body(body)
+            .send()
+            .await
+            .unwrap();
+        (r.status().as_u16(), r.json().await.unwrap())
+    }
+
+    async fn get(&self, path: &str) -> (u16, Value) {
+        let r = self
+            .client
+            .get(format!("{}{path}", self.url))
+            .send()
+            .await
+            .unwrap();
+        (r.status().as_u16(), r.json().await.unwrap())
+    }
+}
+
+/// A simulated robot: searches what it is told, reports the scene file's contents.
+fn contents(scene: &Value, container: &str) -> Vec<String> {
+    scene["containers"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["id"] == container)
+        .map(|c| {
+            c["contents"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_str().unwrap().to_string())
+                .collect()
+        })
+        .unwrap()
+}
+
+/// Runs one trial to the end through the API; returns (strategy, cost, searched).
+async fn run_api_trial(
+    s: &Server,
+    deployment: i64,
+    target: &str,
+    scene: &Value,
+) -> (String, f64, Vec<String>) {
+    let (status, mut reply) = s
+        .post(
+            &format!("/deployments/{deployment}/trials"),
+            json!({"scene": "flat", "target": target}),
+        )
+        .await;
+    assert_eq!(status, 201, "{reply}");
+    let trial = reply["trial"].as_i64().unwrap();
+    let strategy = reply["strategy"].as_str().unwrap().to_string();
+    while reply["status"] == "searching" {
+        let next = reply["next"]["container"].as_str().unwrap().to_string();
+        let seen = contents(scene, &next);
+        let found = seen.iter().any(|o| o == target);
+        let (status, r) = s
+            .post(
+                &format!("/trials/{trial}/observations"),
+                json!({"container": next, "found": found, "objects": seen, "travelled_m": reply["next"]["distance_m"]}),
+            )
+            .await;
+        assert_eq!(status, 200, "{r}");
+        reply = r;
+    }
+    assert_eq!(reply["status"], "done", "{reply}");
+    let searched = reply["searched"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap().to_string())
+        .collect();
+    (strategy, reply["cost_m"].as_f64().unwrap(), searched)
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn a_deployment_through_the_api_costs_what_the_simulator_says() {
+    let s = start(None, None).await;
+    let (status, scene) = s.get("/scenes/flat").await;
+    assert_eq!(status, 200);
+    let (status, dep) = s
+        .post(
+            "/deployments",
+            json!({"selector": "replay", "c": 5.0, "seed": 3}),
+        )
+        .await;
+    assert_eq!(status, 201, "{dep}");
+    let id = dep["id"].as_i64().unwrap();
+    let mut api = Vec::new();
+    for t in TARGETS {
+        api.push(run_api_trial(&s, id, t, &scene).await);
+    }
+    // The same trials by the library pieces `ferret deploy` uses.
+    let file = SceneFile::parse(SCENE, Path::new("flat.json")).unwrap();
+    let sim = file.to_scene(Path::new("flat.json"), None).unwrap();
+    let (_, distances) = ferret_world::distance::build(&sim.house, &GridParams::default()).unwrap();
+    let candidates = strategies();
+    let mut live = LiveDeployment::new(Method::ReplaySelection, candidates.len(), 5.0, 3).unwrap();
+    for (k, t) in TARGETS.iter().enumerate() {
+        let trial = TrialSpec {
+            target: ObjectType::new(*t),
+            revealed: vec![],
+        };
+        let i = live.choose();
+        let outcome = run_trial(
+            candidates[i].as_ref(),
+            &sim.house,
+            &sim.truth,
+            &distances,
+            &trial,
+        )
+        .unwrap();
+        let found = outcome.found.unwrap();
+        let replays = replay_costs(
+            ReplayMode::Pessimistic,
+            &candidates,
+            i,
+            outcome.cost,
+            &sim.house,
+            &sim.truth,
+            &distances,
+            &trial,
+            found,
+        )
+        .unwrap();
+        live.finish(outcome.cost, &replays).unwrap();
+        assert_eq!(api[k].0, candidates[i].name(), "trial {k}");
+        assert!(
+            (api[k].1 - outcome.cost).abs() < 1e-9,
+            "trial {k}: {} vs {}",
+            api[k].1,
+            outcome.cost
+        );
+        let searched: Vec<String> = outcome
+            .searched
+            .iter()
+            .map(|&c| sim.house.containers[c].id.clone())
+            .collect();
+        assert_eq!(api[k].2, searched, "trial {k}");
+    }
+    let (_, state) = s.get(&format!("/deployments/{id}")).await;
+    let stats = live.stats();
+    for (row, st) in state["per_strategy"].as_array().unwrap().iter().zip(&stats) {
+        assert_eq!(row["deployed"].as_u64().unwrap() as usize, st.deployed);
+        let rm = row["replay_mean_m"].as_f64().unwrap();
+        assert!((rm - st.replay_mean.unwrap()).abs() < 1e-9);
+    }
+    assert_eq!(state["next"]["strategy"], candidates[live.peek()].name());
+    assert!(state["next"]["why"].as_str().unwrap().contains("replay"));
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn bad_input_is_a_4xx_naming_the_field() {
+    let s = start(None, None).await;
+    let (_, dep) = s.post("/deployments", json!({})).await;
+    let id = dep["id"].as_i64().unwrap();
+    let (_, trial) = s
+        .post(
+            &format!("/deployments/{id}/trials"),
+            json!({"scene": "flat", "target": "Wallet"}),
+        )
+        .await;
+    let tid = trial["trial"].as_i64().unwrap();
+    let first = trial["next"]["container"].as_str().unwrap().to_string();
+    let (st, _) = s
+        .post(
+            &format!("/trials/{tid}/observations"),
+            json!({"container": first, "found": false}),
+        )
+        .await;
+    assert_eq!(st, 200);
+    let cases: Vec<(String, Value, u16, &str)> = vec![
+        (
+            "/deployments".into(),
+            json!({"strategies": ["model/nothing"]}),
+            422,
+            "strategies[0]",
+        ),
+        ("/deployments".into(), json!({"c": -1.0}), 422, "c"),
+        (
+            "/deployments".into(),
+            json!({"selector": "best"}),
+            400,
+            "selector",
+        ),
+        (
+            "/deployments/99/trials".into(),
+            json!({"scene": "flat", "target": "Wallet"}),
+            404,
+            "deployment",
+        ),
+        (
+            format!("/deployments/{id}/trials"),
+            json!({"scene": "attic", "target": "Wallet"}),
+            404,
+            "scene",
+        ),
+        (
+            format!("/deployments/{id}/trials"),
+            json!({"scene": "flat", "target": "Wallet"}),
+            409,
+            "deployment",
+        ),
+        (
+            format!("/deployments/{id}/trials"),
+            json!({"scene": "flat"}),
+            400,
+            "",
+        ),
+        (
+            format!("/trials/{tid}/observations"),
+            json!({"container": first, "found": false}),
+            409,
+            "container",
+        ),
+        (
+            format!("/trials/{tid}/observations"),
+            json!({"container": "piano", "found": false}),
+            404,
+            "container",
+        ),
+        (
+            format!("/trials/{tid}/observations"),
+            json!({"container": "bed", "found": "yes"}),
+            400,
+            "found",
+        ),
+        (
+            format!("/trials/{tid}/observations"),
+            json!({"container": "bed", "found": false, "objects": ["a pen"]}),
+            422,
+            "objects[0]",
+        ),
+        (
+            format!("/trials/{tid}/observations"),
+            json!({"container": "bed", "found": false, "travelled_m": -2}),
+            422,
+            "travelled_m",
+        ),
+        (
+            "/trials/77/observations".into(),
+            json!({"container": "bed", "found": false}),
+            404,
+            "trial",
+        ),
+        (
+            "/trials/x/observations".into(),
+            json!({"container": "bed", "found": false}),
+            404,
+            "trial",
+        ),
+        (
+            "/scenes".into(),
+            json!({"scene": {"ferret_scene": 1}}),
+            422,
+            "scene",
+        ),
+        (
+            "/scenes".into(),
+            json!({"scene": {"ferret_scene": 1, "name": "x", "rooms": [], "containers": [], "start": [0, 0, 0]}}),
+            422,
+            "scene.rooms",
+        ),
+    ];
+    for (path, body, status, field) in cases {
+        let (st, reply) = s.post(&path, body.clone()).await;
+        assert_eq!(st, status, "{path} {body}: {reply}");
+        if !field.is_empty() {
+            assert_eq!(reply["error"]["field"], field, "{path} {body}: {reply}");
+        }
+        assert!(!reply["error"]["message"].as_str().unwrap().is_empty());
+    }
+    let (st, reply) = s
+        .post_raw(
+            &format!("/trials/{tid}/observations"),
+            "{\"container\": \"bed\",",
+        )
+        .await;
+    assert_eq!(st, 400, "{reply}");
+    // Poses: off the map, and inside a wall far from any floor.
+    let (_, d2) = s.post("/deployments", json!({})).await;
+    let d2 = d2["id"].as_i64().unwrap();
+    for pose in [json!([50.0, 2.0, 0.0]), json!([-3.0, -3.0, 0.0])] {
+        let (st, reply) = s
+            .post(
+                &format!("/deployments/{d2}/trials"),
+                json!({"scene": "flat", "target": "Wallet", "pose": pose}),
+            )
+            .await;
+        assert_eq!(st, 422, "{reply}");
+        assert_eq!(reply["error"]["field"], "pose");
+    }
+    // A scene with a container nobody can reach: the bedroom door removed.
+    let mut closed: Value = serde_json::from_str(SCENE).unwrap();
+    closed["name"] = json!("closed");
+    closed["doors"] = json!([{"from": [4, 1], "to": [4, 2]}]);
+    let (st, reply) = s.post("/scenes", json!({"scene": closed})).await;
+    assert_eq!(st, 422, "{reply}");
+    assert!(
+        reply["error"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("unreachable"),
+        "{reply}"
+    );
+    let (st, _) = s.get("/nowhere").await;
+    assert_eq!(st, 404);
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn a_retried_request_changes_nothing_and_a_reused_id_is_refused() {
+    let s = start(None, None).await;
+    let body = json!({"request_id": "dep-1", "seed": 9});
+    let (a, first) = s.post("/deployments", body.clone()).await;
+    let (b, again) = s.post("/deployments", body).await;
+    assert_eq!((a, b), (201, 201));
+    assert_eq!(first, again);
+    let (st, reply) = s
+        .post("/deployments", json!({"request_id": "dep-1", "seed": 10}))
+        .await;
+    assert_eq!(st, 409, "{reply}");
+    assert_eq!(reply["error"]["field"], "request_id");
+    let id = first["id"].as_i64().unwrap();
+    let start = json!({"request_id": "t-1", "scene": "flat", "target": "Wallet"});
+    let (_, t1) = s
+        .post(&format!("/deployments/{id}/trials"), start.clone())
+        .await;
+    let (st, t1b) = s.post(&format!("/deployments/{id}/trials"), start).await;
+    assert_eq!(st, 201);
+    assert_eq!(
+        t1, t1b,
+        "the retry gets the stored reply, not a 409 for a second trial"
+    );
+    let tid = t1["trial"].as_i64().unwrap();
+    let next = t1["next"]["container"].as_str().unwrap();
+    let obs = json!({"request_id": "o-1", "container": next, "found": false});
+    let (_, o1) = s
+        .post(&format!("/trials/{tid}/observations"), obs.clone())
+        .await;
+    let (st, o1b) = s.post(&format!("/trials/{tid}/observations"), obs).await;
+    assert_eq!(st, 200, "{o1b}");
+    assert_eq!(o1, o1b);
+    let (_, trial) = s.get(&format!("/trials/{tid}")).await;
+    assert_eq!(trial["searched"].as_array().unwrap().len(), 1, "{trial}");
+    let (_, dep) = s.get(&format!("/deployments/{id}")).await;
+    assert_eq!(dep["trials"].as_array().unwrap().len(), 1);
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn a_token_guards_everything_but_health() {
+    let s = start(None, Some("s3cret-token")).await;
+    let (st, _) = s.get("/health").await;
+    assert_eq!(st, 200);
+    let (st, reply) = s.get("/scenes").await;
+    assert_eq!(st, 401);
+    assert_eq!(reply["error"]["field"], "authorization");
+    let r = s
+        .client
+        .get(format!("{}/scenes", s.url))
+        .bearer_auth("s3cret-token")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 200);
+    let r = s
+        .client
+        .get(format!("{}/scenes", s.url))
+        .bearer_auth("s3cret-tokeN")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 401);
+    // No CORS headers unless origins are configured.
+    let r = s
+        .client
+        .get(format!("{}/health", s.url))
+        .header("origin", "http://example.org")
+        .send()
+        .await
+        .unwrap();
+    assert!(r.headers().get("access-control-allow-origin").is_none());
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn the_openapi_document_lists_every_route() {
+    let s = start(None, None).await;
+    let (st, doc) = s.get("/openapi.json").await;
+    assert_eq!(st, 200);
+    assert!(doc["openapi"].as_str().unwrap().starts_with("3."));
+    for (path, method) in [
+        ("/health", "get"),
+        ("/scenes", "get"),
+        ("/scenes", "post"),
+        ("/scenes/{name}", "get"),
+        ("/deployments", "post"),
+        ("/deployments/{id}", "get"),
+        ("/deployments/{id}/trials", "post"),
+        ("/trials/{id}", "get"),
+        ("/trials/{id}/observations", "post"),
+    ] {
+        assert!(
+            doc["paths"][path][method].is_object(),
+            "{method} {path} missing"
+        );
+    }
+    assert!(doc["components"]["schemas"]["Observe"]["properties"]["container"].is_object());
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn a_restarted_service_resumes_every_open_trial() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("serve.sqlite");
+    // Uninterrupted reference run.
+    let reference = {
+        let s = start(Some(&dir.path().join("ref.sqlite")), None).await;
+        let (_, scene) = s.get("/scenes/flat").await;
+        let (_, dep) = s.post("/deployments", json!({"seed": 5})).await;
+        let id = dep["id"].as_i64().unwrap();
+        let mut out = Vec::new();
+        for t in TARGETS {
+            out.push(run_api_trial(&s, id, t, &scene).await);
+        }
+        out
+    };
+    // Interrupted after every request: a new service on the same file each time.
+    let mut results = Vec::new();
+    let scene = start(Some(&db), None).await.get("/scenes/flat").await.1;
+    let id = start(Some(&db), None)
+        .await
+        .post("/deployments", json!({"seed": 5}))
+        .await
+        .1["id"]
+        .as_i64()
+        .unwrap();
+    for t in TARGETS {
+        let (_, mut reply) = start(Some(&db), None)
+            .await
+            .post(
+                &format!("/deployments/{id}/trials"),
+                json!({"scene": "flat", "target": t}),
+            )
+            .await;
+        let trial = reply["trial"].as_i64().unwrap();
+        while reply["status"] == "searching" {
+            // A fresh server reads the trial back: the next container survives the restart.
+            let s = start(Some(&db), None).await;
+            let (_, again) = s.get(&format!("/trials/{trial}")).await;
+            assert_eq!(again["next"], reply["next"]);
+            let next = reply["next"]["container"].as_str().unwrap().to_string();
+            let seen = contents(&scene, &next);
+            let found = seen.iter().any(|o| o == t);
+            reply = s
+                .post(
+                    &format!("/trials/{trial}/observations"),
+                    json!({"container": next, "found": found, "objects": seen}),
+                )
+                .await
+                .1;
+        }
+        let searched: Vec<String> = reply["searched"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_str().unwrap().to_string())
+            .collect();
+        results.push((
+            reply["strategy"].as_str().unwrap().to_string(),
+            reply["cost_m"].as_f64().unwrap(),
+            searched,
+        ));
+    }
+    assert_eq!(results, reference);
+}

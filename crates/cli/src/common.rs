@@ -31,7 +31,8 @@ pub fn init_tracing(verbose: u8) {
 /// Where houses come from.
 #[derive(clap::Args, Clone, Debug)]
 pub struct HouseArgs {
-    /// ProcTHOR houses: a .json house, or .jsonl / .jsonl.gz with one house per line. Without it,
+    /// ProcTHOR houses: a .json house, or .jsonl / .jsonl.gz with one house per line; or a scene
+    /// file (.yaml/.yml, or .json with `ferret_scene`; see `ferret scene --help`). Without it,
     /// ferret generates houses (see --generate and --house-seed). Limits that keep memory
     /// bounded, each an error naming file and house: 64 MiB per line (house), 2000 containers
     /// per house, 16.7 M grid cells per house (see --resolution).
@@ -92,6 +93,14 @@ impl HouseArgs {
                 ),
             });
         };
+        if ferret_world::scene::is_scene_file(path) {
+            let scene = ferret_world::SceneFile::load(path)?;
+            return Ok(LoadedHouses {
+                scenes: vec![scene],
+                skipped: vec![],
+                source: path.display().to_string(),
+            });
+        }
         let db = match &self.asset_db {
             Some(p) => Some(AssetDatabase::load(p)?),
             None => None,

@@ -50,6 +50,11 @@ enum Command {
     /// List prompt templates and show the exact text a prompt would send.
     #[command(subcommand)]
     Prompts(commands::prompts::Command),
+    /// Check scene files (a home described for a real robot; see `ferret scene check --help`).
+    #[command(subcommand)]
+    Scene(commands::scene::Command),
+    /// Serve the planner and strategy selection over HTTP for a real robot (docs/serve.md).
+    Serve(commands::serve::Args),
     /// Measure the planner.
     #[command(subcommand)]
     Bench(commands::bench::Command),
@@ -69,6 +74,8 @@ fn main() -> std::process::ExitCode {
         Command::Deploy(args) => commands::deploy::run(args),
         Command::Llm(cmd) => commands::llm::run(cmd),
         Command::Prompts(cmd) => commands::prompts::run(cmd),
+        Command::Scene(cmd) => commands::scene::run(cmd),
+        Command::Serve(args) => commands::serve::run(args),
         Command::Bench(cmd) => commands::bench::run(cmd),
     };
     match result {

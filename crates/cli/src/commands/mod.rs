@@ -10,4 +10,6 @@ pub mod llm;
 pub mod llm_setup;
 pub mod prior;
 pub mod prompts;
+pub mod scene;
 pub mod select;
+pub mod serve;

@@ -1,0 +1,277 @@
+//! `ferret serve` as a robot meets it: the real binary on 127.0.0.1, driven by the Python robot
+//! client of examples/ and by raw HTTP, killed with SIGKILL and restarted.
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+
+use common::{ferret, s, text};
+use serde_json::{Value, json};
+
+const TARGETS: &str = "Blanket,CellPhone,RemoteControl,Pillow,Wallet";
+const STRATEGIES: &str = "optimistic+greedy,model/uniform,model/uniform/k2";
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn apartment() -> PathBuf {
+    repo().join("examples/apartment/scene.yaml")
+}
+
+/// A running `ferret serve`; killed (SIGKILL) when dropped.
+struct Server {
+    child: Child,
+    url: String,
+}
+
+impl Server {
+    fn start(db: &Path) -> Server {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_ferret"))
+            .args([
+                "serve",
+                "--scene",
+                s(&apartment()),
+                "--strategies",
+                STRATEGIES,
+                "--listen",
+                "127.0.0.1:0",
+                "--db",
+                s(db),
+            ])
+            .env_remove("FERRET_SERVE_TOKEN")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("ferret serve starts");
+        let stdout = child.stdout.take().expect("piped stdout");
+        let mut line = String::new();
+        BufReader::new(stdout)
+            .read_line(&mut line)
+            .expect("the server prints its address");
+        let url = line
+            .split_whitespace()
+            .find(|w| w.starts_with("http://"))
+            .unwrap_or_else(|| panic!("no address in {line:?}"))
+            .to_string();
+        Server { child, url }
+    }
+
+    fn kill(mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn post(url: &str, body: Value) -> (u16, Value) {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let r = reqwest::Client::new()
+            .post(url)
+            .json(&body)
+            .send()
+            .await
+            .unwrap();
+        (r.status().as_u16(), r.json().await.unwrap())
+    })
+}
+
+fn get(url: &str) -> Value {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async { reqwest::get(url).await.unwrap().json().await.unwrap() })
+}
+
+/// (strategy, cost) per trial of `ferret deploy` on the apartment.
+fn deploy_costs(dir: &Path, seed: &str) -> Vec<(String, f64)> {
+    let out = dir.join("deploy");
+    let o = ferret(&[
+        "deploy",
+        "--houses",
+        s(&apartment()),
+        "--find",
+        TARGETS,
+        "--strategies",
+        STRATEGIES,
+        "--seed",
+        seed,
+        "--out",
+        s(&out),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let mut reader = csv::Reader::from_path(out.join("deploy.csv")).unwrap();
+    let headers = reader.headers().unwrap().clone();
+    let col = |name: &str| headers.iter().position(|h| h == name).unwrap();
+    let (chosen, cost) = (col("chosen"), col("cost_m"));
+    reader
+        .records()
+        .map(|r| {
+            let r = r.unwrap();
+            (r[chosen].to_string(), r[cost].parse().unwrap())
+        })
+        .collect()
+}
+
+#[test]
+fn the_paper_targets_through_the_python_client_cost_what_deploy_says() {
+    let dir = tempfile::tempdir().unwrap();
+    let expected = deploy_costs(dir.path(), "4");
+    assert_eq!(expected.len(), 5);
+    let server = Server::start(&dir.path().join("serve.sqlite"));
+    let o = Command::new("python3")
+        .arg(repo().join("examples/robot_client.py"))
+        .args([
+            "--url",
+            &server.url,
+            "--scene",
+            "apartment",
+            "--targets",
+            TARGETS,
+        ])
+        .args(["--strategies", STRATEGIES, "--seed", "4", "--json"])
+        .env_remove("FERRET_SERVE_TOKEN")
+        .output()
+        .expect("python3 runs");
+    assert!(o.status.success(), "{}", text(&o));
+    let report: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let trials = report["trials"].as_array().unwrap();
+    assert_eq!(trials.len(), 5);
+    for (k, (t, (strategy, cost))) in trials.iter().zip(&expected).enumerate() {
+        assert_eq!(t["strategy"].as_str().unwrap(), strategy, "trial {k}");
+        let api = t["cost_m"].as_f64().unwrap();
+        assert!(
+            (api - cost).abs() < 0.005,
+            "trial {k}: API {api} vs deploy {cost}"
+        );
+    }
+    server.kill();
+}
+
+/// Runs the five targets through HTTP; `kill_at` = (trial index, observations) after which the
+/// server is killed with SIGKILL and restarted on the same database.
+fn run_through_http(db: &Path, kill_at: Option<(usize, usize)>) -> Vec<(String, f64, Vec<String>)> {
+    let mut server = Server::start(db);
+    let scene = get(&format!("{}/scenes/apartment", server.url));
+    let contents = |id: &str| -> Vec<String> {
+        scene["containers"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|c| c["id"] == id)
+            .unwrap()["contents"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_str().unwrap().to_string())
+            .collect()
+    };
+    let (st, dep) = post(&format!("{}/deployments", server.url), json!({"seed": 4}));
+    assert_eq!(st, 201, "{dep}");
+    let id = dep["id"].as_i64().unwrap();
+    let mut out = Vec::new();
+    for (k, target) in TARGETS.split(',').enumerate() {
+        let (st, mut reply) = post(
+            &format!("{}/deployments/{id}/trials", server.url),
+            json!({"scene": "apartment", "target": target}),
+        );
+        assert_eq!(st, 201, "{reply}");
+        let trial = reply["trial"].as_i64().unwrap();
+        let mut observed = 0;
+        while reply["status"] == "searching" {
+            if kill_at == Some((k, observed)) {
+                let db = db.to_path_buf();
+                server.kill();
+                server = Server::start(&db);
+                let again = get(&format!("{}/trials/{trial}", server.url));
+                assert_eq!(
+                    again["next"], reply["next"],
+                    "the next container survives SIGKILL"
+                );
+                reply = again;
+            }
+            let next = reply["next"]["container"].as_str().unwrap().to_string();
+            let seen = contents(&next);
+            let found = seen.iter().any(|o| o == target);
+            let (st, r) = post(
+                &format!("{}/trials/{trial}/observations", server.url),
+                json!({"request_id": format!("{trial}-{observed}"), "container": next, "found": found, "objects": seen}),
+            );
+            assert_eq!(st, 200, "{r}");
+            reply = r;
+            observed += 1;
+        }
+        let searched = reply["searched"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_str().unwrap().to_string())
+            .collect();
+        out.push((
+            reply["strategy"].as_str().unwrap().to_string(),
+            reply["cost_m"].as_f64().unwrap(),
+            searched,
+        ));
+    }
+    server.kill();
+    out
+}
+
+#[test]
+fn a_server_killed_mid_trial_resumes_with_identical_results() {
+    let dir = tempfile::tempdir().unwrap();
+    let reference = run_through_http(&dir.path().join("reference.sqlite"), None);
+    let killed = run_through_http(&dir.path().join("killed.sqlite"), Some((2, 1)));
+    assert_eq!(killed, reference);
+    // Killed before any observation of a trial, too.
+    let killed = run_through_http(&dir.path().join("killed0.sqlite"), Some((3, 0)));
+    assert_eq!(killed, reference);
+}
+
+#[test]
+fn scene_check_reports_the_apartment_and_refuses_a_closed_door() {
+    let o = ferret(&["scene", "check", s(&apartment())]);
+    assert!(o.status.success(), "{}", text(&o));
+    let out = text(&o);
+    assert!(
+        out.contains("9 containers") && out.contains("4 rooms"),
+        "{out}"
+    );
+    // The same scene without a map and without doors: walls enclose every room.
+    let dir = tempfile::tempdir().unwrap();
+    let yaml = std::fs::read_to_string(apartment()).unwrap();
+    let closed: String = yaml
+        .lines()
+        .filter(|l| !l.trim_start().starts_with("map:"))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let closed = match closed.find("\ndoors:") {
+        Some(i) => {
+            let rest = &closed[i + 1..];
+            let end = rest
+                .find("\ncontainers:")
+                .map(|j| i + 1 + j)
+                .unwrap_or(closed.len());
+            format!("{}{}", &closed[..i], &closed[end..])
+        }
+        None => closed,
+    };
+    let file = dir.path().join("closed.yaml");
+    std::fs::write(&file, closed).unwrap();
+    let o = ferret(&["scene", "check", s(&file)]);
+    assert!(!o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("cannot be reached"), "{}", text(&o));
+}

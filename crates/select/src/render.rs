@@ -152,10 +152,15 @@ pub fn selection_table_markdown(result: &ExperimentResult, ks: &[usize]) -> Stri
     }
     let _ = write!(
         out,
-        "\n{} deployments of {} distinct houses each, c = {} m, seed {}. Best single strategy: \
+        "\n{} deployments of {} {} each, c = {} m, seed {}. Best single strategy: \
          `{}` (mean cost {:.2} m).\n",
         result.options.deployments,
         trials,
+        if result.options.with_replacement {
+            "houses drawn with replacement"
+        } else {
+            "distinct houses"
+        },
         result.options.c,
         result.options.seed,
         result

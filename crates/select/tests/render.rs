@@ -72,11 +72,17 @@ fn selection_table_has_the_papers_layout_and_differences() {
 ";
     assert!(md.starts_with(expected), "{md}");
     assert!(md.contains("Best single strategy: `a` (mean cost 230.00 m)"));
-    assert!(md.contains("500 deployments of 100 distinct houses each"), "{md}");
+    assert!(
+        md.contains("500 deployments of 100 distinct houses each"),
+        "{md}"
+    );
     let mut drawn = paper_like_result();
     drawn.options.with_replacement = true;
     let md = selection_table_markdown(&drawn, &PAPER_KS);
-    assert!(md.contains("100 houses drawn with replacement each"), "{md}");
+    assert!(
+        md.contains("100 houses drawn with replacement each"),
+        "{md}"
+    );
 }
 
 #[test]

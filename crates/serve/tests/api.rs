@@ -414,6 +414,22 @@ async fn bad_input_is_a_4xx_naming_the_field() {
     );
     let (st, _) = s.get("/nowhere").await;
     assert_eq!(st, 404);
+    // Uploading: a new scene is offered at once; the same one again is fine; another scene
+    // under a taken name is refused.
+    let mut copy: Value = serde_json::from_str(SCENE).unwrap();
+    copy["name"] = json!("copy");
+    let (st, reply) = s.post("/scenes", json!({"scene": copy})).await;
+    assert_eq!(st, 201, "{reply}");
+    assert_eq!(reply["containers"].as_array().unwrap().len(), 7);
+    let (st, _) = s.post("/scenes", json!({"scene": copy})).await;
+    assert_eq!(st, 200);
+    copy["start"] = json!([6.0, 2.0, 0]);
+    let (st, reply) = s.post("/scenes", json!({"scene": copy})).await;
+    assert_eq!(st, 409, "{reply}");
+    assert_eq!(reply["error"]["field"], "scene.name");
+    let (st, reply) = s.get("/scenes").await;
+    assert_eq!(st, 200);
+    assert_eq!(reply.as_array().unwrap().len(), 2, "{reply}");
 }
 
 #[tokio::test(flavor = "multi_thread")]

@@ -105,8 +105,8 @@ impl Distances {
     /// #     name: "doc".into(), index: 0, walls: vec![], doors: vec![], obstacles: vec![],
     /// #     rooms: vec![Room { id: "room|1".into(), room_type: RoomType::new("LivingRoom"), floor: Polygon::new(corners) }],
     /// #     containers: vec![Container { id: "1|0".into(), object_type: ObjectType::new("DiningTable"),
-    /// #         room: Some(0), position: table.center, footprint: table }],
-    /// #     start: Pose { position: Point::new(0.5, 0.5), yaw_deg: 0.0 },
+    /// #         room: Some(0), position: table.center, footprint: table, access: None }],
+    /// #     start: Pose { position: Point::new(0.5, 0.5), yaw_deg: 0.0 }, map: None,
     /// # };
     /// // `house`: one 4 m × 3 m room with a table in it.
     /// let grid = OccupancyGrid::build(&house, &GridParams::default())?;

@@ -656,39 +656,43 @@ impl Service {
             .ok_or_else(|| ApiError::new(404, "trial", format!("no trial {id}")))
     }
 
+    /// What a stored trial's next step needs, read from the store.
+    fn stored_trial(&self, row: &TrialRow) -> Result<StoredTrial, ApiError> {
+        let observations = self.store.read(|r| r.observations(row.id))?;
+        let spec = self.spec(row.deployment)?;
+        let candidates = self.candidates_of(&spec)?;
+        let strategy = candidates.get(row.chosen).cloned().ok_or_else(|| {
+            ApiError::internal(format!("trial {}: no strategy {}", row.id, row.chosen))
+        })?;
+        Ok(StoredTrial {
+            observations,
+            placed: self.placed(&row.scene, row.pose)?,
+            target: ObjectType::new(row.target.clone()),
+            strategy,
+            candidates,
+            spec,
+        })
+    }
+
     /// `GET /trials/{id}`.
     pub fn get_trial(&self, id: i64) -> Result<Reply, ApiError> {
         let row = self.trial_row(id)?;
-        let observations = self.store.read(|r| r.observations(id))?;
-        let spec = self.spec(row.deployment)?;
-        let candidates = self.candidates_of(&spec)?;
-        let placed = self.placed(&row.scene, row.pose)?;
-        let target = ObjectType::new(row.target.clone());
-        let mut search = rebuild(
-            candidates[row.chosen].as_ref(),
-            &placed,
-            &target,
-            &observations,
-        )?;
+        let t = self.stored_trial(&row)?;
+        let (observations, spec) = (&t.observations, &t.spec);
+        let mut search = t.search()?;
         let next = match row.status {
             TrialStatus::Searching => {
                 let from = search.belief().position();
                 search
                     .next_container()
                     .map_err(plan_error)?
-                    .map(|c| next_container(&placed, from, c))
+                    .map(|c| next_container(&t.placed, from, c))
             }
             _ => None,
         };
         json(
             200,
-            &trial_state(
-                &row,
-                &spec,
-                &observations,
-                search.belief().travelled(),
-                next,
-            ),
+            &trial_state(&row, spec, observations, search.belief().travelled(), next),
         )
     }
 
@@ -726,10 +730,9 @@ impl Service {
                 format!("{t}: must be a finite distance ≥ 0"),
             ));
         }
-        let observations = self.store.read(|r| r.observations(id))?;
-        let spec = self.spec(row.deployment)?;
-        let candidates = self.candidates_of(&spec)?;
-        let placed = self.placed(&row.scene, row.pose)?;
+        let t = self.stored_trial(&row)?;
+        let (observations, spec, candidates, placed) =
+            (&t.observations, &t.spec, &t.candidates, &t.placed);
         let house = &placed.house;
         let c = house.container_index(&req.container).ok_or_else(|| {
             ApiError::new(
@@ -741,13 +744,8 @@ impl Service {
                 ),
             )
         })?;
-        let target = ObjectType::new(row.target.clone());
-        let mut search = rebuild(
-            candidates[row.chosen].as_ref(),
-            &placed,
-            &target,
-            &observations,
-        )?;
+        let target = &t.target;
+        let mut search = t.search()?;
         if search.belief().is_searched(c) {
             return Err(ApiError::new(
                 409,
@@ -760,7 +758,7 @@ impl Service {
             .iter()
             .map(|o| ObjectType::new(o.clone()))
             .collect();
-        if req.found && !seen.contains(&target) {
+        if req.found && !seen.contains(target) {
             seen.push(target.clone());
         }
         let leg = search.record(c, seen).map_err(plan_error)?;
@@ -777,10 +775,10 @@ impl Service {
                 target: target.clone(),
                 revealed: Vec::new(),
             };
-            let truth = hindsight_truth(house, &target, c).map_err(plan_error)?;
+            let truth = hindsight_truth(house, target, c).map_err(plan_error)?;
             let replays = replay_costs(
                 ReplayMode::Pessimistic,
-                &candidates,
+                candidates,
                 row.chosen,
                 cost,
                 house,
@@ -796,7 +794,7 @@ impl Service {
             match search.next_container().map_err(plan_error)? {
                 Some(n) => (
                     TrialStatus::Searching,
-                    Some(next_container(&placed, from, n)),
+                    Some(next_container(placed, from, n)),
                     None,
                 ),
                 None => (TrialStatus::Exhausted, None, None),
@@ -825,8 +823,30 @@ impl Service {
             updated.status = status;
             updated.cost = (status != TrialStatus::Searching).then_some(cost);
             updated.replays = replays.clone();
-            json(200, &trial_state(&updated, &spec, &all, cost, next.clone()))
+            json(200, &trial_state(&updated, spec, &all, cost, next.clone()))
         })
+    }
+}
+
+/// A stored trial with what it needs to plan its next step.
+struct StoredTrial {
+    observations: Vec<ObservationRow>,
+    spec: DeploymentSpec,
+    candidates: Vec<Arc<dyn Strategy>>,
+    strategy: Arc<dyn Strategy>,
+    placed: Arc<Placed>,
+    target: ObjectType,
+}
+
+impl StoredTrial {
+    /// The trial's search, replayed up to its last observation.
+    fn search(&self) -> Result<Search<'_>, ApiError> {
+        rebuild(
+            self.strategy.as_ref(),
+            &self.placed,
+            &self.target,
+            &self.observations,
+        )
     }
 }
 

@@ -225,21 +225,7 @@ impl OccupancyGrid {
             )));
         }
         let (width, height) = (w as u32, h as u32);
-        let n = width as usize * height as usize;
-        let mut g = Inner {
-            params: *params,
-            origin,
-            width,
-            height,
-            cells: vec![CellKind::Outside as u8; n],
-            rooms: vec![NO_ROOM; n],
-            free: 0,
-            reachable: 0,
-            start: 0,
-            start_moved: false,
-            access: Vec::new(),
-            closed_doors: Vec::new(),
-        };
+        let mut g = Inner::outside(*params, origin, width, height);
         g.fill_floors(house, true);
         g.draw_walls(house);
         g.draw_furniture(house);
@@ -288,21 +274,7 @@ impl OccupancyGrid {
             map.origin.x - f64::from(pad) * res,
             map.origin.z - f64::from(pad) * res,
         );
-        let n = width as usize * height as usize;
-        let mut g = Inner {
-            params,
-            origin,
-            width,
-            height,
-            cells: vec![CellKind::Outside as u8; n],
-            rooms: vec![NO_ROOM; n],
-            free: 0,
-            reachable: 0,
-            start: 0,
-            start_moved: false,
-            access: Vec::new(),
-            closed_doors: Vec::new(),
-        };
+        let mut g = Inner::outside(params, origin, width, height);
         for z in 0..map.height {
             for x in 0..map.width {
                 let kind = match map.cells[z as usize * map.width as usize + x as usize] {
@@ -566,6 +538,25 @@ fn footprint_distance(f: &Footprint, p: Point) -> f64 {
 }
 
 impl Inner {
+    /// A grid of `width × height` outside cells, nothing placed yet.
+    fn outside(params: GridParams, origin: Point, width: u32, height: u32) -> Inner {
+        let n = width as usize * height as usize;
+        Inner {
+            params,
+            origin,
+            width,
+            height,
+            cells: vec![CellKind::Outside as u8; n],
+            rooms: vec![NO_ROOM; n],
+            free: 0,
+            reachable: 0,
+            start: 0,
+            start_moved: false,
+            access: Vec::new(),
+            closed_doors: Vec::new(),
+        }
+    }
+
     /// The steps after the cells are drawn: counts, start, reachability, doors, access cells.
     fn finish(mut self, house: &House) -> Result<OccupancyGrid> {
         self.free = self

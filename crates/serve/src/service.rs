@@ -328,43 +328,25 @@ impl Service {
         body: &[u8],
         op: impl FnOnce(&crate::store::Writer<'_>) -> Result<Reply, ApiError>,
     ) -> Result<Reply, ApiError> {
-        let fingerprint = request_id.map(|_| {
-            let mut h = Sha256::new();
-            h.update(route.as_bytes());
-            h.update([0]);
-            h.update(body);
-            format!("{:x}", h.finalize())
-        });
-        if let Some(id) = request_id {
-            if id.is_empty() || id.len() > MAX_REQUEST_ID {
-                return Err(ApiError::new(
-                    400,
-                    "request_id",
-                    format!("must have 1 to {MAX_REQUEST_ID} characters"),
-                ));
-            }
+        if let Some(id) = request_id
+            && (id.is_empty() || id.len() > MAX_REQUEST_ID)
+        {
+            return Err(ApiError::new(
+                400,
+                "request_id",
+                format!("must have 1 to {MAX_REQUEST_ID} characters"),
+            ));
         }
         self.store.write(|w| {
-            if let (Some(id), Some(fp)) = (request_id, &fingerprint) {
-                if let Some(stored) = w.reader().reply(id)? {
-                    if &stored.fingerprint != fp {
-                        return Err(ApiError::new(
-                            409,
-                            "request_id",
-                            format!("{id:?} was used for another request"),
-                        ));
-                    }
-                    let body = serde_json::from_str(&stored.body)
-                        .map_err(|e| ApiError::internal(format!("stored reply: {e}")))?;
-                    return Ok((stored.status, body));
-                }
+            if let Some(reply) = stored_reply(&w.reader(), request_id, route, body)? {
+                return Ok(reply);
             }
             let reply = op(w)?;
-            if let (Some(id), Some(fp)) = (request_id, fingerprint) {
+            if let Some(id) = request_id {
                 w.insert_reply(
                     id,
                     &StoredReply {
-                        fingerprint: fp,
+                        fingerprint: fingerprint(route, body),
                         status: reply.0,
                         body: reply.1.to_string(),
                     },
@@ -374,12 +356,18 @@ impl Service {
         })
     }
 
-    /// A stored reply for `request_id`, if the request was already answered (read before
-    /// planning, so a retry costs no planning).
-    fn answered(&self, request_id: Option<&str>) -> Result<bool, ApiError> {
+    /// The stored reply to this request, read before planning so a retry costs no planning.
+    fn earlier_reply(
+        &self,
+        request_id: Option<&str>,
+        route: &str,
+        body: &[u8],
+    ) -> Result<Option<Reply>, ApiError> {
         match request_id {
-            Some(id) => Ok(self.store.read(|r| r.reply(id))?.is_some()),
-            None => Ok(false),
+            Some(_) => self
+                .store
+                .read(|r| Ok(stored_reply(r, request_id, route, body)))?,
+            None => Ok(None),
         }
     }
 
@@ -574,10 +562,8 @@ impl Service {
         body: &[u8],
     ) -> Result<Reply, ApiError> {
         let route = format!("POST /deployments/{deployment}/trials");
-        if self.answered(req.request_id.as_deref())? {
-            return self.idempotent(req.request_id.as_deref(), &route, body, |_| {
-                Err(ApiError::internal("a stored reply vanished"))
-            });
+        if let Some(reply) = self.earlier_reply(req.request_id.as_deref(), &route, body)? {
+            return Ok(reply);
         }
         let spec = self.spec(deployment)?;
         if !is_type_name(&req.target) {
@@ -699,10 +685,8 @@ impl Service {
     /// `POST /trials/{id}/observations`.
     pub fn observe(&self, id: i64, req: Observe, body: &[u8]) -> Result<Reply, ApiError> {
         let route = format!("POST /trials/{id}/observations");
-        if self.answered(req.request_id.as_deref())? {
-            return self.idempotent(req.request_id.as_deref(), &route, body, |_| {
-                Err(ApiError::internal("a stored reply vanished"))
-            });
+        if let Some(reply) = self.earlier_reply(req.request_id.as_deref(), &route, body)? {
+            return Ok(reply);
         }
         let row = self.trial_row(id)?;
         if row.status != TrialStatus::Searching {
@@ -848,6 +832,41 @@ impl StoredTrial {
             &self.observations,
         )
     }
+}
+
+/// What tells a retried request from another one under the same id: route and body.
+fn fingerprint(route: &str, body: &[u8]) -> String {
+    let mut h = Sha256::new();
+    h.update(route.as_bytes());
+    h.update([0]);
+    h.update(body);
+    format!("{:x}", h.finalize())
+}
+
+/// The stored reply to `request_id` when it was this request (route and body); a 409 when the
+/// id was used for another one.
+fn stored_reply(
+    r: &crate::store::Reader<'_>,
+    request_id: Option<&str>,
+    route: &str,
+    body: &[u8],
+) -> Result<Option<Reply>, ApiError> {
+    let Some(id) = request_id else {
+        return Ok(None);
+    };
+    let Some(stored) = r.reply(id)? else {
+        return Ok(None);
+    };
+    if stored.fingerprint != fingerprint(route, body) {
+        return Err(ApiError::new(
+            409,
+            "request_id",
+            format!("{id:?} was used for another request"),
+        ));
+    }
+    let body = serde_json::from_str(&stored.body)
+        .map_err(|e| ApiError::internal(format!("stored reply: {e}")))?;
+    Ok(Some((stored.status, body)))
 }
 
 /// The trial's search rebuilt from its stored observations.

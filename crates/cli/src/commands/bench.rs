@@ -116,7 +116,6 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
     let dir = tempfile::tempdir()?;
     let db = dir.path().join("bench.sqlite");
     let store = ferret_serve::Store::open(&db)?;
-    let names: Vec<String> = loaded.scenes.iter().map(|s| s.house.name.clone()).collect();
     // The work list: per deployment, (scene name, target) per trial, with the truth to answer.
     let mut plans = Vec::with_capacity(args.deployments);
     for d in 0..args.deployments {
@@ -160,7 +159,6 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
         bar.inc(1);
     }
     bar.finish_and_clear();
-    let _ = names;
     let app = ferret_serve::router(Arc::new(service), &ferret_serve::HttpOptions::default())
         .map_err(|e| anyhow::anyhow!("{}", e.message))?;
     let runtime = tokio::runtime::Builder::new_multi_thread()

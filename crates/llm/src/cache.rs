@@ -22,7 +22,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
-use rusqlite::{Connection, OptionalExtension, params};
+use rusqlite::{Connection, OptionalExtension, TransactionBehavior, params};
 use serde::Serialize;
 use sha2::{Digest, Sha256};
 
@@ -130,17 +130,20 @@ impl ResponseCache {
                 ))
             })?;
         }
-        let conn = Connection::open(file).map_err(sql)?;
+        let mut conn = Connection::open(file).map_err(sql)?;
         conn.busy_timeout(BUSY_TIMEOUT).map_err(sql)?;
-        let mode: String = conn
-            .pragma_update_and_check(None, "journal_mode", "WAL", |row| row.get(0))
-            .map_err(sql)?;
+        let mode = switch_to_wal(&conn, BUSY_TIMEOUT).map_err(sql)?;
         if !mode.eq_ignore_ascii_case("wal") {
             tracing::warn!(file = %file.display(), mode, "response cache is not in WAL mode (file system without shared memory?)");
         }
         conn.pragma_update(None, "synchronous", "FULL")
             .map_err(sql)?;
-        let version: i64 = conn
+        // IMMEDIATE takes the write lock before reading the version, so two processes opening
+        // an old cache at once cannot both migrate it, and the busy timeout applies to the wait.
+        let tx = conn
+            .transaction_with_behavior(TransactionBehavior::Immediate)
+            .map_err(sql)?;
+        let version: i64 = tx
             .pragma_query_value(None, "user_version", |row| row.get(0))
             .map_err(sql)?;
         if version > SCHEMA_VERSION {
@@ -150,7 +153,7 @@ impl ResponseCache {
                 expected: SCHEMA_VERSION,
             });
         }
-        conn.execute_batch(
+        tx.execute_batch(
             "CREATE TABLE IF NOT EXISTS responses (
                 key               TEXT PRIMARY KEY,
                 endpoint          TEXT NOT NULL,
@@ -168,11 +171,12 @@ impl ResponseCache {
         )
         .map_err(sql)?;
         if version == 1 {
-            conn.execute_batch("ALTER TABLE responses ADD COLUMN logprobs TEXT;")
+            tx.execute_batch("ALTER TABLE responses ADD COLUMN logprobs TEXT;")
                 .map_err(sql)?;
         }
-        conn.pragma_update(None, "user_version", SCHEMA_VERSION)
+        tx.pragma_update(None, "user_version", SCHEMA_VERSION)
             .map_err(sql)?;
+        tx.commit().map_err(sql)?;
         Ok(Self {
             file: file.to_path_buf(),
             conn: Mutex::new(conn),
@@ -364,6 +368,32 @@ pub(crate) fn now_unix() -> i64 {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| i64::try_from(d.as_secs()).unwrap_or(i64::MAX))
+}
+
+/// Puts a database file in WAL mode and returns the journal mode it ended in.
+///
+/// Switching a new file's journal mode takes an exclusive lock, and when several processes open
+/// the same new file at once SQLite reports `SQLITE_BUSY` at once for the ones that would
+/// deadlock instead of calling the busy handler; so the switch is retried here until `patience`
+/// runs out.
+///
+/// # Errors
+/// Any SQLite error, or `SQLITE_BUSY` still after `patience`.
+pub fn switch_to_wal(conn: &Connection, patience: Duration) -> rusqlite::Result<String> {
+    let deadline = std::time::Instant::now() + patience;
+    let mut pause = Duration::from_millis(1);
+    loop {
+        match conn.pragma_update_and_check(None, "journal_mode", "WAL", |row| row.get(0)) {
+            Err(rusqlite::Error::SqliteFailure(e, _))
+                if e.code == rusqlite::ErrorCode::DatabaseBusy
+                    && std::time::Instant::now() < deadline =>
+            {
+                std::thread::sleep(pause);
+                pause = (pause * 2).min(Duration::from_millis(50));
+            }
+            other => return other,
+        }
+    }
 }
 
 #[cfg(test)]

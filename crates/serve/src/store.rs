@@ -8,7 +8,7 @@ use std::sync::{Mutex, MutexGuard};
 use std::time::Duration;
 
 use ferret_select::Method;
-use rusqlite::{Connection, OptionalExtension, Transaction, params};
+use rusqlite::{Connection, OptionalExtension, Transaction, TransactionBehavior, params};
 use serde::{Deserialize, Serialize};
 
 /// Storage failures (the disk, not the request).
@@ -258,7 +258,11 @@ impl Store {
         f: impl FnOnce(&Writer<'_>) -> Result<T, E>,
     ) -> Result<T, E> {
         let mut conn = self.lock();
-        let tx = conn.transaction().map_err(|e| self.sql(e))?;
+        // IMMEDIATE: a second process on the same file waits for the write lock (busy timeout)
+        // instead of failing when a read turns into a write.
+        let tx = conn
+            .transaction_with_behavior(TransactionBehavior::Immediate)
+            .map_err(|e| self.sql(e))?;
         let out = f(&Writer {
             tx: &tx,
             store: self,

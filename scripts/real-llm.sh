@@ -122,8 +122,12 @@ install() {
 # Four endpoints over one server: text answers and JSON-schema answers, each read from the text
 # or from the token log-probabilities. All request logprobs and share one cache id, so the
 # readings of one request cost one request.
+# JSON answers use the OpenAI `json_schema` form with llama.cpp's server and the `json_object`
+# form (with a schema) that llama-cpp-python's server reads.
 write_config() {
-    local modes=("qwen:text:text" "qwen-logprobs:text:logprobs" "qwen-json:json_object:text" "qwen-json-logprobs:json_object:logprobs")
+    local json=json_schema
+    [ "$SERVER" = llama-cpp-python ] && json=json_object
+    local modes=("qwen:text:text" "qwen-logprobs:text:logprobs" "qwen-json:$json:text" "qwen-json-logprobs:$json:logprobs")
     : >"$OUT/ferret.toml"
     for m in "${modes[@]}"; do
         IFS=: read -r name format from <<<"$m"

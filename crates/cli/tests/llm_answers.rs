@@ -323,6 +323,38 @@ fn the_real_model_lane_writes_a_config_ferret_reads() {
         toml.contains("base_url = \"http://127.0.0.1:18999/v1\""),
         "{toml}"
     );
+    // llama.cpp's server (the default) takes OpenAI's json_schema form; llama-cpp-python's
+    // server only reads a schema under json_object.
+    assert_eq!(
+        toml.matches("answer_format = \"json_schema\"").count(),
+        2,
+        "{toml}"
+    );
+    assert_eq!(
+        toml.matches("answer_format = \"json_object\"").count(),
+        0,
+        "{toml}"
+    );
+    let o = Command::new("bash")
+        .arg(&script)
+        .arg("config")
+        .env("FERRET_LANE_OUT", dir.path())
+        .env("FERRET_LANE_SERVER", "llama-cpp-python")
+        .output()
+        .expect("bash runs");
+    assert!(o.status.success(), "{}", text(&o));
+    let python = std::fs::read_to_string(dir.path().join("ferret.toml")).unwrap();
+    assert_eq!(
+        python.matches("answer_format = \"json_object\"").count(),
+        2,
+        "{python}"
+    );
+    assert_eq!(
+        python.matches("answer_format = \"json_schema\"").count(),
+        0,
+        "{python}"
+    );
+    std::fs::write(dir.path().join("ferret.toml"), &toml).unwrap();
     let o = ferret(&[
         "llm",
         "list",

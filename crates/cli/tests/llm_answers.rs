@@ -303,17 +303,22 @@ async fn calibrate_scores_sources_and_asks_each_question_once() {
 /// reads: four endpoints over one server, sharing one cache id, in the four answer modes.
 #[test]
 fn the_real_model_lane_writes_a_config_ferret_reads() {
-    let dir = tempfile::tempdir().unwrap();
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/real-llm.sh");
-    let o = Command::new("bash")
-        .arg(&script)
-        .arg("config")
-        .env("FERRET_LANE_OUT", dir.path())
-        .env("FERRET_LANE_PORT", "18999")
-        .output()
-        .expect("bash runs");
-    assert!(o.status.success(), "{}", text(&o));
-    let toml = std::fs::read_to_string(dir.path().join("ferret.toml")).unwrap();
+    // The config the lane writes into a fresh directory with these environment settings.
+    let lane_config = |env: &[(&str, &str)]| {
+        let dir = tempfile::tempdir().unwrap();
+        let o = Command::new("bash")
+            .arg(&script)
+            .arg("config")
+            .env("FERRET_LANE_OUT", dir.path())
+            .envs(env.iter().copied())
+            .output()
+            .expect("bash runs");
+        assert!(o.status.success(), "{}", text(&o));
+        let toml = std::fs::read_to_string(dir.path().join("ferret.toml")).unwrap();
+        (dir, toml)
+    };
+    let (dir, toml) = lane_config(&[("FERRET_LANE_PORT", "18999")]);
     assert_eq!(
         toml.matches("cache_id = \"qwen2.5-coder-1.5b-instruct-q4_k_m\"")
             .count(),
@@ -335,15 +340,7 @@ fn the_real_model_lane_writes_a_config_ferret_reads() {
         0,
         "{toml}"
     );
-    let o = Command::new("bash")
-        .arg(&script)
-        .arg("config")
-        .env("FERRET_LANE_OUT", dir.path())
-        .env("FERRET_LANE_SERVER", "llama-cpp-python")
-        .output()
-        .expect("bash runs");
-    assert!(o.status.success(), "{}", text(&o));
-    let python = std::fs::read_to_string(dir.path().join("ferret.toml")).unwrap();
+    let (_, python) = lane_config(&[("FERRET_LANE_SERVER", "llama-cpp-python")]);
     assert_eq!(
         python.matches("answer_format = \"json_object\"").count(),
         2,
@@ -354,7 +351,6 @@ fn the_real_model_lane_writes_a_config_ferret_reads() {
         0,
         "{python}"
     );
-    std::fs::write(dir.path().join("ferret.toml"), &toml).unwrap();
     let o = ferret(&[
         "llm",
         "list",

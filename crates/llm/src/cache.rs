@@ -379,7 +379,7 @@ pub(crate) fn now_unix() -> i64 {
 ///
 /// # Errors
 /// Any SQLite error, or `SQLITE_BUSY` still after `patience`.
-pub fn switch_to_wal(conn: &Connection, patience: Duration) -> rusqlite::Result<String> {
+fn switch_to_wal(conn: &Connection, patience: Duration) -> rusqlite::Result<String> {
     let deadline = std::time::Instant::now() + patience;
     let mut pause = Duration::from_millis(1);
     loop {

@@ -363,12 +363,11 @@ impl Service {
         route: &str,
         body: &[u8],
     ) -> Result<Option<Reply>, ApiError> {
-        match request_id {
-            Some(_) => self
-                .store
-                .read(|r| Ok(stored_reply(r, request_id, route, body)))?,
-            None => Ok(None),
+        if request_id.is_none() {
+            return Ok(None);
         }
+        self.store
+            .read(|r| Ok(stored_reply(r, request_id, route, body)))?
     }
 
     /// `POST /scenes`.

@@ -32,7 +32,15 @@ LLAMA_CPP_PYTHON="${FERRET_LANE_LLAMA_CPP_PYTHON:-0.3.36}"
 # (a build), one thread is faster than two that keep losing their core.
 THREADS="${FERRET_LANE_THREADS:-$(nproc)}"
 SERVER="${FERRET_LANE_SERVER:-llama-cpp}"
-INDEX="${PIP_INDEX_URL:-https://pypi.org/simple}"
+# The package index is pip's own: PIP_INDEX_URL, else pip's configuration, else pip's default.
+INDEX="${PIP_INDEX_URL:-$(python3 -m pip config get global.index-url 2>/dev/null || true)}"
+[ -n "$INDEX" ] || INDEX="$(python3 -c 'from pip._internal.models.index import PyPI; print(PyPI.simple_url)')"
+# A portable x86-64 build: AVX2, FMA, F16C and BMI2, nothing detected from the build machine.
+# `-march=native` (GGML_NATIVE=ON) builds a server that crashes at start on some CPUs (seen on a
+# Xeon that advertises AMX); the portable one runs on any x86-64 CPU from 2013 (Haswell) on.
+# Override with FERRET_LANE_CMAKE_FLAGS (e.g. "-DGGML_AVX512=ON" where you know the CPU).
+PORTABLE_FLAGS="-DGGML_NATIVE=OFF -DGGML_AVX=ON -DGGML_AVX2=ON -DGGML_FMA=ON -DGGML_F16C=ON -DGGML_BMI2=ON"
+CMAKE_FLAGS="${FERRET_LANE_CMAKE_FLAGS:-$PORTABLE_FLAGS}"
 PARTS=22
 MODEL="$CACHE/model/qwen2.5-coder-1.5b-instruct-q4_k_m.gguf"
 PY="$CACHE/venv/bin/python"
@@ -41,7 +49,10 @@ log() { printf '[lane %s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }
 
 # llama.cpp's C++ server, built from the sources llama-cpp-python's sdist vendors.
 install_llama_server() {
-    [ -x "$CACHE/bin/llama-server" ] && return 0
+    # A server built with other flags (an older native build) is rebuilt.
+    if [ -x "$CACHE/bin/llama-server" ] && [ "$(cat "$CACHE/bin/llama-server.flags" 2>/dev/null)" = "$CMAKE_FLAGS" ]; then
+        return 0
+    fi
     local src="$CACHE/src/llama_cpp_python-$LLAMA_CPP_PYTHON"
     if [ ! -d "$src/vendor/llama.cpp" ]; then
         log "fetching llama-cpp-python $LLAMA_CPP_PYTHON's sdist (it vendors llama.cpp)"
@@ -67,17 +78,24 @@ PY
         tar xzf "$tgz" -C "$CACHE/src"
     fi
     "$PY" -m pip install -q cmake ninja
-    log "building llama-server (about 8 min on 2 cores, once)"
+    log "building llama-server (about 8 min on 2 cores, once): $CMAKE_FLAGS"
+    rm -rf "$CACHE/llama-build"
+    # shellcheck disable=SC2086 # the flags are words on purpose
     "$CACHE/venv/bin/cmake" -S "$src/vendor/llama.cpp" -B "$CACHE/llama-build" -G Ninja \
         -DCMAKE_MAKE_PROGRAM="$CACHE/venv/bin/ninja" -DCMAKE_BUILD_TYPE=Release \
         -DLLAMA_BUILD_UI=OFF -DLLAMA_USE_PREBUILT_UI=OFF -DLLAMA_CURL=OFF -DLLAMA_OPENSSL=OFF \
-        -DLLAMA_BUILD_TESTS=OFF -DLLAMA_BUILD_EXAMPLES=OFF -DGGML_NATIVE=ON \
+        -DLLAMA_BUILD_TESTS=OFF -DLLAMA_BUILD_EXAMPLES=OFF $CMAKE_FLAGS \
         -DBUILD_SHARED_LIBS=OFF >"$CACHE/logs/llama-server.log" 2>&1 \
         && "$CACHE/venv/bin/cmake" --build "$CACHE/llama-build" --target llama-server \
             -j "$(nproc)" >>"$CACHE/logs/llama-server.log" 2>&1 \
         || { tail -20 "$CACHE/logs/llama-server.log" >&2; exit 1; }
     mkdir -p "$CACHE/bin"
     cp "$CACHE/llama-build/bin/llama-server" "$CACHE/bin/llama-server"
+    printf '%s' "$CMAKE_FLAGS" >"$CACHE/bin/llama-server.flags"
+    # Smoke test: a build that cannot even print its version (an illegal instruction) fails here,
+    # not in the middle of a run.
+    "$CACHE/bin/llama-server" --version >"$CACHE/logs/llama-server-version.log" 2>&1 \
+        || { log "the built llama-server does not start:"; tail -5 "$CACHE/logs/llama-server-version.log" >&2; exit 1; }
 }
 
 install() {

@@ -64,22 +64,34 @@ pub enum AnswerClass {
     NoNumber,
     /// The worked example's value said about the worked example's object: not an answer.
     ExampleEchoed,
+    /// A word answer: Yes or No (P-YESNO), a listed letter (P-CHOICE).
+    Word,
+    /// Neither Yes nor No, nor a listed letter: not an answer.
+    NoWord,
+    /// A place the answer left out (P-BATCH): not an answer.
+    Missing,
 }
 
 impl AnswerClass {
     /// Every class, in report order.
-    pub const ALL: [AnswerClass; 6] = [
+    pub const ALL: [AnswerClass; 9] = [
         Self::Json,
         Self::NumberOnly,
         Self::NumberInProse,
         Self::SeveralNumbers,
         Self::NoNumber,
         Self::ExampleEchoed,
+        Self::Word,
+        Self::NoWord,
+        Self::Missing,
     ];
 
     /// True for classes that give a probability.
     pub fn usable(self) -> bool {
-        matches!(self, Self::Json | Self::NumberOnly | Self::NumberInProse)
+        matches!(
+            self,
+            Self::Json | Self::NumberOnly | Self::NumberInProse | Self::Word
+        )
     }
 
     /// The class in words, as in reports (`number-in-prose`).
@@ -91,6 +103,9 @@ impl AnswerClass {
             Self::SeveralNumbers => "several-numbers",
             Self::NoNumber => "no-number",
             Self::ExampleEchoed => "example-echoed",
+            Self::Word => "word",
+            Self::NoWord => "no-word",
+            Self::Missing => "missing",
         }
     }
 }
@@ -221,6 +236,106 @@ fn read_json(text: &str) -> Option<ProbabilityReading> {
 /// The probability an answer states, when it is usable; see [`read_probability`].
 pub fn parse_probability(answer: &str) -> Option<f64> {
     read_probability(answer, None).probability
+}
+
+/// A word answer read: which word, and where it stands in the answer text (what the token
+/// log-probabilities are read at).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct WordReading {
+    /// The index of the word among those allowed (Yes = 0, No = 1; a label's index).
+    pub index: usize,
+    /// Byte range of the word in the answer text.
+    pub span: Range<usize>,
+}
+
+static LEADING_WORD: LazyLock<Regex> = LazyLock::new(|| {
+    // The first word, past white space, quotes, emphasis, list marks and a JSON object's opening
+    // up to its value: `Yes`, `**No**.`, `{"answer": "Yes"}`, `{"label": "C"}`, `C.`, `(C)`.
+    Regex::new(r#"^[\s\x00"'`*_(\[{-]*(?:"?[A-Za-z_]+"?\s*:\s*"?)?([A-Za-z]+)"#)
+        .expect("constant pattern")
+});
+
+/// The first word of `text` (reasoning aside) and its byte range.
+fn leading_word(text: &str) -> Option<(String, Range<usize>)> {
+    let t = masked(text);
+    let c = LEADING_WORD.captures(&t)?;
+    let m = c.get(1)?;
+    Some((m.as_str().to_string(), m.range()))
+}
+
+/// Reads a P-YESNO answer: `Yes` (index 0) or `No` (index 1), in any case, as the answer's first
+/// word or the value of a JSON object (`{"answer": "Yes"}`). `None` for anything else.
+pub fn read_yes_no(text: &str) -> Option<WordReading> {
+    let (word, span) = leading_word(text)?;
+    let index = match word.to_ascii_lowercase().as_str() {
+        "yes" => 0,
+        "no" => 1,
+        _ => return None,
+    };
+    Some(WordReading { index, span })
+}
+
+/// Reads a P-CHOICE answer: one of `labels` (capital letters) as the answer's first word, alone
+/// or followed by punctuation or a new line (`C`, `C.`, `(C) the sofa`), or as the value of a JSON
+/// object (`{"label": "C"}`). `None` for anything else: a letter that starts prose is a word
+/// ("I think B", "A sofa"), not an answer.
+pub fn read_label(text: &str, labels: &[String]) -> Option<WordReading> {
+    let (word, span) = leading_word(text)?;
+    let rest = &text[span.end..];
+    let prose = rest
+        .strip_prefix([' ', '\t'])
+        .and_then(|r| r.trim_start_matches([' ', '\t']).chars().next())
+        .is_some_and(char::is_alphanumeric);
+    if prose {
+        return None;
+    }
+    labels
+        .iter()
+        .position(|l| *l == word)
+        .map(|index| WordReading { index, span })
+}
+
+static BATCH_LINE: LazyLock<Regex> = LazyLock::new(|| {
+    // `A: 40%`, `- **B** — 5%`, `"C": "70%"`, `D) 20 %`, one per line or in one JSON object.
+    Regex::new(r#"(?m)(?:^|[{,])[\s\x00"'`*_•-]*([A-Z])[\s"'`*_]*[:.)=–—-]\s*"?([^",}\n]*)"#)
+        .expect("constant pattern")
+});
+
+/// Reads a P-BATCH answer: for each of `labels`, its percentage (as [`read_probability`] reads
+/// one answer, the number's range given in the whole text), `None` when the answer leaves the
+/// label out. A JSON object's values are of class [`AnswerClass::Json`]; a label written twice
+/// is read where it is first written.
+pub fn read_batch(text: &str, labels: &[String]) -> Vec<Option<ProbabilityReading>> {
+    let t = masked(text);
+    let json = {
+        let inner = t.trim_matches(|c: char| c.is_whitespace() || c == '\0');
+        let inner = inner
+            .strip_prefix("```json")
+            .or_else(|| inner.strip_prefix("```"))
+            .map_or(inner, |s| s.trim_end().trim_end_matches("```").trim());
+        serde_json::from_str::<serde_json::Map<String, serde_json::Value>>(inner).is_ok()
+    };
+    let mut out: Vec<Option<ProbabilityReading>> = vec![None; labels.len()];
+    for c in BATCH_LINE.captures_iter(&t) {
+        let (Some(label), Some(value)) = (c.get(1), c.get(2)) else {
+            continue;
+        };
+        let Some(i) = labels.iter().position(|l| l == label.as_str()) else {
+            continue;
+        };
+        if out[i].is_some() {
+            continue;
+        }
+        let mut r = read_probability(value.as_str(), None);
+        if json && r.class.usable() {
+            r.class = AnswerClass::Json;
+        }
+        r.number = r
+            .number
+            .map(|n| n.start + value.start()..n.end + value.start());
+        out[i] = Some(r);
+    }
+    out
 }
 
 /// How a P-DIRECT answer was matched to the list of search locations.
@@ -384,7 +499,10 @@ mod tests {
                 c.usable(),
                 matches!(
                     c,
-                    AnswerClass::Json | AnswerClass::NumberOnly | AnswerClass::NumberInProse
+                    AnswerClass::Json
+                        | AnswerClass::NumberOnly
+                        | AnswerClass::NumberInProse
+                        | AnswerClass::Word
                 )
             );
         }
@@ -461,6 +579,76 @@ mod tests {
         assert_eq!(match_location("", &l), None);
     }
 
+    fn letters(n: usize) -> Vec<String> {
+        crate::context::LABELS
+            .chars()
+            .take(n)
+            .map(|c| c.to_string())
+            .collect()
+    }
+
+    #[test]
+    fn yes_and_no_are_read_where_they_stand() {
+        let r = read_yes_no("Yes").unwrap();
+        assert_eq!((r.index, r.span), (0, 0..3));
+        assert_eq!(read_yes_no(" no.").unwrap().index, 1);
+        assert_eq!(read_yes_no("**YES**, usually").unwrap().index, 0);
+        let json = r#"{"answer": "No"}"#;
+        let r = read_yes_no(json).unwrap();
+        assert_eq!((r.index, &json[r.span.clone()]), (1, "No"));
+        assert_eq!(
+            read_yes_no("<think>yes or no?</think>No").unwrap().span,
+            25..27
+        );
+        for bad in ["Maybe", "", "It could be yes", "Nope"] {
+            assert_eq!(read_yes_no(bad), None, "{bad}");
+        }
+    }
+
+    #[test]
+    fn a_label_is_read_only_at_the_start_of_the_answer() {
+        let l = letters(10);
+        assert_eq!(read_label("C", &l).unwrap().index, 2);
+        assert_eq!(read_label("C.", &l).unwrap().index, 2);
+        assert_eq!(read_label(" (D) the sofa", &l).unwrap().index, 3);
+        let json = r#"{"label": "J"}"#;
+        let r = read_label(json, &l).unwrap();
+        assert_eq!((r.index, &json[r.span.clone()]), (9, "J"));
+        // Not a listed letter, or a letter inside prose.
+        assert_eq!(read_label("K", &l), None);
+        assert_eq!(read_label("I think B", &l), None);
+        assert_eq!(read_label("The sofa", &l), None);
+        assert_eq!(read_label("c", &l), None);
+    }
+
+    #[test]
+    fn batch_answers_in_lines_or_json() {
+        let l = letters(4);
+        let r = read_batch("A: 40%\nB: 5%\n- **C** — 70 %\nD) no idea", &l);
+        let p: Vec<Option<f64>> = r
+            .iter()
+            .map(|r| r.as_ref().and_then(|r| r.probability))
+            .collect();
+        assert_eq!(p, [Some(0.4), Some(0.05), Some(0.7), None]);
+        assert_eq!(r[0].as_ref().unwrap().class, AnswerClass::NumberOnly);
+        assert_eq!(r[3].as_ref().unwrap().class, AnswerClass::NoNumber);
+        // The number's range is in the whole answer.
+        let text = "A: 40%\nB: 5%";
+        let r = read_batch(text, &l);
+        assert_eq!(&text[r[1].as_ref().unwrap().number.clone().unwrap()], "5");
+        // JSON, with a key that is not listed and one left out.
+        let json = r#"{"A": "10%", "Z": "90%", "C": "55%"}"#;
+        let r = read_batch(json, &l);
+        assert_eq!(r[0].as_ref().unwrap().class, AnswerClass::Json);
+        assert_eq!(r[0].as_ref().unwrap().probability, Some(0.1));
+        assert!(r[1].is_none());
+        assert_eq!(r[2].as_ref().unwrap().probability, Some(0.55));
+        assert_eq!(&json[r[2].as_ref().unwrap().number.clone().unwrap()], "55");
+        // The first mention of a letter counts.
+        let r = read_batch("A: 10%\nA: 90%", &l);
+        assert_eq!(r[0].as_ref().unwrap().probability, Some(0.1));
+    }
+
     proptest! {
         #[test]
         fn parsed_probabilities_are_in_range(s in ".{0,40}") {
@@ -480,6 +668,17 @@ mod tests {
             let l = labels();
             prop_assert_eq!(match_location(&l[i], &l), Some((i, MatchKind::Exact)));
             prop_assert_eq!(match_location(&l[i].to_uppercase(), &l), Some((i, MatchKind::CaseInsensitive)));
+        }
+
+        #[test]
+        fn batch_lines_are_read_back(values in proptest::collection::vec(1u32..=100, 1..26)) {
+            let l = letters(values.len());
+            let text: String = l.iter().zip(&values).map(|(l, v)| format!("{l}: {v}%\n")).collect();
+            let r = read_batch(&text, &l);
+            for (r, v) in r.iter().zip(&values) {
+                let p = r.as_ref().and_then(|r| r.probability);
+                prop_assert_eq!(p, Some(f64::from(*v) / 100.0));
+            }
         }
     }
 }

@@ -71,7 +71,7 @@ pub fn cache_key(config: &EndpointConfig, request: &Request) -> String {
         server: config.cache_id.as_deref().unwrap_or(&base),
         temperature: config.temperature,
         seed: config.seed,
-        max_output_tokens: config.max_output_tokens,
+        max_output_tokens: request.max_output_tokens(config),
         reasoning_effort: config.reasoning_effort.as_ref(),
         messages: &request.messages,
         response_format: request.response_format.as_ref(),
@@ -422,6 +422,7 @@ mod tests {
 
     fn req(messages: &[ChatMessage]) -> Request {
         Request {
+            min_output_tokens: None,
             messages: messages.to_vec(),
             response_format: None,
             top_logprobs: None,

@@ -144,9 +144,10 @@ impl EndpointClient {
     fn openai_request(&self, request: &Request) -> CreateChatCompletionRequest {
         let messages = &request.messages;
         let c = &self.endpoint.config;
+        let limit = request.max_output_tokens(c);
         let (max_completion_tokens, max_tokens) = match c.max_tokens_param {
-            MaxTokensParam::MaxCompletionTokens => (c.max_output_tokens, None),
-            MaxTokensParam::MaxTokens => (None, c.max_output_tokens),
+            MaxTokensParam::MaxCompletionTokens => (limit, None),
+            MaxTokensParam::MaxTokens => (None, limit),
         };
         CreateChatCompletionRequest {
             messages: messages.iter().map(Into::into).collect(),

@@ -169,6 +169,12 @@ pub struct EndpointConfig {
     /// Times an unusable answer is asked again with a short format reminder (0..=5).
     #[serde(default = "default_max_reasks")]
     pub max_reasks: u32,
+    /// P-YESNO and P-CHOICE read their probability from the answer token's log-probabilities.
+    /// When a reply has none, the word the model wrote is used instead: Yes gives this
+    /// probability and No one minus it; the chosen letter gets this share and the other places
+    /// the rest (0.5..=0.99; counted as answers without log-probabilities).
+    #[serde(default = "default_word_answer_mass")]
+    pub word_answer_mass: f64,
     /// How the role text is sent.
     #[serde(default)]
     pub system_role: SystemRole,
@@ -176,6 +182,10 @@ pub struct EndpointConfig {
 
 fn default_max_reasks() -> u32 {
     1
+}
+
+fn default_word_answer_mass() -> f64 {
+    0.8
 }
 
 fn default_concurrency() -> usize {
@@ -219,6 +229,7 @@ impl EndpointConfig {
             probability_from: ProbabilityFrom::default(),
             top_logprobs: None,
             max_reasks: default_max_reasks(),
+            word_answer_mass: default_word_answer_mass(),
             system_role: SystemRole::default(),
         }
     }
@@ -368,6 +379,12 @@ impl EndpointConfig {
             return Err(bad(
                 "max_reasks",
                 format!("{} is more than {MAX_REASKS}", self.max_reasks),
+            ));
+        }
+        if !(0.5..=0.99).contains(&self.word_answer_mass) {
+            return Err(bad(
+                "word_answer_mass",
+                format!("{} is outside [0.5, 0.99]", self.word_answer_mass),
             ));
         }
         if self.max_attempts == 0 {

@@ -221,6 +221,161 @@ impl QueryPlan {
     }
 }
 
+impl QueryPlan {
+    /// The questions for `target` in `house` by container type and room *type* (`bedroom`, not
+    /// `bedroom 2`): what a question naming no house asks (P-YESNO), so that one answer serves
+    /// every house with such a room. The queries' `room` holds the room type in words.
+    pub fn by_room_type(house: &House, target: &ObjectType) -> Self {
+        let mut queries: Vec<ProbabilityQuery> = Vec::new();
+        let mut index: BTreeMap<ProbabilityQuery, usize> = BTreeMap::new();
+        let of_container = house
+            .containers
+            .iter()
+            .map(|c| {
+                let room = c
+                    .room
+                    .and_then(|r| house.rooms.get(r))
+                    .map_or_else(|| NO_ROOM.to_string(), |r| r.room_type.words());
+                let q = ProbabilityQuery {
+                    target: target.clone(),
+                    container: c.object_type.clone(),
+                    room,
+                };
+                *index.entry(q.clone()).or_insert_with(|| {
+                    queries.push(q);
+                    queries.len() - 1
+                })
+            })
+            .collect();
+        Self {
+            queries,
+            of_container,
+        }
+    }
+}
+
+/// Labels of listed places: one capital letter each, a single token in common tokenizers (digits
+/// are not: Qwen writes `12` as two tokens, so a number label cannot be read from one token's
+/// alternatives).
+pub const LABELS: &str = "ABCDEFGHIJKLMNOPQRSTUVWXYZ";
+
+/// The most places one listing question names (one per letter).
+pub const MAX_LISTED: usize = LABELS.len();
+
+/// One place of a house's listing: a container type in a room (containers of one type in one
+/// room are one place: nothing in words tells them apart).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ListedPlace {
+    /// The container type in words (`counter top`).
+    pub container: String,
+    /// The room's label (`kitchen`, `bedroom 2`; `house` for none).
+    pub room: String,
+}
+
+/// The places of a house that listing prompts (P-CHOICE, P-BATCH) name, and the parts they are
+/// asked in. A house with more places than [`MAX_LISTED`] is asked in several parts of nearly equal
+/// size, each a question of its own.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Listing {
+    /// Distinct (container type, room) places, in order of first container.
+    pub places: Vec<ListedPlace>,
+    /// For container `i`, the index into `places` of its place.
+    pub of_container: Vec<usize>,
+    /// The parts: indices into `places`, each at most [`MAX_LISTED`] long, together every place
+    /// once, in order.
+    pub parts: Vec<Vec<usize>>,
+}
+
+impl Listing {
+    /// The listing of `house`, named as `labels` describes it.
+    pub fn new(house: &House, labels: &HouseContext) -> Self {
+        let mut places: Vec<ListedPlace> = Vec::new();
+        let of_container = house
+            .containers
+            .iter()
+            .map(|c| {
+                let place = ListedPlace {
+                    container: c.object_type.words(),
+                    room: labels.room_label(c.room.filter(|&r| r < house.rooms.len())),
+                };
+                match places.iter().position(|p| *p == place) {
+                    Some(i) => i,
+                    None => {
+                        places.push(place);
+                        places.len() - 1
+                    }
+                }
+            })
+            .collect();
+        let n = places.len();
+        let count = n.div_ceil(MAX_LISTED).max(1);
+        let parts = (0..count)
+            .map(|k| (k * n / count..(k + 1) * n / count).collect())
+            .filter(|p: &Vec<usize>| !p.is_empty())
+            .collect();
+        Self {
+            places,
+            of_container,
+            parts,
+        }
+    }
+}
+
+/// One listed place as a template sees it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ListedOption {
+    /// Its letter (`A`).
+    pub label: String,
+    /// The container type in words.
+    pub container: String,
+    /// The room's label.
+    pub room: String,
+}
+
+/// What listing templates (P-CHOICE, P-BATCH) are rendered with.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ListingContext {
+    /// The target in words.
+    pub target: String,
+    /// Room labels in house order.
+    pub rooms: Vec<String>,
+    /// The house description.
+    pub house: Vec<RoomEntry>,
+    /// The places asked about, lettered from `A` in the order given.
+    pub options: Vec<ListedOption>,
+}
+
+impl ListingContext {
+    /// The context asking about `places` (indices into `listing.places`, in the order they are
+    /// to be lettered) for `target`.
+    pub fn new(
+        ctx: &HouseContext,
+        listing: &Listing,
+        places: &[usize],
+        target: &ObjectType,
+    ) -> Self {
+        Self {
+            target: target.words(),
+            rooms: ctx.room_labels.clone(),
+            house: ctx.entries.clone(),
+            options: places
+                .iter()
+                .zip(LABELS.chars())
+                .map(|(&p, label)| ListedOption {
+                    label: label.to_string(),
+                    container: listing.places[p].container.clone(),
+                    room: listing.places[p].room.clone(),
+                })
+                .collect(),
+        }
+    }
+
+    /// The option letters, in order.
+    pub fn labels(&self) -> Vec<String> {
+        self.options.iter().map(|o| o.label.clone()).collect()
+    }
+}
+
 /// What probability templates are rendered with.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ProbabilityContext {
@@ -565,5 +720,64 @@ pub(crate) mod tests {
             DirectContext::new(&house, &ctx, &d, &ObjectType::new("X"), Place::Start, &[9])
                 .is_err()
         );
+    }
+
+    #[test]
+    fn yes_no_questions_name_room_types() {
+        let house = small_house();
+        let plan = QueryPlan::by_room_type(&house, &ObjectType::new("CellPhone"));
+        // The beds of bedroom 1 and bedroom 2 are one question about a bed in a bedroom.
+        assert_eq!(plan.queries.len(), 4);
+        assert_eq!(plan.of_container, [0, 1, 1, 2, 2, 3]);
+        assert_eq!(
+            plan.queries[2].describe(),
+            "cell phone in the bed in the bedroom"
+        );
+    }
+
+    #[test]
+    fn listings_name_each_place_once_and_letter_them() {
+        let house = small_house();
+        let ctx = HouseContext::new(&house);
+        let listing = Listing::new(&house, &ctx);
+        assert_eq!(listing.places.len(), 5);
+        assert_eq!(listing.of_container, [0, 1, 1, 2, 3, 4]);
+        assert_eq!(listing.parts, [vec![0, 1, 2, 3, 4]]);
+        let l = ListingContext::new(&ctx, &listing, &[4, 0], &ObjectType::new("Apple"));
+        assert_eq!(l.labels(), ["A", "B"]);
+        assert_eq!(l.options[0].container, "dresser");
+        assert_eq!(l.options[0].room, "bedroom 2");
+        assert_eq!(l.options[1].container, "fridge");
+    }
+
+    /// A house of one room holding `n` containers of distinct types.
+    fn house_of(n: usize) -> House {
+        let mut house = small_house();
+        let template = house.containers[0].clone();
+        house.containers = (0..n)
+            .map(|i| ferret_world::Container {
+                id: format!("c|{i}"),
+                object_type: ObjectType::new(format!("Type{i}")),
+                ..template.clone()
+            })
+            .collect();
+        house
+    }
+
+    proptest::proptest! {
+        /// Parts cover every place once, in order, each within the letters, and differ in size
+        /// by at most one.
+        #[test]
+        fn parts_cover_every_place_once(n in 1usize..120) {
+            let house = house_of(n);
+            let listing = Listing::new(&house, &HouseContext::new(&house));
+            let flat: Vec<usize> = listing.parts.iter().flatten().copied().collect();
+            proptest::prop_assert_eq!(flat, (0..n).collect::<Vec<_>>());
+            proptest::prop_assert_eq!(listing.parts.len(), n.div_ceil(MAX_LISTED));
+            let sizes: Vec<usize> = listing.parts.iter().map(Vec::len).collect();
+            proptest::prop_assert!(sizes.iter().all(|&s| (1..=MAX_LISTED).contains(&s)));
+            let (lo, hi) = (sizes.iter().min().copied(), sizes.iter().max().copied());
+            proptest::prop_assert!(hi.unwrap_or(0) - lo.unwrap_or(0) <= 1);
+        }
     }
 }

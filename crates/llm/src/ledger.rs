@@ -65,7 +65,8 @@ pub enum LogprobUse {
     NotWanted,
     /// The expected percentage from the tokens was used.
     Used,
-    /// Wanted, but the server sent none or they did not fit the answer: the text was used.
+    /// Wanted, but the server sent none or they did not fit the answer: the text was used
+    /// (P-YESNO and P-CHOICE: the word, with the endpoint's `word_answer_mass`).
     Missing,
 }
 
@@ -106,6 +107,12 @@ pub struct AnswerCounts {
     pub class_no_number: u64,
     /// First answers restating the worked example (not an answer).
     pub class_example_echoed: u64,
+    /// First answers that were a word: Yes/No, a listed letter.
+    pub class_word: u64,
+    /// First answers that were no allowed word (not an answer).
+    pub class_no_word: u64,
+    /// Places a batch answer left out (not an answer).
+    pub class_missing: u64,
     /// Questions asked again after an unusable answer.
     pub reasked: u64,
     /// Probability answers still unusable after every re-ask, which fell back to 0.01.
@@ -135,6 +142,9 @@ impl AnswerCounts {
         self.class_several_numbers += o.class_several_numbers;
         self.class_no_number += o.class_no_number;
         self.class_example_echoed += o.class_example_echoed;
+        self.class_word += o.class_word;
+        self.class_no_word += o.class_no_word;
+        self.class_missing += o.class_missing;
         self.reasked += o.reasked;
         self.probability_fallbacks += o.probability_fallbacks;
         self.logprob_used += o.logprob_used;
@@ -155,6 +165,9 @@ impl AnswerCounts {
             AnswerClass::SeveralNumbers => self.class_several_numbers,
             AnswerClass::NoNumber => self.class_no_number,
             AnswerClass::ExampleEchoed => self.class_example_echoed,
+            AnswerClass::Word => self.class_word,
+            AnswerClass::NoWord => self.class_no_word,
+            AnswerClass::Missing => self.class_missing,
         }
     }
 
@@ -166,6 +179,9 @@ impl AnswerCounts {
             AnswerClass::SeveralNumbers => &mut self.class_several_numbers,
             AnswerClass::NoNumber => &mut self.class_no_number,
             AnswerClass::ExampleEchoed => &mut self.class_example_echoed,
+            AnswerClass::Word => &mut self.class_word,
+            AnswerClass::NoWord => &mut self.class_no_word,
+            AnswerClass::Missing => &mut self.class_missing,
         }
     }
 
@@ -335,6 +351,20 @@ impl Ledger {
         cost_usd: f64,
         outcome: AnswerOutcome,
     ) {
+        self.record_answers(llm, strategy, key, usage, cost_usd, &[outcome]);
+    }
+
+    /// Like [`Self::record_answer`] for an answer that gives several readings (a percentage per
+    /// place, P-BATCH): its tokens and cost once, each reading as an answer of its own.
+    pub fn record_answers(
+        &self,
+        llm: &str,
+        strategy: &str,
+        key: &str,
+        usage: &TokenUsage,
+        cost_usd: f64,
+        outcomes: &[AnswerOutcome],
+    ) {
         let mut inner = self.lock();
         if !inner
             .seen
@@ -351,39 +381,8 @@ impl Ledger {
         }
         let r = row(&mut inner.rows, llm, strategy);
         r.distinct.add(usage, cost_usd);
-        if let AnswerOutcome::Probability { value: Some(v), .. } = outcome {
-            *r.probability_values
-                .entry((v * 1000.0).round() as u32)
-                .or_default() += 1;
-        }
-        let a = &mut r.answers;
-        match outcome {
-            AnswerOutcome::Probability {
-                class,
-                reasked,
-                value,
-                logprobs,
-            } => {
-                a.probability_answers += 1;
-                *a.class_mut(class) += 1;
-                a.reasked += u64::from(reasked);
-                a.probability_fallbacks += u64::from(value.is_none());
-                match logprobs {
-                    LogprobUse::Used => a.logprob_used += 1,
-                    LogprobUse::Missing => a.logprob_missing += 1,
-                    LogprobUse::NotWanted => {}
-                }
-            }
-            AnswerOutcome::Direct(kind) => {
-                a.direct_answers += 1;
-                match kind {
-                    MatchKind::Exact => a.direct_exact += 1,
-                    MatchKind::CaseInsensitive => a.direct_case_insensitive += 1,
-                    MatchKind::Containment => a.direct_containment += 1,
-                    MatchKind::Fallback => a.direct_fallbacks += 1,
-                }
-            }
-            AnswerOutcome::Other => {}
+        for &outcome in outcomes {
+            count_outcome(r, outcome);
         }
     }
 
@@ -397,6 +396,43 @@ impl Ledger {
     }
 }
 
+fn count_outcome(r: &mut UsageRow, outcome: AnswerOutcome) {
+    if let AnswerOutcome::Probability { value: Some(v), .. } = outcome {
+        *r.probability_values
+            .entry((v * 1000.0).round() as u32)
+            .or_default() += 1;
+    }
+    let a = &mut r.answers;
+    match outcome {
+        AnswerOutcome::Probability {
+            class,
+            reasked,
+            value,
+            logprobs,
+        } => {
+            a.probability_answers += 1;
+            *a.class_mut(class) += 1;
+            a.reasked += u64::from(reasked);
+            a.probability_fallbacks += u64::from(value.is_none());
+            match logprobs {
+                LogprobUse::Used => a.logprob_used += 1,
+                LogprobUse::Missing => a.logprob_missing += 1,
+                LogprobUse::NotWanted => {}
+            }
+        }
+        AnswerOutcome::Direct(kind) => {
+            a.direct_answers += 1;
+            match kind {
+                MatchKind::Exact => a.direct_exact += 1,
+                MatchKind::CaseInsensitive => a.direct_case_insensitive += 1,
+                MatchKind::Containment => a.direct_containment += 1,
+                MatchKind::Fallback => a.direct_fallbacks += 1,
+            }
+        }
+        AnswerOutcome::Other => {}
+    }
+}
+
 /// A snapshot of a [`Ledger`]: rows sorted by LLM, then strategy.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct TokenReport {
@@ -407,7 +443,7 @@ pub struct TokenReport {
 }
 
 /// The header of `tokens.csv`.
-pub const TOKENS_CSV_HEADER: [&str; 28] = [
+pub const TOKENS_CSV_HEADER: [&str; 31] = [
     "llm",
     "strategy",
     "requests",
@@ -436,6 +472,9 @@ pub const TOKENS_CSV_HEADER: [&str; 28] = [
     "logprob_used",
     "logprob_missing",
     "warning",
+    "class_word",
+    "class_no_word",
+    "class_missing",
 ];
 
 impl TokenReport {
@@ -503,6 +542,9 @@ impl TokenReport {
                 n(r.answers.logprob_used),
                 n(r.answers.logprob_missing),
                 r.warning().unwrap_or_default(),
+                n(r.answers.class_word),
+                n(r.answers.class_no_word),
+                n(r.answers.class_missing),
             ])?;
         }
         w.flush()?;
@@ -674,7 +716,7 @@ mod tests {
         assert_eq!(lines[0], TOKENS_CSV_HEADER.join(","));
         assert_eq!(
             lines[1],
-            "g,llm+model/p-minimal/g,2,200,6,80,1.000000,0,2,200,6,1.000000,2,1,0,0,0,0,0,1,0,0,1,0,1,0,0,"
+            "g,llm+model/p-minimal/g,2,200,6,80,1.000000,0,2,200,6,1.000000,2,1,0,0,0,0,0,1,0,0,1,0,1,0,0,,0,0,0"
         );
         let table = r.to_string();
         assert!(table.lines().nth(1).unwrap().starts_with("g "), "{table}");

@@ -10,18 +10,22 @@
 //!   backoff and jitter on 429, 5xx, timeouts and cut connections, honouring `Retry-After`.
 //! - [`cache`]: the SQLite response cache (one file, WAL, committed before an answer is used);
 //!   [`service`] puts it in front of every endpoint ([`Llm`]), with an offline mode.
-//! - [`prompts`] and [`context`]: P-CONTEXT-A, P-CONTEXT-B, P-MINIMAL and P-DIRECT as minijinja
-//!   templates compiled into the binary (users add their own by path), rendered from a house in
-//!   words.
+//! - [`prompts`] and [`context`]: P-CONTEXT-A, P-CONTEXT-B, P-MINIMAL, P-DIRECT, P-YESNO,
+//!   P-CHOICE and P-BATCH as minijinja templates compiled into the binary (users add their own by
+//!   path), rendered from a house in words.
 //! - [`question`]: a question and the request an endpoint receives for it (role text merged for
 //!   models without a system turn, structured output with a JSON schema, log-probabilities).
-//! - [`answer`]: probability parsing into answer classes and P-DIRECT matching as DESIGN.md says;
-//!   [`logprobs`]: the expected percentage from token log-probabilities.
+//! - [`answer`]: probability parsing into answer classes, yes/no and letter answers, P-DIRECT
+//!   matching; [`logprobs`]: the expected percentage, P(Yes) and the letter distribution from
+//!   token log-probabilities.
+//! - [`likelihood`]: [`LlmLikelihood`], the LLM as a likelihood source, asking and reading each
+//!   kind of prompt (one question per container type and room, per room type, or per house).
 //! - [`ledger`]: tokens, requests, cache hits and USD per LLM and strategy (`tokens.csv`, the
 //!   paper's table V).
-//! - [`strategy`]: `llm+model/<prompt>/<llm>` and `llm-direct/<prompt>/<llm>` for the plan
-//!   crate's [`StrategyRegistry`](ferret_plan::StrategyRegistry), and concurrent prefetching of
-//!   every probability question before trials run.
+//! - [`strategy`]: `llm+model/<prompt>/<llm>`, `fused/<prompt>/<llm>` and
+//!   `llm-direct/<prompt>/<llm>` for the plan crate's
+//!   [`StrategyRegistry`](ferret_plan::StrategyRegistry), and concurrent prefetching of every
+//!   probability question before trials run.
 //!
 //! API keys never leave the endpoint: they are not in the cache, the logs, reports or errors.
 
@@ -34,6 +38,7 @@ pub mod config;
 pub mod context;
 pub mod error;
 pub mod ledger;
+pub mod likelihood;
 pub mod logprobs;
 pub mod message;
 pub mod prompts;
@@ -42,8 +47,8 @@ pub mod service;
 pub mod strategy;
 
 pub use answer::{
-    AnswerClass, FALLBACK_PROBABILITY, MatchKind, ProbabilityReading, WorkedExample,
-    match_location, parse_probability, read_probability,
+    AnswerClass, FALLBACK_PROBABILITY, MatchKind, ProbabilityReading, WordReading, WorkedExample,
+    match_location, parse_probability, read_batch, read_label, read_probability, read_yes_no,
 };
 pub use async_openai::types::chat::ReasoningEffort;
 pub use cache::{CachedReply, DEFAULT_CACHE_PATH, ResponseCache, cache_key};
@@ -52,17 +57,27 @@ pub use config::{
     AnswerFormat, DEFAULT_CONFIG_FILE, Endpoint, EndpointConfig, LlmConfig, MaxTokensParam,
     ProbabilityFrom, SystemRole,
 };
-pub use context::{DirectContext, HouseContext, ProbabilityContext, ProbabilityQuery, QueryPlan};
+pub use context::{
+    DirectContext, HouseContext, LABELS, ListedOption, ListedPlace, Listing, ListingContext,
+    MAX_LISTED, ProbabilityContext, ProbabilityQuery, QueryPlan,
+};
 pub use error::{CacheError, ConfigError, LlmError, Result};
 pub use ledger::{
     AnswerCounts, AnswerOutcome, Ledger, LogprobUse, TokenCounts, TokenReport, UsageRow,
 };
-pub use logprobs::{TokenLogprob, TopLogprob, expected_percentage};
+pub use likelihood::{Asked, LlmLikelihood, QuestionSet, Resolved, Shape, question_set};
+pub use logprobs::{
+    TokenLogprob, TopLogprob, expected_percentage, label_distribution, yes_probability,
+};
 pub use message::{ChatMessage, MessageRole};
-pub use prompts::{P_CONTEXT_A, P_CONTEXT_B, P_DIRECT, P_MINIMAL, PromptLibrary};
+pub use prompts::{
+    P_BATCH, P_CHOICE, P_CONTEXT_A, P_CONTEXT_B, P_DIRECT, P_MINIMAL, P_YESNO, PromptKind,
+    PromptLibrary,
+};
 pub use question::{Expect, Question, Request};
 pub use service::{Answer, Llm, LlmOptions, LlmService};
 pub use strategy::{
-    LLM_DIRECT, LLM_MODEL, LlmDirectPolicy, LlmDirectStrategy, LlmLikelihood, LlmSpec,
-    PrefetchProgress, PrefetchSummary, Resolved, prefetch_probabilities, register_strategies,
+    FUSED, LLM_DIRECT, LLM_MODEL, LlmDirectPolicy, LlmDirectStrategy, LlmSpec, PrefetchProgress,
+    PrefetchSummary, asks_probabilities, prefetch_probabilities, register_fused,
+    register_strategies,
 };

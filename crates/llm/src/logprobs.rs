@@ -86,31 +86,115 @@ pub fn expected_percentage(
         return Err(LogprobIssue::NotInteger);
     }
     // Byte offsets of the tokens in `text`; servers may trim the content's leading white space.
-    let joined: String = tokens.iter().map(|t| t.token.as_str()).collect();
-    let shift = if joined == text {
-        0isize
-    } else if let Some(i) = joined.find(text).filter(|_| !text.is_empty()) {
-        i as isize
-    } else {
-        return Err(LogprobIssue::Misaligned);
-    };
-    let start = number.start as isize + shift;
-    let mut offset = 0isize;
-    let mut first = None;
-    for (i, t) in tokens.iter().enumerate() {
-        let end = offset + t.token.len() as isize;
-        if start >= offset && start < end {
-            first = Some(i);
-            break;
-        }
-        offset = end;
-    }
-    let k = first.ok_or(LogprobIssue::NoDigits)?;
+    let k = token_at(tokens, text, number.start)?.ok_or(LogprobIssue::NoDigits)?;
     if digits(&tokens[k].token).is_none() {
         return Err(LogprobIssue::NoDigits);
     }
     let width = if s == "100" { 2 } else { s.len().min(3) };
     Ok(expect_at(tokens, k, k, "", s, width))
+}
+
+/// The index of the token holding byte `at` of `text`, when `tokens` spell `text` (or spell it
+/// after a prefix, as some servers send the tokens of a reasoning block too).
+fn token_at(tokens: &[TokenLogprob], text: &str, at: usize) -> Result<Option<usize>, LogprobIssue> {
+    let joined: String = tokens.iter().map(|t| t.token.as_str()).collect();
+    let shift = if joined == text {
+        0usize
+    } else if let Some(i) = joined.find(text).filter(|_| !text.is_empty()) {
+        i
+    } else {
+        return Err(LogprobIssue::Misaligned);
+    };
+    let start = at + shift;
+    let mut offset = 0usize;
+    for (i, t) in tokens.iter().enumerate() {
+        let end = offset + t.token.len();
+        if start >= offset && start < end {
+            return Ok(Some(i));
+        }
+        offset = end;
+    }
+    Ok(None)
+}
+
+/// A token as a word: white space, quotes, emphasis and end punctuation removed (`" Yes"`,
+/// `"C."`, `"**No"` → `Yes`, `C`, `No`).
+fn token_word(token: &str) -> &str {
+    token.trim_matches(|c: char| c.is_whitespace() || "\"'`*_.,:;!?()[]{}".contains(c))
+}
+
+/// The probabilities of the alternatives at token `k` (the sampled token included when the
+/// server left it out of its list), summed per word by `word_of` (which returns `None` for
+/// tokens that are none of the words), and the mass of every alternative listed.
+fn word_masses(
+    tok: &TokenLogprob,
+    words: usize,
+    word_of: impl Fn(&str) -> Option<usize>,
+) -> (Vec<f64>, f64) {
+    let mut alternatives: Vec<(&str, f64)> = tok
+        .top_logprobs
+        .iter()
+        .map(|a| (a.token.as_str(), a.logprob))
+        .collect();
+    if !alternatives.iter().any(|(t, _)| *t == tok.token) {
+        alternatives.push((tok.token.as_str(), tok.logprob.unwrap_or(0.0)));
+    }
+    let mut mass = vec![0.0; words];
+    let mut listed = 0.0;
+    for (t, lp) in alternatives {
+        if lp.is_nan() {
+            continue;
+        }
+        let p = lp.min(0.0).exp();
+        listed += p;
+        if let Some(w) = word_of(token_word(t)) {
+            mass[w] += p;
+        }
+    }
+    (mass, listed)
+}
+
+/// P(Yes) / (P(Yes) + P(No)) at the answer word that starts at byte `at` of `text`, from the
+/// alternatives the server listed for that token (any case: `Yes`, ` yes`, `YES`). `None` when
+/// the tokens do not spell the text or list neither word.
+pub fn yes_probability(tokens: &[TokenLogprob], text: &str, at: usize) -> Option<f64> {
+    let k = token_at(tokens, text, at).ok()??;
+    let (mass, _) = word_masses(&tokens[k], 2, |w| match w.to_ascii_lowercase().as_str() {
+        "yes" => Some(0),
+        "no" => Some(1),
+        _ => None,
+    });
+    let total = mass[0] + mass[1];
+    (total > 0.0).then(|| mass[0] / total)
+}
+
+/// The distribution over `labels` at the answer's label that starts at byte `at` of `text`:
+/// the probability of each label among the alternatives the server listed for that token, the
+/// mass it listed for no token at all spread evenly over the labels it left out, normalised over
+/// the labels. `None` when the tokens do not spell the text or list no label.
+pub fn label_distribution(
+    tokens: &[TokenLogprob],
+    text: &str,
+    at: usize,
+    labels: &[String],
+) -> Option<Vec<f64>> {
+    let k = token_at(tokens, text, at).ok()??;
+    let (mut mass, listed) = word_masses(&tokens[k], labels.len(), |w| {
+        labels.iter().position(|l| l == w)
+    });
+    if mass.iter().all(|&m| m <= 0.0) {
+        return None;
+    }
+    let unlisted = (1.0 - listed).max(0.0);
+    let left_out = mass.iter().filter(|&&m| m <= 0.0).count();
+    if left_out > 0 {
+        let share = unlisted / left_out as f64;
+        for m in mass.iter_mut().filter(|m| **m <= 0.0) {
+            *m = share;
+        }
+    }
+    let total: f64 = mass.iter().sum();
+    Some(mass.iter().map(|m| m / total).collect())
 }
 
 /// The expectation at token position `j` with digits `prefix` sampled so far (`k` is the
@@ -283,6 +367,52 @@ mod tests {
         assert!(v[1].top_logprobs.is_empty());
     }
 
+    #[test]
+    fn yes_probability_from_the_answer_token() {
+        let t = vec![tok(
+            "Yes",
+            &[("Yes", 0.6), ("No", 0.2), (" yes", 0.1), ("Maybe", 0.05)],
+        )];
+        let p = yes_probability(&t, "Yes", 0).unwrap();
+        assert!((p - 0.7 / 0.9).abs() < 1e-12, "{p}");
+        // In a JSON answer, at the word's token.
+        let t = vec![
+            tok("{\"", &[("{\"", 1.0)]),
+            tok("answer", &[("answer", 1.0)]),
+            tok("\":", &[("\":", 1.0)]),
+            tok(" \"", &[(" \"", 1.0)]),
+            tok("No", &[("No", 0.75), ("Yes", 0.25)]),
+            tok("\"}", &[("\"}", 1.0)]),
+        ];
+        let text = "{\"answer\": \"No\"}";
+        let p = yes_probability(&t, text, 12).unwrap();
+        assert!((p - 0.25).abs() < 1e-12, "{p}");
+        // Tokens that do not spell the answer are not read.
+        assert_eq!(yes_probability(&t, "Yes", 0), None);
+    }
+
+    #[test]
+    fn label_distribution_spreads_unlisted_mass_over_unlisted_letters() {
+        let labels: Vec<String> = ["A", "B", "C", "D"].iter().map(|s| s.to_string()).collect();
+        // A 0.5, C 0.3 (as " C" and "C."), "The" 0.1: 0.1 is unlisted, shared by B and D.
+        let t = vec![tok(
+            "A",
+            &[("A", 0.5), (" C", 0.2), ("C.", 0.1), ("The", 0.1)],
+        )];
+        let q = label_distribution(&t, "A", 0, &labels).unwrap();
+        let want = [0.5, 0.05, 0.3, 0.05].map(|x| x / 0.9);
+        for (a, b) in q.iter().zip(want) {
+            assert!((a - b).abs() < 1e-12, "{q:?}");
+        }
+        // Every letter listed: nothing is spread.
+        let t = vec![tok("B", &[("A", 0.1), ("B", 0.6), ("C", 0.2), ("D", 0.1)])];
+        let q = label_distribution(&t, "B", 0, &labels).unwrap();
+        assert!((q[1] - 0.6).abs() < 1e-12, "{q:?}");
+        // No letter among the alternatives.
+        let t = vec![tok("Hmm", &[("Hmm", 1.0)])];
+        assert_eq!(label_distribution(&t, "Hmm", 0, &labels), None);
+    }
+
     proptest::proptest! {
         #[test]
         fn expectation_stays_in_range(ps in proptest::collection::vec(0.001f64..1.0, 1..6), d in 1u32..=100) {
@@ -299,6 +429,21 @@ mod tests {
             let text = format!("{s}%");
             let e = expected_percentage(&t, &text, 0..s.len()).unwrap();
             proptest::prop_assert!((1.0..=100.0).contains(&e), "{}", e);
+        }
+
+        #[test]
+        fn label_distributions_are_distributions(
+            ps in proptest::collection::vec(0.0001f64..0.3, 1..6),
+            n in 1usize..26,
+        ) {
+            let labels: Vec<String> = crate::context::LABELS.chars().take(n).map(|c| c.to_string()).collect();
+            let alts: Vec<(String, f64)> = ps.iter().enumerate().map(|(i, p)| (labels[i % n].clone(), *p)).collect();
+            let a: Vec<(&str, f64)> = alts.iter().map(|(x, p)| (x.as_str(), *p)).collect();
+            let t = vec![tok(&labels[0], &a)];
+            let q = label_distribution(&t, &labels[0], 0, &labels).unwrap();
+            proptest::prop_assert_eq!(q.len(), n);
+            proptest::prop_assert!(q.iter().all(|&x| (0.0..=1.0).contains(&x)));
+            proptest::prop_assert!((q.iter().sum::<f64>() - 1.0).abs() < 1e-9);
         }
     }
 }

@@ -1,4 +1,4 @@
-//! Prompt templates (minijinja): the four shipped with ferret and any the user adds by path.
+//! Prompt templates (minijinja): the seven shipped with ferret and any the user adds by path.
 //!
 //! A template renders to text. Lines reading exactly `[system]`, `[user]` or `[assistant]` start
 //! a message with that role; text before the first such line, or a template without any, is one
@@ -13,6 +13,16 @@
 //! `room_distances` (`{from, to, metres}`), `robot` (`{room, at, distances: [{room, metres}]}`) and
 //! `options` (`{number, label, container, room}`; the answer is matched against `label`).
 //!
+//! Variables of **listing** templates (P-CHOICE, P-BATCH), see [`ListingContext`]: `target`,
+//! `rooms`, `house`, and `options` (`{label, container, room}`, lettered `A`, `B`, ...).
+//!
+//! **Kinds.** A template says how it is asked and read with a comment `{# ferret:kind K #}`:
+//! `percent` (the default: one question per target, container type and room, answered with a
+//! percentage), `yesno` (one per target, container type and room *type*, answered Yes or No),
+//! `choice` (one per house and target listing every place; the answer is a letter;
+//! `orders=2` also asks the list reversed and averages), or `batch` (one per house and target, a
+//! percentage per letter). See [`PromptKind`].
+//!
 //! The filter `article` puts "a" or "an" before a noun (`{{ target | article }}` → `an apple`).
 
 use std::collections::BTreeMap;
@@ -22,7 +32,9 @@ use minijinja::{Environment, UndefinedBehavior};
 use serde::Serialize;
 
 use crate::answer::WorkedExample;
-use crate::context::{DirectContext, HouseContext, ProbabilityContext, ProbabilityQuery};
+use crate::context::{
+    DirectContext, HouseContext, ListingContext, ProbabilityContext, ProbabilityQuery,
+};
 use crate::error::{LlmError, Result};
 use crate::message::{ChatMessage, MessageRole};
 
@@ -34,14 +46,86 @@ pub const P_CONTEXT_B: &str = "p-context-b";
 pub const P_MINIMAL: &str = "p-minimal";
 /// P-DIRECT: asks which container to search next (the llm-direct baseline).
 pub const P_DIRECT: &str = "p-direct";
+/// P-YESNO: "would X be found in or on the Y in the Z?", read as P(Yes) / (P(Yes) + P(No)).
+pub const P_YESNO: &str = "p-yesno";
+/// P-CHOICE: which lettered place most likely holds X, read from the letter's distribution.
+pub const P_CHOICE: &str = "p-choice";
+/// P-BATCH: a percentage for every lettered place in one answer.
+pub const P_BATCH: &str = "p-batch";
 
 /// The shipped templates, compiled into the binary.
-pub const BUILTIN_TEMPLATES: [(&str, &str); 4] = [
+pub const BUILTIN_TEMPLATES: [(&str, &str); 7] = [
     (P_CONTEXT_A, include_str!("../prompts/p-context-a.j2")),
     (P_CONTEXT_B, include_str!("../prompts/p-context-b.j2")),
     (P_MINIMAL, include_str!("../prompts/p-minimal.j2")),
     (P_DIRECT, include_str!("../prompts/p-direct.j2")),
+    (P_YESNO, include_str!("../prompts/p-yesno.j2")),
+    (P_CHOICE, include_str!("../prompts/p-choice.j2")),
+    (P_BATCH, include_str!("../prompts/p-batch.j2")),
 ];
+
+/// How a probability template is asked and read, declared in it by `{# ferret:kind K #}`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum PromptKind {
+    /// One question per (target, container type, room); the answer is a percentage.
+    Percent,
+    /// One question per (target, container type, room type), naming no house; the answer is Yes
+    /// or No, read from the first token's log-probabilities.
+    YesNo,
+    /// One question per house and target listing its places with letters; the answer is a
+    /// letter, read from the first token's log-probabilities. `orders` is 1 (as listed) or 2
+    /// (also reversed, averaged).
+    Choice {
+        /// Orders the list is asked in.
+        orders: u8,
+    },
+    /// One question per house and target; the answer gives a percentage per letter.
+    Batch,
+}
+
+impl PromptKind {
+    /// True for kinds asking one question per house and target about a listing of places.
+    pub fn is_listing(self) -> bool {
+        matches!(self, Self::Choice { .. } | Self::Batch)
+    }
+}
+
+static KIND: std::sync::LazyLock<regex::Regex> = std::sync::LazyLock::new(|| {
+    regex::Regex::new(r"\{#-?\s*ferret:kind\s+([a-z]+)(?:\s+orders=(\d+))?")
+        .expect("constant pattern")
+});
+
+/// The kind a template declares; `Percent` when it declares none.
+fn declared_kind(name: &str, source: &str) -> Result<PromptKind> {
+    let Some(c) = KIND.captures(source) else {
+        return Ok(PromptKind::Percent);
+    };
+    let bad = |message: String| LlmError::Prompt {
+        name: name.to_string(),
+        message,
+    };
+    let orders = match c.get(2) {
+        None => 1,
+        Some(o) => match o.as_str().parse::<u8>() {
+            Ok(n @ 1..=2) => n,
+            _ => {
+                return Err(bad(format!(
+                    "ferret:kind orders={}: must be 1 or 2",
+                    o.as_str()
+                )));
+            }
+        },
+    };
+    match c.get(1).map_or("", |k| k.as_str()) {
+        "percent" => Ok(PromptKind::Percent),
+        "yesno" => Ok(PromptKind::YesNo),
+        "choice" => Ok(PromptKind::Choice { orders }),
+        "batch" => Ok(PromptKind::Batch),
+        other => Err(bad(format!(
+            "ferret:kind {other}: expected percent, yesno, choice or batch"
+        ))),
+    }
+}
 
 static EXAMPLE: std::sync::LazyLock<regex::Regex> = std::sync::LazyLock::new(|| {
     regex::Regex::new(
@@ -96,6 +180,7 @@ impl PromptLibrary {
 
     /// Adds (or replaces) a template under `name`.
     pub fn add_template(&mut self, name: &str, source: String) -> Result<()> {
+        declared_kind(name, &source)?;
         self.env
             .add_template_owned(name.to_string(), source.clone())
             .map_err(|e| LlmError::Prompt {
@@ -167,6 +252,14 @@ impl PromptLibrary {
         })
     }
 
+    /// How template `name` is asked and read (`Percent` for an unknown name).
+    pub fn kind(&self, name: &str) -> PromptKind {
+        self.sources
+            .get(name)
+            .and_then(|s| declared_kind(name, s).ok())
+            .unwrap_or(PromptKind::Percent)
+    }
+
     /// Renders template `name` with `ctx` into messages.
     pub fn render<S: Serialize>(&self, name: &str, ctx: &S) -> Result<Vec<ChatMessage>> {
         let err = |message: String| LlmError::Prompt {
@@ -193,6 +286,11 @@ impl PromptLibrary {
         query: &ProbabilityQuery,
     ) -> Result<Vec<ChatMessage>> {
         self.render(name, &ProbabilityContext::new(house, query))
+    }
+
+    /// The messages of listing template `name` (P-CHOICE, P-BATCH) for `ctx`.
+    pub fn listing_messages(&self, name: &str, ctx: &ListingContext) -> Result<Vec<ChatMessage>> {
+        self.render(name, ctx)
     }
 
     /// The messages asking where to search next with template `name`.
@@ -257,8 +355,21 @@ mod tests {
         let lib = PromptLibrary::new();
         assert_eq!(
             lib.names(),
-            ["p-context-a", "p-context-b", "p-direct", "p-minimal"]
+            [
+                "p-batch",
+                "p-choice",
+                "p-context-a",
+                "p-context-b",
+                "p-direct",
+                "p-minimal",
+                "p-yesno"
+            ]
         );
+        assert_eq!(lib.kind(P_CONTEXT_A), PromptKind::Percent);
+        assert_eq!(lib.kind(P_MINIMAL), PromptKind::Percent);
+        assert_eq!(lib.kind(P_YESNO), PromptKind::YesNo);
+        assert_eq!(lib.kind(P_CHOICE), PromptKind::Choice { orders: 2 });
+        assert_eq!(lib.kind(P_BATCH), PromptKind::Batch);
     }
 
     #[test]
@@ -396,5 +507,63 @@ mod tests {
                 .contains("p-context-a")
         );
         assert!(lib.add_template("bad", "{% if %}".into()).is_err());
+    }
+
+    #[test]
+    fn yes_no_choice_and_batch_render() {
+        let house = small_house();
+        let ctx = HouseContext::new(&house);
+        let lib = PromptLibrary::new();
+        let plan = QueryPlan::by_room_type(&house, &ObjectType::new("RemoteControl"));
+        let m = lib
+            .probability_messages(P_YESNO, &ctx, &plan.queries[2])
+            .unwrap();
+        assert_eq!(
+            m,
+            [ChatMessage::user(
+                "In a typical home, would a remote control be found in or on the bed in the bedroom? Answer Yes or No."
+            )]
+        );
+        let listing = crate::context::Listing::new(&house, &ctx);
+        let l = ListingContext::new(&ctx, &listing, &[0, 1, 2, 3, 4], &ObjectType::new("Apple"));
+        for name in [P_CHOICE, P_BATCH] {
+            let m = lib.listing_messages(name, &l).unwrap();
+            let u = &m[1].content;
+            assert!(
+                u.starts_with("Places in the home:\nA. fridge in the kitchen\nB. counter top in the kitchen\nC. bed in the bedroom 1\n"),
+                "{u}"
+            );
+            assert!(u.contains("an apple"), "{u}");
+        }
+        // The listing comes before the target: the same prefix for every target of a house.
+        let other = ListingContext::new(&ctx, &listing, &[0, 1, 2, 3, 4], &ObjectType::new("Book"));
+        let a = &lib.listing_messages(P_CHOICE, &l).unwrap()[1].content;
+        let b = &lib.listing_messages(P_CHOICE, &other).unwrap()[1].content;
+        let common = a.chars().zip(b.chars()).take_while(|(x, y)| x == y).count();
+        assert!(common > a.find("E. dresser").unwrap(), "{common}");
+        // A listing template lacks the probability variables: strict rendering refuses it.
+        assert!(
+            lib.probability_messages(P_CHOICE, &ctx, &plan.queries[0])
+                .is_err()
+        );
+    }
+
+    #[test]
+    fn declared_kinds_are_checked() {
+        let mut lib = PromptLibrary::new();
+        lib.add_template("mine", "{# ferret:kind choice #}\n{{ target }}".into())
+            .unwrap();
+        assert_eq!(lib.kind("mine"), PromptKind::Choice { orders: 1 });
+        let e = lib
+            .add_template("bad", "{# ferret:kind guess #}".into())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("guess") && e.contains("yesno"), "{e}");
+        let e = lib
+            .add_template("bad", "{# ferret:kind choice orders=3 #}".into())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("orders=3"), "{e}");
+        assert_eq!(lib.kind("no-such-template"), PromptKind::Percent);
     }
 }

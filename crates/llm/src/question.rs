@@ -19,6 +19,12 @@ pub enum Expect {
     Probability,
     /// One of these location labels (P-DIRECT).
     Location(Vec<String>),
+    /// Yes or No (P-YESNO).
+    YesNo,
+    /// One of these letters (P-CHOICE).
+    Choice(Vec<String>),
+    /// A percentage for each of these letters (P-BATCH).
+    Batch(Vec<String>),
     /// Anything (a ping).
     Free,
 }
@@ -72,6 +78,21 @@ impl Question {
 /// The format reminder sent with a re-asked probability question.
 pub const PROBABILITY_REMINDER: &str =
     "Answer with one percentage between 1% and 100% and nothing else, for example: 40%";
+/// The format reminder sent with a re-asked P-YESNO question.
+pub const YES_NO_REMINDER: &str = "Answer Yes or No and nothing else.";
+/// The format reminder sent with a re-asked P-CHOICE question.
+pub const CHOICE_REMINDER: &str =
+    "Answer with the letter of one place from the list and nothing else.";
+
+/// The format reminder sent with a re-asked P-BATCH question whose answer left out `missing`.
+pub fn batch_reminder(missing: &[String]) -> String {
+    format!(
+        "Give a percentage between 1% and 100% for each of these places too, one line each, for example \"{}: 40%\": {}",
+        missing.first().map_or("A", String::as_str),
+        missing.join(", ")
+    )
+}
+
 /// The format reminder sent with a re-asked P-DIRECT question.
 pub const LOCATION_REMINDER: &str = "Answer with exactly one search location from the list, written exactly as in the list, and nothing else.";
 
@@ -84,7 +105,14 @@ pub struct Request {
     pub response_format: Option<Value>,
     /// `top_logprobs` (with `logprobs: true`), when log-probabilities are asked for.
     pub top_logprobs: Option<u8>,
+    /// Output tokens the answer needs at least (a percentage per place, P-BATCH): raises an
+    /// endpoint's `max_output_tokens` that is lower, never sets a limit where there is none.
+    pub min_output_tokens: Option<u32>,
 }
+
+/// Output tokens a P-BATCH answer needs per place (`"A": "40%", ` is 8 tokens in common
+/// tokenizers; the rest is room for a model that writes `A: 40%` lines with a word or two).
+pub const BATCH_TOKENS_PER_PLACE: u32 = 12;
 
 impl Request {
     /// A plain text request: these messages, no structured output, no log-probabilities.
@@ -93,6 +121,15 @@ impl Request {
             messages,
             response_format: None,
             top_logprobs: None,
+            min_output_tokens: None,
+        }
+    }
+
+    /// The output-token limit sent with this request under `config`.
+    pub fn max_output_tokens(&self, config: &EndpointConfig) -> Option<u32> {
+        match (config.max_output_tokens, self.min_output_tokens) {
+            (Some(limit), Some(need)) => Some(limit.max(need)),
+            (limit, _) => limit,
         }
     }
 
@@ -104,7 +141,13 @@ impl Request {
         };
         let schema = match &question.expect {
             Expect::Probability => Some(("percent", percent_schema())),
-            Expect::Location(labels) => Some(("location", location_schema(labels))),
+            Expect::Location(labels) => Some(("location", enum_schema("location", labels))),
+            Expect::YesNo => Some((
+                "answer",
+                enum_schema("answer", &["Yes".to_string(), "No".to_string()]),
+            )),
+            Expect::Choice(labels) => Some(("label", enum_schema("label", labels))),
+            Expect::Batch(labels) => Some(("percentages", batch_schema(labels))),
             Expect::Free => None,
         };
         // A model that is not told to write JSON is pushed into it token by token by the
@@ -119,7 +162,8 @@ impl Request {
                 .rev()
                 .find(|m| m.role == MessageRole::User)
         {
-            last.content.push_str(&json_instruction(field));
+            last.content
+                .push_str(&json_instruction(field, &question.expect));
         }
         let response_format = schema.and_then(|(name, schema)| match config.answer_format {
             AnswerFormat::Text => None,
@@ -134,20 +178,41 @@ impl Request {
             Expect::Free => None,
             _ => config.requested_top_logprobs(),
         };
+        let min_output_tokens = match &question.expect {
+            Expect::Batch(labels) => Some(
+                16 + BATCH_TOKENS_PER_PLACE * u32::try_from(labels.len()).unwrap_or(u32::MAX / 64),
+            ),
+            _ => None,
+        };
         Self {
             messages,
             response_format,
             top_logprobs,
+            min_output_tokens,
         }
     }
 }
 
 /// The line appended to the question in JSON answer formats.
-pub fn json_instruction(field: &str) -> String {
-    match field {
-        "percent" => {
+pub fn json_instruction(field: &str, expect: &Expect) -> String {
+    match (field, expect) {
+        ("percent", _) => {
             "\nReply with JSON only: {\"percent\": \"<a percentage from 1% to 100%>\"}".into()
         }
+        (_, Expect::YesNo) => {
+            "\nReply with JSON only: {\"answer\": \"Yes\"} or {\"answer\": \"No\"}".into()
+        }
+        (_, Expect::Choice(_)) => {
+            "\nReply with JSON only: {\"label\": \"<the letter of one place>\"}".into()
+        }
+        (_, Expect::Batch(labels)) => format!(
+            "\nReply with JSON only, a percentage from 1% to 100% for every letter: {{{}}}",
+            labels
+                .iter()
+                .map(|l| format!("\"{l}\": \"<percentage>\""))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
         _ => format!(
             "\nReply with JSON only: {{\"{field}\": \"<one {field} from the list, written as in the list>\"}}"
         ),
@@ -170,12 +235,27 @@ fn percent_schema() -> Value {
     })
 }
 
-/// `{"location": <one of the labels>}`.
-fn location_schema(labels: &[String]) -> Value {
+/// `{"<field>": <one of the labels>}`.
+fn enum_schema(field: &str, labels: &[String]) -> Value {
     json!({
         "type": "object",
-        "properties": {"location": {"type": "string", "enum": labels}},
-        "required": ["location"],
+        "properties": {field: {"type": "string", "enum": labels}},
+        "required": [field],
+        "additionalProperties": false,
+    })
+}
+
+/// `{"A": "<1..100>%", "B": ...}`: every letter required, in order, nothing else.
+fn batch_schema(labels: &[String]) -> Value {
+    let values: Vec<String> = (1..=100).map(|p| format!("{p}%")).collect();
+    let properties: serde_json::Map<String, Value> = labels
+        .iter()
+        .map(|l| (l.clone(), json!({"type": "string", "enum": values})))
+        .collect();
+    json!({
+        "type": "object",
+        "properties": properties,
+        "required": labels,
         "additionalProperties": false,
     })
 }
@@ -306,5 +386,69 @@ mod tests {
         assert_eq!(again.messages[2], ChatMessage::assistant("I am not sure"));
         assert_eq!(again.messages[3].content, PROBABILITY_REMINDER);
         assert_eq!(again.expect, Expect::Probability);
+    }
+
+    #[test]
+    fn yes_no_choice_and_batch_schemas() {
+        let mut c = EndpointConfig::new("http://x/v1", "m");
+        c.answer_format = AnswerFormat::JsonSchema;
+        let yes_no = Question {
+            expect: Expect::YesNo,
+            ..q()
+        };
+        let r = Request::new(&c, &yes_no);
+        let f = r.response_format.unwrap();
+        assert_eq!(
+            f["json_schema"]["schema"]["properties"]["answer"]["enum"],
+            json!(["Yes", "No"])
+        );
+        assert!(r.messages[1].content.contains("{\"answer\": \"Yes\"}"));
+        let letters: Vec<String> = ["A", "B", "C"].iter().map(|s| s.to_string()).collect();
+        let choice = Question {
+            expect: Expect::Choice(letters.clone()),
+            ..q()
+        };
+        let f = Request::new(&c, &choice).response_format.unwrap();
+        assert_eq!(
+            f["json_schema"]["schema"]["properties"]["label"]["enum"],
+            json!(["A", "B", "C"])
+        );
+        let batch = Question {
+            expect: Expect::Batch(letters.clone()),
+            ..q()
+        };
+        let r = Request::new(&c, &batch);
+        let schema = &r.response_format.as_ref().unwrap()["json_schema"]["schema"];
+        assert_eq!(schema["required"], json!(["A", "B", "C"]));
+        assert_eq!(schema["additionalProperties"], false);
+        assert_eq!(
+            schema["properties"]["C"]["enum"].as_array().map(Vec::len),
+            Some(100)
+        );
+        assert!(
+            r.messages[1].content.ends_with(
+                "{\"A\": \"<percentage>\", \"B\": \"<percentage>\", \"C\": \"<percentage>\"}"
+            ),
+            "{}",
+            r.messages[1].content
+        );
+    }
+
+    #[test]
+    fn a_batch_answer_raises_a_low_output_limit_and_nothing_else_does() {
+        let mut c = EndpointConfig::new("http://x/v1", "m");
+        let letters: Vec<String> = (0..20).map(|i| format!("{i}")).collect();
+        let batch = Question {
+            expect: Expect::Batch(letters),
+            ..q()
+        };
+        // No limit set: none is sent.
+        assert_eq!(Request::new(&c, &batch).max_output_tokens(&c), None);
+        c.max_output_tokens = Some(48);
+        let need = 16 + 20 * BATCH_TOKENS_PER_PLACE;
+        assert_eq!(Request::new(&c, &batch).max_output_tokens(&c), Some(need));
+        assert_eq!(Request::new(&c, &q()).max_output_tokens(&c), Some(48));
+        c.max_output_tokens = Some(4000);
+        assert_eq!(Request::new(&c, &batch).max_output_tokens(&c), Some(4000));
     }
 }

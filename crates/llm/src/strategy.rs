@@ -1,64 +1,69 @@
-//! LLMs in the plan crate's terms: a likelihood source ([`LlmLikelihood`], behind the strategy
-//! `llm+model/<prompt>/<llm>[/k<N>|/exact]`), a policy ([`LlmDirectPolicy`], behind
-//! `llm-direct/<prompt>/<llm>`), their registration in a [`StrategyRegistry`], and
+//! LLMs in the plan crate's terms: the planner over an LLM's likelihoods
+//! (`llm+model/<prompt>/<llm>[/k<N>|/exact]`, see [`LlmLikelihood`]), the same fused with the
+//! prior (`fused/<prompt>/<llm>`, see [`ferret_plan::Fused`]), a policy ([`LlmDirectPolicy`],
+//! behind `llm-direct/<prompt>/<llm>`), their registration in a [`StrategyRegistry`], and
 //! [`prefetch_probabilities`], which asks every probability question of a set of trials
 //! concurrently before the trials run so that they find every answer in the cache.
 //!
 //! The plan crate's traits are synchronous (trials run on rayon threads); these types reach the
 //! async client through the [`LlmService`]'s runtime with `block_on`.
 
-use std::collections::{HashMap, HashSet};
-use std::sync::{Arc, Mutex};
+use std::collections::HashSet;
+use std::sync::Arc;
 
 use ferret_plan::policy::nearest;
 use ferret_plan::strategy::parse_limit;
 use ferret_plan::{
-    Belief, LikelihoodSource, ModelStrategy, PlanError, PlannerConfig, Policy, Probability,
-    Strategy, StrategyRegistry, StrategySpec, TrialContext,
+    Belief, Fused, FusionFile, LikelihoodSource, ModelStrategy, PlanError, PlannerConfig, Policy,
+    Prior, Strategy, StrategyRegistry, StrategySpec, TrialContext, prior_fingerprint,
 };
 use ferret_world::{House, ObjectType};
 use futures::future::join_all;
 use futures::stream::{self, StreamExt};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::answer::{
-    AnswerClass, FALLBACK_PROBABILITY, MatchKind, WorkedExample, contains_phrase, match_location,
-    read_probability,
-};
-use crate::client::TokenUsage;
-use crate::config::ProbabilityFrom;
-use crate::context::{DirectContext, HouseContext, ProbabilityQuery, QueryPlan};
+use crate::answer::{MatchKind, match_location};
+use crate::context::{DirectContext, HouseContext};
 use crate::error::{LlmError, Result};
-use crate::ledger::{AnswerOutcome, LogprobUse};
-use crate::logprobs::expected_percentage;
+use crate::ledger::AnswerOutcome;
+use crate::likelihood::{Asked, LlmLikelihood};
 use crate::message::ChatMessage;
-use crate::question::{Expect, LOCATION_REMINDER, PROBABILITY_REMINDER, Question};
-use crate::service::{Answer, Llm, LlmService};
+use crate::question::{Expect, LOCATION_REMINDER, Question};
+use crate::service::{Llm, LlmService};
 
 /// The strategy kind of the LLM-informed planner.
 pub const LLM_MODEL: &str = "llm+model";
 /// The strategy kind of the LLM-direct baseline.
 pub const LLM_DIRECT: &str = "llm-direct";
+/// The strategy kind of the planner over the prior fused with an LLM's likelihoods.
+pub const FUSED: &str = "fused";
+
+/// True for the kinds that plan over an LLM's likelihoods (`llm+model`, `fused`): the ones whose
+/// probability questions are asked before trials run.
+pub fn asks_probabilities(kind: &str) -> bool {
+    kind == LLM_MODEL || kind == FUSED
+}
 
 /// A parsed LLM strategy spec.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct LlmSpec {
-    /// `llm+model` or `llm-direct`.
+    /// `llm+model`, `fused` or `llm-direct`.
     pub kind: String,
     /// The prompt: a template name or a path to a template file (which may hold `/`).
     pub prompt: String,
     /// The LLM's endpoint name.
     pub llm: String,
-    /// The planner-limit suffix (`k8`, `exact`, `exact12`), `llm+model` only.
+    /// The planner-limit suffix (`k8`, `exact`, `exact12`), `llm+model` and `fused` only.
     pub limit: Option<String>,
 }
 
 impl LlmSpec {
-    /// Reads `llm+model/<prompt>/<llm>[/<limit>]` or `llm-direct/<prompt>/<llm>`; `None` for
-    /// other kinds. The prompt may be a path with slashes: the LLM is the last part (before an
-    /// optional limit), the prompt everything between.
+    /// Reads `llm+model/<prompt>/<llm>[/<limit>]`, `fused/<prompt>/<llm>[/<limit>]` or
+    /// `llm-direct/<prompt>/<llm>`; `None` for other kinds. The prompt may be a path with
+    /// slashes: the LLM is the last part (before an optional limit), the prompt everything
+    /// between.
     pub fn parse(spec: &StrategySpec) -> Option<std::result::Result<Self, PlanError>> {
-        if spec.kind != LLM_MODEL && spec.kind != LLM_DIRECT {
+        if !asks_probabilities(&spec.kind) && spec.kind != LLM_DIRECT {
             return None;
         }
         let bad = |reason: String| PlanError::UnknownStrategy {
@@ -66,7 +71,7 @@ impl LlmSpec {
             reason,
         };
         let mut args = spec.args.clone();
-        let limit = if spec.kind == LLM_MODEL
+        let limit = if asks_probabilities(&spec.kind)
             && args.len() >= 3
             && args.last().is_some_and(|a| parse_limit(a, 1).is_some())
         {
@@ -84,288 +89,6 @@ impl LlmSpec {
             llm,
             limit,
         }))
-    }
-}
-
-fn likelihood_error(source: &str, e: LlmError) -> PlanError {
-    PlanError::Likelihood {
-        source_name: source.to_string(),
-        error: Box::new(e),
-    }
-}
-
-/// (house name, house index, container count, target).
-type MemoKey = (String, usize, usize, ObjectType);
-
-/// A question to prefetch, and the source that asks it.
-struct Job {
-    source: Arc<LlmLikelihood>,
-    question: Question,
-    query: ProbabilityQuery,
-}
-
-/// A probability question answered, re-asks included.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Resolved {
-    /// The first question's cache key (what the ledger counts distinct prompts by).
-    pub key: String,
-    /// Tokens of every exchange.
-    pub usage: TokenUsage,
-    /// USD of every exchange.
-    pub cost_usd: f64,
-    /// The first answer's class.
-    pub class: AnswerClass,
-    /// True when the first answer was unusable and the question was asked again.
-    pub reasked: bool,
-    /// The probability, `None` when every answer was unusable.
-    pub value: Option<f64>,
-    /// Where the value came from.
-    pub logprobs: LogprobUse,
-}
-
-/// `P_S` from an LLM: one question per (target, container type, room type) of a house, asked
-/// with a probability prompt; answers read as DESIGN.md says (unreadable ones fall back to 0.01
-/// and are counted).
-pub struct LlmLikelihood {
-    service: Arc<LlmService>,
-    llm: Arc<Llm>,
-    prompt: String,
-    /// `<prompt>/<llm>`.
-    name: String,
-    /// The strategy the answers are counted under.
-    strategy: String,
-    /// Results per (house name, house index, container count, target): trials and replays on
-    /// the same house reuse them without rendering or looking anything up again.
-    memo: Mutex<HashMap<MemoKey, Vec<Probability>>>,
-    /// The prompt's worked example, read from its template once.
-    example: Option<WorkedExample>,
-}
-
-impl std::fmt::Debug for LlmLikelihood {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("LlmLikelihood")
-            .field("name", &self.name)
-            .field("strategy", &self.strategy)
-            .finish()
-    }
-}
-
-impl LlmLikelihood {
-    /// A source asking `llm` with `prompt` (a template name or path), counting under `strategy`.
-    pub fn new(service: Arc<LlmService>, prompt: &str, llm: &str, strategy: &str) -> Result<Self> {
-        let prompt = service.resolve_prompt(prompt)?;
-        let llm = service.llm(llm)?;
-        let example = service.prompts().example(&prompt);
-        Ok(Self {
-            name: format!("{prompt}/{}", llm.name()),
-            service,
-            llm,
-            prompt,
-            strategy: strategy.to_string(),
-            memo: Mutex::new(HashMap::new()),
-            example,
-        })
-    }
-
-    /// The LLM asked.
-    pub fn llm(&self) -> &Arc<Llm> {
-        &self.llm
-    }
-
-    /// The prompt template's name.
-    pub fn prompt(&self) -> &str {
-        &self.prompt
-    }
-
-    /// The questions for `target` in `house`, each as the messages that would be sent.
-    pub fn messages(
-        &self,
-        house: &House,
-        target: &ObjectType,
-    ) -> Result<(QueryPlan, Vec<Vec<ChatMessage>>)> {
-        let (plan, questions) = self.questions(house, target)?;
-        Ok((plan, questions.into_iter().map(|q| q.messages).collect()))
-    }
-
-    /// The questions for `target` in `house`.
-    pub fn questions(
-        &self,
-        house: &House,
-        target: &ObjectType,
-    ) -> Result<(QueryPlan, Vec<Question>)> {
-        let ctx = HouseContext::new(house);
-        let plan = QueryPlan::with_context(house, &ctx, target);
-        let prompts = self.service.prompts();
-        let questions = plan
-            .queries
-            .iter()
-            .map(|q| {
-                let messages = prompts.probability_messages(&self.prompt, &ctx, q)?;
-                Ok(Question::probability(
-                    messages,
-                    format!("house {} (#{}): {}", house.name, house.index, q.describe()),
-                ))
-            })
-            .collect::<Result<Vec<_>>>()?;
-        Ok((plan, questions))
-    }
-
-    /// The prompt's worked example, unless the question is about the example's own object (then
-    /// the example's value may well be the answer).
-    fn example_for(&self, query: &ProbabilityQuery) -> Option<WorkedExample> {
-        let example = self.example.clone()?;
-        let asked = format!(
-            "{} {}",
-            query.target.words().to_lowercase(),
-            query.container.words().to_lowercase()
-        );
-        (!example.words.iter().any(|w| contains_phrase(&asked, w))).then_some(example)
-    }
-
-    /// Reads one answer: its class, the probability (from the text, or from the tokens'
-    /// log-probabilities when the endpoint says so), and where it came from.
-    fn read(
-        &self,
-        answer: &Answer,
-        example: Option<&WorkedExample>,
-    ) -> (AnswerClass, Option<f64>, LogprobUse) {
-        let r = read_probability(&answer.text, example);
-        let Some(p) = r.probability else {
-            return (r.class, None, LogprobUse::NotWanted);
-        };
-        if self.llm.endpoint().config.probability_from == ProbabilityFrom::Text {
-            return (r.class, Some(p), LogprobUse::NotWanted);
-        }
-        let expected = match (&answer.logprobs, r.number) {
-            (Some(tokens), Some(number)) => expected_percentage(tokens, &answer.text, number).ok(),
-            _ => None,
-        };
-        match expected {
-            Some(e) => (
-                r.class,
-                Some((e / 100.0).clamp(FALLBACK_PROBABILITY, 1.0)),
-                LogprobUse::Used,
-            ),
-            None => (r.class, Some(p), LogprobUse::Missing),
-        }
-    }
-
-    /// Asks `question` (about `query`), and asks again with a format reminder while the answer
-    /// is unusable, up to the endpoint's `max_reasks`. Every exchange goes through the cache.
-    /// Nothing is counted as used here (see [`Self::record`]).
-    pub async fn resolve(&self, question: &Question, query: &ProbabilityQuery) -> Result<Resolved> {
-        let example = self.example_for(query);
-        let first = self.llm.ask(question, &self.strategy).await?;
-        let (class, mut value, mut logprobs) = self.read(&first, example.as_ref());
-        let mut resolved = Resolved {
-            key: first.key.clone(),
-            usage: first.usage,
-            cost_usd: first.cost_usd,
-            class,
-            reasked: false,
-            value,
-            logprobs,
-        };
-        let mut asked = question.clone();
-        let mut answer = first;
-        for _ in 0..self.llm.endpoint().config.max_reasks {
-            if value.is_some() {
-                break;
-            }
-            tracing::debug!(source = %self.name, answer = %answer.text, "unusable probability answer; asking again");
-            resolved.reasked = true;
-            asked = asked.reask(&answer.text, PROBABILITY_REMINDER);
-            answer = self.llm.ask(&asked, &self.strategy).await?;
-            resolved.usage.prompt_tokens += answer.usage.prompt_tokens;
-            resolved.usage.completion_tokens += answer.usage.completion_tokens;
-            resolved.cost_usd += answer.cost_usd;
-            (_, value, logprobs) = self.read(&answer, example.as_ref());
-        }
-        resolved.value = value;
-        resolved.logprobs = logprobs;
-        Ok(resolved)
-    }
-
-    /// Counts a resolved question as used (once per distinct prompt) and returns its probability.
-    fn record(&self, r: &Resolved) -> Probability {
-        if r.value.is_none() {
-            tracing::debug!(source = %self.name, "unreadable probability; using {FALLBACK_PROBABILITY}");
-        }
-        self.llm.ledger().record_answer(
-            self.llm.name(),
-            &self.strategy,
-            &r.key,
-            &r.usage,
-            r.cost_usd,
-            AnswerOutcome::Probability {
-                class: r.class,
-                reasked: r.reasked,
-                value: r.value,
-                logprobs: r.logprobs,
-            },
-        );
-        Probability::clamped(
-            r.value.unwrap_or(FALLBACK_PROBABILITY),
-            FALLBACK_PROBABILITY,
-            1.0,
-        )
-    }
-
-    /// The probabilities, asking every question of the house concurrently.
-    pub async fn likelihoods_async(
-        &self,
-        house: &House,
-        target: &ObjectType,
-    ) -> Result<Vec<Probability>> {
-        let (plan, questions) = self.questions(house, target)?;
-        let answers = join_all(
-            questions
-                .iter()
-                .zip(&plan.queries)
-                .map(|(q, query)| self.resolve(q, query)),
-        )
-        .await;
-        let per_query = answers
-            .into_iter()
-            .map(|a| a.map(|r| self.record(&r)))
-            .collect::<Result<Vec<_>>>()?;
-        Ok(plan.of_container.iter().map(|&q| per_query[q]).collect())
-    }
-}
-
-impl LikelihoodSource for LlmLikelihood {
-    fn name(&self) -> &str {
-        &self.name
-    }
-
-    fn likelihoods(
-        &self,
-        house: &House,
-        target: &ObjectType,
-    ) -> std::result::Result<Vec<Probability>, PlanError> {
-        let key = (
-            house.name.clone(),
-            house.index,
-            house.containers.len(),
-            target.clone(),
-        );
-        if let Some(p) = self
-            .memo
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .get(&key)
-        {
-            return Ok(p.clone());
-        }
-        let p = self
-            .service
-            .block_on(self.likelihoods_async(house, target))
-            .map_err(|e| likelihood_error(&self.name, e))?;
-        self.memo
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .insert(key, p.clone());
-        Ok(p)
     }
 }
 
@@ -533,18 +256,7 @@ pub fn register_strategies(
             let parsed = LlmSpec::parse(spec).unwrap_or_else(|| Err(not_llm(spec)))?;
             let source = LlmLikelihood::new(s.clone(), &parsed.prompt, &parsed.llm, &spec.raw)
                 .map_err(|e| build_error(spec, e, false))?;
-            let config = match &parsed.limit {
-                None => planner,
-                Some(l) => match parse_limit(l, exact_max) {
-                    Some(limit) => PlannerConfig { limit, ..planner },
-                    None => {
-                        return Err(PlanError::UnknownStrategy {
-                            spec: spec.raw.clone(),
-                            reason: format!("bad limit `{l}`"),
-                        });
-                    }
-                },
-            };
+            let config = limit_config(spec, &parsed, planner, exact_max)?;
             Ok(Arc::new(ModelStrategy::new(
                 &spec.raw,
                 Arc::new(source),
@@ -558,6 +270,85 @@ pub fn register_strategies(
             LlmDirectStrategy::new(service.clone(), &spec.raw, &parsed.prompt, &parsed.llm)
                 .map_err(|e| build_error(spec, e, true))?;
         Ok(Arc::new(strategy))
+    });
+}
+
+/// The planner settings of a spec with an optional limit suffix.
+fn limit_config(
+    spec: &StrategySpec,
+    parsed: &LlmSpec,
+    planner: PlannerConfig,
+    exact_max: usize,
+) -> std::result::Result<PlannerConfig, PlanError> {
+    match &parsed.limit {
+        None => Ok(planner),
+        Some(l) => match parse_limit(l, exact_max) {
+            Some(limit) => Ok(PlannerConfig { limit, ..planner }),
+            None => Err(PlanError::UnknownStrategy {
+                spec: spec.raw.clone(),
+                reason: format!("bad limit `{l}`"),
+            }),
+        },
+    }
+}
+
+/// Registers `fused/<prompt>/<llm>[/<limit>]`: the planner over `prior` fused with the LLM's
+/// likelihoods by the weights `fusion` holds for `<prompt>/<llm>` (see [`ferret_plan::fusion`]).
+/// Without a fusion file, or without a fit for the source, or with a fit made against another
+/// prior, building the strategy fails and says which.
+pub fn register_fused(
+    registry: &mut StrategyRegistry,
+    service: Arc<LlmService>,
+    prior: Option<Arc<Prior>>,
+    fusion: Option<(String, Arc<FusionFile>)>,
+    planner: PlannerConfig,
+    exact_max: usize,
+) {
+    let fingerprint = prior.as_deref().map(prior_fingerprint);
+    registry.register(FUSED, "fused/<prompt>/<llm>[/k<N>|/exact]", move |spec| {
+        let parsed = LlmSpec::parse(spec).unwrap_or_else(|| Err(not_llm(spec)))?;
+        let bad = |reason: String| PlanError::UnknownStrategy {
+            spec: spec.raw.clone(),
+            reason,
+        };
+        let (Some(prior), Some(fingerprint)) = (&prior, &fingerprint) else {
+            return Err(bad("fused sources need the prior (pass --prior)".into()));
+        };
+        let Some((path, file)) = &fusion else {
+            return Err(bad(
+                "no fusion weights: fit them with `ferret calibrate --fit-fusion FILE` on training houses and pass --fusion FILE".into(),
+            ));
+        };
+        let source = LlmLikelihood::new(service.clone(), &parsed.prompt, &parsed.llm, &spec.raw)
+            .map_err(|e| build_error(spec, e, false))?;
+        let name = source.name().to_string();
+        let fit = file.fit(&name).ok_or_else(|| {
+            bad(format!(
+                "{path} holds no fit for {name} (it has: {})",
+                file.fits
+                    .iter()
+                    .map(|f| f.source.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+        })?;
+        if fit.prior != *fingerprint {
+            return Err(bad(format!(
+                "{path}: the fit for {name} was made with another prior; fit it again with this one"
+            )));
+        }
+        let fused = Fused::new(
+            &format!("fused/{name}"),
+            prior.clone(),
+            Arc::new(source),
+            fit.weights,
+        );
+        let config = limit_config(spec, &parsed, planner, exact_max)?;
+        Ok(Arc::new(ModelStrategy::new(
+            &spec.raw,
+            Arc::new(fused),
+            config,
+        )))
     });
 }
 
@@ -587,6 +378,13 @@ fn not_llm(spec: &StrategySpec) -> PlanError {
         spec: spec.raw.clone(),
         reason: "not an LLM strategy".into(),
     }
+}
+
+/// A question to prefetch, and the source that asks it.
+struct Job {
+    source: Arc<LlmLikelihood>,
+    question: Question,
+    asked: Asked,
 }
 
 /// What [`prefetch_probabilities`] did.
@@ -637,7 +435,7 @@ pub fn prefetch_probabilities(
         let Ok(spec) = StrategySpec::parse(raw) else {
             continue;
         };
-        if spec.kind != LLM_MODEL {
+        if !asks_probabilities(&spec.kind) {
             continue;
         }
         let parsed = match LlmSpec::parse(&spec) {
@@ -655,18 +453,33 @@ pub fn prefetch_probabilities(
         )?));
     }
     for source in &sources {
-        for (house, target) in trials {
-            let (plan, questions) = source.questions(house, target)?;
-            for (question, query) in questions.into_iter().zip(plan.queries) {
-                summary.questions += 1;
-                if seen_keys.insert(source.llm.key(&question)) {
-                    work.push(Job {
-                        source: source.clone(),
-                        question,
-                        query,
-                    });
+        let mut i = 0;
+        while i < trials.len() {
+            // The trials of one house together; within them, listing questions in the same
+            // order of places one after another, so consecutive requests share the listing.
+            let same_house = |t: &(&House, &ObjectType)| {
+                t.0.name == trials[i].0.name && t.0.index == trials[i].0.index
+            };
+            let end = i + trials[i..].iter().take_while(|t| same_house(t)).count();
+            let mut jobs: Vec<Job> = Vec::new();
+            for (house, target) in &trials[i..end] {
+                for (question, asked) in source.questions(house, target)?.questions {
+                    summary.questions += 1;
+                    if seen_keys.insert(source.llm().key(&question)) {
+                        jobs.push(Job {
+                            source: source.clone(),
+                            question,
+                            asked,
+                        });
+                    }
                 }
             }
+            jobs.sort_by_key(|j| match &j.asked {
+                Asked::Places(places) => places.first().copied().unwrap_or(0),
+                Asked::Query(_) => 0,
+            });
+            work.extend(jobs);
+            i = end;
         }
     }
     summary.distinct = work.len();
@@ -674,10 +487,10 @@ pub fn prefetch_probabilities(
     // their requests do not interleave and spoil each other's prefix cache.
     let mut per_server: Vec<(String, Vec<Job>)> = Vec::new();
     for job in work {
-        if job.source.llm.is_cached(&job.question)? {
+        if job.source.llm().is_cached(&job.question)? {
             summary.cached += 1;
         }
-        let config = &job.source.llm.endpoint().config;
+        let config = &job.source.llm().endpoint().config;
         let server = config
             .cache_id
             .clone()
@@ -698,7 +511,7 @@ pub fn prefetch_probabilities(
             // most likely fail the same way, slowly.
             let width = jobs
                 .first()
-                .map_or(1, |j| j.source.llm.endpoint().config.concurrency.max(1));
+                .map_or(1, |j| j.source.llm().endpoint().config.concurrency.max(1));
             let stop = AtomicBool::new(false);
             let stop = &stop;
             stream::iter(jobs.iter())
@@ -706,7 +519,7 @@ pub fn prefetch_probabilities(
                     if stop.load(Ordering::Relaxed) {
                         return None;
                     }
-                    let r = job.source.resolve(&job.question, &job.query).await;
+                    let r = job.source.resolve(&job.question, &job.asked).await;
                     if let Err(e) = &r
                         && !matches!(e, LlmError::NotCached { .. })
                     {

@@ -4,67 +4,15 @@
 
 mod common;
 
-use std::collections::BTreeMap;
-use std::sync::Arc;
-
-use common::{completion, small_scene, straight_distances};
+use common::{JsonServer as Server, completion, logprob, small_scene, straight_distances};
 use ferret_llm::{
-    AnswerClass, AnswerFormat, EndpointConfig, LlmConfig, LlmError, LlmLikelihood, LlmOptions,
-    LlmService, ProbabilityFrom, SystemRole, TokenLogprob, expected_percentage,
-    prefetch_probabilities, read_probability, register_strategies,
+    AnswerClass, AnswerFormat, LlmError, LlmLikelihood, ProbabilityFrom, SystemRole, TokenLogprob,
+    expected_percentage, prefetch_probabilities, read_probability, register_strategies,
 };
 use ferret_plan::{LikelihoodSource, PlannerConfig, StrategyRegistry, TrialSpec, run_trial};
 use ferret_world::ObjectType;
 use serde_json::{Value, json};
-use wiremock::matchers::method;
-use wiremock::{Mock, MockServer, Request, ResponseTemplate};
-
-struct Server {
-    rt: tokio::runtime::Runtime,
-    server: MockServer,
-}
-
-impl Server {
-    fn start(respond: impl Fn(&Value) -> ResponseTemplate + Send + Sync + 'static) -> Self {
-        let rt = tokio::runtime::Runtime::new().unwrap();
-        let server = rt.block_on(MockServer::start());
-        rt.block_on(
-            Mock::given(method("POST"))
-                .respond_with(move |req: &Request| respond(&req.body_json().unwrap_or_default()))
-                .mount(&server),
-        );
-        Self { rt, server }
-    }
-
-    fn bodies(&self) -> Vec<Value> {
-        self.rt
-            .block_on(self.server.received_requests())
-            .unwrap_or_default()
-            .iter()
-            .map(|r| r.body_json().unwrap_or_default())
-            .collect()
-    }
-
-    fn service(&self, edit: impl FnOnce(&mut EndpointConfig)) -> Arc<LlmService> {
-        let mut c = EndpointConfig::new(format!("{}/v1", self.server.uri()), "test-model");
-        c.retry_base_ms = 10;
-        c.timeout_secs = 5.0;
-        edit(&mut c);
-        let config = LlmConfig {
-            file: "test.toml".into(),
-            endpoints: BTreeMap::from([("mock".to_string(), c)]),
-            prompts: BTreeMap::new(),
-        };
-        Arc::new(LlmService::new(config, LlmOptions::default()).unwrap())
-    }
-}
-
-fn logprob(token: &str, p: f64, alts: &[(&str, f64)]) -> Value {
-    json!({
-        "token": token, "logprob": p.ln(), "bytes": null,
-        "top_logprobs": alts.iter().map(|(t, p)| json!({"token": t, "logprob": p.ln(), "bytes": null})).collect::<Vec<_>>()
-    })
-}
+use wiremock::ResponseTemplate;
 
 /// `{"percent": 40}` written as Qwen tokenises it, with the first digit 4 (p 0.5) or 1 (p 0.5 →
 /// read as 10): expected percentage 0.5·40 + 0.5·10 = 25.

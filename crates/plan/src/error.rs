@@ -58,6 +58,14 @@ pub enum PlanError {
         /// The house label.
         house: String,
     },
+    /// A fusion file could not be read.
+    #[error("fusion file {path}: {message}")]
+    Fusion {
+        /// The file.
+        path: String,
+        /// What is wrong.
+        message: String,
+    },
     /// A prior file could not be read or written.
     #[error("prior {path}: {message}")]
     Prior {

@@ -6,13 +6,15 @@
 //! [`Planner`], the optimistic greedy baseline, the oracle), named [`Strategy`]s built from spec
 //! strings through a [`StrategyRegistry`], a trial step by step ([`Search`], what a robot loop
 //! drives), the trial simulator built on it ([`run_trial`]) and offline replay
-//! ([`replay_cost`]), and the [`Calibration`] of a likelihood source against the ground truth.
+//! ([`replay_cost`]), the [`Calibration`] of a likelihood source against the ground truth, and
+//! the [`Fused`] source that combines the prior with another by fitted [`FusionWeights`].
 //! It depends only on the world crate; LLM-backed sources and policies plug in
 //! from the llm crate through the same traits.
 
 pub mod belief;
 pub mod calibration;
 pub mod error;
+pub mod fusion;
 pub mod likelihood;
 pub mod planner;
 pub mod policy;
@@ -25,6 +27,7 @@ pub mod trial;
 pub use belief::Belief;
 pub use calibration::{Calibration, ReliabilityBin};
 pub use error::{BoxError, PlanError};
+pub use fusion::{Fused, FusionFile, FusionFit, FusionWeights, TrainingScore, prior_fingerprint};
 pub use likelihood::{LikelihoodSource, OracleLikelihood, Prior, Uniform};
 pub use planner::{Plan, Problem, solve_brute_force, solve_exact};
 pub use policy::{CandidateLimit, CostModel, Greedy, Oracle, Planner, PlannerConfig, Policy};

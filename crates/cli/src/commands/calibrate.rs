@@ -8,7 +8,10 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use ferret_plan::{Calibration, LikelihoodSource, draw_trial};
+use ferret_plan::{
+    Calibration, FusionFile, FusionFit, FusionWeights, LikelihoodSource, TrainingScore, draw_trial,
+    prior_fingerprint,
+};
 use ferret_world::{House, ObjectType, Scene};
 use indicatif::ParallelProgressIterator;
 use rand::SeedableRng;
@@ -45,6 +48,12 @@ pub struct Args {
     /// Seed of the target choice (with `--targets-per-house N`).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Fit the fusion of the prior with each LLM source among `--sources` (logit P = a·logit
+    /// P_prior + b·logit P_llm + c, by logistic regression on these houses, which should be
+    /// training houses) and write the weights to FILE; `--fusion FILE` then makes
+    /// `fused/<prompt>/<llm>` available to eval, calibrate, select, deploy and serve.
+    #[arg(long, value_name = "FILE")]
+    pub fit_fusion: Option<PathBuf>,
     /// Bins of the reliability diagram.
     #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u16).range(1..=100))]
     pub bins: u16,
@@ -129,7 +138,28 @@ pub fn run(args: Args) -> Result<ExitCode> {
     if args.sources.is_empty() {
         anyhow::bail!("--sources names no source");
     }
-    let setup = super::llm_setup::full_registry(&args.planning, &args.llm, &args.sources)?;
+    let fitted: Vec<String> = if args.fit_fusion.is_some() {
+        let fit: Vec<String> = args
+            .sources
+            .iter()
+            .filter(|s| s.starts_with(&format!("{}/", ferret_llm::LLM_MODEL)))
+            .cloned()
+            .collect();
+        if fit.is_empty() {
+            anyhow::bail!(
+                "--fit-fusion: --sources names no llm+model/<prompt>/<llm> source to fuse with the prior"
+            );
+        }
+        fit
+    } else {
+        Vec::new()
+    };
+    // The prior is needed to fit a fusion even when it is not scored itself.
+    let mut needed = args.sources.clone();
+    if !fitted.is_empty() {
+        needed.push("model/prior".into());
+    }
+    let setup = super::llm_setup::full_registry(&args.planning, &args.llm, &needed)?;
     let mut sources: Vec<(String, Arc<dyn LikelihoodSource>)> = Vec::new();
     for spec in &args.sources {
         let strategy = setup.registry.build(spec)?;
@@ -159,29 +189,25 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let mut rows = Vec::new();
     let mut scored = Vec::new();
     let mut errors = Vec::new();
+    let holds: Vec<Vec<bool>> = trials
+        .iter()
+        .map(|(house, target, scene)| {
+            (0..house.containers.len())
+                .map(|c| scene.truth.holds(c, target))
+                .collect()
+        })
+        .collect();
+    // Each source's probabilities per trial (None where it failed), kept for the fusion fit.
+    let mut per_source: Vec<(String, Vec<Option<Vec<f64>>>)> = Vec::new();
     for (spec, source) in &sources {
-        let bar = progress(trials.len(), "calibrating");
-        let per_trial: Vec<std::result::Result<Vec<(f64, bool)>, String>> = trials
-            .par_iter()
-            .progress_with(bar.clone())
-            .map(|(house, target, scene)| {
-                let p = source
-                    .likelihoods(house, target)
-                    .map_err(|e| format!("{spec}: {}: {e}", house.name))?;
-                Ok(p.iter()
-                    .enumerate()
-                    .map(|(c, p)| (p.get(), scene.truth.holds(c, target)))
-                    .collect())
-            })
+        let probabilities = source_probabilities(spec, source.as_ref(), &trials, &mut errors);
+        let all: Vec<(f64, bool)> = probabilities
+            .iter()
+            .zip(&holds)
+            .filter_map(|(p, h)| p.as_ref().map(|p| p.iter().copied().zip(h.iter().copied())))
+            .flatten()
             .collect();
-        bar.finish_and_clear();
-        let mut all = Vec::new();
-        for r in per_trial {
-            match r {
-                Ok(v) => all.extend(v),
-                Err(e) => errors.push(e),
-            }
-        }
+        per_source.push((spec.clone(), probabilities));
         let Some(c) = Calibration::score(&all, usize::from(args.bins)) else {
             errors.push(format!("{spec}: no pairs scored"));
             continue;
@@ -198,6 +224,34 @@ pub fn run(args: Args) -> Result<ExitCode> {
         });
         scored.push((spec.clone(), c));
     }
+    let fusion = match &args.fit_fusion {
+        None => None,
+        Some(path) => {
+            let prior = setup
+                .prior
+                .clone()
+                .context("--fit-fusion needs the prior")?;
+            let prior_p = source_probabilities("model/prior", prior.as_ref(), &trials, &mut errors);
+            let trained_on = format!(
+                "{} houses from {}, {} ({} house–target pairs)",
+                loaded.scenes.len(),
+                loaded.source,
+                match args.targets_per_house {
+                    TargetCount::All => "every target type present".to_string(),
+                    TargetCount::N(n) => format!("up to {n} target types per house"),
+                },
+                trials.len()
+            );
+            let mut fits = Vec::new();
+            for (spec, probabilities) in per_source.iter().filter(|(s, _)| fitted.contains(s)) {
+                match fit_fusion(spec, &prior, &prior_p, probabilities, &holds, &trained_on) {
+                    Ok(f) => fits.push(f),
+                    Err(e) => errors.push(format!("--fit-fusion: {spec}: {e}")),
+                }
+            }
+            Some((path.clone(), FusionFile::new(fits)))
+        }
+    };
     for e in &errors {
         eprintln!("error: {e}");
     }
@@ -218,6 +272,11 @@ pub fn run(args: Args) -> Result<ExitCode> {
         }
     }
     println!("{md}");
+    if let Some((path, file)) = &fusion {
+        crate::output::write_bytes(path, file.to_json())?;
+        println!("{}", fusion_markdown(file));
+        println!("wrote {}", path.display());
+    }
     super::llm_setup::write_token_report(&setup.service, &args.out)?;
     super::llm_setup::check_fallback_gate(&setup.service, &args.llm)?;
     println!(
@@ -232,6 +291,98 @@ pub fn run(args: Args) -> Result<ExitCode> {
     } else {
         ExitCode::FAILURE
     })
+}
+
+/// The probabilities `source` gives on every trial; a failure is recorded in `errors` and
+/// leaves that trial's entry `None`.
+fn source_probabilities(
+    spec: &str,
+    source: &dyn LikelihoodSource,
+    trials: &[(&House, ObjectType, &Scene)],
+    errors: &mut Vec<String>,
+) -> Vec<Option<Vec<f64>>> {
+    let bar = progress(trials.len(), "calibrating");
+    let per_trial: Vec<std::result::Result<Vec<f64>, String>> = trials
+        .par_iter()
+        .progress_with(bar.clone())
+        .map(|(house, target, _)| {
+            source
+                .likelihoods(house, target)
+                .map(|p| p.iter().map(|p| p.get()).collect())
+                .map_err(|e| format!("{spec}: {}: {e}", house.name))
+        })
+        .collect();
+    bar.finish_and_clear();
+    per_trial
+        .into_iter()
+        .map(|r| r.map_err(|e| errors.push(e)).ok())
+        .collect()
+}
+
+/// The fusion of the prior with the LLM source `spec`, fitted on every trial both answered.
+fn fit_fusion(
+    spec: &str,
+    prior: &ferret_plan::Prior,
+    prior_p: &[Option<Vec<f64>>],
+    llm_p: &[Option<Vec<f64>>],
+    holds: &[Vec<bool>],
+    trained_on: &str,
+) -> Result<FusionFit> {
+    let samples: Vec<(f64, f64, bool)> = prior_p
+        .iter()
+        .zip(llm_p)
+        .zip(holds)
+        .filter_map(|((p, l), h)| Some((p.as_ref()?, l.as_ref()?, h)))
+        .flat_map(|(p, l, h)| p.iter().zip(l).zip(h).map(|((&p, &l), &h)| (p, l, h)))
+        .collect();
+    let weights = FusionWeights::fit(&samples)
+        .context("the fit needs containers that hold the target and ones that do not")?;
+    let score = |f: &dyn Fn(&(f64, f64, bool)) -> f64| -> Result<TrainingScore> {
+        let pairs: Vec<(f64, bool)> = samples.iter().map(|s| (f(s), s.2)).collect();
+        let c = Calibration::score(&pairs, 10).context("no pairs")?;
+        Ok(TrainingScore {
+            brier: c.brier,
+            auroc: c.auroc,
+        })
+    };
+    let parsed = ferret_plan::StrategySpec::parse(spec)?;
+    let llm = ferret_llm::LlmSpec::parse(&parsed).context("not an LLM source")??;
+    Ok(FusionFit {
+        source: format!("{}/{}", llm.prompt, llm.llm),
+        weights,
+        prior: prior_fingerprint(prior),
+        trained_on: trained_on.to_string(),
+        pairs: samples.len() as u64,
+        positives: samples.iter().filter(|s| s.2).count() as u64,
+        prior_score: score(&|s| s.0)?,
+        source_score: score(&|s| s.1)?,
+        fused_score: score(&|s| weights.fuse(s.0, s.1))?,
+    })
+}
+
+/// The fitted fusions as Markdown.
+pub fn fusion_markdown(file: &FusionFile) -> String {
+    let mut md = String::from(
+        "## Fusion with the prior (logit P = a·logit P_prior + b·logit P_llm + c)\n\n| source | a | b | c | pairs | Brier prior / LLM / fused | AUROC prior / LLM / fused |\n|---|---:|---:|---:|---:|---|---|\n",
+    );
+    let auroc = |a: Option<f64>| a.map_or_else(|| "–".into(), |a| format!("{a:.3}"));
+    for f in &file.fits {
+        md.push_str(&format!(
+            "| {} | {:.3} | {:.3} | {:.3} | {} | {:.4} / {:.4} / {:.4} | {} / {} / {} |\n",
+            f.source,
+            f.weights.a,
+            f.weights.b,
+            f.weights.c,
+            f.pairs,
+            f.prior_score.brier,
+            f.source_score.brier,
+            f.fused_score.brier,
+            auroc(f.prior_score.auroc),
+            auroc(f.source_score.auroc),
+            auroc(f.fused_score.auroc),
+        ));
+    }
+    md
 }
 
 /// The table of scores as Markdown.

@@ -131,20 +131,22 @@ impl PlanningArgs {
         }
     }
 
-    /// The registry of built-in strategies under these settings. The prior is loaded (or the
-    /// default one trained) only when one of `specs` plans over it.
-    pub fn registry(&self, specs: &[String]) -> Result<StrategyRegistry> {
-        let needs_prior = specs.iter().any(|s| s.starts_with("model/prior"));
-        let prior = if needs_prior {
+    /// The prior, when one of `specs` plans over it (`model/prior...`, `fused/...`): loaded, or
+    /// the default one trained. `None` when none does.
+    pub fn prior_for(&self, specs: &[String]) -> Result<Option<Arc<Prior>>> {
+        let needs_prior = specs
+            .iter()
+            .any(|s| s.starts_with("model/prior") || s.starts_with("fused/"));
+        Ok(if needs_prior {
             Some(Arc::new(self.prior()?))
         } else {
             None
-        };
-        Ok(StrategyRegistry::builtin(
-            prior,
-            self.planner_config(),
-            self.exact_max,
-        ))
+        })
+    }
+
+    /// The registry of built-in strategies under these settings over `prior`.
+    pub fn registry_with(&self, prior: Option<Arc<Prior>>) -> StrategyRegistry {
+        StrategyRegistry::builtin(prior, self.planner_config(), self.exact_max)
     }
 }
 

@@ -5,8 +5,11 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use anyhow::Result;
-use ferret_llm::{LlmConfig, LlmOptions, LlmService, prefetch_probabilities, register_strategies};
+use ferret_llm::{
+    LlmConfig, LlmOptions, LlmService, prefetch_probabilities, register_fused, register_strategies,
+};
 use ferret_plan::StrategyRegistry;
+use ferret_plan::{FusionFile, Prior};
 use ferret_world::{House, ObjectType};
 
 use super::eval::PlanningArgs;
@@ -33,6 +36,10 @@ pub struct LlmArgs {
     /// re-asks) exceeds this fraction, e.g. 0.02. Results are written first.
     #[arg(long, value_name = "SHARE", value_parser = parse_share)]
     pub max_fallback_share: Option<f64>,
+    /// Fusion weights from `ferret calibrate --fit-fusion`: makes `fused/<prompt>/<llm>`
+    /// available, the prior and the LLM's likelihoods combined as fitted on training houses.
+    #[arg(long, value_name = "FILE")]
+    pub fusion: Option<PathBuf>,
 }
 
 fn parse_share(s: &str) -> std::result::Result<f64, String> {
@@ -52,6 +59,8 @@ pub struct Strategies {
     pub registry: StrategyRegistry,
     /// The LLM service (endpoints, cache, accounting).
     pub service: Arc<LlmService>,
+    /// The prior, when a strategy plans over it.
+    pub prior: Option<Arc<Prior>>,
 }
 
 /// Built-in strategies plus the LLM kinds, for the strategies `specs` will build. The LLM service opens its cache only when an LLM is
@@ -61,7 +70,15 @@ pub fn full_registry(
     llm: &LlmArgs,
     specs: &[String],
 ) -> Result<Strategies> {
-    let mut registry = planning.registry(specs)?;
+    let prior = planning.prior_for(specs)?;
+    let mut registry = planning.registry_with(prior.clone());
+    let fusion = match &llm.fusion {
+        Some(path) => Some((
+            path.display().to_string(),
+            Arc::new(FusionFile::load(path)?),
+        )),
+        None => None,
+    };
     let config = LlmConfig::load_default(llm.config.as_deref())?;
     let service = Arc::new(LlmService::new(
         config,
@@ -76,7 +93,19 @@ pub fn full_registry(
         planning.planner_config(),
         planning.exact_max,
     );
-    Ok(Strategies { registry, service })
+    register_fused(
+        &mut registry,
+        service.clone(),
+        prior.clone(),
+        fusion,
+        planning.planner_config(),
+        planning.exact_max,
+    );
+    Ok(Strategies {
+        registry,
+        service,
+        prior,
+    })
 }
 
 /// Asks every probability question of the `llm+model` strategies concurrently before trials run,
@@ -90,7 +119,12 @@ pub fn prefetch(
     specs: &[String],
     trials: &[(&House, &ObjectType)],
 ) -> Result<Vec<String>> {
-    if !specs.iter().any(|s| s.starts_with(ferret_llm::LLM_MODEL)) {
+    let asks = |s: &String| {
+        s.split('/')
+            .next()
+            .is_some_and(ferret_llm::asks_probabilities)
+    };
+    if !specs.iter().any(asks) {
         return Ok(Vec::new());
     }
     let bar = crate::common::progress(0, "LLM questions");
@@ -242,16 +276,18 @@ pub fn answers_markdown(report: &ferret_llm::TokenReport) -> String {
         return String::new();
     }
     let mut md = String::from(
-        "\n## LLM answers\n\nClass of each distinct question's first answer; unusable ones (several numbers, none, the worked example echoed) are asked again, then fall back to 0.01.\n\n| strategy | answers |",
+        "\n## LLM answers\n\nClass of each distinct question's first answer (P-BATCH: of each place's percentage); unusable ones (several numbers, none, the worked example echoed, no allowed word, a place left out) are asked again, then fall back to 0.01. \"logprobs missing\": read from the text although log-probabilities were wanted (P-YESNO and P-CHOICE: the word with the endpoint's `word_answer_mass`).\n\n| strategy | answers |",
     );
     for c in AnswerClass::ALL {
         md.push_str(&format!(" {} |", c.label()));
     }
-    md.push_str(" re-asked | fell back | from logprobs | most common p |\n|---|---:|");
+    md.push_str(
+        " re-asked | fell back | from logprobs | logprobs missing | most common p |\n|---|---:|",
+    );
     for _ in AnswerClass::ALL {
         md.push_str("---:|");
     }
-    md.push_str("---:|---:|---:|---:|\n");
+    md.push_str("---:|---:|---:|---:|---:|\n");
     for r in rows {
         let a = &r.answers;
         let mut line = format!("| {} | {} |", r.strategy, a.answers());
@@ -268,11 +304,12 @@ pub fn answers_markdown(report: &ferret_llm::TokenReport) -> String {
             String::new()
         };
         line.push_str(&format!(
-            " {} | {}{} | {} | {} |\n",
+            " {} | {}{} | {} | {} | {} |\n",
             a.reasked,
             a.fallbacks(),
             direct,
             a.logprob_used,
+            a.logprob_missing,
             common
         ));
         md.push_str(&line);

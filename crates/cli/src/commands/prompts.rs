@@ -6,7 +6,10 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, anyhow, bail};
 use ferret_llm::message::transcript;
-use ferret_llm::{DirectContext, HouseContext, LlmConfig, PromptLibrary, QueryPlan};
+use ferret_llm::{
+    Asked, DirectContext, HouseContext, LlmConfig, PromptKind, PromptLibrary, QueryPlan, Shape,
+    question_set,
+};
 use ferret_world::procthor::{AssetDatabase, HouseRange, LoadOptions, load_scenes};
 use ferret_world::{ObjectType, Place, Scene};
 
@@ -15,7 +18,8 @@ use crate::common::GridArgs;
 /// Prompt templates.
 #[derive(clap::Subcommand, Debug)]
 pub enum Command {
-    /// List the prompt templates (the four shipped ones and those of the config's [prompts]).
+    /// List the prompt templates (the seven shipped ones and those of the config's [prompts]),
+    /// each with its kind.
     List(ListArgs),
     /// Print the exact messages a prompt sends for a house and target.
     Show(ShowArgs),
@@ -35,8 +39,8 @@ pub struct ListArgs {
 /// `ferret prompts show`.
 #[derive(clap::Args, Debug)]
 pub struct ShowArgs {
-    /// The prompt: p-context-a, p-context-b, p-minimal, p-direct, a name from the config's
-    /// [prompts], or a path to a template file.
+    /// The prompt: p-context-a, p-context-b, p-minimal, p-yesno, p-choice, p-batch, p-direct, a
+    /// name from the config's [prompts], or a path to a template file.
     pub name: String,
     /// ProcTHOR houses (.json, .jsonl, .jsonl.gz); generated houses when not given.
     #[arg(long, value_name = "PATH")]
@@ -84,7 +88,14 @@ fn library(config: Option<&std::path::Path>) -> Result<PromptLibrary> {
 fn list(args: &ListArgs) -> Result<ExitCode> {
     let lib = library(args.config.as_deref())?;
     for name in lib.names() {
-        println!("{name}");
+        let kind = match lib.kind(&name) {
+            PromptKind::Percent if name == ferret_llm::P_DIRECT => "direct: the next container",
+            PromptKind::Percent => "percent: one question per container type and room",
+            PromptKind::YesNo => "yesno: one question per container type and room type",
+            PromptKind::Choice { .. } => "choice: one question per house and target, a letter",
+            PromptKind::Batch => "batch: one question per house and target, a percentage per place",
+        };
+        println!("{name:<14} {kind}");
         if args.source {
             println!("{}\n", lib.source(&name).unwrap_or_default());
         }
@@ -140,6 +151,39 @@ fn show(args: &ShowArgs) -> Result<ExitCode> {
             )
         })?),
     };
+    let kind = lib.kind(&name);
+    if kind != PromptKind::Percent {
+        // Yes/no questions name room types; listing questions name every place at once.
+        let set = question_set(&lib, &name, house, &target)?;
+        println!(
+            "# {name} on {} (target {target}): {} question(s) for {} container(s)",
+            house.name,
+            set.questions.len(),
+            house.containers.len()
+        );
+        for (i, (question, asked)) in set.questions.iter().enumerate() {
+            let holders: Vec<&str> = (0..house.containers.len())
+                .filter(|&c| match (&set.shape, asked) {
+                    (Shape::PerQuery { of_container }, _) => of_container[c] == i,
+                    (Shape::Listing(l), Asked::Places(places)) => {
+                        places.contains(&l.of_container[c])
+                    }
+                    _ => false,
+                })
+                .map(|c| house.containers[c].id.as_str())
+                .collect();
+            if container.is_some_and(|c| !holders.contains(&house.containers[c].id.as_str())) {
+                continue;
+            }
+            println!(
+                "\n## question {} (containers {})\n{}",
+                i + 1,
+                holders.join(", "),
+                transcript(&question.messages)
+            );
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
     let ctx = HouseContext::new(house);
     let plan = QueryPlan::new(house, &target);
 

@@ -2,9 +2,13 @@
 //! loopback wiremock server.
 #![allow(dead_code)]
 
-use ferret_llm::{Endpoint, EndpointConfig};
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use ferret_llm::{Endpoint, EndpointConfig, LlmConfig, LlmOptions, LlmService};
 use serde_json::{Value, json};
-use wiremock::MockServer;
+use wiremock::matchers::method;
+use wiremock::{Mock, MockServer, Request, ResponseTemplate};
 
 /// The key the tests configure; it must never show up anywhere but the Authorization header.
 pub const KEY: &str = "sk-test-0123456789-secret";
@@ -143,4 +147,66 @@ pub fn last_message(body: &Value) -> String {
         .and_then(|m| m["content"].as_str())
         .unwrap_or_default()
         .to_string()
+}
+
+/// A loopback OpenAI-compatible server whose reply is computed from each request body, with its own
+/// runtime so synchronous tests can drive it.
+pub struct JsonServer {
+    pub rt: tokio::runtime::Runtime,
+    pub server: MockServer,
+}
+
+impl JsonServer {
+    /// Starts the server; `respond` answers every POST.
+    pub fn start(respond: impl Fn(&Value) -> ResponseTemplate + Send + Sync + 'static) -> Self {
+        let rt = tokio::runtime::Runtime::new().unwrap();
+        let server = rt.block_on(MockServer::start());
+        rt.block_on(
+            Mock::given(method("POST"))
+                .respond_with(move |req: &Request| respond(&req.body_json().unwrap_or_default()))
+                .mount(&server),
+        );
+        Self { rt, server }
+    }
+
+    /// Every request body received, in order.
+    pub fn bodies(&self) -> Vec<Value> {
+        self.rt
+            .block_on(self.server.received_requests())
+            .unwrap_or_default()
+            .iter()
+            .map(|r| r.body_json().unwrap_or_default())
+            .collect()
+    }
+
+    /// A service with one endpoint `mock` at this server, as `edit` configures it.
+    pub fn service(&self, edit: impl FnOnce(&mut EndpointConfig)) -> Arc<LlmService> {
+        self.service_with(edit, LlmOptions::default())
+    }
+
+    /// The same with a response cache or offline mode.
+    pub fn service_with(
+        &self,
+        edit: impl FnOnce(&mut EndpointConfig),
+        options: LlmOptions,
+    ) -> Arc<LlmService> {
+        let mut c = EndpointConfig::new(format!("{}/v1", self.server.uri()), "test-model");
+        c.retry_base_ms = 10;
+        c.timeout_secs = 5.0;
+        edit(&mut c);
+        let config = LlmConfig {
+            file: "test.toml".into(),
+            endpoints: BTreeMap::from([("mock".to_string(), c)]),
+            prompts: BTreeMap::new(),
+        };
+        Arc::new(LlmService::new(config, options).unwrap())
+    }
+}
+
+/// One token of `logprobs.content` with its alternatives.
+pub fn logprob(token: &str, p: f64, alts: &[(&str, f64)]) -> Value {
+    json!({
+        "token": token, "logprob": p.ln(), "bytes": null,
+        "top_logprobs": alts.iter().map(|(t, p)| json!({"token": t, "logprob": p.ln(), "bytes": null})).collect::<Vec<_>>()
+    })
 }

@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # The real-model lane: a real OpenAI-compatible server and a small real instruct model
 # (Qwen2.5-Coder-1.5B-Instruct, Q4_K_M, shipped on PyPI in 22 chunk packages), served on
-# 127.0.0.1, driving ferret on real ProcTHOR houses: `llm ping`, `calibrate` and `eval` with all
-# four prompts, then the same eval `--offline`, which must be identical.
+# 127.0.0.1, driving ferret on real ProcTHOR houses: `llm ping`; P-YESNO, P-CHOICE and P-BATCH
+# fused with the prior as fitted on held-out training houses (`calibrate --fit-fusion`); then
+# `calibrate` and `eval` on all val150 houses with them, and on a smaller range beside the
+# paper's per-container prompts; then the evals again `--offline`, which must be identical.
 #
 # The server is llama.cpp's own `llama-server` (default), built from the llama.cpp sources that
 # PyPI's llama-cpp-python sdist vendors, with cmake and ninja from PyPI; or, with
@@ -13,11 +15,12 @@
 #   scripts/real-llm.sh install    # only build/fetch into the cache
 #   scripts/real-llm.sh config     # only write $FERRET_LANE_OUT/ferret.toml (tested in CI)
 #
+# FERRET_LANE_BIN runs a given ferret binary instead of building this checkout's.
 # Everything downloaded or built lives in $FERRET_LANE_CACHE (default ~/.cache/ferret-real-llm):
 # llama-server (~8 min on 2 cores, once), the llama-cpp-python wheel when that server is chosen
 # (~6–11 min, once), a venv and the assembled GGUF. Outputs go to $FERRET_LANE_OUT (default ferret-lane/). The lane fails on any
 # request error and when a strategy's fallback share exceeds $FERRET_LANE_MAX_FALLBACK (default
-# 0.02, the bound the issue sets for json_schema answers; see README "Real models").
+# 0.02; see README "Real models").
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
@@ -25,7 +28,12 @@ CACHE="${FERRET_LANE_CACHE:-$HOME/.cache/ferret-real-llm}"
 OUT="${FERRET_LANE_OUT:-$ROOT/ferret-lane}"
 DATA="${FERRET_PROCTHOR_DIR:-$ROOT/../shared/data/procthor}"
 PORT="${FERRET_LANE_PORT:-18080}"
+# The paper's per-container prompts ask ~57 questions per house: they run on RANGE; the prompts
+# that ask once per house (or per room type) run on ALL_RANGE, and are fused with the prior as
+# fitted on training houses FIT_RANGE.
 RANGE="${FERRET_LANE_RANGE:-0..30}"
+ALL_RANGE="${FERRET_LANE_ALL_RANGE:-0..150}"
+FIT_RANGE="${FERRET_LANE_FIT_RANGE:-0..100}"
 MAX_FALLBACK="${FERRET_LANE_MAX_FALLBACK:-0.02}"
 LLAMA_CPP_PYTHON="${FERRET_LANE_LLAMA_CPP_PYTHON:-0.3.36}"
 # llama.cpp's threads wait for each other at every layer: on a machine busy with other work
@@ -211,40 +219,68 @@ serve() {
 }
 
 run() {
-    local ferret="$ROOT/target/release/ferret"
-    (cd "$ROOT" && cargo build --release -q -p ferret-cli)
-    local houses=(--houses "$DATA/multiroom-val150.jsonl.gz" --range "$RANGE"
-        --asset-db "$DATA/databases/asset-database.json")
+    local ferret="${FERRET_LANE_BIN:-}"
+    if [ -z "$ferret" ]; then
+        (cd "$ROOT" && cargo build --release -q -p ferret-cli)
+        ferret="$ROOT/target/release/ferret"
+    fi
+    local asset=(--asset-db "$DATA/databases/asset-database.json")
+    local val=(--houses "$DATA/multiroom-val150.jsonl.gz" "${asset[@]}")
     local common=(--config "$OUT/ferret.toml" --llm-cache "$OUT/llm-cache.sqlite" --prior "$OUT/prior.json")
     cd "$OUT"
     local t0=$SECONDS
-    "$ferret" prior train --houses "$DATA/smallhouse-train1000.jsonl.gz" \
-        --also "$DATA/oneroom-train500.jsonl.gz" --asset-db "$DATA/databases/asset-database.json" \
-        --out prior.json
+    # The prior learns from training houses 100.. of smallhouse-train1000 (and oneroom-train500);
+    # houses 0..100 are held out for fitting the fusion, so the fit sees the prior as it is on
+    # houses it never saw.
+    "$ferret" prior train --houses "$DATA/smallhouse-train1000.jsonl.gz" --range "100..1000" \
+        --also "$DATA/oneroom-train500.jsonl.gz" "${asset[@]}" --out prior.json
     "$ferret" llm ping qwen --config ferret.toml
-    local sources=(model/uniform model/prior)
-    for p in p-context-a p-context-b p-minimal; do
-        for e in qwen qwen-logprobs qwen-json qwen-json-logprobs; do
-            sources+=("llm+model/$p/$e")
-        done
-    done
-    log "calibrate: every probability prompt in every mode, on the target eval draws per house"
-    "$ferret" calibrate "${houses[@]}" "${common[@]}" --targets-per-house 1 \
+    local new=(llm+model/p-yesno/qwen llm+model/p-choice/qwen llm+model/p-batch/qwen-logprobs)
+    log "fusion: the new prompts on held-out training houses $FIT_RANGE, fitted against the prior"
+    "$ferret" calibrate --houses "$DATA/smallhouse-train1000.jsonl.gz" --range "$FIT_RANGE" \
+        "${asset[@]}" "${common[@]}" --targets-per-house 1 --max-fallback-share "$MAX_FALLBACK" \
+        --sources "$(IFS=,; echo "${new[*]}")" --fit-fusion fusion.json --out fit
+    local fused=(fused/p-yesno/qwen fused/p-choice/qwen fused/p-batch/qwen-logprobs)
+    log "calibrate on val150 $ALL_RANGE: the new prompts (one request per house or per room type) and their fusions"
+    local sources=(model/uniform model/prior llm+model/p-yesno/qwen llm+model/p-choice/qwen
+        llm+model/p-batch/qwen llm+model/p-batch/qwen-logprobs "${fused[@]}")
+    "$ferret" calibrate "${val[@]}" --range "$ALL_RANGE" "${common[@]}" --fusion fusion.json \
+        --targets-per-house 1 --max-fallback-share "$MAX_FALLBACK" \
         --sources "$(IFS=,; echo "${sources[*]}")" --out calibration
-    local strategies="optimistic+greedy,model/uniform,model/prior,model/prior/exact"
+    log "calibrate on val150 $RANGE: the paper's per-container prompts beside the new ones"
+    local side=(model/uniform model/prior)
     for p in p-context-a p-context-b p-minimal; do
-        strategies+=",llm+model/$p/qwen-json,llm+model/$p/qwen-json-logprobs"
+        side+=("llm+model/$p/qwen" "llm+model/$p/qwen-logprobs")
     done
-    strategies+=",llm-direct/p-direct/qwen-json,oracle"
-    log "eval: all four prompts with JSON-schema answers (fallback share at most $MAX_FALLBACK)"
-    "$ferret" eval "${houses[@]}" "${common[@]}" --strategies "$strategies" \
-        --max-fallback-share "$MAX_FALLBACK" --out eval
+    side+=(llm+model/p-yesno/qwen llm+model/p-choice/qwen llm+model/p-batch/qwen
+        llm+model/p-batch/qwen-logprobs "${fused[@]}")
+    "$ferret" calibrate "${val[@]}" --range "$RANGE" "${common[@]}" --fusion fusion.json \
+        --targets-per-house 1 --max-fallback-share "$MAX_FALLBACK" \
+        --sources "$(IFS=,; echo "${side[*]}")" --out calibration-side
+    local strategies="optimistic+greedy,model/uniform,model/prior,model/prior/exact"
+    strategies+=",llm+model/p-yesno/qwen,llm+model/p-choice/qwen,llm+model/p-batch/qwen-logprobs"
+    strategies+=",$(IFS=,; echo "${fused[*]}"),fused/p-yesno/qwen/exact,oracle"
+    log "eval on val150 $ALL_RANGE (answers from the calibration's cache)"
+    "$ferret" eval "${val[@]}" --range "$ALL_RANGE" "${common[@]}" --fusion fusion.json \
+        --strategies "$strategies" --max-fallback-share "$MAX_FALLBACK" --out eval
+    local side_strategies="optimistic+greedy,model/uniform,model/prior"
+    for p in p-context-a p-context-b p-minimal; do
+        side_strategies+=",llm+model/$p/qwen-logprobs"
+    done
+    side_strategies+=",llm+model/p-yesno/qwen,llm+model/p-choice/qwen,llm+model/p-batch/qwen-logprobs"
+    side_strategies+=",$(IFS=,; echo "${fused[*]}"),oracle"
+    log "eval on val150 $RANGE with the paper's prompts beside the new ones"
+    "$ferret" eval "${val[@]}" --range "$RANGE" "${common[@]}" --fusion fusion.json \
+        --strategies "$side_strategies" --max-fallback-share "$MAX_FALLBACK" --out eval-side
     local online=$((SECONDS - t0))
     stop_server
     log "eval again --offline with the server stopped: it must be identical"
-    "$ferret" eval "${houses[@]}" "${common[@]}" --strategies "$strategies" --offline \
-        --out eval-offline >/dev/null
+    "$ferret" eval "${val[@]}" --range "$ALL_RANGE" "${common[@]}" --fusion fusion.json \
+        --strategies "$strategies" --offline --out eval-offline >/dev/null
     cmp eval/trials.csv eval-offline/trials.csv
+    "$ferret" eval "${val[@]}" --range "$RANGE" "${common[@]}" --fusion fusion.json \
+        --strategies "$side_strategies" --offline --out eval-side-offline >/dev/null
+    cmp eval-side/trials.csv eval-side-offline/trials.csv
     log "done in $((SECONDS - t0)) s ($online s with the server); outputs in $OUT"
 }
 

@@ -301,11 +301,22 @@ static BATCH_LINE: LazyLock<Regex> = LazyLock::new(|| {
         .expect("constant pattern")
 });
 
-/// Reads a P-BATCH answer: for each of `labels`, its percentage (as [`read_probability`] reads
-/// one answer, the number's range given in the whole text), `None` when the answer leaves the
-/// label out. A JSON object's values are of class [`AnswerClass::Json`]; a label written twice
-/// is read where it is first written.
-pub fn read_batch(text: &str, labels: &[String]) -> Vec<Option<ProbabilityReading>> {
+static NAMED_LINE: LazyLock<Regex> = LazyLock::new(|| {
+    // `sofa in the living room: Yes`, `- **bed in the bedroom 2**: 40%`, `"fridge in the
+    // kitchen": "No"`, one per line or in one JSON object.
+    Regex::new(r#"(?m)(?:^|[{,])[\s\x00"'`*_•-]*([^:=\n"{},*]+?)[\s"'`*_]*[:=]\s*"?([^",}\n]*)"#)
+        .expect("constant pattern")
+});
+
+/// Where a P-BATCH answer gives each of `labels` its value: the byte range of the value in
+/// `text` (`None` when the answer leaves the label out; a label written twice counts where it is
+/// first written), and whether the answer is one JSON object. `names`: the labels are place
+/// names (matched as P-DIRECT answers are) rather than letters.
+pub fn batch_entries(
+    text: &str,
+    labels: &[String],
+    names: bool,
+) -> (bool, Vec<Option<Range<usize>>>) {
     let t = masked(text);
     let json = {
         let inner = t.trim_matches(|c: char| c.is_whitespace() || c == '\0');
@@ -315,27 +326,65 @@ pub fn read_batch(text: &str, labels: &[String]) -> Vec<Option<ProbabilityReadin
             .map_or(inner, |s| s.trim_end().trim_end_matches("```").trim());
         serde_json::from_str::<serde_json::Map<String, serde_json::Value>>(inner).is_ok()
     };
-    let mut out: Vec<Option<ProbabilityReading>> = vec![None; labels.len()];
-    for c in BATCH_LINE.captures_iter(&t) {
+    let mut out: Vec<Option<Range<usize>>> = vec![None; labels.len()];
+    let pattern: &Regex = if names { &NAMED_LINE } else { &BATCH_LINE };
+    for c in pattern.captures_iter(&t) {
         let (Some(label), Some(value)) = (c.get(1), c.get(2)) else {
             continue;
         };
-        let Some(i) = labels.iter().position(|l| l == label.as_str()) else {
-            continue;
+        let found = if names {
+            match_location(label.as_str(), labels).map(|(i, _)| i)
+        } else {
+            labels.iter().position(|l| l == label.as_str())
         };
-        if out[i].is_some() {
-            continue;
+        if let Some(i) = found
+            && out[i].is_none()
+        {
+            out[i] = Some(value.range());
         }
-        let mut r = read_probability(value.as_str(), None);
-        if json && r.class.usable() {
-            r.class = AnswerClass::Json;
-        }
-        r.number = r
-            .number
-            .map(|n| n.start + value.start()..n.end + value.start());
-        out[i] = Some(r);
     }
-    out
+    (json, out)
+}
+
+/// Reads a P-BATCH answer: for each of `labels`, its percentage (as [`read_probability`] reads
+/// one answer, the number's range given in the whole text), `None` when the answer leaves the
+/// label out. A JSON object's values are of class [`AnswerClass::Json`]; a label written twice
+/// is read where it is first written.
+pub fn read_batch(text: &str, labels: &[String], names: bool) -> Vec<Option<ProbabilityReading>> {
+    let (json, entries) = batch_entries(text, labels, names);
+    entries
+        .into_iter()
+        .map(|range| {
+            let range = range?;
+            let mut r = read_probability(&text[range.clone()], None);
+            if json && r.class.usable() {
+                r.class = AnswerClass::Json;
+            }
+            r.number = r.number.map(|n| n.start + range.start..n.end + range.start);
+            Some(r)
+        })
+        .collect()
+}
+
+/// Reads a P-BATCH answer of Yes or No per place: for each of `labels`, the word read (its span
+/// in the whole text), `Some(None)` when the place is given something else, `None` when the
+/// answer leaves it out.
+pub fn read_batch_yes_no(
+    text: &str,
+    labels: &[String],
+    names: bool,
+) -> Vec<Option<Option<WordReading>>> {
+    let (_, entries) = batch_entries(text, labels, names);
+    entries
+        .into_iter()
+        .map(|range| {
+            let range = range?;
+            Some(read_yes_no(&text[range.clone()]).map(|w| WordReading {
+                index: w.index,
+                span: w.span.start + range.start..w.span.end + range.start,
+            }))
+        })
+        .collect()
 }
 
 /// How a P-DIRECT answer was matched to the list of search locations.
@@ -624,7 +673,7 @@ mod tests {
     #[test]
     fn batch_answers_in_lines_or_json() {
         let l = letters(4);
-        let r = read_batch("A: 40%\nB: 5%\n- **C** — 70 %\nD) no idea", &l);
+        let r = read_batch("A: 40%\nB: 5%\n- **C** — 70 %\nD) no idea", &l, false);
         let p: Vec<Option<f64>> = r
             .iter()
             .map(|r| r.as_ref().and_then(|r| r.probability))
@@ -634,19 +683,45 @@ mod tests {
         assert_eq!(r[3].as_ref().unwrap().class, AnswerClass::NoNumber);
         // The number's range is in the whole answer.
         let text = "A: 40%\nB: 5%";
-        let r = read_batch(text, &l);
+        let r = read_batch(text, &l, false);
         assert_eq!(&text[r[1].as_ref().unwrap().number.clone().unwrap()], "5");
         // JSON, with a key that is not listed and one left out.
         let json = r#"{"A": "10%", "Z": "90%", "C": "55%"}"#;
-        let r = read_batch(json, &l);
+        let r = read_batch(json, &l, false);
         assert_eq!(r[0].as_ref().unwrap().class, AnswerClass::Json);
         assert_eq!(r[0].as_ref().unwrap().probability, Some(0.1));
         assert!(r[1].is_none());
         assert_eq!(r[2].as_ref().unwrap().probability, Some(0.55));
         assert_eq!(&json[r[2].as_ref().unwrap().number.clone().unwrap()], "55");
         // The first mention of a letter counts.
-        let r = read_batch("A: 10%\nA: 90%", &l);
+        let r = read_batch("A: 10%\nA: 90%", &l, false);
         assert_eq!(r[0].as_ref().unwrap().probability, Some(0.1));
+    }
+
+    #[test]
+    fn batch_answers_naming_their_places() {
+        let names: Vec<String> = [
+            "sofa in the living room",
+            "bed in the bedroom 1",
+            "bed in the bedroom 2",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        let text = "- Sofa in the living room: Yes\nbed in the bedroom 2: no\n**bed in the bedroom 1**: maybe";
+        let r = read_batch_yes_no(text, &names, true);
+        let sofa = r[0].clone().unwrap().unwrap();
+        assert_eq!((sofa.index, &text[sofa.span.clone()]), (0, "Yes"));
+        assert_eq!(r[1], Some(None), "maybe is no answer");
+        assert_eq!(r[2].clone().unwrap().unwrap().index, 1);
+        let json = r#"{"sofa in the living room": "No", "bed in the bedroom 1": "Yes"}"#;
+        let r = read_batch_yes_no(json, &names, true);
+        assert_eq!(r[0].clone().unwrap().unwrap().index, 1);
+        assert_eq!(r[1].clone().unwrap().unwrap().index, 0);
+        assert_eq!(r[2], None, "left out");
+        let r = read_batch("sofa in the living room: 35%", &names, true);
+        assert_eq!(r[0].as_ref().unwrap().probability, Some(0.35));
+        assert!(r[1].is_none());
     }
 
     proptest! {
@@ -674,7 +749,7 @@ mod tests {
         fn batch_lines_are_read_back(values in proptest::collection::vec(1u32..=100, 1..26)) {
             let l = letters(values.len());
             let text: String = l.iter().zip(&values).map(|(l, v)| format!("{l}: {v}%\n")).collect();
-            let r = read_batch(&text, &l);
+            let r = read_batch(&text, &l, false);
             for (r, v) in r.iter().zip(&values) {
                 let p = r.as_ref().and_then(|r| r.probability);
                 prop_assert_eq!(p, Some(f64::from(*v) / 100.0));

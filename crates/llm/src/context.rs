@@ -324,7 +324,7 @@ impl Listing {
 /// One listed place as a template sees it.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ListedOption {
-    /// Its letter (`A`).
+    /// Its letter (`A`), or its name (`sofa in the living room`) in a prompt that names places.
     pub label: String,
     /// The container type in words.
     pub container: String,
@@ -354,6 +354,17 @@ impl ListingContext {
         places: &[usize],
         target: &ObjectType,
     ) -> Self {
+        Self::labelled(ctx, listing, places, target, false)
+    }
+
+    /// The same, with each place's label its name (`sofa in the living room`) when `names`.
+    pub fn labelled(
+        ctx: &HouseContext,
+        listing: &Listing,
+        places: &[usize],
+        target: &ObjectType,
+        names: bool,
+    ) -> Self {
         Self {
             target: target.words(),
             rooms: ctx.room_labels.clone(),
@@ -361,10 +372,17 @@ impl ListingContext {
             options: places
                 .iter()
                 .zip(LABELS.chars())
-                .map(|(&p, label)| ListedOption {
-                    label: label.to_string(),
-                    container: listing.places[p].container.clone(),
-                    room: listing.places[p].room.clone(),
+                .map(|(&p, letter)| {
+                    let place = &listing.places[p];
+                    ListedOption {
+                        label: if names {
+                            format!("{} in the {}", place.container, place.room)
+                        } else {
+                            letter.to_string()
+                        },
+                        container: place.container.clone(),
+                        room: place.room.clone(),
+                    }
                 })
                 .collect(),
         }

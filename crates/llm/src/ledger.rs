@@ -33,11 +33,14 @@ pub struct TokenCounts {
     pub cached_input_tokens: u64,
     /// USD at the endpoint's prices.
     pub cost_usd: f64,
+    /// Seconds the server took to answer (the requests' latencies, summed).
+    pub seconds: f64,
 }
 
 impl TokenCounts {
-    fn add(&mut self, usage: &TokenUsage, cost_usd: f64) {
+    fn add(&mut self, usage: &TokenUsage, cost_usd: f64, seconds: f64) {
         self.requests += 1;
+        self.seconds += seconds;
         self.input_tokens += usage.prompt_tokens;
         self.output_tokens += usage.completion_tokens;
         self.cached_input_tokens += usage.cached_tokens.unwrap_or(0);
@@ -50,6 +53,7 @@ impl TokenCounts {
         self.output_tokens += o.output_tokens;
         self.cached_input_tokens += o.cached_input_tokens;
         self.cost_usd += o.cost_usd;
+        self.seconds += o.seconds;
     }
 
     /// Input plus output tokens.
@@ -314,7 +318,8 @@ impl Ledger {
         self.inner.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    /// Counts a request for prompt `key` sent to `llm` on behalf of `strategy`.
+    /// Counts a request for prompt `key` sent to `llm` on behalf of `strategy`, answered in
+    /// `seconds`.
     pub fn record_sent(
         &self,
         llm: &str,
@@ -322,12 +327,13 @@ impl Ledger {
         key: &str,
         usage: &TokenUsage,
         cost_usd: f64,
+        seconds: f64,
     ) {
         let mut inner = self.lock();
         inner.fetched.insert((llm.to_string(), key.to_string()));
         row(&mut inner.rows, llm, strategy)
             .sent
-            .add(usage, cost_usd);
+            .add(usage, cost_usd, seconds);
     }
 
     /// Counts an answer to prompt `key` served from the cache — once per run: reading again an
@@ -351,11 +357,13 @@ impl Ledger {
         cost_usd: f64,
         outcome: AnswerOutcome,
     ) {
-        self.record_answers(llm, strategy, key, usage, cost_usd, &[outcome]);
+        self.record_answers(llm, strategy, key, usage, cost_usd, 0.0, &[outcome]);
     }
 
-    /// Like [`Self::record_answer`] for an answer that gives several readings (a percentage per
-    /// place, P-BATCH): its tokens and cost once, each reading as an answer of its own.
+    /// Like [`Self::record_answer`], with the `seconds` the answer took when it was asked, for an
+    /// answer that may give several readings (a percentage per place, P-BATCH): its tokens, cost
+    /// and seconds once, each reading as an answer of its own.
+    #[allow(clippy::too_many_arguments)] // one call's facts; a struct would only rename them
     pub fn record_answers(
         &self,
         llm: &str,
@@ -363,6 +371,7 @@ impl Ledger {
         key: &str,
         usage: &TokenUsage,
         cost_usd: f64,
+        seconds: f64,
         outcomes: &[AnswerOutcome],
     ) {
         let mut inner = self.lock();
@@ -377,10 +386,10 @@ impl Ledger {
                 .llm_distinct
                 .entry(llm.to_string())
                 .or_default()
-                .add(usage, cost_usd);
+                .add(usage, cost_usd, seconds);
         }
         let r = row(&mut inner.rows, llm, strategy);
-        r.distinct.add(usage, cost_usd);
+        r.distinct.add(usage, cost_usd, seconds);
         for &outcome in outcomes {
             count_outcome(r, outcome);
         }
@@ -443,7 +452,7 @@ pub struct TokenReport {
 }
 
 /// The header of `tokens.csv`.
-pub const TOKENS_CSV_HEADER: [&str; 31] = [
+pub const TOKENS_CSV_HEADER: [&str; 33] = [
     "llm",
     "strategy",
     "requests",
@@ -475,6 +484,8 @@ pub const TOKENS_CSV_HEADER: [&str; 31] = [
     "class_word",
     "class_no_word",
     "class_missing",
+    "seconds",
+    "distinct_seconds",
 ];
 
 impl TokenReport {
@@ -545,6 +556,8 @@ impl TokenReport {
                 n(r.answers.class_word),
                 n(r.answers.class_no_word),
                 n(r.answers.class_missing),
+                format!("{:.3}", r.sent.seconds),
+                format!("{:.3}", r.distinct.seconds),
             ])?;
         }
         w.flush()?;
@@ -584,13 +597,17 @@ impl fmt::Display for TokenReport {
         }
         // The same columns per strategy, so prompts of one LLM can be compared (paper table V
         // gives only the per-LLM totals).
+        // "prompts" and "seconds" are over the distinct prompts used, whenever they were asked:
+        // what the strategy costs, whether its answers came from the cache or not.
         writeln!(
             f,
-            "\n{:<40} {:>12} {:>10} {:>10} {:>9} {:>10} {:>10}",
+            "\n{:<40} {:>8} {:>12} {:>10} {:>10} {:>9} {:>9} {:>10} {:>10}",
             "strategy",
+            "prompts",
             "input tok",
             "output tok",
             "cost USD",
+            "seconds",
             "requests",
             "cache hits",
             "fallbacks"
@@ -598,11 +615,13 @@ impl fmt::Display for TokenReport {
         for r in &self.rows {
             writeln!(
                 f,
-                "{:<40} {:>12} {:>10} {:>10.4} {:>9} {:>10} {:>10}",
+                "{:<40} {:>8} {:>12} {:>10} {:>10.4} {:>9.1} {:>9} {:>10} {:>10}",
                 r.strategy,
+                r.distinct.requests,
                 r.distinct.input_tokens,
                 r.distinct.output_tokens,
                 r.distinct.cost_usd,
+                r.distinct.seconds,
                 r.sent.requests,
                 r.cache_hits,
                 r.answers.fallbacks(),
@@ -634,8 +653,8 @@ mod tests {
             completion_tokens: 3,
             cached_tokens: Some(40),
         };
-        l.record_sent("g", m, "k1", &u, 0.5);
-        l.record_sent("g", m, "k2", &u, 0.5);
+        l.record_sent("g", m, "k1", &u, 0.5, 1.5);
+        l.record_sent("g", m, "k2", &u, 0.5, 1.5);
         l.record_answer(
             "g",
             m,
@@ -676,7 +695,8 @@ mod tests {
                 input_tokens: 200,
                 output_tokens: 6,
                 cached_input_tokens: 80,
-                cost_usd: 1.0
+                cost_usd: 1.0,
+                seconds: 3.0,
             }
         );
         assert_eq!(row_m.distinct.requests, 2);
@@ -716,7 +736,7 @@ mod tests {
         assert_eq!(lines[0], TOKENS_CSV_HEADER.join(","));
         assert_eq!(
             lines[1],
-            "g,llm+model/p-minimal/g,2,200,6,80,1.000000,0,2,200,6,1.000000,2,1,0,0,0,0,0,1,0,0,1,0,1,0,0,,0,0,0"
+            "g,llm+model/p-minimal/g,2,200,6,80,1.000000,0,2,200,6,1.000000,2,1,0,0,0,0,0,1,0,0,1,0,1,0,0,,0,0,0,3.000,0.000"
         );
         let table = r.to_string();
         assert!(table.lines().nth(1).unwrap().starts_with("g "), "{table}");

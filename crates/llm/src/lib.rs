@@ -48,7 +48,8 @@ pub mod strategy;
 
 pub use answer::{
     AnswerClass, FALLBACK_PROBABILITY, MatchKind, ProbabilityReading, WordReading, WorkedExample,
-    match_location, parse_probability, read_batch, read_label, read_probability, read_yes_no,
+    batch_entries, match_location, parse_probability, read_batch, read_batch_yes_no, read_label,
+    read_probability, read_yes_no,
 };
 pub use async_openai::types::chat::ReasoningEffort;
 pub use cache::{CachedReply, DEFAULT_CACHE_PATH, ResponseCache, cache_key};

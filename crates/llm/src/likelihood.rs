@@ -13,7 +13,9 @@
 //!   house with more places than letters is asked in parts; each part's distribution is scaled
 //!   by the part's share of the places, so the total is still 1.
 //! - **batch** (P-BATCH): one question per house and target (per part) giving a percentage for
-//!   every letter; a letter left out is asked again once, then 0.01.
+//!   every letter (or, with `yesno`, Yes or No for every place, read as P-YESNO reads its answer;
+//!   with `names`, places are named rather than lettered); a place left out is asked again once,
+//!   then 0.01.
 //!
 //! Unusable answers are asked again with a format reminder (up to the endpoint's `max_reasks`),
 //! then fall back to 0.01 (for P-CHOICE: every place of the part alike), and are counted.
@@ -26,8 +28,8 @@ use ferret_world::{House, ObjectType};
 use futures::future::join_all;
 
 use crate::answer::{
-    AnswerClass, FALLBACK_PROBABILITY, WorkedExample, contains_phrase, read_batch, read_label,
-    read_probability, read_yes_no,
+    AnswerClass, FALLBACK_PROBABILITY, WorkedExample, contains_phrase, read_batch,
+    read_batch_yes_no, read_label, read_probability, read_yes_no,
 };
 use crate::client::TokenUsage;
 use crate::config::ProbabilityFrom;
@@ -57,6 +59,16 @@ pub enum Asked {
     /// Places of the house's [`Listing`] (indices), lettered `A`, `B`, ... in this order: a
     /// distribution over them (P-CHOICE) or a probability each (P-BATCH).
     Places(Vec<usize>),
+}
+
+impl Asked {
+    /// The places a listing question names, in the order lettered.
+    pub fn places(&self) -> Option<&[usize]> {
+        match self {
+            Self::Places(p) => Some(p),
+            Self::Query(_) => None,
+        }
+    }
 }
 
 /// How each container takes its probability from the answers of a [`QuestionSet`].
@@ -89,6 +101,8 @@ pub struct Resolved {
     pub usage: TokenUsage,
     /// USD of every exchange.
     pub cost_usd: f64,
+    /// Seconds every exchange took when it was asked.
+    pub seconds: f64,
     /// True when the first answer was (in part) unusable and the question was asked again.
     pub reasked: bool,
     /// The probability of each thing asked (one for a query; one per place, in the order asked,
@@ -230,9 +244,19 @@ impl LlmLikelihood {
 
     /// Reads one yes/no answer.
     fn read_yes_no(&self, answer: &Answer) -> (AnswerClass, Option<f64>, LogprobUse) {
-        let Some(word) = read_yes_no(&answer.text) else {
-            return (AnswerClass::NoWord, None, LogprobUse::NotWanted);
-        };
+        match read_yes_no(&answer.text) {
+            Some(word) => self.word_probability(answer, &word),
+            None => (AnswerClass::NoWord, None, LogprobUse::NotWanted),
+        }
+    }
+
+    /// P(Yes) at a Yes/No `word` of `answer`: from the tokens' log-probabilities, or the word
+    /// with the endpoint's `word_answer_mass` when there are none.
+    fn word_probability(
+        &self,
+        answer: &Answer,
+        word: &crate::answer::WordReading,
+    ) -> (AnswerClass, Option<f64>, LogprobUse) {
         let from_tokens = answer
             .logprobs
             .as_deref()
@@ -290,6 +314,7 @@ impl LlmLikelihood {
             key: first.key.clone(),
             usage: first.usage,
             cost_usd: first.cost_usd,
+            seconds: first.latency.as_secs_f64(),
             reasked: false,
             values: Vec::new(),
             outcomes: Vec::new(),
@@ -298,16 +323,13 @@ impl LlmLikelihood {
         let mut asked_now = question.clone();
         let mut answer = first;
         match (&question.expect, asked) {
-            (Expect::Batch(labels), Asked::Places(_)) => {
-                let mut readings = read_batch(&answer.text, labels);
-                let first_classes: Vec<AnswerClass> = readings
-                    .iter()
-                    .map(|r| r.as_ref().map_or(AnswerClass::Missing, |r| r.class))
-                    .collect();
-                let mut read: Vec<Option<(f64, LogprobUse)>> = readings
-                    .iter()
-                    .map(|r| self.batch_value(&answer, r.as_ref()))
-                    .collect();
+            (Expect::Batch(labels) | Expect::BatchYesNo(labels), Asked::Places(_)) => {
+                let yesno = matches!(question.expect, Expect::BatchYesNo(_));
+                let names = labels.iter().any(|l| l.chars().count() > 1);
+                let first = self.read_batch(&answer, labels, names, yesno);
+                let first_classes: Vec<AnswerClass> = first.iter().map(|(c, _)| *c).collect();
+                let mut read: Vec<Option<(f64, LogprobUse)>> =
+                    first.into_iter().map(|(_, v)| v).collect();
                 for _ in 0..max_reasks {
                     let missing: Vec<String> = labels
                         .iter()
@@ -320,12 +342,12 @@ impl LlmLikelihood {
                     }
                     tracing::debug!(source = %self.name, missing = ?missing, "places missing from a batch answer; asking again");
                     resolved.reasked = true;
-                    asked_now = asked_now.reask(&answer.text, &batch_reminder(&missing));
+                    asked_now = asked_now.reask(&answer.text, &batch_reminder(&missing, yesno));
                     answer = self.ask_again(&asked_now, &mut resolved).await?;
-                    readings = read_batch(&answer.text, labels);
-                    for (slot, r) in read.iter_mut().zip(&readings) {
+                    let again = self.read_batch(&answer, labels, names, yesno);
+                    for (slot, (_, v)) in read.iter_mut().zip(again) {
                         if slot.is_none() {
-                            *slot = self.batch_value(&answer, r.as_ref());
+                            *slot = v;
                         }
                     }
                 }
@@ -408,6 +430,39 @@ impl LlmLikelihood {
         Ok(resolved)
     }
 
+    /// Reads a batch answer: per label, the class of what it gives and its probability (`None`
+    /// when the place is missing or its value unreadable).
+    fn read_batch(
+        &self,
+        answer: &Answer,
+        labels: &[String],
+        names: bool,
+        yesno: bool,
+    ) -> Vec<(AnswerClass, Option<(f64, LogprobUse)>)> {
+        if !yesno {
+            return read_batch(&answer.text, labels, names)
+                .iter()
+                .map(|r| {
+                    (
+                        r.as_ref().map_or(AnswerClass::Missing, |r| r.class),
+                        self.batch_value(answer, r.as_ref()),
+                    )
+                })
+                .collect();
+        }
+        read_batch_yes_no(&answer.text, labels, names)
+            .into_iter()
+            .map(|r| match r {
+                None => (AnswerClass::Missing, None),
+                Some(None) => (AnswerClass::NoWord, None),
+                Some(Some(word)) => {
+                    let (class, p, l) = self.word_probability(answer, &word);
+                    (class, p.map(|p| (p, l)))
+                }
+            })
+            .collect()
+    }
+
     /// The probability of one batch reading, `None` when the place is missing or unreadable.
     fn batch_value(
         &self,
@@ -425,6 +480,7 @@ impl LlmLikelihood {
         resolved.usage.prompt_tokens += answer.usage.prompt_tokens;
         resolved.usage.completion_tokens += answer.usage.completion_tokens;
         resolved.cost_usd += answer.cost_usd;
+        resolved.seconds += answer.latency.as_secs_f64();
         Ok(answer)
     }
 
@@ -439,6 +495,7 @@ impl LlmLikelihood {
             &r.key,
             &r.usage,
             r.cost_usd,
+            r.seconds,
             &r.outcomes,
         );
     }
@@ -563,15 +620,19 @@ pub fn question_set(
                 shape: Shape::Listing(listing),
             })
         }
-        PromptKind::Batch => {
+        PromptKind::Batch { names, yesno } => {
             let listing = Listing::new(house, &ctx);
             let mut questions = Vec::new();
             for (i, part) in listing.parts.iter().enumerate() {
-                let lctx = ListingContext::new(&ctx, &listing, part, target);
+                let lctx = ListingContext::labelled(&ctx, &listing, part, target, names);
                 let messages = prompts.listing_messages(prompt, &lctx)?;
                 let question = Question {
                     messages,
-                    expect: Expect::Batch(lctx.labels()),
+                    expect: if yesno {
+                        Expect::BatchYesNo(lctx.labels())
+                    } else {
+                        Expect::Batch(lctx.labels())
+                    },
                     about: about(format!(
                         "likelihood of {} at every place ({})",
                         target.words(),
@@ -602,6 +663,7 @@ fn part_words(i: usize, parts: usize) -> String {
 /// order spread evenly), times the part's share of all places; floored at 0.01, capped at
 /// [`CHOICE_CAP`].
 fn choice_probabilities(listing: &Listing, set: &QuestionSet, resolved: &[Resolved]) -> Vec<f64> {
+    let readable = |r: &Resolved| -> Option<Vec<f64>> { r.values.iter().copied().collect() };
     let total = listing.places.len().max(1) as f64;
     let mut sum = vec![0.0; listing.places.len()];
     let mut orders = vec![0usize; listing.places.len()];
@@ -609,11 +671,11 @@ fn choice_probabilities(listing: &Listing, set: &QuestionSet, resolved: &[Resolv
         let Asked::Places(places) = asked else {
             continue;
         };
-        if r.values.iter().any(Option::is_none) {
+        let Some(q) = readable(r) else {
             continue;
-        }
-        for (&place, v) in places.iter().zip(&r.values) {
-            sum[place] += v.unwrap_or(0.0);
+        };
+        for (&place, v) in places.iter().zip(&q) {
+            sum[place] += v;
             orders[place] += 1;
         }
     }

@@ -21,7 +21,8 @@
 //! percentage), `yesno` (one per target, container type and room *type*, answered Yes or No),
 //! `choice` (one per house and target listing every place; the answer is a letter;
 //! `orders=2` also asks the list reversed and averages), or `batch` (one per house and target, a
-//! percentage per letter). See [`PromptKind`].
+//! percentage per letter; `names` names the places instead, `yesno` asks Yes or No for each). See
+//! [`PromptKind`].
 //!
 //! The filter `article` puts "a" or "an" before a noun (`{{ target | article }}` → `an apple`).
 
@@ -79,20 +80,27 @@ pub enum PromptKind {
         /// Orders the list is asked in.
         orders: u8,
     },
-    /// One question per house and target; the answer gives a percentage per letter.
-    Batch,
+    /// One question per house and target; the answer gives a percentage (or, with `yesno`, Yes
+    /// or No) for every place.
+    Batch {
+        /// Places are named (`sofa in the living room`) rather than lettered, and the answer
+        /// names each place before its value.
+        names: bool,
+        /// Each place is answered Yes or No, read as P-YESNO reads its answer (at that word's
+        /// token), rather than with a percentage.
+        yesno: bool,
+    },
 }
 
 impl PromptKind {
     /// True for kinds asking one question per house and target about a listing of places.
     pub fn is_listing(self) -> bool {
-        matches!(self, Self::Choice { .. } | Self::Batch)
+        matches!(self, Self::Choice { .. } | Self::Batch { .. })
     }
 }
 
 static KIND: std::sync::LazyLock<regex::Regex> = std::sync::LazyLock::new(|| {
-    regex::Regex::new(r"\{#-?\s*ferret:kind\s+([a-z]+)(?:\s+orders=(\d+))?")
-        .expect("constant pattern")
+    regex::Regex::new(r"\{#-?\s*ferret:kind\s+([a-z]+)([^#]*)").expect("constant pattern")
 });
 
 /// The kind a template declares; `Percent` when it declares none.
@@ -104,23 +112,28 @@ fn declared_kind(name: &str, source: &str) -> Result<PromptKind> {
         name: name.to_string(),
         message,
     };
-    let orders = match c.get(2) {
-        None => 1,
-        Some(o) => match o.as_str().parse::<u8>() {
-            Ok(n @ 1..=2) => n,
-            _ => {
+    let kind = c.get(1).map_or("", |k| k.as_str());
+    let (mut orders, mut names, mut yesno) = (1, false, false);
+    for option in c.get(2).map_or("", |o| o.as_str()).split_whitespace() {
+        match (kind, option) {
+            ("batch", "names") => names = true,
+            ("batch", "yesno") => yesno = true,
+            ("choice", o) if o.starts_with("orders=") => match o["orders=".len()..].parse() {
+                Ok(n @ 1..=2) => orders = n,
+                _ => return Err(bad(format!("ferret:kind {o}: orders must be 1 or 2"))),
+            },
+            (_, o) => {
                 return Err(bad(format!(
-                    "ferret:kind orders={}: must be 1 or 2",
-                    o.as_str()
+                    "ferret:kind {kind} has no option `{o}` (choice: orders=1|2; batch: names, yesno)"
                 )));
             }
-        },
-    };
-    match c.get(1).map_or("", |k| k.as_str()) {
+        }
+    }
+    match kind {
         "percent" => Ok(PromptKind::Percent),
         "yesno" => Ok(PromptKind::YesNo),
         "choice" => Ok(PromptKind::Choice { orders }),
-        "batch" => Ok(PromptKind::Batch),
+        "batch" => Ok(PromptKind::Batch { names, yesno }),
         other => Err(bad(format!(
             "ferret:kind {other}: expected percent, yesno, choice or batch"
         ))),
@@ -369,7 +382,13 @@ mod tests {
         assert_eq!(lib.kind(P_MINIMAL), PromptKind::Percent);
         assert_eq!(lib.kind(P_YESNO), PromptKind::YesNo);
         assert_eq!(lib.kind(P_CHOICE), PromptKind::Choice { orders: 2 });
-        assert_eq!(lib.kind(P_BATCH), PromptKind::Batch);
+        assert_eq!(
+            lib.kind(P_BATCH),
+            PromptKind::Batch {
+                names: false,
+                yesno: false
+            }
+        );
     }
 
     #[test]

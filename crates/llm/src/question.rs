@@ -23,6 +23,8 @@ pub enum Expect {
     YesNo,
     /// One of these letters (P-CHOICE).
     Choice(Vec<String>),
+    /// Yes or No for each of these places (P-BATCH with `yesno`).
+    BatchYesNo(Vec<String>),
     /// A percentage for each of these letters (P-BATCH).
     Batch(Vec<String>),
     /// Anything (a ping).
@@ -83,11 +85,16 @@ pub const YES_NO_REMINDER: &str = "Answer Yes or No and nothing else.";
 /// The format reminder sent with a re-asked P-CHOICE question.
 pub const CHOICE_REMINDER: &str =
     "Answer with the letter of one place from the list and nothing else.";
-
-/// The format reminder sent with a re-asked P-BATCH question whose answer left out `missing`.
-pub fn batch_reminder(missing: &[String]) -> String {
+/// The format reminder sent with a re-asked P-BATCH question whose answer left out `missing`
+/// (answered Yes or No when `yesno`).
+pub fn batch_reminder(missing: &[String], yesno: bool) -> String {
+    let (what, example) = if yesno {
+        ("Yes or No", "No")
+    } else {
+        ("a percentage between 1% and 100%", "40%")
+    };
     format!(
-        "Give a percentage between 1% and 100% for each of these places too, one line each, for example \"{}: 40%\": {}",
+        "Give {what} for each of these places too, one line each, for example \"{}: {example}\": {}",
         missing.first().map_or("A", String::as_str),
         missing.join(", ")
     )
@@ -110,9 +117,22 @@ pub struct Request {
     pub min_output_tokens: Option<u32>,
 }
 
-/// Output tokens a P-BATCH answer needs per place (`"A": "40%", ` is 8 tokens in common
-/// tokenizers; the rest is room for a model that writes `A: 40%` lines with a word or two).
+/// Output tokens a P-BATCH answer needs per place besides its label (`"A": "40%", ` is 8 tokens
+/// in common tokenizers; the rest is room for a model that writes a word or two more).
 pub const BATCH_TOKENS_PER_PLACE: u32 = 12;
+
+/// Output tokens a P-BATCH answer over `labels` needs: [`BATCH_TOKENS_PER_PLACE`] per place,
+/// plus its label when places are named (a token per 3 characters, generously).
+pub fn batch_output_tokens(labels: &[String]) -> u32 {
+    let per_place = |l: &String| {
+        let name = if l.len() > 1 { l.len().div_ceil(3) } else { 0 };
+        BATCH_TOKENS_PER_PLACE + u32::try_from(name).unwrap_or(u32::MAX / 1024)
+    };
+    labels
+        .iter()
+        .map(per_place)
+        .fold(16u32, u32::saturating_add)
+}
 
 impl Request {
     /// A plain text request: these messages, no structured output, no log-probabilities.
@@ -147,7 +167,11 @@ impl Request {
                 enum_schema("answer", &["Yes".to_string(), "No".to_string()]),
             )),
             Expect::Choice(labels) => Some(("label", enum_schema("label", labels))),
-            Expect::Batch(labels) => Some(("percentages", batch_schema(labels))),
+            Expect::BatchYesNo(labels) => Some(("answers", batch_schema(labels, &["Yes", "No"]))),
+            Expect::Batch(labels) => {
+                let values: Vec<String> = (1..=100).map(|p| format!("{p}%")).collect();
+                Some(("percentages", batch_schema(labels, &values)))
+            }
             Expect::Free => None,
         };
         // A model that is not told to write JSON is pushed into it token by token by the
@@ -179,9 +203,7 @@ impl Request {
             _ => config.requested_top_logprobs(),
         };
         let min_output_tokens = match &question.expect {
-            Expect::Batch(labels) => Some(
-                16 + BATCH_TOKENS_PER_PLACE * u32::try_from(labels.len()).unwrap_or(u32::MAX / 64),
-            ),
+            Expect::Batch(labels) | Expect::BatchYesNo(labels) => Some(batch_output_tokens(labels)),
             _ => None,
         };
         Self {
@@ -205,6 +227,14 @@ pub fn json_instruction(field: &str, expect: &Expect) -> String {
         (_, Expect::Choice(_)) => {
             "\nReply with JSON only: {\"label\": \"<the letter of one place>\"}".into()
         }
+        (_, Expect::BatchYesNo(labels)) => format!(
+            "\nReply with JSON only, Yes or No for every place: {{{}}}",
+            labels
+                .iter()
+                .map(|l| format!("\"{l}\": \"<Yes or No>\""))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
         (_, Expect::Batch(labels)) => format!(
             "\nReply with JSON only, a percentage from 1% to 100% for every letter: {{{}}}",
             labels
@@ -245,9 +275,8 @@ fn enum_schema(field: &str, labels: &[String]) -> Value {
     })
 }
 
-/// `{"A": "<1..100>%", "B": ...}`: every letter required, in order, nothing else.
-fn batch_schema(labels: &[String]) -> Value {
-    let values: Vec<String> = (1..=100).map(|p| format!("{p}%")).collect();
+/// `{"A": <one of values>, "B": ...}`: every label required, in order, nothing else.
+fn batch_schema<S: Serialize>(labels: &[String], values: &[S]) -> Value {
     let properties: serde_json::Map<String, Value> = labels
         .iter()
         .map(|l| (l.clone(), json!({"type": "string", "enum": values})))
@@ -437,7 +466,11 @@ mod tests {
     #[test]
     fn a_batch_answer_raises_a_low_output_limit_and_nothing_else_does() {
         let mut c = EndpointConfig::new("http://x/v1", "m");
-        let letters: Vec<String> = (0..20).map(|i| format!("{i}")).collect();
+        let letters: Vec<String> = crate::context::LABELS
+            .chars()
+            .take(20)
+            .map(|c| c.to_string())
+            .collect();
         let batch = Question {
             expect: Expect::Batch(letters),
             ..q()
@@ -450,5 +483,13 @@ mod tests {
         assert_eq!(Request::new(&c, &q()).max_output_tokens(&c), Some(48));
         c.max_output_tokens = Some(4000);
         assert_eq!(Request::new(&c, &batch).max_output_tokens(&c), Some(4000));
+        // Named places need room for their names too.
+        c.max_output_tokens = Some(48);
+        let named = Question {
+            expect: Expect::BatchYesNo(vec!["sofa in the living room".into(); 20]),
+            ..q()
+        };
+        let limit = Request::new(&c, &named).max_output_tokens(&c).unwrap();
+        assert_eq!(limit, need + 20 * 8, "23 characters: 8 more tokens each");
     }
 }

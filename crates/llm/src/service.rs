@@ -204,8 +204,14 @@ impl Llm {
             }
         };
         let cost = self.cost(&reply.usage);
-        self.ledger
-            .record_sent(self.name(), strategy, key, &reply.usage, cost);
+        self.ledger.record_sent(
+            self.name(),
+            strategy,
+            key,
+            &reply.usage,
+            cost,
+            reply.latency.as_secs_f64(),
+        );
         let mut answer = Answer {
             text: reply.text,
             usage: reply.usage,

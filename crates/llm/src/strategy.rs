@@ -228,13 +228,14 @@ impl LlmDirectPolicy<'_> {
                 (c, MatchKind::Fallback)
             }
         };
-        s.llm.ledger().record_answer(
+        s.llm.ledger().record_answers(
             s.llm.name(),
             &s.name,
             &first_key,
             &answer.usage,
             answer.cost_usd,
-            AnswerOutcome::Direct(kind),
+            answer.latency.as_secs_f64(),
+            &[AnswerOutcome::Direct(kind)],
         );
         Ok(choice)
     }
@@ -474,10 +475,7 @@ pub fn prefetch_probabilities(
                     }
                 }
             }
-            jobs.sort_by_key(|j| match &j.asked {
-                Asked::Places(places) => places.first().copied().unwrap_or(0),
-                Asked::Query(_) => 0,
-            });
+            jobs.sort_by_key(|j| j.asked.places().and_then(|p| p.first().copied()));
             work.extend(jobs);
             i = end;
         }

@@ -449,3 +449,59 @@ fn fused_sources_combine_the_prior_and_the_llm_by_the_fitted_weights() {
         .unwrap_or_default();
     assert!(e.contains("another prior"), "{e}");
 }
+
+#[test]
+fn batch_prompts_may_name_places_and_ask_yes_or_no() {
+    let dir = tempfile::tempdir().unwrap();
+    let template = dir.path().join("yes-no-batch.j2");
+    std::fs::write(
+        &template,
+        "{# ferret:kind batch names yesno #}\nPlaces:\n{% for o in options %}\n- {{ o.label }}\n{% endfor %}\nWould {{ target | article }} be there? One line per place: \"<place>: Yes\" or \"<place>: No\".\n",
+    )
+    .unwrap();
+    // The dresser line answered Yes (0.7 of the token's mass against No 0.2), every other No
+    // without log-probabilities for its word... except that one line's token is given too.
+    let server = JsonServer::start(|body| {
+        let u = user(body);
+        let places: Vec<&str> = u.lines().filter_map(|l| l.strip_prefix("- ")).collect();
+        let mut text = String::new();
+        let mut tokens = Vec::new();
+        for p in places {
+            let prefix = format!("{p}: ");
+            tokens.push(logprob(&prefix, 1.0, &[(&prefix, 1.0)]));
+            let (word, alts): (&str, Vec<(&str, f64)>) = if p.starts_with("dresser") {
+                ("Yes", vec![("Yes", 0.7), ("No", 0.2)])
+            } else {
+                ("No", vec![("No", 0.6), ("Yes", 0.4)])
+            };
+            let p_word = alts[0].1;
+            tokens.push(logprob(word, p_word, &alts));
+            tokens.push(logprob("\n", 1.0, &[("\n", 1.0)]));
+            text.push_str(&format!("{prefix}{word}\n"));
+        }
+        let mut c = completion(&text, 100, 30);
+        c["choices"][0]["logprobs"] = json!({ "content": tokens });
+        ResponseTemplate::new(200).set_body_json(c)
+    });
+    let service = server.service(|c| c.top_logprobs = Some(5));
+    let source =
+        LlmLikelihood::new(service.clone(), template.to_str().unwrap(), "mock", "s").unwrap();
+    let (house, _) = small_scene("h#0");
+    let got = p(&source.likelihoods(&house, &remote()).unwrap());
+    assert!(
+        close(&got, &[0.4, 0.4, 0.4, 0.4, 0.4, 0.7 / 0.9]),
+        "{got:?}"
+    );
+    let bodies = server.bodies();
+    assert_eq!(bodies.len(), 1, "one request for the house");
+    assert!(
+        user(&bodies[0]).contains("- bed in the bedroom 2\n"),
+        "places named"
+    );
+    let report = service.report();
+    let a = report.row("mock", "s").unwrap().answers;
+    assert_eq!(
+        (a.probability_answers, a.class_word, a.logprob_used),
+        (5, 5, 5)
+    );
+}

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use anyhow::{Context, Result, anyhow, bail};
 use ferret_llm::message::transcript;
 use ferret_llm::{
-    Asked, DirectContext, HouseContext, LlmConfig, PromptKind, PromptLibrary, QueryPlan, Shape,
+    DirectContext, HouseContext, LlmConfig, PromptKind, PromptLibrary, QueryPlan, Shape,
     question_set,
 };
 use ferret_world::procthor::{AssetDatabase, HouseRange, LoadOptions, load_scenes};
@@ -93,7 +93,12 @@ fn list(args: &ListArgs) -> Result<ExitCode> {
             PromptKind::Percent => "percent: one question per container type and room",
             PromptKind::YesNo => "yesno: one question per container type and room type",
             PromptKind::Choice { .. } => "choice: one question per house and target, a letter",
-            PromptKind::Batch => "batch: one question per house and target, a percentage per place",
+            PromptKind::Batch { yesno: false, .. } => {
+                "batch: one question per house and target, a percentage per place"
+            }
+            PromptKind::Batch { yesno: true, .. } => {
+                "batch: one question per house and target, Yes or No per place"
+            }
         };
         println!("{name:<14} {kind}");
         if args.source {
@@ -165,10 +170,9 @@ fn show(args: &ShowArgs) -> Result<ExitCode> {
             let holders: Vec<&str> = (0..house.containers.len())
                 .filter(|&c| match (&set.shape, asked) {
                     (Shape::PerQuery { of_container }, _) => of_container[c] == i,
-                    (Shape::Listing(l), Asked::Places(places)) => {
-                        places.contains(&l.of_container[c])
-                    }
-                    _ => false,
+                    (Shape::Listing(l), asked) => asked
+                        .places()
+                        .is_some_and(|places| places.contains(&l.of_container[c])),
                 })
                 .map(|c| house.containers[c].id.as_str())
                 .collect();

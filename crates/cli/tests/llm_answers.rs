@@ -423,6 +423,28 @@ async fn fusion_is_fitted_by_calibrate_and_planned_over_by_eval() {
     );
     let tokens = std::fs::read_to_string(out.join("tokens.csv")).unwrap();
     assert!(tokens.contains("fused/p-choice/mock/exact"), "{tokens}");
+    // select replays the fused strategies from the same cache, asking nothing new.
+    let asked = requests.load(Ordering::SeqCst);
+    let mut select = common("select");
+    select.extend(
+        [
+            "--trials",
+            s(&out),
+            "--deployments",
+            "20",
+            "--trials-per-deployment",
+            "4",
+            "--fusion",
+            s(&fusion),
+            "--out",
+            s(&dir.path().join("select")),
+        ]
+        .map(String::from),
+    );
+    let o = run(select);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("fused/p-yesno/mock"), "{}", text(&o));
+    assert_eq!(requests.load(Ordering::SeqCst), asked);
     let mut cal = common("calibrate");
     cal.extend(
         [

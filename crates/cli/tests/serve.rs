@@ -29,18 +29,24 @@ struct Server {
 
 impl Server {
     fn start(db: &Path) -> Server {
+        Self::start_with(db, STRATEGIES, &[])
+    }
+
+    /// `ferret serve` on the apartment with these strategies and further arguments.
+    fn start_with(db: &Path, strategies: &str, extra: &[&str]) -> Server {
         let mut child = Command::new(env!("CARGO_BIN_EXE_ferret"))
             .args([
                 "serve",
                 "--scene",
                 s(&apartment()),
                 "--strategies",
-                STRATEGIES,
+                strategies,
                 "--listen",
                 "127.0.0.1:0",
                 "--db",
                 s(db),
             ])
+            .args(extra)
             .env_remove("FERRET_SERVE_TOKEN")
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())
@@ -274,4 +280,97 @@ fn scene_check_reports_the_apartment_and_refuses_a_closed_door() {
     let o = ferret(&["scene", "check", s(&file)]);
     assert!(!o.status.success(), "{}", text(&o));
     assert!(text(&o).contains("cannot be reached"), "{}", text(&o));
+}
+
+/// An LLM on 127.0.0.1 that says Yes for sofas, tables and beds and No elsewhere (P-YESNO).
+fn yes_no_llm(rt: &tokio::runtime::Runtime) -> wiremock::MockServer {
+    use wiremock::matchers::method;
+    use wiremock::{Mock, MockServer, Request, ResponseTemplate};
+    rt.block_on(async {
+        let server = MockServer::start().await;
+        Mock::given(method("POST"))
+            .respond_with(|req: &Request| {
+                let body: Value = serde_json::from_slice(&req.body).unwrap_or_default();
+                let q = body["messages"][0]["content"].as_str().unwrap_or_default().to_string();
+                let q = q.rsplit("in or on").next().unwrap_or_default();
+                let yes = ["sofa", "table", "bed "].iter().any(|k| q.contains(k));
+                ResponseTemplate::new(200).set_body_json(json!({
+                    "id": "x", "object": "chat.completion", "created": 1, "model": "m",
+                    "choices": [{"index": 0, "finish_reason": "stop",
+                        "message": {"role": "assistant", "content": if yes { "Yes" } else { "No" }}}],
+                    "usage": {"prompt_tokens": 30, "completion_tokens": 1, "total_tokens": 31}
+                }))
+            })
+            .mount(&server)
+            .await;
+        server
+    })
+}
+
+#[test]
+fn a_fused_strategy_is_served_with_its_fusion_file() {
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let llm = yes_no_llm(&rt);
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("ferret.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[llm.mock]\nbase_url = \"{}/v1\"\nmodel = \"m\"\nretry_base_ms = 10\n",
+            llm.uri()
+        ),
+    )
+    .unwrap();
+    let cache = dir.path().join("c.sqlite");
+    let fusion = dir.path().join("fusion.json");
+    let llm_args = ["--config", s(&config), "--llm-cache", s(&cache)];
+    let fit_out = dir.path().join("fit");
+    let mut fit = vec![
+        "calibrate",
+        "--generate",
+        "10",
+        "--sources",
+        "llm+model/p-yesno/mock",
+        "--fit-fusion",
+        s(&fusion),
+        "--out",
+        s(&fit_out),
+    ];
+    fit.extend(llm_args);
+    let o = ferret(&fit);
+    assert!(o.status.success(), "{}", text(&o));
+    let mut extra = vec!["--fusion", s(&fusion)];
+    extra.extend(llm_args);
+    let server = Server::start_with(
+        &dir.path().join("serve.sqlite"),
+        "fused/p-yesno/mock",
+        &extra,
+    );
+    let (st, dep) = post(&format!("{}/deployments", server.url), json!({"seed": 1}));
+    assert_eq!(st, 201, "{dep}");
+    let id = dep["id"].as_i64().unwrap();
+    let (st, reply) = post(
+        &format!("{}/deployments/{id}/trials", server.url),
+        json!({"scene": "apartment", "target": "RemoteControl"}),
+    );
+    assert_eq!(st, 201, "{reply}");
+    assert_eq!(reply["strategy"], "fused/p-yesno/mock", "{reply}");
+    assert!(reply["next"]["container"].is_string(), "{reply}");
+    server.kill();
+    // Without the fusion file the server refuses the strategy at start, saying what to do.
+    let o = ferret(&[
+        "serve",
+        "--scene",
+        s(&apartment()),
+        "--strategies",
+        "fused/p-yesno/mock",
+        "--listen",
+        "127.0.0.1:0",
+        "--db",
+        s(&dir.path().join("other.sqlite")),
+        "--config",
+        s(&config),
+    ]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("--fit-fusion"), "{}", text(&o));
 }

@@ -37,8 +37,9 @@ pub struct Args {
     pub planning: super::eval::PlanningArgs,
     #[command(flatten)]
     pub llm: super::llm_setup::LlmArgs,
-    /// Likelihood sources as strategy specs, comma separated: model/uniform, model/prior, and
-    /// llm+model/<prompt>/<llm> (any planner suffix is ignored: only the probabilities count).
+    /// Likelihood sources as strategy specs, comma separated: model/uniform, model/prior,
+    /// llm+model/<prompt>/<llm> and fused/<prompt>/<llm> (with --fusion); any planner suffix is
+    /// ignored: only the probabilities count.
     #[arg(long, value_delimiter = ',', default_value = DEFAULT_SOURCES)]
     pub sources: Vec<String>,
     /// Targets per house: `all` (every small-object type present) or a number N. With N, the

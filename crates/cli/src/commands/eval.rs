@@ -43,7 +43,8 @@ pub struct Args {
     /// Strategies, comma separated: optimistic+greedy, model/uniform, model/prior,
     /// model/prior/exact, model/prior/k<N>, oracle (a model spec ending in /authors plans with the
     /// paper reference code's cost), and with an LLM configuration
-    /// llm+model/<prompt>/<llm>[/exact] and llm-direct/p-direct/<llm> (prompts: p-context-a,
+    /// llm+model/<prompt>/<llm>[/exact], fused/<prompt>/<llm>[/exact] (with --fusion) and
+    /// llm-direct/p-direct/<llm> (prompts: p-yesno, p-choice, p-batch, p-context-a,
     /// p-context-b, p-minimal, p-direct, or a template path).
     #[arg(long, value_delimiter = ',', default_value = DEFAULT_STRATEGIES)]
     pub strategies: Vec<String>,

@@ -214,11 +214,11 @@ impl LlmLikelihood {
         let Some(p) = r.probability else {
             return (r.class, None, LogprobUse::NotWanted);
         };
-        self.from_logprobs(answer, r.class, p, r.number)
+        self.percent_from_tokens(answer, r.class, p, r.number)
     }
 
     /// `p`, or the expectation over the tokens of the number at `number`, as the endpoint says.
-    fn from_logprobs(
+    fn percent_from_tokens(
         &self,
         answer: &Answer,
         class: AnswerClass,
@@ -471,7 +471,7 @@ impl LlmLikelihood {
     ) -> Option<(f64, LogprobUse)> {
         let r = reading?;
         let p = r.probability?;
-        let (_, v, l) = self.from_logprobs(answer, r.class, p, r.number.clone());
+        let (_, v, l) = self.percent_from_tokens(answer, r.class, p, r.number.clone());
         v.map(|v| (v, l))
     }
 

@@ -77,6 +77,7 @@ impl FusionWeights {
     ///
     /// Written out rather than taken from a crate: three parameters need a 3×3 solve, and the
     /// crates that fit logistic regressions bring a linear-algebra stack for it.
+    #[allow(clippy::needless_range_loop)] // gradient and Hessian by index, as written on paper
     pub fn fit(samples: &[(f64, f64, bool)]) -> Option<Self> {
         let positives = samples.iter().filter(|s| s.2).count();
         if positives == 0 || positives == samples.len() {
@@ -122,6 +123,8 @@ impl FusionWeights {
 }
 
 /// Solves `m · x = v` by Gaussian elimination with partial pivoting; `None` when singular.
+// Indices read as the textbook algorithm does; iterators over rows and columns would not.
+#[allow(clippy::needless_range_loop)]
 fn solve3(mut m: [[f64; 3]; 3], mut v: [f64; 3]) -> Option<[f64; 3]> {
     for col in 0..3 {
         let pivot = (col..3).max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))?;

@@ -139,6 +139,19 @@ impl std::fmt::Debug for LlmLikelihood {
     }
 }
 
+impl Resolved {
+    /// Sets the single reading of a per-container question.
+    fn one(&mut self, class: AnswerClass, value: Option<f64>, logprobs: LogprobUse) {
+        self.values = vec![value];
+        self.outcomes = vec![AnswerOutcome::Probability {
+            class,
+            reasked: self.reasked,
+            value,
+            logprobs,
+        }];
+    }
+}
+
 impl LlmLikelihood {
     /// A source asking `llm` with `prompt` (a template name or path), counting under `strategy`.
     pub fn new(service: Arc<LlmService>, prompt: &str, llm: &str, strategy: &str) -> Result<Self> {
@@ -364,16 +377,11 @@ impl LlmLikelihood {
                     .collect();
             }
             (Expect::Choice(labels), Asked::Places(places)) => {
-                let (class, mut q, mut logprobs) = self.read_choice(&answer, labels);
-                for _ in 0..max_reasks {
-                    if q.is_some() {
-                        break;
-                    }
-                    resolved.reasked = true;
-                    asked_now = asked_now.reask(&answer.text, CHOICE_REMINDER);
-                    answer = self.ask_again(&asked_now, &mut resolved).await?;
-                    (_, q, logprobs) = self.read_choice(&answer, labels);
-                }
+                let (class, q, logprobs) = self
+                    .read_until_usable(question, answer, &mut resolved, CHOICE_REMINDER, |a| {
+                        self.read_choice(a, labels)
+                    })
+                    .await?;
                 let top = q.as_ref().and_then(|q| q.iter().copied().reduce(f64::max));
                 resolved.values = match q {
                     Some(q) => q.into_iter().map(Some).collect(),
@@ -387,47 +395,50 @@ impl LlmLikelihood {
                 }];
             }
             (Expect::YesNo, Asked::Query(_)) => {
-                let (class, mut value, mut logprobs) = self.read_yes_no(&answer);
-                for _ in 0..max_reasks {
-                    if value.is_some() {
-                        break;
-                    }
-                    resolved.reasked = true;
-                    asked_now = asked_now.reask(&answer.text, YES_NO_REMINDER);
-                    answer = self.ask_again(&asked_now, &mut resolved).await?;
-                    (_, value, logprobs) = self.read_yes_no(&answer);
-                }
-                resolved.values = vec![value];
-                resolved.outcomes = vec![AnswerOutcome::Probability {
-                    class,
-                    reasked: resolved.reasked,
-                    value,
-                    logprobs,
-                }];
+                let (class, value, logprobs) = self
+                    .read_until_usable(question, answer, &mut resolved, YES_NO_REMINDER, |a| {
+                        self.read_yes_no(a)
+                    })
+                    .await?;
+                resolved.one(class, value, logprobs);
             }
             _ => {
                 let example = self.example_for(asked);
-                let (class, mut value, mut logprobs) = self.read_percent(&answer, example.as_ref());
-                for _ in 0..max_reasks {
-                    if value.is_some() {
-                        break;
-                    }
-                    tracing::debug!(source = %self.name, answer = %answer.text, "unusable probability answer; asking again");
-                    resolved.reasked = true;
-                    asked_now = asked_now.reask(&answer.text, PROBABILITY_REMINDER);
-                    answer = self.ask_again(&asked_now, &mut resolved).await?;
-                    (_, value, logprobs) = self.read_percent(&answer, example.as_ref());
-                }
-                resolved.values = vec![value];
-                resolved.outcomes = vec![AnswerOutcome::Probability {
-                    class,
-                    reasked: resolved.reasked,
-                    value,
-                    logprobs,
-                }];
+                let (class, value, logprobs) = self
+                    .read_until_usable(question, answer, &mut resolved, PROBABILITY_REMINDER, |a| {
+                        self.read_percent(a, example.as_ref())
+                    })
+                    .await?;
+                resolved.one(class, value, logprobs);
             }
         }
         Ok(resolved)
+    }
+
+    /// Reads `answer` to `question` with `read`, and while it gives nothing usable, asks again
+    /// with `reminder` (up to the endpoint's `max_reasks`), counting every exchange in
+    /// `resolved`. Returns the first answer's class with the last reading's value.
+    async fn read_until_usable<T>(
+        &self,
+        question: &Question,
+        mut answer: Answer,
+        resolved: &mut Resolved,
+        reminder: &str,
+        read: impl Fn(&Answer) -> (AnswerClass, Option<T>, LogprobUse),
+    ) -> Result<(AnswerClass, Option<T>, LogprobUse)> {
+        let (class, mut value, mut logprobs) = read(&answer);
+        let mut asked = question.clone();
+        for _ in 0..self.llm.endpoint().config.max_reasks {
+            if value.is_some() {
+                break;
+            }
+            tracing::debug!(source = %self.name, answer = %answer.text, "unusable answer; asking again");
+            resolved.reasked = true;
+            asked = asked.reask(&answer.text, reminder);
+            answer = self.ask_again(&asked, resolved).await?;
+            (_, value, logprobs) = read(&answer);
+        }
+        Ok((class, value, logprobs))
     }
 
     /// Reads a batch answer: per label, the class of what it gives and its probability (`None`

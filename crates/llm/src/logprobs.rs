@@ -46,6 +46,22 @@ pub struct TokenLogprob {
     pub top_logprobs: Vec<TopLogprob>,
 }
 
+impl TokenLogprob {
+    /// The alternatives listed for this position, with the sampled token added when the server
+    /// left it out of its list.
+    pub fn alternatives(&self) -> Vec<(&str, f64)> {
+        let mut alternatives: Vec<(&str, f64)> = self
+            .top_logprobs
+            .iter()
+            .map(|a| (a.token.as_str(), a.logprob))
+            .collect();
+        if !alternatives.iter().any(|(t, _)| *t == self.token) {
+            alternatives.push((self.token.as_str(), self.logprob.unwrap_or(0.0)));
+        }
+        alternatives
+    }
+}
+
 fn null_as_empty<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<TopLogprob>, D::Error> {
     Ok(Option::<Vec<TopLogprob>>::deserialize(d)?.unwrap_or_default())
 }
@@ -131,14 +147,7 @@ fn word_masses(
     words: usize,
     word_of: impl Fn(&str) -> Option<usize>,
 ) -> (Vec<f64>, f64) {
-    let mut alternatives: Vec<(&str, f64)> = tok
-        .top_logprobs
-        .iter()
-        .map(|a| (a.token.as_str(), a.logprob))
-        .collect();
-    if !alternatives.iter().any(|(t, _)| *t == tok.token) {
-        alternatives.push((tok.token.as_str(), tok.logprob.unwrap_or(0.0)));
-    }
+    let alternatives = tok.alternatives();
     let mut mass = vec![0.0; words];
     let mut listed = 0.0;
     for (t, lp) in alternatives {
@@ -218,14 +227,7 @@ fn expect_at(
         return ended();
     };
     let sampled_digits = digits(&tok.token);
-    let mut alternatives: Vec<(&str, f64)> = tok
-        .top_logprobs
-        .iter()
-        .map(|a| (a.token.as_str(), a.logprob))
-        .collect();
-    if !alternatives.iter().any(|(t, _)| *t == tok.token) {
-        alternatives.push((tok.token.as_str(), tok.logprob.unwrap_or(0.0)));
-    }
+    let alternatives = tok.alternatives();
     let mut mass = 0.0;
     let mut sum = 0.0;
     for (t, lp) in alternatives {

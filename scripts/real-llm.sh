@@ -33,7 +33,8 @@ PORT="${FERRET_LANE_PORT:-18080}"
 # fitted on training houses FIT_RANGE.
 RANGE="${FERRET_LANE_RANGE:-0..30}"
 ALL_RANGE="${FERRET_LANE_ALL_RANGE:-0..150}"
-FIT_RANGE="${FERRET_LANE_FIT_RANGE:-0..100}"
+FIT_RANGE="${FERRET_LANE_FIT_RANGE:-0..60}"
+PRIOR_RANGE="${FERRET_LANE_PRIOR_RANGE:-100..1000}"
 MAX_FALLBACK="${FERRET_LANE_MAX_FALLBACK:-0.02}"
 LLAMA_CPP_PYTHON="${FERRET_LANE_LLAMA_CPP_PYTHON:-0.3.36}"
 # llama.cpp's threads wait for each other at every layer: on a machine busy with other work
@@ -232,7 +233,7 @@ run() {
     # The prior learns from training houses 100.. of smallhouse-train1000 (and oneroom-train500);
     # houses 0..100 are held out for fitting the fusion, so the fit sees the prior as it is on
     # houses it never saw.
-    "$ferret" prior train --houses "$DATA/smallhouse-train1000.jsonl.gz" --range "100..1000" \
+    "$ferret" prior train --houses "$DATA/smallhouse-train1000.jsonl.gz" --range "$PRIOR_RANGE" \
         --also "$DATA/oneroom-train500.jsonl.gz" "${asset[@]}" --out prior.json
     "$ferret" llm ping qwen --config ferret.toml
     local new=(llm+model/p-yesno/qwen llm+model/p-choice/qwen llm+model/p-batch/qwen-logprobs)
@@ -247,6 +248,12 @@ run() {
     "$ferret" calibrate "${val[@]}" --range "$ALL_RANGE" "${common[@]}" --fusion fusion.json \
         --targets-per-house 1 --max-fallback-share "$MAX_FALLBACK" \
         --sources "$(IFS=,; echo "${sources[*]}")" --out calibration
+    local strategies="optimistic+greedy,model/uniform,model/prior,model/prior/exact"
+    strategies+=",llm+model/p-yesno/qwen,llm+model/p-choice/qwen,llm+model/p-batch/qwen-logprobs"
+    strategies+=",$(IFS=,; echo "${fused[*]}"),fused/p-yesno/qwen/exact,oracle"
+    log "eval on val150 $ALL_RANGE (answers from the calibration's cache)"
+    "$ferret" eval "${val[@]}" --range "$ALL_RANGE" "${common[@]}" --fusion fusion.json \
+        --strategies "$strategies" --max-fallback-share "$MAX_FALLBACK" --out eval
     log "calibrate on val150 $RANGE: the paper's per-container prompts beside the new ones"
     local side=(model/uniform model/prior)
     for p in p-context-a p-context-b p-minimal; do
@@ -257,18 +264,12 @@ run() {
     "$ferret" calibrate "${val[@]}" --range "$RANGE" "${common[@]}" --fusion fusion.json \
         --targets-per-house 1 --max-fallback-share "$MAX_FALLBACK" \
         --sources "$(IFS=,; echo "${side[*]}")" --out calibration-side
-    local strategies="optimistic+greedy,model/uniform,model/prior,model/prior/exact"
-    strategies+=",llm+model/p-yesno/qwen,llm+model/p-choice/qwen,llm+model/p-batch/qwen-logprobs"
-    strategies+=",$(IFS=,; echo "${fused[*]}"),fused/p-yesno/qwen/exact,oracle"
-    log "eval on val150 $ALL_RANGE (answers from the calibration's cache)"
-    "$ferret" eval "${val[@]}" --range "$ALL_RANGE" "${common[@]}" --fusion fusion.json \
-        --strategies "$strategies" --max-fallback-share "$MAX_FALLBACK" --out eval
     local side_strategies="optimistic+greedy,model/uniform,model/prior"
     for p in p-context-a p-context-b p-minimal; do
         side_strategies+=",llm+model/$p/qwen-logprobs"
     done
     side_strategies+=",llm+model/p-yesno/qwen,llm+model/p-choice/qwen,llm+model/p-batch/qwen-logprobs"
-    side_strategies+=",$(IFS=,; echo "${fused[*]}"),oracle"
+    side_strategies+=",$(IFS=,; echo "${fused[*]}"),llm-direct/p-direct/qwen,oracle"
     log "eval on val150 $RANGE with the paper's prompts beside the new ones"
     "$ferret" eval "${val[@]}" --range "$RANGE" "${common[@]}" --fusion fusion.json \
         --strategies "$side_strategies" --max-fallback-share "$MAX_FALLBACK" --out eval-side

@@ -338,6 +338,7 @@ impl LlmLikelihood {
         match (&question.expect, asked) {
             (Expect::Batch(labels) | Expect::BatchYesNo(labels), Asked::Places(_)) => {
                 let yesno = matches!(question.expect, Expect::BatchYesNo(_));
+                // Letters are one character; a named place is a phrase.
                 let names = labels.iter().any(|l| l.chars().count() > 1);
                 let first = self.read_batch(&answer, labels, names, yesno);
                 let first_classes: Vec<AnswerClass> = first.iter().map(|(c, _)| *c).collect();

@@ -15,7 +15,9 @@ pub mod grid;
 pub mod house;
 pub mod map;
 pub mod procthor;
+pub mod rules;
 pub mod scene;
+pub mod soft;
 
 pub use distance::{Distances, Place};
 pub use error::{HouseLocation, Result, WorldError};
@@ -27,3 +29,5 @@ pub use house::{
 };
 pub use map::{MapCell, OccupancyMap};
 pub use scene::SceneFile;
+pub use rules::{AccessRule, ContainerSet, TravelCost};
+pub use soft::SoftGrid;

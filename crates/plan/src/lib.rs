@@ -37,7 +37,9 @@ pub use protocol::{
     AccessRule, ContainerSet, DrawMode, InitialBelief, Protocol, ProtocolName, ReplayMode,
     TargetSet, TravelCost, TrialRng, TrialSettings, UntriedScore,
 };
-pub use replay::{hindsight_truth, replay_cost, replay_cost_with, replay_costs};
+pub use replay::{
+    hindsight_truth, replay_cost, replay_cost_with, replay_costs, replay_outcome_with,
+};
 pub use strategy::{ModelStrategy, Strategy, StrategyRegistry, StrategySpec, TrialContext};
 pub use trial::{
     Search, TrialOutcome, TrialSpec, TrialsPerHouse, draw_trial, draw_trials, draw_trials_with,

@@ -35,6 +35,10 @@ pub struct ExperimentOptions {
     /// Default `false`: distinct houses, as the paper's text says.
     #[serde(default)]
     pub with_replacement: bool,
+    /// Score untried strategies 0 in UCB, as the reference code does, instead of deploying
+    /// each once first (see [`Ucb::untried_score`]). Default `false`.
+    #[serde(default)]
+    pub ucb_untried_zero: bool,
 }
 
 impl Default for ExperimentOptions {
@@ -46,6 +50,7 @@ impl Default for ExperimentOptions {
             seed: 0,
             replay_untried_first: false,
             with_replacement: false,
+            ucb_untried_zero: false,
         }
     }
 }
@@ -293,8 +298,13 @@ fn run_deployment(
             rows => rows[pick.random_range(0..rows.len())],
         })
         .collect();
+    let untried = if opts.ucb_untried_zero {
+        0.0
+    } else {
+        f64::NEG_INFINITY
+    };
     let ucb = run_selector(
-        &mut Ucb::new(table.n_strategies(), opts.c)?,
+        &mut Ucb::new(table.n_strategies(), opts.c)?.untried_score(untried),
         table,
         &houses,
         &mut stream(base, d, 1),

@@ -221,10 +221,13 @@ pub(crate) fn check_c(c: f64) -> Result<(), SelectError> {
 
 /// UCB selection (paper eq. 2): `argmin_i mean_cost_i − c·sqrt(ln k / n_i)`.
 ///
-/// Every strategy is deployed once (in random order) before any is deployed twice.
+/// By default every strategy is deployed once (in random order) before any is deployed twice.
+/// [`Ucb::untried_score`] gives untried strategies a finite score instead, as the paper's
+/// reference code does (its NaN and infinite scores become 0).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Ucb {
     stats: Deployed,
+    untried: f64,
 }
 
 impl Ucb {
@@ -234,7 +237,17 @@ impl Ucb {
     pub fn new(strategies: usize, c: f64) -> Result<Self, SelectError> {
         Ok(Self {
             stats: Deployed::new(strategies, c)?,
+            untried: f64::NEG_INFINITY,
         })
+    }
+
+    /// The score of a strategy never deployed: `−∞` by default (each is tried once first); the
+    /// reference code's 0 puts an untried strategy below every tried one whose lower bound is
+    /// positive and above those whose bound is negative, so with cheap trials it may never be
+    /// tried. A NaN is taken as 0.
+    pub fn untried_score(mut self, score: f64) -> Self {
+        self.untried = if score.is_nan() { 0.0 } else { score };
+        self
     }
 
     /// How often each strategy has been deployed (`n_i`).
@@ -259,6 +272,9 @@ impl Selector for Ucb {
     fn score(&self, i: usize) -> f64 {
         if i >= self.n_strategies() {
             return f64::NAN;
+        }
+        if self.stats.pulls[i] == 0 {
+            return self.untried;
         }
         self.stats.lower_bound(i)
     }

@@ -408,7 +408,11 @@ fn check_invariants(table: &CostTable, result: &ExperimentResult) {
             let total: f64 = summary.choice_fraction[t].iter().sum();
             assert!((total - 1.0).abs() < 1e-12);
         }
-        let untried_first = method == Method::Ucb || result.options.replay_untried_first;
+        let untried_first = if method == Method::Ucb {
+            !result.options.ucb_untried_zero
+        } else {
+            result.options.replay_untried_first
+        };
         if untried_first && result.trials() >= s {
             for dep in &result.deployments {
                 let first: HashSet<usize> = dep.run(method).chosen[..s].iter().copied().collect();
@@ -461,6 +465,7 @@ proptest! {
         c in 0.0f64..20.0,
         seed in any::<u64>(),
         replay_untried_first in any::<bool>(),
+        ucb_untried_zero in any::<bool>(),
     ) {
         let trials = 1 + ((table.n_houses() - 1) as f64 * trials_frac) as usize;
         let opts = ExperimentOptions {
@@ -470,6 +475,7 @@ proptest! {
             seed,
             replay_untried_first,
             with_replacement: false,
+            ucb_untried_zero,
         };
         let result = run_experiment(&table, &opts).unwrap();
         check_invariants(&table, &result);

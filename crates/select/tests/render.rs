@@ -31,6 +31,7 @@ fn paper_like_result() -> ExperimentResult {
             seed: 0,
             replay_untried_first: false,
             with_replacement: false,
+            ucb_untried_zero: false,
         },
         strategies: vec!["a".into(), "b".into(), "c".into()],
         mean_costs: vec![230.0, 240.0, 250.0],

@@ -320,7 +320,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     }
     crate::common::check_distinct("--strategies", &args.strategies)?;
     let protocol = args.protocol.resolve(Protocol::FERRET)?;
-    let loaded = args.houses.load()?;
+    let loaded = args.houses.load_for(protocol.containers)?;
     for s in &loaded.skipped {
         eprintln!("skipped: {s}");
     }
@@ -341,7 +341,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         .iter()
         .map(|s| setup.registry.build(s))
         .collect::<Result<_, _>>()?;
-    let maps = build_maps(&loaded.scenes, &args.grid.params());
+    let maps = build_maps(&loaded.scenes, &args.grid.params_for(protocol.access));
     let targets: Vec<(&ferret_world::House, ferret_world::ObjectType)> = loaded
         .scenes
         .iter()
@@ -507,7 +507,13 @@ pub fn evaluate(
             let mut errors = Vec::new();
             for trial in &trials {
                 for s in strategies {
-                    match run_trial(s.as_ref(), &scene.house, &scene.truth, distances, trial) {
+                    let run = run_trial(s.as_ref(), &scene.house, &scene.truth, distances, trial)
+                        .and_then(|out| {
+                            let cost =
+                                out.reported_cost(&scene.house, distances, protocol.travel_cost)?;
+                            Ok(TrialOutcome { cost, ..out })
+                        });
+                    match run {
                         Ok(out) => rows.push(row(scene, trial, &out)),
                         // The target is named only when a house has several trials, so that
                         // single-trial messages read as before.

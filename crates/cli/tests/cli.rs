@@ -786,3 +786,62 @@ fn cells_report_costs_in_the_papers_unit_too() {
     ]);
     assert!(o.status.success(), "{}", text(&o));
 }
+
+/// A generated house rewritten the ProcTHOR-10k way (types only in id prefixes, no
+/// `objectType` fields, line index 1000) runs end to end under the paper's protocol, and the
+/// soft reported cost is never below the plain one on the same trials.
+#[test]
+fn a_procthor_10k_style_house_runs_under_the_paper_protocol() {
+    let dir = tempfile::tempdir().unwrap();
+    let generated = dir.path().join("g.jsonl");
+    let o = ferret(&["generate", "--count", "1", "--seed", "3", "--out", s(&generated)]);
+    assert!(o.status.success(), "{}", text(&o));
+    let mut house: serde_json::Value =
+        serde_json::from_str(std::fs::read_to_string(&generated).unwrap().lines().next().unwrap())
+            .unwrap();
+    let mut k = 0;
+    for o in house["objects"].as_array_mut().unwrap() {
+        let room = o["id"].as_str().unwrap().split('|').next().unwrap().to_owned();
+        let ty = o["objectType"].as_str().unwrap().to_owned();
+        o["id"] = format!("{ty}|{room}|{k}").into();
+        o.as_object_mut().unwrap().remove("objectType");
+        k += 1;
+        if let Some(children) = o.get_mut("children").and_then(|c| c.as_array_mut()) {
+            for c in children {
+                let ty = c["objectType"].as_str().unwrap().to_owned();
+                c["id"] = format!("{ty}|surface|{room}|{k}").into();
+                c.as_object_mut().unwrap().remove("objectType");
+                k += 1;
+            }
+        }
+    }
+    // House 1000 of the file, as the reference's seeds are line indices.
+    let file = dir.path().join("procthor-10k-train.jsonl");
+    std::fs::write(&file, "\n".repeat(1000) + &house.to_string() + "\n").unwrap();
+    let run = |travel: &str, out: &Path| {
+        let o = ferret(&[
+            "eval", "--houses", s(&file), "--range", "1000", "--protocol", "paper",
+            "--travel-cost", travel, "--cells", "--strategies", "optimistic+greedy,oracle",
+            "--out", s(out),
+        ]);
+        assert!(o.status.success(), "{}", text(&o));
+        read_csv(&out.join("trials.csv"))
+    };
+    let (soft_out, plain_out) = (dir.path().join("soft"), dir.path().join("plain"));
+    let soft = run("soft", &soft_out);
+    let plain = run("plain", &plain_out);
+    assert_eq!(soft.len(), 2);
+    for (a, b) in soft.iter().zip(&plain) {
+        assert_eq!((&a["target"], &a["searched"]), (&b["target"], &b["searched"]));
+        let (s, p): (f64, f64) = (a["cost_m"].parse().unwrap(), b["cost_m"].parse().unwrap());
+        assert!(s >= p - 1e-9, "soft {s} < plain {p}");
+        assert!(a["house_index"] == "1000");
+    }
+    let info: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(soft_out.join("run.json")).unwrap()).unwrap();
+    assert_eq!(info["protocol"]["containers"], "furniture");
+    assert_eq!(info["protocol"]["travel_cost"], "soft");
+    assert_eq!(info["protocol"]["rng"], "python");
+    let md = std::fs::read_to_string(soft_out.join("summary.md")).unwrap();
+    assert!(md.contains("As the reference code averages"), "{md}");
+}

@@ -67,6 +67,13 @@ pub trait Selector {
         argmin_random_tie(self.n_strategies(), |i| self.score(i), rng)
     }
 
+    /// Strategy for the next trial: the lowest score; among `t > 1` exact ties (in index order)
+    /// the one at `pick(t)`, which must be below `t`. For another generator's tie-breaks, such
+    /// as the reference code's numpy `choice`.
+    fn choose_with(&mut self, pick: &mut dyn FnMut(usize) -> usize) -> usize {
+        argmin_tie(self.n_strategies(), |i| self.score(i), pick)
+    }
+
     /// Records a finished trial: strategy `chosen` was deployed and cost `cost` metres.
     ///
     /// `replay_costs[i]` is the replay cost of strategy `i` on this trial given that `chosen`
@@ -401,6 +408,16 @@ pub(crate) fn argmin_random_tie(
     score: impl Fn(usize) -> f64,
     rng: &mut dyn RngCore,
 ) -> usize {
+    argmin_tie(n, score, &mut |ties| rng.random_range(0..ties))
+}
+
+/// Index of the smallest `score(i)`; among `t > 1` exact ties, the `pick(t)`-th in index order
+/// (`pick` is called only for ties). NaN scores are never chosen unless all are NaN.
+pub(crate) fn argmin_tie(
+    n: usize,
+    score: impl Fn(usize) -> f64,
+    pick: &mut dyn FnMut(usize) -> usize,
+) -> usize {
     let mut best: Option<(f64, usize)> = None;
     let mut ties = 0usize;
     for i in 0..n {
@@ -421,7 +438,7 @@ pub(crate) fn argmin_random_tie(
     if ties == 1 {
         return first;
     }
-    let mut pick = rng.random_range(0..ties);
+    let mut pick = pick(ties);
     for i in first..n {
         if score(i) == best {
             if pick == 0 {

@@ -32,6 +32,7 @@ fn paper_like_result() -> ExperimentResult {
             replay_untried_first: false,
             with_replacement: false,
             ucb_untried_zero: false,
+            reference_draws: false,
         },
         strategies: vec!["a".into(), "b".into(), "c".into()],
         mean_costs: vec![230.0, 240.0, 250.0],

@@ -1,6 +1,6 @@
 //! `ferret eval`: one trial per house, every strategy on it; costs, summary tables and pictures.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -287,6 +287,41 @@ impl SummaryRow {
     }
 }
 
+/// Each strategy's mean cost as the reference code averages its table: 500 runs of 100 houses
+/// drawn with replacement by numpy's legacy generator (`seed(s)`, shuffle, `choice`) from the
+/// houses in file order, i.e. a mean weighted by how often each house is drawn. Houses a
+/// strategy has no trial on are left out of its weights. `(strategy, metres)` in `order`.
+pub fn reference_means(rows: &[TrialRow], order: &[String], houses: &[usize]) -> Vec<(String, f64)> {
+    let counts = ferret_select::numpy::reference_draw_counts(houses.len(), 500, 100);
+    let weight: HashMap<usize, f64> = houses
+        .iter()
+        .zip(&counts)
+        .map(|(&h, &c)| (h, c as f64))
+        .collect();
+    order
+        .iter()
+        .filter_map(|s| {
+            let (sum, total) = rows
+                .iter()
+                .filter(|r| &r.strategy == s)
+                .filter_map(|r| weight.get(&r.house_index).map(|w| (w * r.cost_m, *w)))
+                .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+            (total > 0.0).then(|| (s.clone(), sum / total))
+        })
+        .collect()
+}
+
+/// [`reference_means`] as Markdown, in metres and cells.
+fn reference_means_markdown(means: &[(String, f64)]) -> String {
+    let mut md = String::from(
+        "\n## As the reference code averages\n\nEach mean weighted by how often 500 seeded runs of 100 draws with replacement (numpy's legacy generator, as the reference's results script) pick each house.\n\n| strategy | mean cost (m) | mean cost (cells) |\n|---|---:|---:|\n",
+    );
+    for (s, m) in means {
+        md.push_str(&format!("| {s} | {m:.2} | {:.1} |\n", m / CELL_M));
+    }
+    md
+}
+
 /// The summary in 0.05 m cells as Markdown: the paper's unit, for comparison with its table I.
 pub fn cells_markdown(summary: &[SummaryRow]) -> String {
     let mut md = String::from(
@@ -410,6 +445,13 @@ pub fn run(args: Args) -> Result<ExitCode> {
         outcome.trials_run,
     ) + &if args.cells {
         cells_markdown(&summary)
+    } else {
+        String::new()
+    } + &if protocol.rng == ferret_plan::TrialRng::Python
+        && args.trials_per_house == TrialsPerHouse::One
+    {
+        let houses: Vec<usize> = loaded.scenes.iter().map(|s| s.house.index).collect();
+        reference_means_markdown(&reference_means(&outcome.rows, &args.strategies, &houses))
     } else {
         String::new()
     } + &paired_markdown(&paired);

@@ -237,6 +237,10 @@ pub fn run(args: Args) -> Result<ExitCode> {
         replay_untried_first: args.replay_untried_first,
         with_replacement: protocol.draw == DrawMode::Replacement,
         ucb_untried_zero: protocol.untried == ferret_plan::UntriedScore::Zero,
+        // The reference's numpy draws are draws with replacement; with distinct houses the
+        // deployments keep ferret's own streams.
+        reference_draws: protocol.rng == ferret_plan::TrialRng::Python
+            && protocol.draw == DrawMode::Replacement,
     };
     let result = run_experiment(&table, &opts)?;
     std::fs::create_dir_all(&args.out)?;

@@ -794,14 +794,33 @@ fn cells_report_costs_in_the_papers_unit_too() {
 fn a_procthor_10k_style_house_runs_under_the_paper_protocol() {
     let dir = tempfile::tempdir().unwrap();
     let generated = dir.path().join("g.jsonl");
-    let o = ferret(&["generate", "--count", "1", "--seed", "3", "--out", s(&generated)]);
+    let o = ferret(&[
+        "generate",
+        "--count",
+        "1",
+        "--seed",
+        "3",
+        "--out",
+        s(&generated),
+    ]);
     assert!(o.status.success(), "{}", text(&o));
-    let mut house: serde_json::Value =
-        serde_json::from_str(std::fs::read_to_string(&generated).unwrap().lines().next().unwrap())
-            .unwrap();
+    let mut house: serde_json::Value = serde_json::from_str(
+        std::fs::read_to_string(&generated)
+            .unwrap()
+            .lines()
+            .next()
+            .unwrap(),
+    )
+    .unwrap();
     let mut k = 0;
     for o in house["objects"].as_array_mut().unwrap() {
-        let room = o["id"].as_str().unwrap().split('|').next().unwrap().to_owned();
+        let room = o["id"]
+            .as_str()
+            .unwrap()
+            .split('|')
+            .next()
+            .unwrap()
+            .to_owned();
         let ty = o["objectType"].as_str().unwrap().to_owned();
         o["id"] = format!("{ty}|{room}|{k}").into();
         o.as_object_mut().unwrap().remove("objectType");
@@ -820,9 +839,20 @@ fn a_procthor_10k_style_house_runs_under_the_paper_protocol() {
     std::fs::write(&file, "\n".repeat(1000) + &house.to_string() + "\n").unwrap();
     let run = |travel: &str, out: &Path| {
         let o = ferret(&[
-            "eval", "--houses", s(&file), "--range", "1000", "--protocol", "paper",
-            "--travel-cost", travel, "--cells", "--strategies", "optimistic+greedy,oracle",
-            "--out", s(out),
+            "eval",
+            "--houses",
+            s(&file),
+            "--range",
+            "1000",
+            "--protocol",
+            "paper",
+            "--travel-cost",
+            travel,
+            "--cells",
+            "--strategies",
+            "optimistic+greedy,oracle",
+            "--out",
+            s(out),
         ]);
         assert!(o.status.success(), "{}", text(&o));
         read_csv(&out.join("trials.csv"))
@@ -832,7 +862,10 @@ fn a_procthor_10k_style_house_runs_under_the_paper_protocol() {
     let plain = run("plain", &plain_out);
     assert_eq!(soft.len(), 2);
     for (a, b) in soft.iter().zip(&plain) {
-        assert_eq!((&a["target"], &a["searched"]), (&b["target"], &b["searched"]));
+        assert_eq!(
+            (&a["target"], &a["searched"]),
+            (&b["target"], &b["searched"])
+        );
         let (s, p): (f64, f64) = (a["cost_m"].parse().unwrap(), b["cost_m"].parse().unwrap());
         assert!(s >= p - 1e-9, "soft {s} < plain {p}");
         assert!(a["house_index"] == "1000");

@@ -165,7 +165,10 @@ mod tests {
         let (m, got) = unsearched(1021, 40);
         assert_eq!((m, complement(40, &got)), (36, vec![2, 4, 9, 12]));
         let (m, got) = unsearched(1000, 40);
-        assert_eq!((m, complement(40, &got)), (33, vec![2, 9, 12, 16, 18, 19, 34]));
+        assert_eq!(
+            (m, complement(40, &got)),
+            (33, vec![2, 9, 12, 16, 18, 19, 34])
+        );
         assert_eq!(unsearched(1001, 40).0, 21);
     }
 

@@ -163,7 +163,8 @@ pub fn draw_trials_with(
         .map(|c| &c.object_type)
         .chain(house.obstacles.iter().map(|o| &o.object_type))
         .collect();
-    let allowed = |t: &ObjectType| protocol.targets == TargetSet::Pickupable || !furniture.contains(t);
+    let allowed =
+        |t: &ObjectType| protocol.targets == TargetSet::Pickupable || !furniture.contains(t);
     let mut trials = if protocol.rng == TrialRng::Python && per_house == TrialsPerHouse::One {
         let types = types_in_house_order(truth, &allowed);
         if types.is_empty() {
@@ -182,7 +183,11 @@ pub fn draw_trials_with(
         );
         vec![TrialSpec { target, revealed }]
     } else {
-        let types = truth.target_types().into_iter().filter(|t| allowed(t)).collect();
+        let types = truth
+            .target_types()
+            .into_iter()
+            .filter(|t| allowed(t))
+            .collect();
         draw_targets(house, types, truth, seed, reveal_fraction, per_house)?
     };
     if protocol.initial_belief == InitialBelief::Paper {
@@ -206,7 +211,10 @@ pub fn draw_trials_with(
                 }
             };
             let mut keep = vec![false; n];
-            for c in unsearched.into_iter().chain(truth.goal_containers(&t.target)) {
+            for c in unsearched
+                .into_iter()
+                .chain(truth.goal_containers(&t.target))
+            {
                 if let Some(k) = keep.get_mut(c) {
                     *k = true;
                 }
@@ -230,7 +238,10 @@ pub fn python_seed(index: usize, seed: u64) -> u64 {
 /// The distinct types of the containers' contents that `allowed` admits, in the order the house
 /// lists them (container by container, each one's objects in order): the order of the
 /// reference's scene graph, which fixes what an index drawn into it means.
-fn types_in_house_order(truth: &GroundTruth, allowed: &dyn Fn(&ObjectType) -> bool) -> Vec<ObjectType> {
+fn types_in_house_order(
+    truth: &GroundTruth,
+    allowed: &dyn Fn(&ObjectType) -> bool,
+) -> Vec<ObjectType> {
     let mut seen = std::collections::HashSet::new();
     let mut types = Vec::new();
     for c in 0..truth.container_count() {
@@ -331,7 +342,9 @@ impl TrialOutcome {
         if cost.is_finite() {
             Ok(cost)
         } else {
-            Err(err("a leg of the trial has no path under the soft travel cost"))
+            Err(err(
+                "a leg of the trial has no path under the soft travel cost",
+            ))
         }
     }
 

@@ -7,8 +7,8 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::selector::check_c;
 use crate::numpy::LegacyRandomState;
+use crate::selector::check_c;
 use crate::{CostTable, DEFAULT_C, Method, ReplaySelection, SelectError, Selector, Ucb};
 
 /// Most deployment trials (`deployments × trials_per_deployment`) one experiment keeps: every
@@ -417,10 +417,8 @@ fn run_reference_deployment(
         f64::NEG_INFINITY
     };
     let ucb = run(&mut Ucb::new(table.n_strategies(), opts.c)?.untried_score(untried))?;
-    let replay = run(
-        &mut ReplaySelection::new(table.n_strategies(), opts.c)?
-            .untried_first(opts.replay_untried_first),
-    )?;
+    let replay = run(&mut ReplaySelection::new(table.n_strategies(), opts.c)?
+        .untried_first(opts.replay_untried_first))?;
     Ok(Deployment {
         houses,
         ucb,

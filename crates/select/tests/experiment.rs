@@ -593,7 +593,12 @@ fn reference_draws_follow_the_reference_script() {
     );
     // The best strategy's curve ends at the reference's weighted table mean.
     let counts = ferret_select::numpy::reference_draw_counts(150, 500, 100);
-    let weighted: f64 = counts.iter().enumerate().map(|(m, &w)| m as f64 * w as f64).sum::<f64>() / 50_000.0;
+    let weighted: f64 = counts
+        .iter()
+        .enumerate()
+        .map(|(m, &w)| m as f64 * w as f64)
+        .sum::<f64>()
+        / 50_000.0;
     assert_eq!(result.best_strategy, 0);
     let last = *result.best_avg_cost.last().unwrap();
     assert!((last - weighted).abs() < 1e-9, "{last} vs {weighted}");

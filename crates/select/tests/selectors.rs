@@ -245,5 +245,8 @@ fn ucb_untried_score_zero_is_the_reference_rule() {
         default.observe(0, 1.0, &[]).unwrap();
     }
     assert_ne!(default.choose(&mut rng(1)), 0);
-    assert_eq!(Ucb::new(2, 5.0).unwrap().untried_score(f64::NAN).score(0), 0.0);
+    assert_eq!(
+        Ucb::new(2, 5.0).unwrap().untried_score(f64::NAN).score(0),
+        0.0
+    );
 }

@@ -28,6 +28,6 @@ pub use house::{
     SmallObject, Wall,
 };
 pub use map::{MapCell, OccupancyMap};
-pub use scene::SceneFile;
 pub use rules::{AccessRule, ContainerSet, TravelCost};
+pub use scene::SceneFile;
 pub use soft::SoftGrid;

@@ -229,7 +229,10 @@ mod tests {
     /// A grid from rows of `#` (blocked) and `.` (free); cell (i, j) is row i, column j.
     fn grid(rows: &[&str]) -> SoftGrid {
         let width = rows[0].len();
-        let blocked = rows.iter().flat_map(|r| r.chars().map(|c| c == '#')).collect();
+        let blocked = rows
+            .iter()
+            .flat_map(|r| r.chars().map(|c| c == '#'))
+            .collect();
         SoftGrid::new(width, blocked).unwrap()
     }
 
@@ -346,8 +349,8 @@ mod tests {
     #[test]
     fn c8_around_a_short_wall() {
         let mut rows = free(5, 5);
-        for r in 1..=3 {
-            rows[r] = "..#..".into();
+        for row in &mut rows[1..=3] {
+            *row = "..#..".into();
         }
         let g = grid(&rows.iter().map(String::as_str).collect::<Vec<_>>());
         check(&g, (2, 0), (2, 4), 7.014499, 5.656854);

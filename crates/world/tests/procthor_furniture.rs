@@ -64,15 +64,29 @@ fn furniture_is_every_top_level_object_but_the_ignored_types() {
         .map(|c| c.object_type.as_str())
         .collect();
     assert_eq!(types, ["Fridge", "CounterTop", "Chair", "Sofa", "Dresser"]);
-    let obstacles: Vec<&str> = scene.house.obstacles.iter().map(|o| o.id.as_str()).collect();
+    let obstacles: Vec<&str> = scene
+        .house
+        .obstacles
+        .iter()
+        .map(|o| o.id.as_str())
+        .collect();
     assert_eq!(obstacles, ["FloorLamp|2|2", "Box|2|3"]);
     // Direct children only (the pen under the remote is never looked at), every type kept but
     // those that are also top-level types (the chair on the sofa); the microwave counts.
-    assert_eq!(contents(&scene, "CounterTop|1|1"), ["Microwave", "CellPhone"]);
+    assert_eq!(
+        contents(&scene, "CounterTop|1|1"),
+        ["Microwave", "CellPhone"]
+    );
     assert_eq!(contents(&scene, "Sofa|2|0"), ["RemoteControl"]);
     assert_eq!(contents(&scene, "Chair|1|2"), Vec::<String>::new());
     // The box's cup vanished with the box.
-    assert!(!scene.truth.target_types().iter().any(|t| t.as_str() == "Cup"));
+    assert!(
+        !scene
+            .truth
+            .target_types()
+            .iter()
+            .any(|t| t.as_str() == "Cup")
+    );
 }
 
 #[test]
@@ -134,7 +148,10 @@ fn soft_cost_of_a_trajectory_is_at_least_its_plain_length() {
     let plain = d.travel_cost(&visits, TravelCost::Plain).unwrap();
     let soft = d.travel_cost(&visits, TravelCost::Soft).unwrap();
     assert!(plain > 1.0);
-    assert!(soft >= plain && soft <= 1.28 * plain + 1e-9, "soft {soft}, plain {plain}");
+    assert!(
+        soft >= plain && soft <= 1.28 * plain + 1e-9,
+        "soft {soft}, plain {plain}"
+    );
     for leg in visits.windows(2) {
         let p = d.travel_cost(leg, TravelCost::Plain).unwrap();
         let s = d.travel_cost(leg, TravelCost::Soft).unwrap();
@@ -142,7 +159,16 @@ fn soft_cost_of_a_trajectory_is_at_least_its_plain_length() {
     }
     // Synthetic distances have no grid, so no soft cost; a bad place has no cost at all.
     let m = Distances::from_matrix(1, vec![0.0, 1.0, 1.0, 0.0]).unwrap();
-    assert_eq!(m.travel_cost(&[Place::Start, Place::Container(0)], TravelCost::Plain), Some(1.0));
-    assert_eq!(m.travel_cost(&[Place::Start, Place::Container(0)], TravelCost::Soft), None);
-    assert_eq!(m.travel_cost(&[Place::Container(5)], TravelCost::Plain), None);
+    assert_eq!(
+        m.travel_cost(&[Place::Start, Place::Container(0)], TravelCost::Plain),
+        Some(1.0)
+    );
+    assert_eq!(
+        m.travel_cost(&[Place::Start, Place::Container(0)], TravelCost::Soft),
+        None
+    );
+    assert_eq!(
+        m.travel_cost(&[Place::Container(5)], TravelCost::Plain),
+        None
+    );
 }

@@ -291,7 +291,11 @@ impl SummaryRow {
 /// drawn with replacement by numpy's legacy generator (`seed(s)`, shuffle, `choice`) from the
 /// houses in file order, i.e. a mean weighted by how often each house is drawn. Houses a
 /// strategy has no trial on are left out of its weights. `(strategy, metres)` in `order`.
-pub fn reference_means(rows: &[TrialRow], order: &[String], houses: &[usize]) -> Vec<(String, f64)> {
+pub fn reference_means(
+    rows: &[TrialRow],
+    order: &[String],
+    houses: &[usize],
+) -> Vec<(String, f64)> {
     let counts = ferret_select::numpy::reference_draw_counts(houses.len(), 500, 100);
     let weight: HashMap<usize, f64> = houses
         .iter()
@@ -1038,6 +1042,28 @@ mod tests {
             goal_containers: 1,
             cost_cells: None,
         }
+    }
+
+    #[test]
+    fn reference_means_weight_houses_by_the_reference_draws() {
+        // Houses 10, 11, 12 in file order; strategy b lacks house 12.
+        let rows = vec![
+            trial(10, "a", 1.0),
+            trial(11, "a", 2.0),
+            trial(12, "a", 4.0),
+            trial(10, "b", 3.0),
+            trial(11, "b", 3.0),
+        ];
+        let order = vec!["a".to_string(), "b".to_string(), "c".to_string()];
+        let means = reference_means(&rows, &order, &[10, 11, 12]);
+        let w = ferret_select::numpy::reference_draw_counts(3, 500, 100);
+        let w: Vec<f64> = w.into_iter().map(|c| c as f64).collect();
+        assert_eq!(means.len(), 2, "no rows, no mean for c");
+        let a = (w[0] + 2.0 * w[1] + 4.0 * w[2]) / (w[0] + w[1] + w[2]);
+        assert!((means[0].1 - a).abs() < 1e-12);
+        // Unequal weights: the weighted mean is not the plain one.
+        assert!((a - 7.0 / 3.0).abs() > 1e-6);
+        assert!((means[1].1 - 3.0).abs() < 1e-12);
     }
 
     #[test]

@@ -17,11 +17,11 @@ use super::types::{
 };
 use crate::error::{HouseLocation, Result, WorldError};
 use crate::geometry::{Footprint, Point, Polygon};
-use crate::rules::ContainerSet;
 use crate::house::{
     Container, Door, GroundTruth, House, ObjectType, Obstacle, Pose, Room, RoomType, Scene,
     SmallObject, Wall,
 };
+use crate::rules::ContainerSet;
 
 /// Coordinates beyond this many metres from the origin are rejected: no house is kilometres
 /// across, and such numbers would make the occupancy grid absurdly large.
@@ -396,7 +396,7 @@ pub fn scene_from_raw_with(
     let top_level: std::collections::HashSet<String> = if furniture {
         raw.objects
             .iter()
-            .filter_map(|o| type_of(o))
+            .filter_map(type_of)
             .map(|t| t.as_str().to_lowercase())
             .collect()
     } else {

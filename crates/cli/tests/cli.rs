@@ -648,7 +648,8 @@ fn protocol_switches_change_what_they_should_and_select_refuses_to_mix() {
     assert_eq!(
         run["protocol"],
         serde_json::json!({"initial_belief": "paper", "containers": "receptacles",
-            "targets": "pickupable", "replay": "pessimistic", "draw": "distinct"})
+            "targets": "pickupable", "replay": "pessimistic", "draw": "distinct",
+            "travel_cost": "plain", "access": "footprint", "rng": "ferret", "untried": "first"})
     );
     // Selecting over the plain run with the paper's belief would mix protocols: refused.
     let sel = dir.path().join("sel");
@@ -699,21 +700,18 @@ fn protocol_switches_change_what_they_should_and_select_refuses_to_mix() {
         s(&sel),
     ]);
     assert!(o.status.success(), "{}", text(&o));
-    // --protocol paper needs the unimplemented container set, and says so.
+    // --protocol paper sets every part; a single switch overrides one.
     let paper = dir.path().join("paper");
-    let o = eval(&paper, &["--protocol", "paper"]);
-    assert!(!o.status.success());
-    assert!(text(&o).contains("--containers furniture"), "{}", text(&o));
-    assert!(!paper.exists(), "a refused run writes nothing");
-    let o = eval(
-        &paper,
-        &["--protocol", "paper", "--containers", "receptacles"],
-    );
+    let o = eval(&paper, &["--protocol", "paper", "--access", "footprint"]);
     assert!(o.status.success(), "{}", text(&o));
     let run: serde_json::Value =
         serde_json::from_slice(&std::fs::read(paper.join("run.json")).unwrap()).unwrap();
-    assert_eq!(run["protocol"]["replay"], "counterfactual");
-    assert_eq!(run["protocol"]["draw"], "replacement");
+    assert_eq!(
+        run["protocol"],
+        serde_json::json!({"initial_belief": "paper", "containers": "furniture",
+            "targets": "paper", "replay": "counterfactual", "draw": "replacement",
+            "travel_cost": "soft", "access": "footprint", "rng": "python", "untried": "zero"})
+    );
     // deploy draws with replacement: 14 trials from 10 houses repeat a house.
     let o = ferret(&[
         "deploy",

@@ -253,7 +253,8 @@ run() {
     strategies+=",$(IFS=,; echo "${fused[*]}"),fused/p-yesno/qwen/exact,oracle"
     log "eval on val150 $ALL_RANGE (answers from the calibration's cache)"
     "$ferret" eval "${val[@]}" --range "$ALL_RANGE" "${common[@]}" --fusion fusion.json \
-        --strategies "$strategies" --max-fallback-share "$MAX_FALLBACK" --out eval
+        --strategies "$strategies" --paired-against model/prior --max-fallback-share "$MAX_FALLBACK" \
+        --out eval
     log "calibrate on val150 $RANGE: the paper's per-container prompts beside the new ones"
     local side=(model/uniform model/prior)
     for p in p-context-a p-context-b p-minimal; do
@@ -272,15 +273,17 @@ run() {
     side_strategies+=",$(IFS=,; echo "${fused[*]}"),llm-direct/p-direct/qwen,oracle"
     log "eval on val150 $RANGE with the paper's prompts beside the new ones"
     "$ferret" eval "${val[@]}" --range "$RANGE" "${common[@]}" --fusion fusion.json \
-        --strategies "$side_strategies" --max-fallback-share "$MAX_FALLBACK" --out eval-side
+        --strategies "$side_strategies" --paired-against model/prior \
+        --max-fallback-share "$MAX_FALLBACK" --out eval-side
     local online=$((SECONDS - t0))
     stop_server
     log "eval again --offline with the server stopped: it must be identical"
     "$ferret" eval "${val[@]}" --range "$ALL_RANGE" "${common[@]}" --fusion fusion.json \
-        --strategies "$strategies" --offline --out eval-offline >/dev/null
+        --strategies "$strategies" --paired-against model/prior --offline --out eval-offline >/dev/null
     cmp eval/trials.csv eval-offline/trials.csv
     "$ferret" eval "${val[@]}" --range "$RANGE" "${common[@]}" --fusion fusion.json \
-        --strategies "$side_strategies" --offline --out eval-side-offline >/dev/null
+        --strategies "$side_strategies" --paired-against model/prior --offline \
+        --out eval-side-offline >/dev/null
     cmp eval-side/trials.csv eval-side-offline/trials.csv
     log "done in $((SECONDS - t0)) s ($online s with the server); outputs in $OUT"
 }

@@ -270,7 +270,9 @@ run() {
         side_strategies+=",llm+model/$p/qwen-logprobs"
     done
     side_strategies+=",llm+model/p-yesno/qwen,llm+model/p-choice/qwen,llm+model/p-batch/qwen-logprobs"
-    side_strategies+=",$(IFS=,; echo "${fused[*]}"),llm-direct/p-direct/qwen,oracle"
+    # P-DIRECT answers in JSON: the schema's enum of listed places keeps the model from naming
+    # a place that is not there (as text, 7 of 96 answers did, above the fallback gate).
+    side_strategies+=",$(IFS=,; echo "${fused[*]}"),llm-direct/p-direct/qwen-json,oracle"
     log "eval on val150 $RANGE with the paper's prompts beside the new ones"
     "$ferret" eval "${val[@]}" --range "$RANGE" "${common[@]}" --fusion fusion.json \
         --strategies "$side_strategies" --paired-against model/prior \

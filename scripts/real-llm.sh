@@ -31,7 +31,7 @@ PORT="${FERRET_LANE_PORT:-18080}"
 # The paper's per-container prompts ask ~58 questions per house: they run on RANGE; the prompts
 # that ask once per house (or per room type) run on ALL_RANGE, and are fused with the prior as
 # fitted on training houses FIT_RANGE.
-RANGE="${FERRET_LANE_RANGE:-0..10}"
+RANGE="${FERRET_LANE_RANGE:-0..30}"
 ALL_RANGE="${FERRET_LANE_ALL_RANGE:-0..150}"
 FIT_RANGE="${FERRET_LANE_FIT_RANGE:-0..60}"
 PRIOR_RANGE="${FERRET_LANE_PRIOR_RANGE:-100..1000}"

@@ -63,6 +63,11 @@ pub struct Args {
     /// in summary.md.
     #[arg(long)]
     pub cells: bool,
+    /// More references for the paired comparisons in summary.md and paired.csv, comma
+    /// separated, each one of --strategies (e.g. `model/prior`, to see what an LLM adds to the
+    /// prior). Every strategy is always compared with the first one and with the best.
+    #[arg(long, value_delimiter = ',', value_name = "STRATEGY")]
+    pub paired_against: Vec<String>,
     /// House (index) whose trajectories are drawn; the first house when not given.
     #[arg(long)]
     pub show_house: Option<usize>,
@@ -358,6 +363,13 @@ pub fn run(args: Args) -> Result<ExitCode> {
         );
     }
     crate::common::check_distinct("--strategies", &args.strategies)?;
+    if let Some(s) = args
+        .paired_against
+        .iter()
+        .find(|s| !args.strategies.contains(s))
+    {
+        anyhow::bail!("--paired-against {s}: not one of --strategies");
+    }
     let protocol = args.protocol.resolve(Protocol::FERRET)?;
     let loaded = args.houses.load_for(protocol.containers)?;
     for s in &loaded.skipped {
@@ -439,7 +451,12 @@ pub fn run(args: Args) -> Result<ExitCode> {
         summary = summary.into_iter().map(SummaryRow::with_cells).collect();
     }
     write_csv(&args.out.join("summary.csv"), &summary)?;
-    let paired = paired_comparisons(&outcome.rows, &args.strategies, args.seed);
+    let paired = paired_comparisons(
+        &outcome.rows,
+        &args.strategies,
+        &args.paired_against,
+        args.seed,
+    );
     write_csv(&args.out.join("paired.csv"), &paired)?;
     let md = summary_markdown(
         &summary,
@@ -709,12 +726,12 @@ pub fn summarize(rows: &[TrialRow], order: &[String]) -> Vec<SummaryRow> {
 pub const PAIRED_RESAMPLES: usize = 10_000;
 
 /// One row of `paired.csv`: a strategy against a reference on the trials both finished.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct PairedRow {
     /// The strategy compared against.
     pub reference: String,
-    /// Why it is the reference: `first` (the first strategy named) or `best` (the lowest mean
-    /// on the paired trials, the oracle excepted).
+    /// Why it is the reference: `first` (the first strategy named), `best` (the lowest mean
+    /// on the paired trials, the oracle excepted) or `named` (given with `--paired-against`).
     pub role: &'static str,
     /// The strategy.
     pub strategy: String,
@@ -738,9 +755,15 @@ pub struct PairedRow {
 
 /// Every strategy of `order` against the first one, and against the best (lowest mean over the
 /// trials every strategy finished; the oracle is a bound, never the best) when that is another
-/// strategy. Pairs are the trials (house and target) both strategies of a comparison finished.
-/// `seed` seeds the bootstrap, so the table is reproducible.
-pub fn paired_comparisons(rows: &[TrialRow], order: &[String], seed: u64) -> Vec<PairedRow> {
+/// strategy, then against each of `named` that is neither. Pairs are the trials (house and
+/// target) both strategies of a comparison finished. `seed` seeds the bootstrap, so the table is
+/// reproducible.
+pub fn paired_comparisons(
+    rows: &[TrialRow],
+    order: &[String],
+    named: &[String],
+    seed: u64,
+) -> Vec<PairedRow> {
     let by = costs_by_trial(rows);
     let present: Vec<&str> = order
         .iter()
@@ -765,6 +788,13 @@ pub fn paired_comparisons(rows: &[TrialRow], order: &[String], seed: u64) -> Vec
     let mut references = vec![(first, "first")];
     if let Some(b) = best.filter(|b| *b != first) {
         references.push((b, "best"));
+    }
+    for n in named {
+        if let Some(&n) = present.iter().find(|s| **s == n.as_str())
+            && !references.iter().any(|(r, _)| *r == n)
+        {
+            references.push((n, "named"));
+        }
     }
     let mut out = Vec::new();
     for (reference, role) in references {
@@ -820,10 +850,10 @@ pub fn paired_markdown(paired: &[PairedRow]) -> String {
     for r in paired {
         if current != Some((r.reference.as_str(), r.role)) {
             current = Some((r.reference.as_str(), r.role));
-            let why = if r.role == "first" {
-                "the first strategy"
-            } else {
-                "the lowest mean, oracle excepted"
+            let why = match r.role {
+                "first" => "the first strategy",
+                "best" => "the lowest mean, oracle excepted",
+                _ => "named with --paired-against",
             };
             md.push_str(&format!(
                 "\nAgainst {} ({why}):\n\n| strategy | pairs | mean difference (m) | 95 % CI (m) | Wilcoxon p | wins / ties / losses |\n|---|---:|---:|---:|---:|---:|\n",
@@ -1135,7 +1165,7 @@ mod tests {
         let mut extra = trial(9, "model/x", 1.0);
         extra.target = "Cup".into();
         rows.push(extra);
-        let paired = paired_comparisons(&rows, &order, 0);
+        let paired = paired_comparisons(&rows, &order, &[], 0);
         // Against greedy: x, y, oracle; against the best (model/x): greedy, y, oracle.
         assert_eq!(paired.len(), 6);
         let x = &paired[0];
@@ -1177,6 +1207,36 @@ mod tests {
         );
         assert!(md.contains("| 5 / 1 / 0 |"), "{md}");
         // The same seed gives the same table.
-        assert_eq!(paired_markdown(&paired_comparisons(&rows, &order, 0)), md);
+        assert_eq!(
+            paired_markdown(&paired_comparisons(&rows, &order, &[], 0)),
+            md
+        );
+        // A named reference adds its own table; the first, the best and strategies that ran no
+        // trial add nothing twice.
+        let named: Vec<String> = ["model/y", "model/x", "optimistic+greedy", "model/z"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        let with = paired_comparisons(&rows, &order, &named, 0);
+        assert_eq!(with.len(), 9);
+        assert_eq!(&with[..6], &paired[..]);
+        let y: Vec<(&str, &str, &str)> = with[6..]
+            .iter()
+            .map(|r| (r.role, r.reference.as_str(), r.strategy.as_str()))
+            .collect();
+        assert_eq!(
+            y,
+            [
+                ("named", "model/y", "optimistic+greedy"),
+                ("named", "model/y", "model/x"),
+                ("named", "model/y", "oracle")
+            ]
+        );
+        assert!((with[7].mean_diff_m + 7.0 / 6.0).abs() < 1e-12);
+        assert!(
+            paired_markdown(&with).contains("Against model/y (named with --paired-against)"),
+            "{}",
+            paired_markdown(&with)
+        );
     }
 }

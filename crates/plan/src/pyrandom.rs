@@ -135,9 +135,12 @@ mod tests {
         (0..n).filter(|i| !drawn.contains(i)).collect()
     }
 
+    /// Seed, container count, kept count, the drawn positions, the rest.
+    type UnsearchedCase = (u64, usize, usize, &'static [usize], &'static [usize]);
+
     #[test]
     fn unsearched_draws_match_the_reference() {
-        let cases: [(u64, usize, usize, &[usize], &[usize]); 6] = [
+        let cases: [UnsearchedCase; 6] = [
             (1000, 5, 3, &[0, 3, 1], &[2, 4]),
             (1000, 10, 8, &[1, 6, 5, 0, 3, 9, 7, 8], &[2, 4]),
             (

@@ -1,4 +1,4 @@
-//! End-to-end tests of issue #9: nothing lost, nothing stale, no panics, fast failure.
+//! End-to-end reliability tests: nothing lost, nothing stale, no panics, fast failure.
 
 mod common;
 

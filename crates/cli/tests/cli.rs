@@ -734,6 +734,75 @@ fn protocol_switches_change_what_they_should_and_select_refuses_to_mix() {
     assert!(houses.len() < 14);
 }
 
+/// Under the paper's protocol a live deployment runs the very trials eval runs (same draws,
+/// same access points) and learns from the same reported costs: every chosen cost and every
+/// counterfactual replay equals eval's soft cost of that strategy on that house.
+#[test]
+fn deploy_under_the_paper_protocol_reports_evals_soft_costs() {
+    let dir = tempfile::tempdir().unwrap();
+    let strategies = "optimistic+greedy,model/uniform,model/prior";
+    let common = [
+        "--generate",
+        "6",
+        "--house-seed",
+        "9",
+        "--protocol",
+        "paper",
+        "--strategies",
+        strategies,
+    ];
+    let eval_out = dir.path().join("eval");
+    let o = ferret(&[&["eval"][..], &common, &["--out", s(&eval_out)]].concat());
+    assert!(o.status.success(), "{}", text(&o));
+    let plain_out = dir.path().join("plain");
+    let o = ferret(
+        &[
+            &["eval"][..],
+            &common,
+            &["--travel-cost", "plain", "--out", s(&plain_out)],
+        ]
+        .concat(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let cost = |rows: &[std::collections::HashMap<String, String>]| {
+        rows.iter()
+            .map(|r| {
+                (
+                    (r["house"].clone(), r["strategy"].clone()),
+                    r["cost_m"].parse::<f64>().unwrap(),
+                )
+            })
+            .collect::<std::collections::HashMap<_, _>>()
+    };
+    let soft = cost(&read_csv(&eval_out.join("trials.csv")));
+    let plain = cost(&read_csv(&plain_out.join("trials.csv")));
+    // The comparison below can only tell soft from plain where they differ.
+    assert!(soft.iter().any(|(k, v)| (v - plain[k]).abs() > 0.01));
+    let deploy_out = dir.path().join("deploy");
+    let o = ferret(
+        &[
+            &["deploy"][..],
+            &common,
+            &["--trials", "12", "--out", s(&deploy_out)],
+        ]
+        .concat(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let rows = read_csv(&deploy_out.join("deploy.csv"));
+    assert_eq!(rows.len(), 12);
+    for r in &rows {
+        let chosen: f64 = r["cost_m"].parse().unwrap();
+        let want = soft[&(r["house"].clone(), r["chosen"].clone())];
+        assert!((chosen - want).abs() < 1e-6, "{r:?}: eval says {want}");
+        for entry in r["replays"].split(' ') {
+            let (name, m) = entry.split_once('=').unwrap();
+            let m: f64 = m.parse().unwrap();
+            let want = soft[&(r["house"].clone(), name.to_owned())];
+            assert!((m - want).abs() < 0.006, "{r:?}: {name} eval says {want}");
+        }
+    }
+}
+
 #[test]
 fn cells_report_costs_in_the_papers_unit_too() {
     let dir = tempfile::tempdir().unwrap();

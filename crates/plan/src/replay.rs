@@ -5,7 +5,7 @@
 //! container is assumed empty. The replay reuses [`run_trial`] and the strategies' own policies,
 //! so a replay cannot drift from a real run.
 
-use ferret_world::{Distances, GroundTruth, House, ObjectType, SmallObject};
+use ferret_world::{Distances, GroundTruth, House, ObjectType, SmallObject, TravelCost};
 
 use crate::error::PlanError;
 use crate::protocol::ReplayMode;
@@ -104,11 +104,13 @@ pub fn replay_cost(
 }
 
 /// The replay costs of every candidate on a finished trial, as selection needs them after each
-/// deployment: entry `chosen` is the deployed strategy's own `cost`, the others are replayed
-/// under `mode`. `ferret deploy` and `ferret serve` both call this.
+/// deployment: entry `chosen` is the deployed strategy's own `cost` (already in `travel`'s
+/// terms), the others are replayed under `mode` and reported under `travel`, so that every
+/// entry is in the same unit. `ferret deploy` and `ferret serve` both call this.
 #[allow(clippy::too_many_arguments)]
 pub fn replay_costs(
     mode: ReplayMode,
+    travel: TravelCost,
     candidates: &[std::sync::Arc<dyn Strategy>],
     chosen: usize,
     cost: f64,
@@ -125,7 +127,8 @@ pub fn replay_costs(
             if j == chosen {
                 Ok(cost)
             } else {
-                replay_cost_with(mode, s.as_ref(), house, truth, distances, trial, found)
+                replay_outcome_with(mode, s.as_ref(), house, truth, distances, trial, found)?
+                    .reported_cost(house, distances, travel)
             }
         })
         .collect()

@@ -85,6 +85,9 @@ fn selection_table_has_the_papers_layout_and_differences() {
         md.contains("100 houses drawn with replacement each"),
         "{md}"
     );
+    drawn.options.reference_draws = true;
+    let md = selection_table_markdown(&drawn, &PAPER_KS);
+    assert!(md.contains("numpy's legacy generator"), "{md}");
 }
 
 #[test]

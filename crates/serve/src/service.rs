@@ -8,7 +8,9 @@ use std::sync::{Arc, Mutex, RwLock};
 use ferret_plan::{ReplayMode, Search, Strategy, TrialSpec, hindsight_truth, replay_costs};
 use ferret_select::{DEFAULT_C, FinishedTrial, LiveDeployment, Method, TrialEnd};
 use ferret_world::distance::{self, Place};
-use ferret_world::{Distances, GridParams, House, ObjectType, Point, Pose, Scene, SceneFile};
+use ferret_world::{
+    Distances, GridParams, House, ObjectType, Point, Pose, Scene, SceneFile, TravelCost,
+};
 use serde::Serialize;
 use sha2::{Digest, Sha256};
 
@@ -759,8 +761,10 @@ impl Service {
                 revealed: Vec::new(),
             };
             let truth = hindsight_truth(house, target, c).map_err(plan_error)?;
+            // A robot's trial costs what it travelled; replays are plain path lengths to match.
             let replays = replay_costs(
                 ReplayMode::Pessimistic,
+                TravelCost::Plain,
                 candidates,
                 row.chosen,
                 cost,

@@ -12,7 +12,9 @@ use std::time::Instant;
 use ferret_llm::{
     EndpointConfig, LlmConfig, LlmOptions, LlmService, prefetch_probabilities, register_strategies,
 };
-use ferret_plan::{PlannerConfig, StrategyRegistry, TrialOutcome, draw_trial, run_trial};
+use ferret_plan::{
+    PlannerConfig, SearchProblem, StrategyRegistry, TrialOutcome, draw_trial, run_trial,
+};
 use ferret_world::{GridParams, House, ObjectType};
 use serde_json::{Value, json};
 use wiremock::matchers::method;
@@ -128,7 +130,12 @@ fn main() {
             for ((scene, map), trial) in scenes.iter().zip(&maps).zip(&trials) {
                 if let (Ok(d), Some(t)) = (map, trial) {
                     outs.push(
-                        run_trial(s.as_ref(), &scene.house, &scene.truth, d, t).expect("trial"),
+                        run_trial(
+                            s.as_ref(),
+                            &SearchProblem::new(&scene.house, d, t),
+                            &scene.truth,
+                        )
+                        .expect("trial"),
                     );
                 }
             }

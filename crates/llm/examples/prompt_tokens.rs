@@ -15,7 +15,7 @@ use ferret_llm::{
     P_MINIMAL, PromptLibrary, QueryPlan, cache_key,
 };
 use ferret_plan::strategy::GreedyStrategy;
-use ferret_plan::{Belief, draw_trial, run_trial};
+use ferret_plan::{Belief, SearchProblem, draw_trial, run_trial};
 use ferret_world::{GridParams, Scene};
 
 fn tokens(messages: &[ChatMessage]) -> usize {
@@ -73,7 +73,11 @@ fn measure(label: &str, scenes: &[Scene]) {
         let Ok((_, d)) = ferret_world::distance::build(&s.house, &GridParams::default()) else {
             continue;
         };
-        let Ok(out) = run_trial(&GreedyStrategy, &s.house, &s.truth, &d, &trial) else {
+        let Ok(out) = run_trial(
+            &GreedyStrategy,
+            &SearchProblem::new(&s.house, &d, &trial),
+            &s.truth,
+        ) else {
             continue;
         };
         houses += 1;

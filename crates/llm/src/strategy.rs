@@ -133,7 +133,7 @@ impl Strategy for LlmDirectStrategy {
     ) -> std::result::Result<Box<dyn Policy + 'a>, PlanError> {
         Ok(Box::new(LlmDirectPolicy {
             strategy: self,
-            house: HouseContext::new(ctx.house),
+            house: HouseContext::new(ctx.problem.house),
         }))
     }
 }

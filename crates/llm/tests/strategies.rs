@@ -13,8 +13,8 @@ use ferret_llm::{
     register_strategies,
 };
 use ferret_plan::{
-    LikelihoodSource, PlannerConfig, Probability, StrategyRegistry, StrategySpec, TrialSpec,
-    run_trial,
+    LikelihoodSource, PlannerConfig, Probability, SearchProblem, StrategyRegistry, StrategySpec,
+    TrialSpec, run_trial,
 };
 use ferret_world::{House, ObjectType};
 use serde_json::Value;
@@ -198,7 +198,12 @@ fn llm_model_strategy_plans_over_llm_probabilities() {
         target: ObjectType::new("RemoteControl"),
         revealed: vec![],
     };
-    let out = run_trial(strategy.as_ref(), &house, &truth, &d, &trial).unwrap();
+    let out = run_trial(
+        strategy.as_ref(),
+        &SearchProblem::new(&house, &d, &trial),
+        &truth,
+    )
+    .unwrap();
     assert_eq!(out.found, Some(5));
     // p-context-a questions carry the house (re-asks carry only the reminder).
     let asked = server.requests();
@@ -236,7 +241,12 @@ fn llm_direct_follows_the_answer_and_falls_back_to_the_nearest() {
         target: ObjectType::new("RemoteControl"),
         revealed: vec![],
     };
-    let out = run_trial(strategy.as_ref(), &house, &truth, &d, &remote).unwrap();
+    let out = run_trial(
+        strategy.as_ref(),
+        &SearchProblem::new(&house, &d, &remote),
+        &truth,
+    )
+    .unwrap();
     assert_eq!(out.searched, [5]);
     // The apple is in the fridge: first the dresser, then nothing matches ("the garage"), so the
     // nearest container to the dresser is taken each time: bed 2 (x=10), ..., the fridge last
@@ -245,7 +255,12 @@ fn llm_direct_follows_the_answer_and_falls_back_to_the_nearest() {
         target: ObjectType::new("Apple"),
         revealed: vec![],
     };
-    let out = run_trial(strategy.as_ref(), &house, &truth, &d, &apple).unwrap();
+    let out = run_trial(
+        strategy.as_ref(),
+        &SearchProblem::new(&house, &d, &apple),
+        &truth,
+    )
+    .unwrap();
     assert_eq!(out.searched, [5, 4, 3, 2, 1, 0]);
     let asked = server.requests();
     // 1 question for the remote, 5 for the apple (the last container is taken without asking),
@@ -310,8 +325,12 @@ fn offline_replay_gives_identical_trials_and_sends_nothing() {
                     revealed: vec![],
                 };
                 outs.push(
-                    run_trial(s.as_ref(), house, truth, &straight_distances(house), &trial)
-                        .unwrap(),
+                    run_trial(
+                        s.as_ref(),
+                        &SearchProblem::new(house, &straight_distances(house), &trial),
+                        truth,
+                    )
+                    .unwrap(),
                 );
             }
         }
@@ -339,10 +358,8 @@ fn offline_replay_gives_identical_trials_and_sends_nothing() {
     let (house, truth) = &scenes[0];
     let e = run_trial(
         s.as_ref(),
-        house,
+        &SearchProblem::new(house, &straight_distances(house), &unknown),
         truth,
-        &straight_distances(house),
-        &unknown,
     )
     .unwrap_err()
     .to_string();
@@ -403,7 +420,12 @@ fn prefetch_asks_every_question_once_then_trials_send_nothing() {
                 target: target.clone(),
                 revealed: vec![],
             };
-            run_trial(s.as_ref(), house, truth, &straight_distances(house), &trial).unwrap();
+            run_trial(
+                s.as_ref(),
+                &SearchProblem::new(house, &straight_distances(house), &trial),
+                truth,
+            )
+            .unwrap();
         }
     }
     assert_eq!(server.requests().len(), 14);

@@ -9,7 +9,9 @@ use ferret_llm::{
     AnswerClass, AnswerFormat, LlmError, LlmLikelihood, ProbabilityFrom, SystemRole, TokenLogprob,
     expected_percentage, prefetch_probabilities, read_probability, register_strategies,
 };
-use ferret_plan::{LikelihoodSource, PlannerConfig, StrategyRegistry, TrialSpec, run_trial};
+use ferret_plan::{
+    LikelihoodSource, PlannerConfig, SearchProblem, StrategyRegistry, TrialSpec, run_trial,
+};
 use ferret_world::ObjectType;
 use serde_json::{Value, json};
 use wiremock::ResponseTemplate;
@@ -102,10 +104,8 @@ fn json_object_dialect_and_location_enums_for_p_direct() {
     };
     let out = run_trial(
         strategy.as_ref(),
-        &house,
+        &SearchProblem::new(&house, &straight_distances(&house), &trial),
         &truth,
-        &straight_distances(&house),
-        &trial,
     )
     .unwrap();
     // The last location listed each time: the dresser (5), then bed 2 (4), ..., the fridge.

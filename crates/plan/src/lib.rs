@@ -42,6 +42,6 @@ pub use replay::{
 };
 pub use strategy::{ModelStrategy, Strategy, StrategyRegistry, StrategySpec, TrialContext};
 pub use trial::{
-    Search, TrialOutcome, TrialSpec, TrialsPerHouse, draw_trial, draw_trials, draw_trials_with,
-    python_seed, run_trial,
+    Search, SearchProblem, TrialOutcome, TrialSpec, TrialsPerHouse, draw_trial, draw_trials,
+    draw_trials_with, python_seed, run_trial,
 };

@@ -5,12 +5,12 @@
 //! container is assumed empty. The replay reuses [`run_trial`] and the strategies' own policies,
 //! so a replay cannot drift from a real run.
 
-use ferret_world::{Distances, GroundTruth, House, ObjectType, SmallObject, TravelCost};
+use ferret_world::{GroundTruth, House, ObjectType, SmallObject, TravelCost};
 
 use crate::error::PlanError;
 use crate::protocol::ReplayMode;
 use crate::strategy::Strategy;
-use crate::trial::{TrialOutcome, TrialSpec, run_trial};
+use crate::trial::{SearchProblem, TrialOutcome, run_trial};
 
 /// The hindsight world of a finished trial: the target in `found` only.
 pub fn hindsight_truth(
@@ -38,38 +38,34 @@ pub fn hindsight_truth(
 pub fn replay_cost_with(
     mode: ReplayMode,
     strategy: &dyn Strategy,
-    house: &House,
+    problem: &SearchProblem<'_>,
     truth: &GroundTruth,
-    distances: &Distances,
-    trial: &TrialSpec,
     found: usize,
 ) -> Result<f64, PlanError> {
-    replay_outcome_with(mode, strategy, house, truth, distances, trial, found).map(|o| o.cost)
+    replay_outcome_with(mode, strategy, problem, truth, found).map(|o| o.cost)
 }
 
 /// The replayed trial itself under `mode` (see [`replay_cost_with`]): its searches give its
-/// cost under any [`TravelCost`](ferret_world::TravelCost) through
-/// [`TrialOutcome::reported_cost`].
+/// cost under any [`TravelCost`] through [`TrialOutcome::reported_cost`].
 pub fn replay_outcome_with(
     mode: ReplayMode,
     strategy: &dyn Strategy,
-    house: &House,
+    problem: &SearchProblem<'_>,
     truth: &GroundTruth,
-    distances: &Distances,
-    trial: &TrialSpec,
     found: usize,
 ) -> Result<TrialOutcome, PlanError> {
+    let house = problem.house;
     let (outcome, never) = match mode {
         ReplayMode::Pessimistic => {
-            let hindsight = hindsight_truth(house, &trial.target, found)?;
+            let hindsight = hindsight_truth(house, problem.target(), found)?;
             (
-                run_trial(strategy, house, &hindsight, distances, trial)?,
+                run_trial(strategy, problem, &hindsight)?,
                 format!("never searched container {found}"),
             )
         }
         ReplayMode::Counterfactual => (
-            run_trial(strategy, house, truth, distances, trial)?,
-            format!("never found {}", trial.target),
+            run_trial(strategy, problem, truth)?,
+            format!("never found {}", problem.target()),
         ),
     };
     match outcome.found {
@@ -85,50 +81,37 @@ pub fn replay_outcome_with(
 /// distance it travels until it searches `found`.
 pub fn replay_cost(
     strategy: &dyn Strategy,
-    house: &House,
-    distances: &Distances,
-    trial: &TrialSpec,
+    problem: &SearchProblem<'_>,
     found: usize,
 ) -> Result<f64, PlanError> {
-    let truth = hindsight_truth(house, &trial.target, found)?;
-    replay_outcome_with(
-        ReplayMode::Pessimistic,
-        strategy,
-        house,
-        &truth,
-        distances,
-        trial,
-        found,
-    )
-    .map(|o| o.cost)
+    let truth = hindsight_truth(problem.house, problem.target(), found)?;
+    replay_cost_with(ReplayMode::Pessimistic, strategy, problem, &truth, found)
 }
 
 /// The replay costs of every candidate on a finished trial, as selection needs them after each
-/// deployment: entry `chosen` is the deployed strategy's own `cost` (already in `travel`'s
-/// terms), the others are replayed under `mode` and reported under `travel`, so that every
-/// entry is in the same unit. `ferret deploy` and `ferret serve` both call this.
-#[allow(clippy::too_many_arguments)]
+/// deployment. `deployed` is the deployed candidate's index and its own cost (already in
+/// `travel`'s terms), which its entry keeps; the others are replayed under `mode` and reported
+/// under `travel`, so that every entry is in the same unit.
 pub fn replay_costs(
-    mode: ReplayMode,
-    travel: TravelCost,
+    (mode, travel): (ReplayMode, TravelCost),
     candidates: &[std::sync::Arc<dyn Strategy>],
-    chosen: usize,
-    cost: f64,
-    house: &House,
+    problem: &SearchProblem<'_>,
     truth: &GroundTruth,
-    distances: &Distances,
-    trial: &TrialSpec,
     found: usize,
+    deployed: (usize, f64),
 ) -> Result<Vec<f64>, PlanError> {
     candidates
         .iter()
         .enumerate()
         .map(|(j, s)| {
-            if j == chosen {
-                Ok(cost)
+            if j == deployed.0 {
+                Ok(deployed.1)
             } else {
-                replay_outcome_with(mode, s.as_ref(), house, truth, distances, trial, found)?
-                    .reported_cost(house, distances, travel)
+                replay_outcome_with(mode, s.as_ref(), problem, truth, found)?.reported_cost(
+                    problem.house,
+                    problem.distances,
+                    travel,
+                )
             }
         })
         .collect()

@@ -5,21 +5,18 @@
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
-use ferret_world::{Distances, GroundTruth, House, ObjectType};
+use ferret_world::GroundTruth;
 
 use crate::error::PlanError;
 use crate::likelihood::{LikelihoodSource, Prior, Uniform};
 use crate::policy::{CandidateLimit, CostModel, Greedy, Oracle, Planner, PlannerConfig, Policy};
+use crate::trial::SearchProblem;
 
 /// What a strategy needs to start a trial.
 #[derive(Clone, Copy, Debug)]
 pub struct TrialContext<'a> {
-    /// The known map.
-    pub house: &'a House,
-    /// Travel distances.
-    pub distances: &'a Distances,
-    /// The object type searched for.
-    pub target: &'a ObjectType,
+    /// The search problem.
+    pub problem: SearchProblem<'a>,
     /// The ground truth, filled in only for strategies whose
     /// [`needs_ground_truth`](Strategy::needs_ground_truth) is true (the oracle).
     pub truth: Option<&'a GroundTruth>,
@@ -253,7 +250,9 @@ impl Strategy for OracleStrategy {
             policy: "oracle".into(),
             error: "the oracle was not given the ground truth".into(),
         })?;
-        Ok(Box::new(Oracle::new(truth.goal_containers(ctx.target))))
+        Ok(Box::new(Oracle::new(
+            truth.goal_containers(ctx.problem.target()),
+        )))
     }
 }
 
@@ -290,11 +289,13 @@ impl Strategy for ModelStrategy {
     }
 
     fn policy<'a>(&'a self, ctx: &TrialContext<'a>) -> Result<Box<dyn Policy + 'a>, PlanError> {
-        let p = self.source.likelihoods(ctx.house, ctx.target)?;
-        if p.len() != ctx.house.containers.len() {
+        let p = self
+            .source
+            .likelihoods(ctx.problem.house, ctx.problem.target())?;
+        if p.len() != ctx.problem.house.containers.len() {
             return Err(PlanError::LikelihoodCount {
                 source_name: self.source.name().to_string(),
-                expected: ctx.house.containers.len(),
+                expected: ctx.problem.house.containers.len(),
                 got: p.len(),
             });
         }

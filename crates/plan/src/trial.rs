@@ -22,6 +22,35 @@ pub struct TrialSpec {
     pub revealed: Vec<usize>,
 }
 
+/// One object-search problem: the map the robot knows, travel distances on it, and the trial
+/// (what to find, what was searched before it began). The ground truth is not part of it: a
+/// robot never knows it, so simulations and replays pass it beside the problem.
+#[derive(Clone, Copy, Debug)]
+pub struct SearchProblem<'a> {
+    /// The known map: rooms, containers, the start pose.
+    pub house: &'a House,
+    /// Travel distances between the start and the containers' access points.
+    pub distances: &'a Distances,
+    /// The target and the containers searched beforehand.
+    pub trial: &'a TrialSpec,
+}
+
+impl<'a> SearchProblem<'a> {
+    /// The problem of `trial` in `house`.
+    pub fn new(house: &'a House, distances: &'a Distances, trial: &'a TrialSpec) -> Self {
+        Self {
+            house,
+            distances,
+            trial,
+        }
+    }
+
+    /// The object type searched for.
+    pub fn target(&self) -> &'a ObjectType {
+        &self.trial.target
+    }
+}
+
 /// A deterministic RNG for house `index` under `seed`, independent of thread scheduling.
 fn house_rng(seed: u64, index: usize, stream: u64) -> ChaCha8Rng {
     let mut rng =
@@ -370,36 +399,39 @@ pub struct Search<'a> {
 }
 
 impl<'a> Search<'a> {
-    /// Starts `strategy` on a trial for `target` from the house's start. `revealed` are
-    /// containers known before the trial, with what they hold. `truth` is read only by
-    /// strategies that declare [`needs_ground_truth`](Strategy::needs_ground_truth) (the oracle);
-    /// such a strategy fails without it.
+    /// Starts `strategy` on `problem` from the house's start. `truth` is read only by strategies
+    /// that declare [`needs_ground_truth`](Strategy::needs_ground_truth) (the oracle), which fail
+    /// without it, and for what the containers searched beforehand (`problem.trial.revealed`)
+    /// held; a robot, which has no ground truth, starts with none searched.
     pub fn start(
         strategy: &'a dyn Strategy,
-        house: &'a House,
-        distances: &'a Distances,
-        target: &'a ObjectType,
+        problem: &SearchProblem<'a>,
         truth: Option<&'a GroundTruth>,
-        revealed: impl IntoIterator<Item = (usize, Vec<ObjectType>)>,
     ) -> Result<Self, PlanError> {
+        let unusable = |why| PlanError::BadChoice {
+            policy: strategy.name().into(),
+            container: 0,
+            why,
+        };
         let ctx = TrialContext {
-            house,
-            distances,
-            target,
+            problem: *problem,
             truth: if strategy.needs_ground_truth() {
-                Some(truth.ok_or_else(|| PlanError::BadChoice {
-                    policy: strategy.name().into(),
-                    container: 0,
-                    why: "unusable: the strategy needs the ground truth and none is known",
+                Some(truth.ok_or_else(|| {
+                    unusable("unusable: the strategy needs the ground truth and none is known")
                 })?)
             } else {
                 None
             },
         };
         let policy = strategy.policy(&ctx)?;
-        let mut belief = Belief::new(house, distances, target);
-        for (c, contents) in revealed {
-            belief.reveal(c, contents);
+        let mut belief = Belief::new(problem.house, problem.distances, problem.target());
+        if !problem.trial.revealed.is_empty() {
+            let truth = truth.ok_or_else(|| {
+                unusable("unusable: containers searched beforehand need the ground truth")
+            })?;
+            for &c in &problem.trial.revealed {
+                belief.reveal(c, contents_of(truth, c));
+            }
         }
         Ok(Self {
             strategy,
@@ -457,20 +489,11 @@ impl<'a> Search<'a> {
 /// is searched or none is left.
 pub fn run_trial(
     strategy: &dyn Strategy,
-    house: &House,
+    problem: &SearchProblem<'_>,
     truth: &GroundTruth,
-    distances: &Distances,
-    trial: &TrialSpec,
 ) -> Result<TrialOutcome, PlanError> {
-    let revealed = trial.revealed.iter().map(|&c| (c, contents_of(truth, c)));
-    let mut search = Search::start(
-        strategy,
-        house,
-        distances,
-        &trial.target,
-        Some(truth),
-        revealed,
-    )?;
+    let trial = problem.trial;
+    let mut search = Search::start(strategy, problem, Some(truth))?;
     let mut found = None;
     while let Some(c) = search.next_container()? {
         search.record(c, contents_of(truth, c))?;

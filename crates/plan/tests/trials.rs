@@ -3,7 +3,8 @@
 use std::sync::Arc;
 
 use ferret_plan::{
-    CandidateLimit, PlannerConfig, Prior, StrategyRegistry, TrialSpec, replay_cost, run_trial,
+    CandidateLimit, PlannerConfig, Prior, SearchProblem, StrategyRegistry, TrialSpec, replay_cost,
+    run_trial,
 };
 use ferret_world::{
     Container, Distances, Footprint, GroundTruth, House, ObjectType, Point, Polygon, Pose, Room,
@@ -123,11 +124,11 @@ proptest! {
         let reg = registry(std::slice::from_ref(&scene));
         for target in truth.target_types() {
             let trial = TrialSpec { target: target.clone(), revealed: vec![] };
-            let oracle = run_trial(reg.build("oracle").unwrap().as_ref(), &house, &truth, &distances, &trial).unwrap();
+            let oracle = run_trial(reg.build("oracle").unwrap().as_ref(), &SearchProblem::new(&house, &distances, &trial), &truth).unwrap();
             for spec in SPECS {
                 let s = reg.build(spec).unwrap();
                 // run_trial itself rejects a policy choosing a searched container, so Ok means it never did.
-                let out = run_trial(s.as_ref(), &house, &truth, &distances, &trial).unwrap();
+                let out = run_trial(s.as_ref(), &SearchProblem::new(&house, &distances, &trial), &truth).unwrap();
                 let found = out.found.expect("target exists, so every policy must find it");
                 prop_assert!(truth.holds(found, &target));
                 prop_assert_eq!(*out.searched.last().unwrap(), found);
@@ -152,14 +153,14 @@ proptest! {
             let single_goal = truth.goal_containers(&target).len() == 1;
             for deployed in SPECS.iter().filter(|s| **s != "oracle") {
                 let d = reg.build(deployed).unwrap();
-                let real = run_trial(d.as_ref(), &house, &truth, &distances, &trial).unwrap();
+                let real = run_trial(d.as_ref(), &SearchProblem::new(&house, &distances, &trial), &truth).unwrap();
                 let found = real.found.unwrap();
-                let own = replay_cost(d.as_ref(), &house, &distances, &trial, found).unwrap();
+                let own = replay_cost(d.as_ref(), &SearchProblem::new(&house, &distances, &trial), found).unwrap();
                 prop_assert!((own - real.cost).abs() < 1e-9, "{}: replay {} != real {}", deployed, own, real.cost);
                 for other in SPECS.iter().filter(|s| **s != "oracle") {
                     let o = reg.build(other).unwrap();
-                    let true_cost = run_trial(o.as_ref(), &house, &truth, &distances, &trial).unwrap().cost;
-                    let replay = replay_cost(o.as_ref(), &house, &distances, &trial, found).unwrap();
+                    let true_cost = run_trial(o.as_ref(), &SearchProblem::new(&house, &distances, &trial), &truth).unwrap().cost;
+                    let replay = replay_cost(o.as_ref(), &SearchProblem::new(&house, &distances, &trial), found).unwrap();
                     prop_assert!(replay + 1e-9 >= true_cost, "{} replay {} < true {}", other, replay, true_cost);
                     if single_goal {
                         prop_assert!((replay - true_cost).abs() < 1e-9);
@@ -187,18 +188,14 @@ fn model_strategy_prefers_the_likely_container() {
     };
     let model = run_trial(
         reg.build("model/prior").unwrap().as_ref(),
-        &house,
+        &SearchProblem::new(&house, &distances, &trial),
         &truth,
-        &distances,
-        &trial,
     )
     .unwrap();
     let greedy = run_trial(
         reg.build("optimistic+greedy").unwrap().as_ref(),
-        &house,
+        &SearchProblem::new(&house, &distances, &trial),
         &truth,
-        &distances,
-        &trial,
     )
     .unwrap();
     assert_eq!(model.searched, vec![1]);
@@ -297,7 +294,12 @@ fn authors_cost_specs_parse_and_plan_with_the_extra_term() {
     };
     for s in ["model/uniform", "model/uniform/authors"] {
         let strategy = reg.build(s).unwrap();
-        let out = run_trial(strategy.as_ref(), &house, &truth, &distances, &trial).unwrap();
+        let out = run_trial(
+            strategy.as_ref(),
+            &SearchProblem::new(&house, &distances, &trial),
+            &truth,
+        )
+        .unwrap();
         assert_eq!(out.searched, vec![0, 1], "{s}");
         assert!((out.cost - 13.0).abs() < 1e-9, "{s}: {}", out.cost);
     }
@@ -314,7 +316,7 @@ proptest! {
         (pts, kinds, contents) in arb_house(),
         seed in 0u64..50,
     ) {
-        use ferret_plan::{InitialBelief, Protocol, ReplayMode, TrialsPerHouse, draw_trials_with, replay_cost_with};
+        use ferret_plan::{InitialBelief, Protocol, ReplayMode, SearchProblem, TrialsPerHouse, draw_trials_with, replay_cost_with};
         let (house, truth, distances) = house(&pts, &kinds, &contents);
         prop_assume!(!truth.target_types().is_empty());
         let scene = Scene { house: house.clone(), truth: truth.clone() };
@@ -326,12 +328,12 @@ proptest! {
                 let single_goal = truth.goal_containers(&trial.target).len() == 1;
                 for deployed in SPECS.iter().filter(|s| **s != "oracle") {
                     let d = reg.build(deployed).unwrap();
-                    let found = run_trial(d.as_ref(), &house, &truth, &distances, trial).unwrap().found.unwrap();
+                    let found = run_trial(d.as_ref(), &SearchProblem::new(&house, &distances, trial), &truth).unwrap().found.unwrap();
                     for other in SPECS.iter().filter(|s| **s != "oracle") {
                         let o = reg.build(other).unwrap();
-                        let pess = replay_cost_with(ReplayMode::Pessimistic, o.as_ref(), &house, &truth, &distances, trial, found).unwrap();
-                        let cf = replay_cost_with(ReplayMode::Counterfactual, o.as_ref(), &house, &truth, &distances, trial, found).unwrap();
-                        let real = run_trial(o.as_ref(), &house, &truth, &distances, trial).unwrap().cost;
+                        let pess = replay_cost_with(ReplayMode::Pessimistic, o.as_ref(), &SearchProblem::new(&house, &distances, trial), &truth, found).unwrap();
+                        let cf = replay_cost_with(ReplayMode::Counterfactual, o.as_ref(), &SearchProblem::new(&house, &distances, trial), &truth, found).unwrap();
+                        let real = run_trial(o.as_ref(), &SearchProblem::new(&house, &distances, trial), &truth).unwrap().cost;
                         prop_assert!(cf <= pess + 1e-9, "{}: counterfactual {} > pessimistic {}", other, cf, pess);
                         prop_assert!((cf - real).abs() < 1e-9);
                         if single_goal {

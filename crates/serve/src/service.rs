@@ -5,7 +5,9 @@
 use std::collections::{BTreeMap, HashMap};
 use std::sync::{Arc, Mutex, RwLock};
 
-use ferret_plan::{ReplayMode, Search, Strategy, TrialSpec, hindsight_truth, replay_costs};
+use ferret_plan::{
+    ReplayMode, Search, SearchProblem, Strategy, TrialSpec, hindsight_truth, replay_costs,
+};
 use ferret_select::{DEFAULT_C, FinishedTrial, LiveDeployment, Method, TrialEnd};
 use ferret_world::distance::{self, Place};
 use ferret_world::{
@@ -592,17 +594,14 @@ impl Service {
         let candidates = self.candidates_of(&spec)?;
         let mut live = self.live(&spec, &trials)?;
         let chosen = live.choose();
-        let target = ObjectType::new(req.target.clone());
+        let trial = TrialSpec {
+            target: ObjectType::new(req.target.clone()),
+            revealed: Vec::new(),
+        };
         let next = {
-            let mut search = Search::start(
-                candidates[chosen].as_ref(),
-                &placed.house,
-                &placed.distances,
-                &target,
-                None,
-                [],
-            )
-            .map_err(plan_error)?;
+            let problem = SearchProblem::new(&placed.house, &placed.distances, &trial);
+            let mut search =
+                Search::start(candidates[chosen].as_ref(), &problem, None).map_err(plan_error)?;
             let c = search.next_container().map_err(plan_error)?;
             c.map(|c| next_container(&placed, Place::Start, c))
         };
@@ -654,7 +653,10 @@ impl Service {
         Ok(StoredTrial {
             observations,
             placed: self.placed(&row.scene, row.pose)?,
-            target: ObjectType::new(row.target.clone()),
+            trial: TrialSpec {
+                target: ObjectType::new(row.target.clone()),
+                revealed: Vec::new(),
+            },
             strategy,
             candidates,
             spec,
@@ -729,7 +731,7 @@ impl Service {
                 ),
             )
         })?;
-        let target = &t.target;
+        let target = &t.trial.target;
         let mut search = t.search()?;
         if search.belief().is_searched(c) {
             return Err(ApiError::new(
@@ -756,23 +758,15 @@ impl Service {
         };
         let cost = search.belief().travelled();
         let (status, next, replays) = if req.found {
-            let trial = TrialSpec {
-                target: target.clone(),
-                revealed: Vec::new(),
-            };
             let truth = hindsight_truth(house, target, c).map_err(plan_error)?;
             // A robot's trial costs what it travelled; replays are plain path lengths to match.
             let replays = replay_costs(
-                ReplayMode::Pessimistic,
-                TravelCost::Plain,
+                (ReplayMode::Pessimistic, TravelCost::Plain),
                 candidates,
-                row.chosen,
-                cost,
-                house,
+                &SearchProblem::new(house, &placed.distances, &t.trial),
                 &truth,
-                &placed.distances,
-                &trial,
                 c,
+                (row.chosen, cost),
             )
             .map_err(plan_error)?;
             (TrialStatus::Done, None, Some(replays))
@@ -822,7 +816,7 @@ struct StoredTrial {
     candidates: Vec<Arc<dyn Strategy>>,
     strategy: Arc<dyn Strategy>,
     placed: Arc<Placed>,
-    target: ObjectType,
+    trial: TrialSpec,
 }
 
 impl StoredTrial {
@@ -831,7 +825,7 @@ impl StoredTrial {
         rebuild(
             self.strategy.as_ref(),
             &self.placed,
-            &self.target,
+            &self.trial,
             &self.observations,
         )
     }
@@ -876,11 +870,11 @@ fn stored_reply(
 fn rebuild<'a>(
     strategy: &'a dyn Strategy,
     placed: &'a Placed,
-    target: &'a ObjectType,
+    trial: &'a TrialSpec,
     observations: &[ObservationRow],
 ) -> Result<Search<'a>, ApiError> {
-    let mut search = Search::start(strategy, &placed.house, &placed.distances, target, None, [])
-        .map_err(plan_error)?;
+    let problem = SearchProblem::new(&placed.house, &placed.distances, trial);
+    let mut search = Search::start(strategy, &problem, None).map_err(plan_error)?;
     for o in observations {
         let c = placed.house.container_index(&o.container).ok_or_else(|| {
             ApiError::internal(format!(
@@ -893,8 +887,8 @@ fn rebuild<'a>(
             .iter()
             .map(|t| ObjectType::new(t.clone()))
             .collect();
-        if o.found && !seen.contains(target) {
-            seen.push(target.clone());
+        if o.found && !seen.contains(&trial.target) {
+            seen.push(trial.target.clone());
         }
         search.record(c, seen).map_err(plan_error)?;
     }

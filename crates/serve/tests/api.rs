@@ -6,7 +6,8 @@ use std::path::Path;
 use std::sync::Arc;
 
 use ferret_plan::{
-    PlannerConfig, ReplayMode, Strategy, StrategyRegistry, TrialSpec, replay_costs, run_trial,
+    PlannerConfig, ReplayMode, SearchProblem, Strategy, StrategyRegistry, TrialSpec, replay_costs,
+    run_trial,
 };
 use ferret_select::{LiveDeployment, Method};
 use ferret_serve::{HttpOptions, Service, Store};
@@ -211,26 +212,16 @@ async fn a_deployment_through_the_api_costs_what_the_simulator_says() {
             revealed: vec![],
         };
         let i = live.choose();
-        let outcome = run_trial(
-            candidates[i].as_ref(),
-            &sim.house,
-            &sim.truth,
-            &distances,
-            &trial,
-        )
-        .unwrap();
+        let problem = SearchProblem::new(&sim.house, &distances, &trial);
+        let outcome = run_trial(candidates[i].as_ref(), &problem, &sim.truth).unwrap();
         let found = outcome.found.unwrap();
         let replays = replay_costs(
-            ReplayMode::Pessimistic,
-            TravelCost::Plain,
+            (ReplayMode::Pessimistic, TravelCost::Plain),
             &candidates,
-            i,
-            outcome.cost,
-            &sim.house,
+            &problem,
             &sim.truth,
-            &distances,
-            &trial,
             found,
+            (i, outcome.cost),
         )
         .unwrap();
         live.finish(outcome.cost, &replays).unwrap();

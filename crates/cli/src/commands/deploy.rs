@@ -7,8 +7,8 @@ use std::sync::Arc;
 
 use anyhow::{Result, bail};
 use ferret_plan::{
-    DrawMode, Protocol, Strategy, TrialSpec, TrialsPerHouse, draw_trials_with, replay_costs,
-    run_trial,
+    DrawMode, Protocol, SearchProblem, Strategy, TrialSpec, TrialsPerHouse, draw_trials_with,
+    replay_costs, run_trial,
 };
 use ferret_select::{LiveDeployment, Method, ORACLE};
 use ferret_world::ObjectType;
@@ -189,13 +189,8 @@ pub fn run(args: Args) -> Result<ExitCode> {
             drawn.swap_remove(pick)
         };
         let i = deployment.choose();
-        let outcome = run_trial(
-            candidates[i].as_ref(),
-            &scene.house,
-            &scene.truth,
-            &distances,
-            &trial,
-        )?;
+        let problem = SearchProblem::new(&scene.house, &distances, &trial);
+        let outcome = run_trial(candidates[i].as_ref(), &problem, &scene.truth)?;
         // The selector learns from the cost the protocol reports (soft under the reference's
         // rules); the strategies themselves planned on plain distances either way.
         let cost = outcome.reported_cost(&scene.house, &distances, protocol.travel_cost)?;
@@ -207,16 +202,12 @@ pub fn run(args: Args) -> Result<ExitCode> {
             );
         };
         let replays = replay_costs(
-            protocol.replay,
-            protocol.travel_cost,
+            (protocol.replay, protocol.travel_cost),
             &candidates,
-            i,
-            cost,
-            &scene.house,
+            &problem,
             &scene.truth,
-            &distances,
-            &trial,
             found,
+            (i, cost),
         )?;
         deployment.finish(cost, &replays)?;
         total += cost;

@@ -8,8 +8,8 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use ferret_plan::{
-    CandidateLimit, PlannerConfig, Prior, Protocol, Strategy, StrategyRegistry, TrialOutcome,
-    TrialSpec, TrialsPerHouse, draw_trials_with, run_trial,
+    CandidateLimit, PlannerConfig, Prior, Protocol, SearchProblem, Strategy, StrategyRegistry,
+    TrialOutcome, TrialSpec, TrialsPerHouse, draw_trials_with, run_trial,
 };
 use ferret_report::{
     TrajectoryOptions, TrajectoryPanel, ViolinOptions, draw_trajectories, draw_violins,
@@ -570,12 +570,16 @@ pub fn evaluate(
             let mut errors = Vec::new();
             for trial in &trials {
                 for s in strategies {
-                    let run = run_trial(s.as_ref(), &scene.house, &scene.truth, distances, trial)
-                        .and_then(|out| {
-                            let cost =
-                                out.reported_cost(&scene.house, distances, protocol.travel_cost)?;
-                            Ok(TrialOutcome { cost, ..out })
-                        });
+                    let run = run_trial(
+                        s.as_ref(),
+                        &SearchProblem::new(&scene.house, distances, trial),
+                        &scene.truth,
+                    )
+                    .and_then(|out| {
+                        let cost =
+                            out.reported_cost(&scene.house, distances, protocol.travel_cost)?;
+                        Ok(TrialOutcome { cost, ..out })
+                    });
                     match run {
                         Ok(out) => rows.push(row(scene, trial, &out)),
                         // The target is named only when a house has several trials, so that

@@ -7,7 +7,9 @@ use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
 
 use anyhow::{Context, Result, bail};
-use ferret_plan::{DrawMode, ReplayMode, Strategy, draw_trials_with, replay_outcome_with};
+use ferret_plan::{
+    DrawMode, ReplayMode, SearchProblem, Strategy, draw_trials_with, replay_outcome_with,
+};
 use ferret_report::{CurvePanel, draw_choice_shares, draw_curve_panels};
 use ferret_select::{
     CostTable, ExperimentOptions, Method, ORACLE, PAPER_KS, choice_rows, run_experiment,
@@ -716,10 +718,8 @@ fn replay_trial(
             let c = replay_outcome_with(
                 mode,
                 s.as_ref(),
-                house,
+                &SearchProblem::new(house, distances, trial),
                 &scene.truth,
-                distances,
-                trial,
                 found,
             )?
             .reported_cost(house, distances, travel)?;

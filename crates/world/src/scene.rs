@@ -524,8 +524,11 @@ fn check_object(
 /// clockwise one (see [`Footprint::corners`]).
 fn footprint(pose: [f64; 3], size: Option<[f64; 2]>) -> std::result::Result<Footprint, String> {
     let [sx, sz] = size.unwrap_or(DEFAULT_SIZE);
-    if !(sx.is_finite() && sz.is_finite() && sx > 0.0 && sz > 0.0) {
-        return Err(format!("[{sx}, {sz}] must be two positive sizes in metres"));
+    let max = crate::procthor::MAX_COORDINATE;
+    if !(sx.is_finite() && sz.is_finite() && sx > 0.0 && sz > 0.0 && sx <= max && sz <= max) {
+        return Err(format!(
+            "[{sx}, {sz}] must be two positive sizes in metres, at most {max}"
+        ));
     }
     Ok(Footprint {
         center: Point::new(pose[0], pose[1]),

@@ -66,6 +66,44 @@ impl Default for HttpOptions {
     }
 }
 
+impl HttpOptions {
+    /// What [`router`] would refuse, checked without a service (so that a command line can be
+    /// refused before anything is opened).
+    ///
+    /// # Errors
+    /// An empty token, a CORS origin that is not a valid header value, an allowed host that is
+    /// not a host name; the field names the option.
+    pub fn validate(&self) -> Result<(), ApiError> {
+        if self.token.as_deref().is_some_and(|t| t.trim().is_empty()) {
+            return Err(ApiError::new(
+                400,
+                "token",
+                "the token is empty: set a non-empty token, or none to run without one",
+            ));
+        }
+        self.origins()?;
+        let listen = self
+            .listen
+            .unwrap_or_else(|| SocketAddr::from(([127, 0, 0, 1], 0)));
+        Hosts::new(listen, &self.allowed_hosts)?;
+        Ok(())
+    }
+
+    fn origins(&self) -> Result<Vec<HeaderValue>, ApiError> {
+        self.cors_origins
+            .iter()
+            .map(|o| {
+                HeaderValue::from_str(o)
+                    .ok()
+                    .filter(|_| !o.trim().is_empty())
+                    .ok_or_else(|| {
+                        ApiError::new(400, "cors-origin", format!("{o:?} is not a valid origin"))
+                    })
+            })
+            .collect()
+    }
+}
+
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let status = StatusCode::from_u16(self.status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR);
@@ -567,13 +605,7 @@ async fn guard(State(guards): State<Arc<Guards>>, req: Request, next: Next) -> R
 /// An empty token, a CORS origin that is not a valid header value, an allowed host that is not
 /// a host name.
 pub fn router(service: Arc<Service>, options: &HttpOptions) -> Result<Router, ApiError> {
-    if options.token.as_deref().is_some_and(|t| t.trim().is_empty()) {
-        return Err(ApiError::new(
-            400,
-            "token",
-            "the token is empty: set a non-empty token, or none to run without one",
-        ));
-    }
+    options.validate()?;
     let hosts = options
         .listen
         .map(|l| Hosts::new(l, &options.allowed_hosts))
@@ -613,15 +645,7 @@ pub fn router(service: Arc<Service>, options: &HttpOptions) -> Result<Router, Ap
         .layer(DefaultBodyLimit::max(options.max_body_bytes))
         .layer(middleware::from_fn_with_state(guards, guard));
     if !options.cors_origins.is_empty() {
-        let origins = options
-            .cors_origins
-            .iter()
-            .map(|o| {
-                HeaderValue::from_str(o).map_err(|_| {
-                    ApiError::new(400, "cors-origin", format!("{o:?} is not a valid origin"))
-                })
-            })
-            .collect::<Result<Vec<_>, _>>()?;
+        let origins = options.origins()?;
         app = app.layer(
             CorsLayer::new()
                 .allow_origin(AllowOrigin::list(origins))

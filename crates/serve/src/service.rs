@@ -331,6 +331,20 @@ impl Service {
         &self.options
     }
 
+    /// Bytes the cached grids and distances hold now (at most
+    /// [`ServiceOptions::grid_cache_bytes`]).
+    pub fn grid_cache_bytes(&self) -> usize {
+        self.lock_cache().used
+    }
+
+    /// The scenes with a grid in the cache, each once, sorted.
+    pub fn cached_grids(&self) -> Vec<String> {
+        let mut names: Vec<String> = self.lock_cache().entries.keys().map(|k| k.0.clone()).collect();
+        names.sort();
+        names.dedup();
+        names
+    }
+
     /// Offers `scene` under `name` (scene files and houses named on the command line; no limits
     /// apply, the operator chose them). Its grid is built now, to check it.
     ///

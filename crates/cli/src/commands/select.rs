@@ -304,8 +304,6 @@ fn parse_csv<T: for<'de> Deserialize<'de>>(bytes: &[u8], path: &Path) -> Result<
         .collect()
 }
 
-/// The identity of an eval run's trials: SHA-256 of run.json and trials.csv. Replays are only
-/// valid for the exact trials they were computed on.
 /// An eval output file, through the bounded reader every input goes through.
 fn read_input(path: &Path) -> std::io::Result<Vec<u8>> {
     ferret_world::input::read_file(path, MAX_RUN_FILE_BYTES)
@@ -314,6 +312,8 @@ fn read_input(path: &Path) -> std::io::Result<Vec<u8>> {
 /// Largest eval output read (trials.csv of a very large run is tens of megabytes).
 const MAX_RUN_FILE_BYTES: u64 = 1 << 30;
 
+/// The identity of an eval run's trials: SHA-256 of run.json and trials.csv. Replays are only
+/// valid for the exact trials they were computed on.
 fn trials_key(run_json: &[u8], trials_csv: &[u8]) -> String {
     use sha2::{Digest, Sha256};
     let mut h = Sha256::new();

@@ -28,7 +28,7 @@ CACHE="${FERRET_LANE_CACHE:-$HOME/.cache/ferret-real-llm}"
 OUT="${FERRET_LANE_OUT:-$ROOT/ferret-lane}"
 DATA="${FERRET_PROCTHOR_DIR:-$ROOT/../shared/data/procthor}"
 PORT="${FERRET_LANE_PORT:-18080}"
-# The paper's per-container prompts ask ~57 questions per house: they run on RANGE; the prompts
+# The paper's per-container prompts ask ~58 questions per house: they run on RANGE; the prompts
 # that ask once per house (or per room type) run on ALL_RANGE, and are fused with the prior as
 # fitted on training houses FIT_RANGE.
 RANGE="${FERRET_LANE_RANGE:-0..30}"
@@ -253,7 +253,8 @@ run() {
     strategies+=",$(IFS=,; echo "${fused[*]}"),fused/p-yesno/qwen/exact,oracle"
     log "eval on val150 $ALL_RANGE (answers from the calibration's cache)"
     "$ferret" eval "${val[@]}" --range "$ALL_RANGE" "${common[@]}" --fusion fusion.json \
-        --strategies "$strategies" --max-fallback-share "$MAX_FALLBACK" --out eval
+        --strategies "$strategies" --paired-against model/prior --max-fallback-share "$MAX_FALLBACK" \
+        --out eval
     log "calibrate on val150 $RANGE: the paper's per-container prompts beside the new ones"
     local side=(model/uniform model/prior)
     for p in p-context-a p-context-b p-minimal; do
@@ -269,18 +270,22 @@ run() {
         side_strategies+=",llm+model/$p/qwen-logprobs"
     done
     side_strategies+=",llm+model/p-yesno/qwen,llm+model/p-choice/qwen,llm+model/p-batch/qwen-logprobs"
-    side_strategies+=",$(IFS=,; echo "${fused[*]}"),llm-direct/p-direct/qwen,oracle"
+    # P-DIRECT answers in JSON: the schema's enum of listed places keeps the model from naming
+    # a place that is not there (as text, 7 of 96 answers did, above the fallback gate).
+    side_strategies+=",$(IFS=,; echo "${fused[*]}"),llm-direct/p-direct/qwen-json,oracle"
     log "eval on val150 $RANGE with the paper's prompts beside the new ones"
     "$ferret" eval "${val[@]}" --range "$RANGE" "${common[@]}" --fusion fusion.json \
-        --strategies "$side_strategies" --max-fallback-share "$MAX_FALLBACK" --out eval-side
+        --strategies "$side_strategies" --paired-against model/prior \
+        --max-fallback-share "$MAX_FALLBACK" --out eval-side
     local online=$((SECONDS - t0))
     stop_server
     log "eval again --offline with the server stopped: it must be identical"
     "$ferret" eval "${val[@]}" --range "$ALL_RANGE" "${common[@]}" --fusion fusion.json \
-        --strategies "$strategies" --offline --out eval-offline >/dev/null
+        --strategies "$strategies" --paired-against model/prior --offline --out eval-offline >/dev/null
     cmp eval/trials.csv eval-offline/trials.csv
     "$ferret" eval "${val[@]}" --range "$RANGE" "${common[@]}" --fusion fusion.json \
-        --strategies "$side_strategies" --offline --out eval-side-offline >/dev/null
+        --strategies "$side_strategies" --paired-against model/prior --offline \
+        --out eval-side-offline >/dev/null
     cmp eval-side/trials.csv eval-side-offline/trials.csv
     log "done in $((SECONDS - t0)) s ($online s with the server); outputs in $OUT"
 }

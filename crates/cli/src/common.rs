@@ -7,7 +7,9 @@ use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
 use ferret_world::procthor::{AssetDatabase, HouseRange, LoadOptions, load_scenes};
-use ferret_world::{Distances, GridParams, OccupancyGrid, Scene, WorldError};
+use ferret_world::{
+    AccessRule, ContainerSet, Distances, GridParams, OccupancyGrid, Scene, WorldError,
+};
 use indicatif::{ParallelProgressIterator, ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 
@@ -74,6 +76,16 @@ impl HouseArgs {
 
     /// Like [`load`](Self::load) with an explicit skip-invalid choice.
     pub fn load_with(&self, skip_invalid: bool) -> Result<LoadedHouses> {
+        self.load_inner(skip_invalid, ContainerSet::Receptacles)
+    }
+
+    /// Like [`load`](Self::load), ProcTHOR files read with the container set `containers`
+    /// (generated houses and scene files name their containers themselves).
+    pub fn load_for(&self, containers: ContainerSet) -> Result<LoadedHouses> {
+        self.load_inner(self.skip_invalid, containers)
+    }
+
+    fn load_inner(&self, skip_invalid: bool, containers: ContainerSet) -> Result<LoadedHouses> {
         let Some(path) = &self.houses else {
             let scenes = ferret_world::generate::default_scenes(self.generate, self.house_seed)
                 .context("generating the default houses")?;
@@ -109,6 +121,7 @@ impl HouseArgs {
             asset_db: db.as_ref(),
             range: self.range.unwrap_or_default(),
             skip_invalid,
+            containers,
         };
         let report = load_scenes(path, &opts)?;
         Ok(LoadedHouses {
@@ -171,12 +184,21 @@ impl GridArgs {
         Ok(())
     }
 
+    /// The grid parameters with access points chosen by `access`.
+    pub fn params_for(&self, access: AccessRule) -> GridParams {
+        GridParams {
+            access,
+            ..self.params()
+        }
+    }
+
     /// The grid parameters.
     pub fn params(&self) -> GridParams {
         GridParams {
             resolution: self.resolution,
             robot_radius: self.robot_radius,
             wall_thickness: self.wall_thickness,
+            ..GridParams::default()
         }
     }
 }
@@ -222,10 +244,28 @@ pub struct ProtocolArgs {
     /// partly searched house (`paper`).
     #[arg(long, value_name = "empty|paper")]
     pub initial_belief: Option<ferret_plan::InitialBelief>,
-    /// Which top-level objects are containers: `receptacles`; `furniture` (the reference
-    /// code's) is not implemented yet and is refused.
+    /// Which top-level objects of a ProcTHOR file are containers: the asset database's
+    /// receptacles (`receptacles`), or every top-level object but 15 ignored types, holding its
+    /// direct children that are not furniture themselves (`furniture`, the reference code's).
     #[arg(long, value_name = "receptacles|furniture")]
     pub containers: Option<ferret_plan::ContainerSet>,
+    /// Where the robot stands to search a container: the reachable cell of its room nearest its
+    /// footprint (`footprint`), or the reachable cell nearest its centre (`nearest-free`, the
+    /// reference code's).
+    #[arg(long, value_name = "footprint|nearest-free")]
+    pub access: Option<ferret_plan::AccessRule>,
+    /// The reported cost of a trial: its plain path length (`plain`), or the reference code's
+    /// soft cost, dearer near obstacles (`soft`). Planners always decide on plain distances.
+    #[arg(long, value_name = "plain|soft")]
+    pub travel_cost: Option<ferret_plan::TravelCost>,
+    /// The trials' random draws: ferret's own (`ferret`), or CPython's `random` seeded with the
+    /// house's index, as the reference code draws targets and initial beliefs (`python`).
+    #[arg(long, value_name = "ferret|python")]
+    pub rng: Option<ferret_plan::TrialRng>,
+    /// UCB's score of a strategy never deployed: −∞, so each is tried once first (`first`), or
+    /// 0 as the reference code scores it (`zero`).
+    #[arg(long, value_name = "first|zero")]
+    pub untried: Option<ferret_plan::UntriedScore>,
     /// Which object types may be targets: every contained type (`pickupable`), or those that
     /// are never a top-level object of the house (`paper`).
     #[arg(long, value_name = "pickupable|paper")]
@@ -240,8 +280,7 @@ pub struct ProtocolArgs {
 }
 
 impl ProtocolArgs {
-    /// The settings: `--protocol` (else `base`) with the single switches applied. Refuses what
-    /// is not implemented, naming the option.
+    /// The settings: `--protocol` (else `base`) with the single switches applied.
     pub fn resolve(&self, base: ferret_plan::Protocol) -> Result<ferret_plan::Protocol> {
         let mut p = self.protocol.map_or(base, ferret_plan::Protocol::named);
         if let Some(v) = self.initial_belief {
@@ -259,12 +298,17 @@ impl ProtocolArgs {
         if let Some(v) = self.draw {
             p.draw = v;
         }
-        if p.containers == ferret_plan::ContainerSet::Furniture {
-            anyhow::bail!(
-                "--containers furniture (part of --protocol paper) is not implemented yet: it needs \
-                 the reference code's list of ignored object types in the house reader; add \
-                 --containers receptacles to run the rest of the protocol"
-            );
+        if let Some(v) = self.access {
+            p.access = v;
+        }
+        if let Some(v) = self.travel_cost {
+            p.travel_cost = v;
+        }
+        if let Some(v) = self.rng {
+            p.rng = v;
+        }
+        if let Some(v) = self.untried {
+            p.untried = v;
         }
         Ok(p)
     }

@@ -648,7 +648,8 @@ fn protocol_switches_change_what_they_should_and_select_refuses_to_mix() {
     assert_eq!(
         run["protocol"],
         serde_json::json!({"initial_belief": "paper", "containers": "receptacles",
-            "targets": "pickupable", "replay": "pessimistic", "draw": "distinct"})
+            "targets": "pickupable", "replay": "pessimistic", "draw": "distinct",
+            "travel_cost": "plain", "access": "footprint", "rng": "ferret", "untried": "first"})
     );
     // Selecting over the plain run with the paper's belief would mix protocols: refused.
     let sel = dir.path().join("sel");
@@ -699,21 +700,18 @@ fn protocol_switches_change_what_they_should_and_select_refuses_to_mix() {
         s(&sel),
     ]);
     assert!(o.status.success(), "{}", text(&o));
-    // --protocol paper needs the unimplemented container set, and says so.
+    // --protocol paper sets every part; a single switch overrides one.
     let paper = dir.path().join("paper");
-    let o = eval(&paper, &["--protocol", "paper"]);
-    assert!(!o.status.success());
-    assert!(text(&o).contains("--containers furniture"), "{}", text(&o));
-    assert!(!paper.exists(), "a refused run writes nothing");
-    let o = eval(
-        &paper,
-        &["--protocol", "paper", "--containers", "receptacles"],
-    );
+    let o = eval(&paper, &["--protocol", "paper", "--access", "footprint"]);
     assert!(o.status.success(), "{}", text(&o));
     let run: serde_json::Value =
         serde_json::from_slice(&std::fs::read(paper.join("run.json")).unwrap()).unwrap();
-    assert_eq!(run["protocol"]["replay"], "counterfactual");
-    assert_eq!(run["protocol"]["draw"], "replacement");
+    assert_eq!(
+        run["protocol"],
+        serde_json::json!({"initial_belief": "paper", "containers": "furniture",
+            "targets": "paper", "replay": "counterfactual", "draw": "replacement",
+            "travel_cost": "soft", "access": "footprint", "rng": "python", "untried": "zero"})
+    );
     // deploy draws with replacement: 14 trials from 10 houses repeat a house.
     let o = ferret(&[
         "deploy",
@@ -734,6 +732,75 @@ fn protocol_switches_change_what_they_should_and_select_refuses_to_mix() {
     let houses: std::collections::BTreeSet<&str> =
         rows.iter().map(|r| r["house"].as_str()).collect();
     assert!(houses.len() < 14);
+}
+
+/// Under the paper's protocol a live deployment runs the very trials eval runs (same draws,
+/// same access points) and learns from the same reported costs: every chosen cost and every
+/// counterfactual replay equals eval's soft cost of that strategy on that house.
+#[test]
+fn deploy_under_the_paper_protocol_reports_evals_soft_costs() {
+    let dir = tempfile::tempdir().unwrap();
+    let strategies = "optimistic+greedy,model/uniform,model/prior";
+    let common = [
+        "--generate",
+        "6",
+        "--house-seed",
+        "9",
+        "--protocol",
+        "paper",
+        "--strategies",
+        strategies,
+    ];
+    let eval_out = dir.path().join("eval");
+    let o = ferret(&[&["eval"][..], &common, &["--out", s(&eval_out)]].concat());
+    assert!(o.status.success(), "{}", text(&o));
+    let plain_out = dir.path().join("plain");
+    let o = ferret(
+        &[
+            &["eval"][..],
+            &common,
+            &["--travel-cost", "plain", "--out", s(&plain_out)],
+        ]
+        .concat(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let cost = |rows: &[std::collections::HashMap<String, String>]| {
+        rows.iter()
+            .map(|r| {
+                (
+                    (r["house"].clone(), r["strategy"].clone()),
+                    r["cost_m"].parse::<f64>().unwrap(),
+                )
+            })
+            .collect::<std::collections::HashMap<_, _>>()
+    };
+    let soft = cost(&read_csv(&eval_out.join("trials.csv")));
+    let plain = cost(&read_csv(&plain_out.join("trials.csv")));
+    // The comparison below can only tell soft from plain where they differ.
+    assert!(soft.iter().any(|(k, v)| (v - plain[k]).abs() > 0.01));
+    let deploy_out = dir.path().join("deploy");
+    let o = ferret(
+        &[
+            &["deploy"][..],
+            &common,
+            &["--trials", "12", "--out", s(&deploy_out)],
+        ]
+        .concat(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let rows = read_csv(&deploy_out.join("deploy.csv"));
+    assert_eq!(rows.len(), 12);
+    for r in &rows {
+        let chosen: f64 = r["cost_m"].parse().unwrap();
+        let want = soft[&(r["house"].clone(), r["chosen"].clone())];
+        assert!((chosen - want).abs() < 1e-6, "{r:?}: eval says {want}");
+        for entry in r["replays"].split(' ') {
+            let (name, m) = entry.split_once('=').unwrap();
+            let m: f64 = m.parse().unwrap();
+            let want = soft[&(r["house"].clone(), name.to_owned())];
+            assert!((m - want).abs() < 0.006, "{r:?}: {name} eval says {want}");
+        }
+    }
 }
 
 #[test]
@@ -785,4 +852,96 @@ fn cells_report_costs_in_the_papers_unit_too() {
         s(&dir.path().join("sel")),
     ]);
     assert!(o.status.success(), "{}", text(&o));
+}
+
+/// A generated house rewritten the ProcTHOR-10k way (types only in id prefixes, no
+/// `objectType` fields, line index 1000) runs end to end under the paper's protocol, and the
+/// soft reported cost is never below the plain one on the same trials.
+#[test]
+fn a_procthor_10k_style_house_runs_under_the_paper_protocol() {
+    let dir = tempfile::tempdir().unwrap();
+    let generated = dir.path().join("g.jsonl");
+    let o = ferret(&[
+        "generate",
+        "--count",
+        "1",
+        "--seed",
+        "3",
+        "--out",
+        s(&generated),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let mut house: serde_json::Value = serde_json::from_str(
+        std::fs::read_to_string(&generated)
+            .unwrap()
+            .lines()
+            .next()
+            .unwrap(),
+    )
+    .unwrap();
+    let mut k = 0;
+    for o in house["objects"].as_array_mut().unwrap() {
+        let room = o["id"]
+            .as_str()
+            .unwrap()
+            .split('|')
+            .next()
+            .unwrap()
+            .to_owned();
+        let ty = o["objectType"].as_str().unwrap().to_owned();
+        o["id"] = format!("{ty}|{room}|{k}").into();
+        o.as_object_mut().unwrap().remove("objectType");
+        k += 1;
+        if let Some(children) = o.get_mut("children").and_then(|c| c.as_array_mut()) {
+            for c in children {
+                let ty = c["objectType"].as_str().unwrap().to_owned();
+                c["id"] = format!("{ty}|surface|{room}|{k}").into();
+                c.as_object_mut().unwrap().remove("objectType");
+                k += 1;
+            }
+        }
+    }
+    // House 1000 of the file, as the reference's seeds are line indices.
+    let file = dir.path().join("procthor-10k-train.jsonl");
+    std::fs::write(&file, "\n".repeat(1000) + &house.to_string() + "\n").unwrap();
+    let run = |travel: &str, out: &Path| {
+        let o = ferret(&[
+            "eval",
+            "--houses",
+            s(&file),
+            "--range",
+            "1000",
+            "--protocol",
+            "paper",
+            "--travel-cost",
+            travel,
+            "--cells",
+            "--strategies",
+            "optimistic+greedy,oracle",
+            "--out",
+            s(out),
+        ]);
+        assert!(o.status.success(), "{}", text(&o));
+        read_csv(&out.join("trials.csv"))
+    };
+    let (soft_out, plain_out) = (dir.path().join("soft"), dir.path().join("plain"));
+    let soft = run("soft", &soft_out);
+    let plain = run("plain", &plain_out);
+    assert_eq!(soft.len(), 2);
+    for (a, b) in soft.iter().zip(&plain) {
+        assert_eq!(
+            (&a["target"], &a["searched"]),
+            (&b["target"], &b["searched"])
+        );
+        let (s, p): (f64, f64) = (a["cost_m"].parse().unwrap(), b["cost_m"].parse().unwrap());
+        assert!(s >= p - 1e-9, "soft {s} < plain {p}");
+        assert!(a["house_index"] == "1000");
+    }
+    let info: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(soft_out.join("run.json")).unwrap()).unwrap();
+    assert_eq!(info["protocol"]["containers"], "furniture");
+    assert_eq!(info["protocol"]["travel_cost"], "soft");
+    assert_eq!(info["protocol"]["rng"], "python");
+    let md = std::fs::read_to_string(soft_out.join("summary.md")).unwrap();
+    assert!(md.contains("As the reference code averages"), "{md}");
 }

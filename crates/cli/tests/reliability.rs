@@ -1,4 +1,4 @@
-//! End-to-end tests of issue #9: nothing lost, nothing stale, no panics, fast failure.
+//! End-to-end reliability tests: nothing lost, nothing stale, no panics, fast failure.
 
 mod common;
 
@@ -146,6 +146,7 @@ fn bad_options_are_refused_before_outputs_are_touched() {
         ("--max-containers", "0".into()),
         ("--show-house", "50".into()),
         ("--strategies", "oracle,model/uniform,oracle".into()),
+        ("--paired-against", "model/prior/k4".into()),
     ];
     for _ in 0..4 {
         cases.push(("--resolution", bad(-10.0, 0.005)));

@@ -1,4 +1,4 @@
-//! Decision latency of the exact planner (issue targets: ≤ 50 µs at n = 8, ≤ 100 ms at n = 16).
+//! Decision latency of the exact planner (targets: ≤ 50 µs at n = 8, ≤ 100 ms at n = 16).
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use ferret_plan::{Problem, solve_exact};

@@ -74,6 +74,14 @@ pub enum PlanError {
         /// What went wrong.
         message: String,
     },
+    /// A trial's reported cost cannot be measured as asked.
+    #[error("{house}: {message}")]
+    TravelCost {
+        /// The house label.
+        house: String,
+        /// Why.
+        message: String,
+    },
     /// A trial to replay is inconsistent with its house.
     #[error("replay on {house}: {message}")]
     Replay {

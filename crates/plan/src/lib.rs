@@ -20,6 +20,7 @@ pub mod planner;
 pub mod policy;
 pub mod probability;
 pub mod protocol;
+pub mod pyrandom;
 pub mod replay;
 pub mod strategy;
 pub mod trial;
@@ -33,11 +34,14 @@ pub use planner::{Plan, Problem, solve_brute_force, solve_exact};
 pub use policy::{CandidateLimit, CostModel, Greedy, Oracle, Planner, PlannerConfig, Policy};
 pub use probability::Probability;
 pub use protocol::{
-    ContainerSet, DrawMode, InitialBelief, Protocol, ProtocolName, ReplayMode, TargetSet,
+    AccessRule, ContainerSet, DrawMode, InitialBelief, Protocol, ProtocolName, ReplayMode,
+    TargetSet, TravelCost, TrialRng, TrialSettings, UntriedScore,
 };
-pub use replay::{hindsight_truth, replay_cost, replay_cost_with, replay_costs};
+pub use replay::{
+    hindsight_truth, replay_cost, replay_cost_with, replay_costs, replay_outcome_with,
+};
 pub use strategy::{ModelStrategy, Strategy, StrategyRegistry, StrategySpec, TrialContext};
 pub use trial::{
     Search, TrialOutcome, TrialSpec, TrialsPerHouse, draw_trial, draw_trials, draw_trials_with,
-    run_trial,
+    python_seed, run_trial,
 };

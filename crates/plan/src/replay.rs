@@ -5,12 +5,12 @@
 //! container is assumed empty. The replay reuses [`run_trial`] and the strategies' own policies,
 //! so a replay cannot drift from a real run.
 
-use ferret_world::{Distances, GroundTruth, House, ObjectType, SmallObject};
+use ferret_world::{Distances, GroundTruth, House, ObjectType, SmallObject, TravelCost};
 
 use crate::error::PlanError;
 use crate::protocol::ReplayMode;
 use crate::strategy::Strategy;
-use crate::trial::{TrialSpec, run_trial};
+use crate::trial::{TrialOutcome, TrialSpec, run_trial};
 
 /// The hindsight world of a finished trial: the target in `found` only.
 pub fn hindsight_truth(
@@ -44,18 +44,40 @@ pub fn replay_cost_with(
     trial: &TrialSpec,
     found: usize,
 ) -> Result<f64, PlanError> {
-    match mode {
-        ReplayMode::Pessimistic => replay_cost(strategy, house, distances, trial, found),
-        ReplayMode::Counterfactual => {
-            let outcome = run_trial(strategy, house, truth, distances, trial)?;
-            match outcome.found {
-                Some(_) => Ok(outcome.cost),
-                None => Err(PlanError::Replay {
-                    house: house.name.clone(),
-                    message: format!("{} never found {}", strategy.name(), trial.target),
-                }),
-            }
+    replay_outcome_with(mode, strategy, house, truth, distances, trial, found).map(|o| o.cost)
+}
+
+/// The replayed trial itself under `mode` (see [`replay_cost_with`]): its searches give its
+/// cost under any [`TravelCost`](ferret_world::TravelCost) through
+/// [`TrialOutcome::reported_cost`].
+pub fn replay_outcome_with(
+    mode: ReplayMode,
+    strategy: &dyn Strategy,
+    house: &House,
+    truth: &GroundTruth,
+    distances: &Distances,
+    trial: &TrialSpec,
+    found: usize,
+) -> Result<TrialOutcome, PlanError> {
+    let (outcome, never) = match mode {
+        ReplayMode::Pessimistic => {
+            let hindsight = hindsight_truth(house, &trial.target, found)?;
+            (
+                run_trial(strategy, house, &hindsight, distances, trial)?,
+                format!("never searched container {found}"),
+            )
         }
+        ReplayMode::Counterfactual => (
+            run_trial(strategy, house, truth, distances, trial)?,
+            format!("never found {}", trial.target),
+        ),
+    };
+    match outcome.found {
+        Some(_) => Ok(outcome),
+        None => Err(PlanError::Replay {
+            house: house.name.clone(),
+            message: format!("{} {never}", strategy.name()),
+        }),
     }
 }
 
@@ -69,22 +91,26 @@ pub fn replay_cost(
     found: usize,
 ) -> Result<f64, PlanError> {
     let truth = hindsight_truth(house, &trial.target, found)?;
-    let outcome = run_trial(strategy, house, &truth, distances, trial)?;
-    match outcome.found {
-        Some(_) => Ok(outcome.cost),
-        None => Err(PlanError::Replay {
-            house: house.name.clone(),
-            message: format!("{} never searched container {found}", strategy.name()),
-        }),
-    }
+    replay_outcome_with(
+        ReplayMode::Pessimistic,
+        strategy,
+        house,
+        &truth,
+        distances,
+        trial,
+        found,
+    )
+    .map(|o| o.cost)
 }
 
 /// The replay costs of every candidate on a finished trial, as selection needs them after each
-/// deployment: entry `chosen` is the deployed strategy's own `cost`, the others are replayed
-/// under `mode`. `ferret deploy` and `ferret serve` both call this.
+/// deployment: entry `chosen` is the deployed strategy's own `cost` (already in `travel`'s
+/// terms), the others are replayed under `mode` and reported under `travel`, so that every
+/// entry is in the same unit. `ferret deploy` and `ferret serve` both call this.
 #[allow(clippy::too_many_arguments)]
 pub fn replay_costs(
     mode: ReplayMode,
+    travel: TravelCost,
     candidates: &[std::sync::Arc<dyn Strategy>],
     chosen: usize,
     cost: f64,
@@ -101,7 +127,8 @@ pub fn replay_costs(
             if j == chosen {
                 Ok(cost)
             } else {
-                replay_cost_with(mode, s.as_ref(), house, truth, distances, trial, found)
+                replay_outcome_with(mode, s.as_ref(), house, truth, distances, trial, found)?
+                    .reported_cost(house, distances, travel)
             }
         })
         .collect()

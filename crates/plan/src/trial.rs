@@ -1,7 +1,7 @@
 //! Trials: drawing a target for a house, and the simulator that runs a strategy until the target
 //! is found.
 
-use ferret_world::{Distances, GroundTruth, House, ObjectType, Place, Point};
+use ferret_world::{Distances, GroundTruth, House, ObjectType, Place, Point, TravelCost};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -9,7 +9,8 @@ use serde::{Deserialize, Serialize};
 use crate::belief::Belief;
 use crate::error::PlanError;
 use crate::policy::Policy;
-use crate::protocol::{InitialBelief, Protocol, TargetSet};
+use crate::protocol::{InitialBelief, Protocol, TargetSet, TrialRng};
+use crate::pyrandom::PyRandom;
 use crate::strategy::{Strategy, TrialContext};
 
 /// One house, one target, one start pose (the house's), and containers revealed beforehand.
@@ -135,11 +136,19 @@ pub fn draw_trials(
     )
 }
 
-/// [`draw_trials`] under a protocol's target set and initial belief. Under ferret's protocol it
-/// is exactly [`draw_trials`]. The paper's target set leaves out types that are also top-level
-/// objects of the house (containers or other furniture); the paper's initial belief marks
-/// searched, besides any `reveal_fraction`, all but a random number — between half and all but
-/// one — of the containers that do not hold the target (drawn from a stream of its own).
+/// [`draw_trials`] under a protocol's target set, initial belief and random draws. Under
+/// ferret's protocol it is exactly [`draw_trials`].
+///
+/// The paper's target set leaves out types that are also top-level objects of the house
+/// (containers or other furniture). The paper's initial belief keeps unsearched `m` containers
+/// drawn from all `n` of the house, `m` uniform in `⌊n/2⌋ … n − 1` (at least `min(n, 2)`), plus
+/// every goal container; the rest start out searched (besides any `reveal_fraction`).
+///
+/// With [`TrialRng::Python`] the draws are the reference code's: CPython's `random` seeded with
+/// [`python_seed`], afresh for the target (`sample` of the distinct target types in the order
+/// the house lists its objects) and afresh for the unsearched containers (`randint` for `m`,
+/// then `sample`). Several trials per house draw their targets from ferret's stream and all
+/// share the house's one unsearched draw, which does not depend on the target.
 pub fn draw_trials_with(
     house: &House,
     truth: &GroundTruth,
@@ -148,52 +157,101 @@ pub fn draw_trials_with(
     per_house: TrialsPerHouse,
     protocol: &Protocol,
 ) -> Result<Vec<TrialSpec>, PlanError> {
-    let mut trials = match protocol.targets {
-        TargetSet::Pickupable => draw_targets(
-            house,
-            truth.target_types().into_iter().collect(),
-            truth,
-            seed,
-            reveal_fraction,
-            per_house,
-        )?,
-        TargetSet::Paper => {
-            let furniture: std::collections::BTreeSet<&ObjectType> = house
-                .containers
-                .iter()
-                .map(|c| &c.object_type)
-                .chain(house.obstacles.iter().map(|o| &o.object_type))
-                .collect();
-            let types = truth
-                .target_types()
-                .into_iter()
-                .filter(|t| !furniture.contains(t))
-                .collect();
-            draw_targets(house, types, truth, seed, reveal_fraction, per_house)?
+    let furniture: std::collections::BTreeSet<&ObjectType> = house
+        .containers
+        .iter()
+        .map(|c| &c.object_type)
+        .chain(house.obstacles.iter().map(|o| &o.object_type))
+        .collect();
+    let allowed =
+        |t: &ObjectType| protocol.targets == TargetSet::Pickupable || !furniture.contains(t);
+    let mut trials = if protocol.rng == TrialRng::Python && per_house == TrialsPerHouse::One {
+        let types = types_in_house_order(truth, &allowed);
+        if types.is_empty() {
+            return Err(PlanError::NoTarget {
+                house: house.name.clone(),
+            });
         }
+        let mut py = PyRandom::new(python_seed(house.index, seed));
+        let target = types[py.sample(types.len(), 1)[0]].clone();
+        let revealed = reveal(
+            house,
+            truth,
+            &target,
+            reveal_fraction,
+            &mut house_rng(seed, house.index, 1),
+        );
+        vec![TrialSpec { target, revealed }]
+    } else {
+        let types = truth
+            .target_types()
+            .into_iter()
+            .filter(|t| allowed(t))
+            .collect();
+        draw_targets(house, types, truth, seed, reveal_fraction, per_house)?
     };
     if protocol.initial_belief == InitialBelief::Paper {
+        let n = house.containers.len();
         let mut rng = house_rng(seed, house.index, 4);
         for t in &mut trials {
-            let mut others: Vec<usize> = (0..house.containers.len())
-                .filter(|&c| !truth.holds(c, &t.target))
-                .collect();
-            let m = others.len();
-            if m == 0 {
-                continue;
+            let unsearched = match protocol.rng {
+                TrialRng::Python => {
+                    let mut py = PyRandom::new(python_seed(house.index, seed));
+                    let m = (py.randint((n / 2) as u64, n.saturating_sub(1) as u64) as usize)
+                        .max(n.min(2));
+                    py.sample(n, m)
+                }
+                TrialRng::Ferret => {
+                    let m = if n == 0 {
+                        0
+                    } else {
+                        rng.random_range(n / 2..n).max(n.min(2))
+                    };
+                    rand::seq::index::sample(&mut rng, n, m).into_vec()
+                }
+            };
+            let mut keep = vec![false; n];
+            for c in unsearched
+                .into_iter()
+                .chain(truth.goal_containers(&t.target))
+            {
+                if let Some(k) = keep.get_mut(c) {
+                    *k = true;
+                }
             }
-            // Keep between half and all but one of the others unsearched.
-            let keep = rng.random_range((m / 2).min(m - 1)..=m - 1);
-            for _ in 0..keep {
-                let i = rng.random_range(0..others.len());
-                others.swap_remove(i);
-            }
-            t.revealed.extend(others);
+            t.revealed.extend((0..n).filter(|&c| !keep[c]));
             t.revealed.sort_unstable();
             t.revealed.dedup();
         }
     }
     Ok(trials)
+}
+
+/// The seed of CPython's `random` for house `index` under trial seed `seed`: the house's index
+/// itself for seed 0 (the reference seeds with the house's line index in its file), and for
+/// other seeds the index with the seed in the high 32 bits, so that no two (house, seed) pairs
+/// share a seed.
+pub fn python_seed(index: usize, seed: u64) -> u64 {
+    (index as u64).wrapping_add(seed.wrapping_shl(32))
+}
+
+/// The distinct types of the containers' contents that `allowed` admits, in the order the house
+/// lists them (container by container, each one's objects in order): the order of the
+/// reference's scene graph, which fixes what an index drawn into it means.
+fn types_in_house_order(
+    truth: &GroundTruth,
+    allowed: &dyn Fn(&ObjectType) -> bool,
+) -> Vec<ObjectType> {
+    let mut seen = std::collections::HashSet::new();
+    let mut types = Vec::new();
+    for c in 0..truth.container_count() {
+        for o in truth.contents(c) {
+            if allowed(&o.object_type) && seen.insert(&o.object_type) {
+                types.push(o.object_type.clone());
+            }
+        }
+    }
+    types
 }
 
 /// The trials of a house among target `types` (in name order).
@@ -256,6 +314,38 @@ impl TrialOutcome {
         std::iter::once(Place::Start)
             .chain(self.searched.iter().map(|&c| Place::Container(c)))
             .collect()
+    }
+
+    /// The cost to report for this trial, metres: [`cost`](Self::cost) itself for
+    /// [`TravelCost::Plain`], the soft cost of its visits for [`TravelCost::Soft`] (the
+    /// reference code's reported metric; the strategy still decided on plain distances).
+    ///
+    /// # Errors
+    /// [`PlanError::TravelCost`] for the soft cost on distances that came from no grid, or a
+    /// trajectory with a leg the soft cost cannot travel.
+    pub fn reported_cost(
+        &self,
+        house: &House,
+        distances: &Distances,
+        travel: TravelCost,
+    ) -> Result<f64, PlanError> {
+        if travel == TravelCost::Plain {
+            return Ok(self.cost);
+        }
+        let err = |message: &str| PlanError::TravelCost {
+            house: house.name.clone(),
+            message: message.to_owned(),
+        };
+        let cost = distances
+            .travel_cost(&self.places(), travel)
+            .ok_or_else(|| err("the soft travel cost needs distances measured on a grid"))?;
+        if cost.is_finite() {
+            Ok(cost)
+        } else {
+            Err(err(
+                "a leg of the trial has no path under the soft travel cost",
+            ))
+        }
     }
 
     /// The trajectory on the floor (the cells walked), when the distances came from a grid.

@@ -343,8 +343,9 @@ proptest! {
         }
     }
 
-    /// The paper's initial belief marks no goal container searched, leaves between half and all
-    /// but one of the others unsearched, and changes nothing else of the draw.
+    /// The paper's initial belief marks no goal container searched, keeps at least half of all
+    /// the containers (and at least two) unsearched, so at most ⌈n/2⌉ start out searched, and
+    /// changes nothing else of the draw.
     #[test]
     fn paper_belief_never_marks_a_goal_searched(
         (pts, kinds, contents) in arb_house(),
@@ -364,11 +365,10 @@ proptest! {
                 prop_assert!(a.revealed.is_empty());
                 let goals = truth.goal_containers(&b.target);
                 prop_assert!(b.revealed.iter().all(|c| !goals.contains(c)));
-                let others = house.containers.len() - goals.len();
-                let kept = others - b.revealed.len();
-                if others > 0 {
-                    prop_assert!(kept >= (others / 2).min(others - 1) && kept < others, "kept {} of {}", kept, others);
-                }
+                let n = house.containers.len();
+                let kept = n - b.revealed.len();
+                prop_assert!(kept >= (n / 2).max(n.min(2)), "kept {} of {}", kept, n);
+                prop_assert!(b.revealed.len() <= n.div_ceil(2), "revealed {} of {}", b.revealed.len(), n);
             }
         }
     }
@@ -402,4 +402,51 @@ fn paper_targets_leave_out_types_that_are_also_furniture() {
     };
     assert_eq!(all(TargetSet::Pickupable), ["Bed", "Book", "Egg"]);
     assert_eq!(all(TargetSet::Paper), ["Book", "Egg"]);
+}
+
+#[test]
+fn python_draws_give_the_reference_trials() {
+    use ferret_plan::{InitialBelief, Protocol, TrialRng, TrialsPerHouse, draw_trials_with};
+    // Ten containers; seven distinct object types, listed in house order T0 … T6, with T6 (the
+    // type a fresh `random.seed(1000)` samples among seven) in container 2 only.
+    let (mut house, _, _) = house(&[(1.0, 0.0); 10], &[0; 10], &[]);
+    house.index = 1000;
+    let obj = |t: &str| SmallObject {
+        id: format!("small|{t}"),
+        object_type: ObjectType::new(t),
+    };
+    let mut contents = vec![vec![]; 10];
+    contents[0] = vec![obj("T0"), obj("T1")];
+    contents[1] = vec![obj("T2"), obj("T0")];
+    contents[2] = vec![obj("T3"), obj("T4"), obj("T5"), obj("T6")];
+    // Put the types out of name order so that house order is what is tested.
+    contents[0][0].object_type = ObjectType::new("Z0");
+    contents[1][1].object_type = ObjectType::new("Z0");
+    contents[2][3].object_type = ObjectType::new("A6");
+    let truth = GroundTruth::new(contents);
+    let p = Protocol {
+        rng: TrialRng::Python,
+        initial_belief: InitialBelief::Paper,
+        ..Protocol::FERRET
+    };
+    let trials = draw_trials_with(&house, &truth, 0, 0.0, TrialsPerHouse::One, &p).unwrap();
+    assert_eq!(trials[0].target.as_str(), "A6");
+    // Drawn unsearched: 1 6 5 0 3 9 7 8; containers 2 and 4 pre-searched, but 2 holds the
+    // target and stays unsearched.
+    assert_eq!(trials[0].revealed, vec![4]);
+    // Another trial seed draws another trial; the ferret generator draws yet another way.
+    let other = draw_trials_with(&house, &truth, 1, 0.0, TrialsPerHouse::One, &p).unwrap();
+    let ferret = Protocol {
+        rng: TrialRng::Ferret,
+        ..p
+    };
+    let f = draw_trials_with(&house, &truth, 0, 0.0, TrialsPerHouse::One, &ferret).unwrap();
+    assert!(other != trials || f != trials);
+    // Without the paper belief the python target is the same and nothing is searched.
+    let empty = Protocol {
+        initial_belief: InitialBelief::Empty,
+        ..p
+    };
+    let t = draw_trials_with(&house, &truth, 0, 0.0, TrialsPerHouse::One, &empty).unwrap();
+    assert_eq!((t[0].target.as_str(), t[0].revealed.len()), ("A6", 0));
 }

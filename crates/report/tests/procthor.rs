@@ -31,6 +31,7 @@ fn real_houses_are_drawn() {
         asset_db: db.as_ref(),
         range: "0..3".parse().unwrap(),
         skip_invalid: false,
+        ..Default::default()
     };
     let scenes = load_scenes(&dir.join("multiroom-val150.jsonl.gz"), &opts)
         .unwrap()

@@ -7,6 +7,7 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::numpy::LegacyRandomState;
 use crate::selector::check_c;
 use crate::{CostTable, DEFAULT_C, Method, ReplaySelection, SelectError, Selector, Ucb};
 
@@ -35,6 +36,18 @@ pub struct ExperimentOptions {
     /// Default `false`: distinct houses, as the paper's text says.
     #[serde(default)]
     pub with_replacement: bool,
+    /// Score untried strategies 0 in UCB, as the reference code does, instead of deploying
+    /// each once first (see [`Ucb::untried_score`]). Default `false`.
+    #[serde(default)]
+    pub ucb_untried_zero: bool,
+    /// Draw as the reference code's results script does: deployment `d` seeds numpy's legacy
+    /// generator with `seed + d`, shuffles the houses, then per trial draws a house with
+    /// replacement (`choice`) and breaks score ties with `choice` from the same stream, so the
+    /// two methods see different houses after their first tie. The best strategy and its
+    /// curve come from the same draws without tie-breaks, i.e. the reference's table average.
+    /// Implies drawing with replacement. Default `false`.
+    #[serde(default)]
+    pub reference_draws: bool,
 }
 
 impl Default for ExperimentOptions {
@@ -46,6 +59,8 @@ impl Default for ExperimentOptions {
             seed: 0,
             replay_untried_first: false,
             with_replacement: false,
+            ucb_untried_zero: false,
+            reference_draws: false,
         }
     }
 }
@@ -57,6 +72,10 @@ pub struct MethodRun {
     pub chosen: Vec<usize>,
     /// Real cost of that choice at trial `k` (index `k − 1`), metres.
     pub costs: Vec<f64>,
+    /// The rows this method's trials used, when they differ from the deployment's
+    /// ([`ExperimentOptions::reference_draws`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub houses: Option<Vec<usize>>,
 }
 
 /// One deployment: its house order, shared by both methods, and what each method did.
@@ -72,6 +91,11 @@ pub struct Deployment {
 }
 
 impl Deployment {
+    /// The rows method `method`'s trials used.
+    pub fn houses_of(&self, method: Method) -> &[usize] {
+        self.run(method).houses.as_deref().unwrap_or(&self.houses)
+    }
+
     /// The run of method `method`.
     pub fn run(&self, method: Method) -> &MethodRun {
         match method {
@@ -185,24 +209,34 @@ pub fn run_experiment(
         .map(|d| run_deployment(table, opts, &base, d))
         .collect::<Result<Vec<_>, _>>()?;
 
-    let best = table.best_strategy();
+    let best = if opts.reference_draws {
+        reference_best(table, &deployments, opts.trials_per_deployment)
+    } else {
+        table.best_strategy()
+    };
+    let best_avg = best_avg_cost(table, &deployments, best, opts.trials_per_deployment);
+    let best_mean = if opts.reference_draws {
+        best_avg.last().copied().unwrap_or(f64::NAN)
+    } else {
+        table.mean_costs()[best]
+    };
     let result = ExperimentResult {
         options: *opts,
         strategies: table.strategies().to_vec(),
         mean_costs: table.mean_costs(),
         best_strategy: best,
-        best_avg_cost: best_avg_cost(table, &deployments, best, opts.trials_per_deployment),
+        best_avg_cost: best_avg,
         ucb: summarise(
             table,
             &deployments,
-            best,
+            (best, best_mean),
             opts.trials_per_deployment,
             Method::Ucb,
         ),
         replay: summarise(
             table,
             &deployments,
-            best,
+            (best, best_mean),
             opts.trials_per_deployment,
             Method::ReplaySelection,
         ),
@@ -247,7 +281,10 @@ fn check_options(table: &CostTable, opts: &ExperimentOptions) -> Result<(), Sele
             ),
         });
     }
-    if !opts.with_replacement && opts.trials_per_deployment > table.n_groups() {
+    if !opts.with_replacement
+        && !opts.reference_draws
+        && opts.trials_per_deployment > table.n_groups()
+    {
         return Err(SelectError::TooManyTrials {
             trials: opts.trials_per_deployment,
             houses: table.n_groups(),
@@ -269,6 +306,9 @@ fn run_deployment(
     base: &ChaCha8Rng,
     d: usize,
 ) -> Result<Deployment, SelectError> {
+    if opts.reference_draws {
+        return run_reference_deployment(table, opts, base, d);
+    }
     let groups = table.groups();
     let drawn = if opts.with_replacement {
         let mut rng = stream(base, d, 0);
@@ -293,8 +333,13 @@ fn run_deployment(
             rows => rows[pick.random_range(0..rows.len())],
         })
         .collect();
+    let untried = if opts.ucb_untried_zero {
+        0.0
+    } else {
+        f64::NEG_INFINITY
+    };
     let ucb = run_selector(
-        &mut Ucb::new(table.n_strategies(), opts.c)?,
+        &mut Ucb::new(table.n_strategies(), opts.c)?.untried_score(untried),
         table,
         &houses,
         &mut stream(base, d, 1),
@@ -311,6 +356,86 @@ fn run_deployment(
         ucb,
         replay,
     })
+}
+
+/// A deployment drawn as the reference code draws it (see
+/// [`ExperimentOptions::reference_draws`]); a house with several trials picks one from ferret's
+/// stream 3 of the deployment, as [`run_deployment`] does.
+fn run_reference_deployment(
+    table: &CostTable,
+    opts: &ExperimentOptions,
+    base: &ChaCha8Rng,
+    d: usize,
+) -> Result<Deployment, SelectError> {
+    let groups = table.groups();
+    let seed = opts.seed.wrapping_add(d as u64) as u32;
+    let shuffled = || {
+        let mut np = LegacyRandomState::new(seed);
+        let mut order: Vec<usize> = (0..groups.len()).collect();
+        np.shuffle(&mut order);
+        (np, order)
+    };
+    let mut pick = stream(base, d, 3);
+    let mut row_of = |g: usize| match groups[g].as_slice() {
+        [only] => *only,
+        rows => rows[pick.random_range(0..rows.len())],
+    };
+    // The sequence without tie-breaks: the reference's table draws, for the best strategy.
+    let (mut np, order) = shuffled();
+    let houses: Vec<usize> = (0..opts.trials_per_deployment)
+        .map(|_| row_of(order[np.choice(order.len())]))
+        .collect();
+    let mut run = |selector: &mut dyn Selector| -> Result<MethodRun, SelectError> {
+        let (mut np, order) = shuffled();
+        let mut rows = Vec::with_capacity(opts.trials_per_deployment);
+        let mut chosen = Vec::with_capacity(opts.trials_per_deployment);
+        let mut costs = Vec::with_capacity(opts.trials_per_deployment);
+        for _ in 0..opts.trials_per_deployment {
+            let h = row_of(order[np.choice(order.len())]);
+            let i = selector.choose_with(&mut |ties| np.choice(ties));
+            let replay = table
+                .replay_costs(h, i)
+                .ok_or(SelectError::StrategyOutOfRange {
+                    index: i,
+                    strategies: table.n_strategies(),
+                })?;
+            let cost = table.cost_at(h, i);
+            selector.observe(i, cost, replay)?;
+            rows.push(h);
+            chosen.push(i);
+            costs.push(cost);
+        }
+        Ok(MethodRun {
+            chosen,
+            costs,
+            houses: Some(rows),
+        })
+    };
+    let untried = if opts.ucb_untried_zero {
+        0.0
+    } else {
+        f64::NEG_INFINITY
+    };
+    let ucb = run(&mut Ucb::new(table.n_strategies(), opts.c)?.untried_score(untried))?;
+    let replay = run(&mut ReplaySelection::new(table.n_strategies(), opts.c)?
+        .untried_first(opts.replay_untried_first))?;
+    Ok(Deployment {
+        houses,
+        ucb,
+        replay,
+    })
+}
+
+/// The strategy with the lowest mean, over deployments, of its average cost on each
+/// deployment's tie-free houses: the reference's table average.
+fn reference_best(table: &CostTable, deployments: &[Deployment], trials: usize) -> usize {
+    (0..table.n_strategies())
+        .map(|s| {
+            let avg = best_avg_cost(table, deployments, s, trials);
+            (avg.last().copied().unwrap_or(f64::INFINITY), s)
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))
+        .map_or(0, |(_, s)| s)
 }
 
 /// Runs `selector` over `houses` of `table`, one trial at a time, exactly as a robot would.
@@ -345,7 +470,11 @@ pub fn run_selector(
         chosen.push(i);
         costs.push(cost);
     }
-    Ok(MethodRun { chosen, costs })
+    Ok(MethodRun {
+        chosen,
+        costs,
+        houses: None,
+    })
 }
 
 fn best_avg_cost(
@@ -370,7 +499,7 @@ fn best_avg_cost(
 fn summarise(
     table: &CostTable,
     deployments: &[Deployment],
-    best: usize,
+    (best, best_mean): (usize, f64),
     trials: usize,
     method: Method,
 ) -> MethodSummary {
@@ -383,7 +512,7 @@ fn summarise(
         let mut sum = 0.0;
         let mut regret = 0.0;
         for (k, ((&h, &i), &c)) in dep
-            .houses
+            .houses_of(method)
             .iter()
             .zip(&run.chosen)
             .zip(&run.costs)
@@ -399,7 +528,6 @@ fn summarise(
     let n = deployments.len() as f64;
     avg_cost.iter_mut().for_each(|a| *a /= n);
     cum_regret.iter_mut().for_each(|r| *r /= n);
-    let best_mean = table.mean_costs()[best];
     let paper_regret = avg_cost
         .iter()
         .scan(0.0, |sum, &a| {

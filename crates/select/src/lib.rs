@@ -19,6 +19,7 @@
 mod error;
 mod experiment;
 mod live;
+pub mod numpy;
 mod render;
 mod selector;
 mod table;

@@ -169,6 +169,12 @@ pub fn selection_table_markdown(result: &ExperimentResult, ks: &[usize]) -> Stri
             .map_or("?", String::as_str),
         at(&result.mean_costs, result.best_strategy),
     );
+    if result.options.reference_draws {
+        out.push_str(
+            "Houses and tie-breaks drawn as the reference code draws them: numpy's legacy \
+             generator, deployment d seeded with seed + d.\n",
+        );
+    }
     out
 }
 

@@ -67,6 +67,13 @@ pub trait Selector {
         argmin_random_tie(self.n_strategies(), |i| self.score(i), rng)
     }
 
+    /// Strategy for the next trial: the lowest score; among `t > 1` exact ties (in index order)
+    /// the one at `pick(t)`, which must be below `t`. For another generator's tie-breaks, such
+    /// as the reference code's numpy `choice`.
+    fn choose_with(&mut self, pick: &mut dyn FnMut(usize) -> usize) -> usize {
+        argmin_tie(self.n_strategies(), |i| self.score(i), pick)
+    }
+
     /// Records a finished trial: strategy `chosen` was deployed and cost `cost` metres.
     ///
     /// `replay_costs[i]` is the replay cost of strategy `i` on this trial given that `chosen`
@@ -221,10 +228,13 @@ pub(crate) fn check_c(c: f64) -> Result<(), SelectError> {
 
 /// UCB selection (paper eq. 2): `argmin_i mean_cost_i − c·sqrt(ln k / n_i)`.
 ///
-/// Every strategy is deployed once (in random order) before any is deployed twice.
+/// By default every strategy is deployed once (in random order) before any is deployed twice.
+/// [`Ucb::untried_score`] gives untried strategies a finite score instead, as the paper's
+/// reference code does (its NaN and infinite scores become 0).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Ucb {
     stats: Deployed,
+    untried: f64,
 }
 
 impl Ucb {
@@ -234,7 +244,17 @@ impl Ucb {
     pub fn new(strategies: usize, c: f64) -> Result<Self, SelectError> {
         Ok(Self {
             stats: Deployed::new(strategies, c)?,
+            untried: f64::NEG_INFINITY,
         })
+    }
+
+    /// The score of a strategy never deployed: `−∞` by default (each is tried once first); the
+    /// reference code's 0 puts an untried strategy below every tried one whose lower bound is
+    /// positive and above those whose bound is negative, so with cheap trials it may never be
+    /// tried. A NaN is taken as 0.
+    pub fn untried_score(mut self, score: f64) -> Self {
+        self.untried = if score.is_nan() { 0.0 } else { score };
+        self
     }
 
     /// How often each strategy has been deployed (`n_i`).
@@ -259,6 +279,9 @@ impl Selector for Ucb {
     fn score(&self, i: usize) -> f64 {
         if i >= self.n_strategies() {
             return f64::NAN;
+        }
+        if self.stats.pulls[i] == 0 {
+            return self.untried;
         }
         self.stats.lower_bound(i)
     }
@@ -385,6 +408,16 @@ pub(crate) fn argmin_random_tie(
     score: impl Fn(usize) -> f64,
     rng: &mut dyn RngCore,
 ) -> usize {
+    argmin_tie(n, score, &mut |ties| rng.random_range(0..ties))
+}
+
+/// Index of the smallest `score(i)`; among `t > 1` exact ties, the `pick(t)`-th in index order
+/// (`pick` is called only for ties). NaN scores are never chosen unless all are NaN.
+pub(crate) fn argmin_tie(
+    n: usize,
+    score: impl Fn(usize) -> f64,
+    pick: &mut dyn FnMut(usize) -> usize,
+) -> usize {
     let mut best: Option<(f64, usize)> = None;
     let mut ties = 0usize;
     for i in 0..n {
@@ -405,7 +438,7 @@ pub(crate) fn argmin_random_tie(
     if ties == 1 {
         return first;
     }
-    let mut pick = rng.random_range(0..ties);
+    let mut pick = pick(ties);
     for i in first..n {
         if score(i) == best {
             if pick == 0 {

@@ -408,7 +408,11 @@ fn check_invariants(table: &CostTable, result: &ExperimentResult) {
             let total: f64 = summary.choice_fraction[t].iter().sum();
             assert!((total - 1.0).abs() < 1e-12);
         }
-        let untried_first = method == Method::Ucb || result.options.replay_untried_first;
+        let untried_first = if method == Method::Ucb {
+            !result.options.ucb_untried_zero
+        } else {
+            result.options.replay_untried_first
+        };
         if untried_first && result.trials() >= s {
             for dep in &result.deployments {
                 let first: HashSet<usize> = dep.run(method).chosen[..s].iter().copied().collect();
@@ -461,6 +465,7 @@ proptest! {
         c in 0.0f64..20.0,
         seed in any::<u64>(),
         replay_untried_first in any::<bool>(),
+        ucb_untried_zero in any::<bool>(),
     ) {
         let trials = 1 + ((table.n_houses() - 1) as f64 * trials_frac) as usize;
         let opts = ExperimentOptions {
@@ -470,6 +475,8 @@ proptest! {
             seed,
             replay_untried_first,
             with_replacement: false,
+            ucb_untried_zero,
+            reference_draws: false,
         };
         let result = run_experiment(&table, &opts).unwrap();
         check_invariants(&table, &result);
@@ -562,4 +569,57 @@ fn with_replacement_draws_repeat_houses_and_may_outnumber_them() {
             .iter()
             .any(|d| { d.houses.iter().collect::<HashSet<_>>().len() < d.houses.len() })
     );
+}
+
+#[test]
+fn reference_draws_follow_the_reference_script() {
+    // 150 houses, two strategies; house m costs m for strategy 0 and 100 for strategy 1.
+    let cost: Vec<Vec<f64>> = (0..150).map(|m| vec![m as f64, 100.0]).collect();
+    let table = CostTable::with_exact_replay(names("s", 2), names("h", 150), cost).unwrap();
+    let o = ExperimentOptions {
+        reference_draws: true,
+        ucb_untried_zero: true,
+        ..opts(500, 100, 0)
+    };
+    let result = run_experiment(&table, &o).unwrap();
+    // Run 0's and run 1's first maps are the reference's (its seeds 1000 + m).
+    assert_eq!(
+        result.deployments[0].houses[..10],
+        [20, 16, 139, 20, 125, 30, 63, 42, 7, 58]
+    );
+    assert_eq!(
+        result.deployments[1].houses[..10],
+        [38, 94, 87, 113, 126, 37, 87, 99, 71, 134]
+    );
+    // The best strategy's curve ends at the reference's weighted table mean.
+    let counts = ferret_select::numpy::reference_draw_counts(150, 500, 100);
+    let weighted: f64 = counts
+        .iter()
+        .enumerate()
+        .map(|(m, &w)| m as f64 * w as f64)
+        .sum::<f64>()
+        / 50_000.0;
+    assert_eq!(result.best_strategy, 0);
+    let last = *result.best_avg_cost.last().unwrap();
+    assert!((last - weighted).abs() < 1e-9, "{last} vs {weighted}");
+    // The first pick is a tie of two untried strategies: it draws from the stream, so the
+    // methods' maps part from the tie-free sequence after the first trial.
+    for dep in &result.deployments {
+        for m in Method::ALL {
+            let h = dep.houses_of(m);
+            assert_eq!(h.len(), 100);
+            assert_eq!(h[0], dep.houses[0]);
+        }
+    }
+    assert!(
+        result
+            .deployments
+            .iter()
+            .any(|d| d.houses_of(Method::Ucb) != d.houses.as_slice())
+    );
+    // Without reference draws every method sees the deployment's houses.
+    let plain = run_experiment(&table, &opts(5, 100, 0)).unwrap();
+    for d in &plain.deployments {
+        assert!(d.ucb.houses.is_none() && d.houses_of(Method::Ucb) == d.houses.as_slice());
+    }
 }

@@ -31,6 +31,8 @@ fn paper_like_result() -> ExperimentResult {
             seed: 0,
             replay_untried_first: false,
             with_replacement: false,
+            ucb_untried_zero: false,
+            reference_draws: false,
         },
         strategies: vec!["a".into(), "b".into(), "c".into()],
         mean_costs: vec![230.0, 240.0, 250.0],
@@ -83,6 +85,9 @@ fn selection_table_has_the_papers_layout_and_differences() {
         md.contains("100 houses drawn with replacement each"),
         "{md}"
     );
+    drawn.options.reference_draws = true;
+    let md = selection_table_markdown(&drawn, &PAPER_KS);
+    assert!(md.contains("numpy's legacy generator"), "{md}");
 }
 
 #[test]

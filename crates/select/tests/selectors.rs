@@ -223,3 +223,30 @@ fn methods_have_stable_names_and_selectors() {
     assert_eq!(Method::ReplaySelection.to_string(), "replay");
     assert!("thompson".parse::<Method>().is_err());
 }
+
+#[test]
+fn ucb_untried_score_zero_is_the_reference_rule() {
+    // Strategy 0 costs 1 m; after one trial its bound is 1 − c·√(ln 1 / 1) = 1 > 0, so an
+    // untried strategy (score 0) comes next.
+    let mut ucb = Ucb::new(3, 5.0).unwrap().untried_score(0.0);
+    assert_eq!(ucb.scores(), vec![0.0; 3]);
+    ucb.observe(0, 1.0, &[]).unwrap();
+    assert_eq!(ucb.score(0), 1.0);
+    assert_eq!(ucb.score(1), 0.0);
+    assert_ne!(ucb.choose(&mut rng(1)), 0);
+    // After three trials of strategy 0 its bound 1 − 5·√(ln 3 / 3) is negative: it beats the
+    // untried strategies, which the default (−∞) would have tried first.
+    ucb.observe(0, 1.0, &[]).unwrap();
+    ucb.observe(0, 1.0, &[]).unwrap();
+    assert!(ucb.score(0) < 0.0);
+    assert_eq!(ucb.choose(&mut rng(1)), 0);
+    let mut default = Ucb::new(3, 5.0).unwrap();
+    for _ in 0..3 {
+        default.observe(0, 1.0, &[]).unwrap();
+    }
+    assert_ne!(default.choose(&mut rng(1)), 0);
+    assert_eq!(
+        Ucb::new(2, 5.0).unwrap().untried_score(f64::NAN).score(0),
+        0.0
+    );
+}

@@ -14,6 +14,7 @@ use ferret_select::{DEFAULT_C, FinishedTrial, LiveDeployment, TrialEnd};
 use ferret_world::distance::{self, Place};
 use ferret_world::{
     Distances, GridParams, House, ObjectType, OccupancyGrid, Point, Pose, Scene, SceneFile,
+    TravelCost,
 };
 use serde::Serialize;
 use sha2::{Digest, Sha256};
@@ -1103,8 +1104,10 @@ impl Service {
                 revealed: Vec::new(),
             };
             let truth = hindsight_truth(house, target, c).map_err(plan_error)?;
+            // A robot's trial costs what it travelled; replays are plain path lengths to match.
             let replays = replay_costs(
                 ReplayMode::Pessimistic,
+                TravelCost::Plain,
                 candidates,
                 row.chosen,
                 cost,

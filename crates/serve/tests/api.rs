@@ -10,7 +10,7 @@ use ferret_plan::{
 };
 use ferret_select::{LiveDeployment, Method};
 use ferret_serve::{HttpOptions, ServeOptions, Service, ServiceOptions, Store};
-use ferret_world::{GridParams, ObjectType, SceneFile};
+use ferret_world::{GridParams, ObjectType, SceneFile, TravelCost};
 use serde_json::{Value, json};
 
 /// Three rooms in a row with doors, seven containers, targets in several places.
@@ -236,6 +236,7 @@ async fn a_deployment_through_the_api_costs_what_the_simulator_says() {
         let found = outcome.found.unwrap();
         let replays = replay_costs(
             ReplayMode::Pessimistic,
+            TravelCost::Plain,
             &candidates,
             i,
             outcome.cost,

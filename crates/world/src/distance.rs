@@ -29,6 +29,8 @@ use crate::error::{Result, WorldError};
 use crate::geometry::Point;
 use crate::grid::{Cell, GridParams, OccupancyGrid, neighbours};
 use crate::house::{House, Scene};
+use crate::rules::TravelCost;
+use crate::soft::SoftGrid;
 
 /// Most containers a house may have for its distances to be computed: the matrix holds
 /// (containers + 1)² distances, so 2 000 containers take 32 MB (60 000 would take 28 GB).
@@ -216,6 +218,34 @@ impl Distances {
     /// The grid the distances were measured on, if any.
     pub fn grid(&self) -> Option<&OccupancyGrid> {
         self.routes.as_ref().map(|r| &r.grid)
+    }
+
+    /// The reported cost, metres, of a trajectory visiting `places` in order: the sum of the
+    /// plain distances, or the soft cost of [`soft`](crate::soft) on this grid with every visited
+    /// cell freed first. `None` for the soft cost of synthetic distances (they have no grid) or
+    /// for a place that does not exist; the soft cost of a leg no 8-connected path joins
+    /// (possible only with cells that need corner cutting, never in practice) is infinite.
+    pub fn travel_cost(&self, places: &[Place], cost: TravelCost) -> Option<f64> {
+        let n = self.containers + 1;
+        if places.iter().any(|p| p.slot() >= n) {
+            return None;
+        }
+        match cost {
+            TravelCost::Plain => Some(places.windows(2).map(|l| self.between(l[0], l[1])).sum()),
+            TravelCost::Soft => {
+                let r = self.routes.as_ref()?;
+                let cells: Vec<usize> = places.iter().map(|p| r.cells[p.slot()] as usize).collect();
+                let soft = SoftGrid::new(
+                    r.grid.width() as usize,
+                    r.grid
+                        .raw_cells()
+                        .iter()
+                        .map(|&b| !OccupancyGrid::raw_reachable(b))
+                        .collect(),
+                )?;
+                Some(soft.trajectory_cost(&cells) * r.grid.resolution())
+            }
+        }
     }
 
     /// The shortest path from `a` to `b` as points on the floor (cell centres, from `a`'s cell to

@@ -17,6 +17,7 @@ use crate::error::{Result, WorldError};
 use crate::geometry::{Footprint, Point, Rect};
 use crate::house::House;
 use crate::map::{MapCell, OccupancyMap};
+use crate::rules::AccessRule;
 
 /// Parameters of the occupancy grid.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -35,6 +36,9 @@ pub struct GridParams {
     /// database, every container of multiroom-val150 is reachable for radii up to 0.2 m; at 0.25 m
     /// furniture closes off rooms in three houses.
     pub robot_radius: f64,
+    /// Where the robot stands to search a container that names no standing point of its own.
+    #[serde(default)]
+    pub access: AccessRule,
 }
 
 impl Default for GridParams {
@@ -43,6 +47,7 @@ impl Default for GridParams {
             resolution: 0.05,
             wall_thickness: 0.05,
             robot_radius: 0.18,
+            access: AccessRule::Footprint,
         }
     }
 }
@@ -584,9 +589,10 @@ impl Inner {
         self.access = house
             .containers
             .iter()
-            .map(|c| match c.access {
-                Some(p) => self.access_at(p, &c.footprint),
-                None => self.nearest_reachable(&c.footprint, c.room),
+            .map(|c| match (c.access, self.params.access) {
+                (Some(p), _) => self.access_at(p, &c.footprint),
+                (None, AccessRule::Footprint) => self.nearest_reachable(&c.footprint, c.room),
+                (None, AccessRule::NearestFree) => self.nearest_to_centre(&c.footprint),
             })
             .collect();
         for (i, a) in self.access.iter().enumerate() {
@@ -1005,6 +1011,25 @@ impl Inner {
             }
         }
         closed
+    }
+
+    /// The reference code's access cell for footprint `f`: the reachable cell whose centre is
+    /// nearest the footprint's centre, in any room (ties to the lowest index).
+    fn nearest_to_centre(&self, f: &Footprint) -> Option<Access> {
+        let w = self.width as usize;
+        self.cells
+            .iter()
+            .enumerate()
+            .filter(|&(_, &c)| c & REACHABLE != 0)
+            .map(|(i, _)| {
+                let p = self.center((i % w) as u32, (i / w) as u32);
+                (p.distance(f.center), i)
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))
+            .map(|(_, i)| Access {
+                cell: i as u32,
+                gap: footprint_distance(f, self.center((i % w) as u32, (i / w) as u32)),
+            })
     }
 
     /// The access cell for footprint `f`: a reachable free cell (in `room` when given) at most

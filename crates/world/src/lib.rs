@@ -16,7 +16,9 @@ pub mod house;
 pub mod input;
 pub mod map;
 pub mod procthor;
+pub mod rules;
 pub mod scene;
+pub mod soft;
 
 pub use distance::{Distances, Place};
 pub use error::{HouseLocation, Result, WorldError};
@@ -27,4 +29,6 @@ pub use house::{
     SmallObject, Wall,
 };
 pub use map::{MapCell, OccupancyMap};
+pub use rules::{AccessRule, ContainerSet, TravelCost};
 pub use scene::SceneFile;
+pub use soft::SoftGrid;

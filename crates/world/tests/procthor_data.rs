@@ -27,6 +27,7 @@ fn load(path: &Path, db: Option<&AssetDatabase>) -> LoadReport {
         asset_db: db,
         range: HouseRange::ALL,
         skip_invalid: true,
+        ..Default::default()
     };
     let started = Instant::now();
     let report = load_scenes(path, &opts).expect("file loads");

@@ -428,6 +428,7 @@ fn opts(range: &str, skip_invalid: bool) -> LoadOptions<'static> {
         asset_db: None,
         range: range.parse().unwrap(),
         skip_invalid,
+        ..Default::default()
     }
 }
 

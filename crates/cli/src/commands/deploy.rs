@@ -142,7 +142,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         }
     };
     let mut deployment = LiveDeployment::new(args.method, candidates.len(), args.c, args.seed)?;
-    let params = args.grid.params();
+    let params = args.grid.params_for(protocol.access);
     let mut rows = Vec::new();
     let mut total = 0.0;
     println!(
@@ -196,6 +196,9 @@ pub fn run(args: Args) -> Result<ExitCode> {
             &distances,
             &trial,
         )?;
+        // The selector learns from the cost the protocol reports (soft under the reference's
+        // rules); the strategies themselves planned on plain distances either way.
+        let cost = outcome.reported_cost(&scene.house, &distances, protocol.travel_cost)?;
         let Some(found) = outcome.found else {
             bail!(
                 "{}: the target {} was not found",
@@ -205,23 +208,24 @@ pub fn run(args: Args) -> Result<ExitCode> {
         };
         let replays = replay_costs(
             protocol.replay,
+            protocol.travel_cost,
             &candidates,
             i,
-            outcome.cost,
+            cost,
             &scene.house,
             &scene.truth,
             &distances,
             &trial,
             found,
         )?;
-        deployment.finish(outcome.cost, &replays)?;
-        total += outcome.cost;
+        deployment.finish(cost, &replays)?;
+        total += cost;
         let row = DeployRow {
             k: k + 1,
             house: scene.house.name.clone(),
             target: trial.target.to_string(),
             chosen: candidates[i].name().to_string(),
-            cost_m: outcome.cost,
+            cost_m: cost,
             found_container: scene.house.containers[found].id.clone(),
             average_cost_m: total / (k + 1) as f64,
             replays: candidates

@@ -1,6 +1,6 @@
 //! `ferret eval`: one trial per house, every strategy on it; costs, summary tables and pictures.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -63,6 +63,11 @@ pub struct Args {
     /// in summary.md.
     #[arg(long)]
     pub cells: bool,
+    /// More references for the paired comparisons in summary.md and paired.csv, comma
+    /// separated, each one of --strategies (e.g. `model/prior`, to see what an LLM adds to the
+    /// prior). Every strategy is always compared with the first one and with the best.
+    #[arg(long, value_delimiter = ',', value_name = "STRATEGY")]
+    pub paired_against: Vec<String>,
     /// House (index) whose trajectories are drawn; the first house when not given.
     #[arg(long)]
     pub show_house: Option<usize>,
@@ -297,6 +302,45 @@ impl SummaryRow {
     }
 }
 
+/// Each strategy's mean cost as the reference code averages its table: 500 runs of 100 houses
+/// drawn with replacement by numpy's legacy generator (`seed(s)`, shuffle, `choice`) from the
+/// houses in file order, i.e. a mean weighted by how often each house is drawn. Houses a
+/// strategy has no trial on are left out of its weights. `(strategy, metres)` in `order`.
+pub fn reference_means(
+    rows: &[TrialRow],
+    order: &[String],
+    houses: &[usize],
+) -> Vec<(String, f64)> {
+    let counts = ferret_select::numpy::reference_draw_counts(houses.len(), 500, 100);
+    let weight: HashMap<usize, f64> = houses
+        .iter()
+        .zip(&counts)
+        .map(|(&h, &c)| (h, c as f64))
+        .collect();
+    order
+        .iter()
+        .filter_map(|s| {
+            let (sum, total) = rows
+                .iter()
+                .filter(|r| &r.strategy == s)
+                .filter_map(|r| weight.get(&r.house_index).map(|w| (w * r.cost_m, *w)))
+                .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+            (total > 0.0).then(|| (s.clone(), sum / total))
+        })
+        .collect()
+}
+
+/// [`reference_means`] as Markdown, in metres and cells.
+fn reference_means_markdown(means: &[(String, f64)]) -> String {
+    let mut md = String::from(
+        "\n## As the reference code averages\n\nEach mean weighted by how often 500 seeded runs of 100 draws with replacement (numpy's legacy generator, as the reference's results script) pick each house.\n\n| strategy | mean cost (m) | mean cost (cells) |\n|---|---:|---:|\n",
+    );
+    for (s, m) in means {
+        md.push_str(&format!("| {s} | {m:.2} | {:.1} |\n", m / CELL_M));
+    }
+    md
+}
+
 /// The summary in 0.05 m cells as Markdown: the paper's unit, for comparison with its table I.
 pub fn cells_markdown(summary: &[SummaryRow]) -> String {
     let mut md = String::from(
@@ -329,8 +373,15 @@ pub fn run(args: Args) -> Result<ExitCode> {
         );
     }
     crate::common::check_distinct("--strategies", &args.strategies)?;
+    if let Some(s) = args
+        .paired_against
+        .iter()
+        .find(|s| !args.strategies.contains(s))
+    {
+        anyhow::bail!("--paired-against {s}: not one of --strategies");
+    }
     let protocol = args.protocol.resolve(Protocol::FERRET)?;
-    let loaded = args.houses.load()?;
+    let loaded = args.houses.load_for(protocol.containers)?;
     for s in &loaded.skipped {
         eprintln!("skipped: {s}");
     }
@@ -351,7 +402,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         .iter()
         .map(|s| setup.registry.build(s))
         .collect::<Result<_, _>>()?;
-    let maps = build_maps(&loaded.scenes, &args.grid.params());
+    let maps = build_maps(&loaded.scenes, &args.grid.params_for(protocol.access));
     let targets: Vec<(&ferret_world::House, ferret_world::ObjectType)> = loaded
         .scenes
         .iter()
@@ -411,7 +462,12 @@ pub fn run(args: Args) -> Result<ExitCode> {
         summary = summary.into_iter().map(SummaryRow::with_cells).collect();
     }
     write_csv(&args.out.join("summary.csv"), &summary)?;
-    let paired = paired_comparisons(&outcome.rows, &args.strategies, args.seed);
+    let paired = paired_comparisons(
+        &outcome.rows,
+        &args.strategies,
+        &args.paired_against,
+        args.seed,
+    );
     write_csv(&args.out.join("paired.csv"), &paired)?;
     let md = summary_markdown(
         &summary,
@@ -421,6 +477,13 @@ pub fn run(args: Args) -> Result<ExitCode> {
         outcome.trials_run,
     ) + &if args.cells {
         cells_markdown(&summary)
+    } else {
+        String::new()
+    } + &if protocol.rng == ferret_plan::TrialRng::Python
+        && args.trials_per_house == TrialsPerHouse::One
+    {
+        let houses: Vec<usize> = loaded.scenes.iter().map(|s| s.house.index).collect();
+        reference_means_markdown(&reference_means(&outcome.rows, &args.strategies, &houses))
     } else {
         String::new()
     } + &paired_markdown(&paired);
@@ -519,7 +582,13 @@ pub fn evaluate(
             let mut errors = Vec::new();
             for trial in &trials {
                 for s in strategies {
-                    match run_trial(s.as_ref(), &scene.house, &scene.truth, distances, trial) {
+                    let run = run_trial(s.as_ref(), &scene.house, &scene.truth, distances, trial)
+                        .and_then(|out| {
+                            let cost =
+                                out.reported_cost(&scene.house, distances, protocol.travel_cost)?;
+                            Ok(TrialOutcome { cost, ..out })
+                        });
+                    match run {
                         Ok(out) => rows.push(row(scene, trial, &out)),
                         // The target is named only when a house has several trials, so that
                         // single-trial messages read as before.
@@ -669,12 +738,12 @@ pub fn summarize(rows: &[TrialRow], order: &[String]) -> Vec<SummaryRow> {
 pub const PAIRED_RESAMPLES: usize = 10_000;
 
 /// One row of `paired.csv`: a strategy against a reference on the trials both finished.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct PairedRow {
     /// The strategy compared against.
     pub reference: String,
-    /// Why it is the reference: `first` (the first strategy named) or `best` (the lowest mean
-    /// on the paired trials, the oracle excepted).
+    /// Why it is the reference: `first` (the first strategy named), `best` (the lowest mean
+    /// on the paired trials, the oracle excepted) or `named` (given with `--paired-against`).
     pub role: &'static str,
     /// The strategy.
     pub strategy: String,
@@ -698,9 +767,15 @@ pub struct PairedRow {
 
 /// Every strategy of `order` against the first one, and against the best (lowest mean over the
 /// trials every strategy finished; the oracle is a bound, never the best) when that is another
-/// strategy. Pairs are the trials (house and target) both strategies of a comparison finished.
-/// `seed` seeds the bootstrap, so the table is reproducible.
-pub fn paired_comparisons(rows: &[TrialRow], order: &[String], seed: u64) -> Vec<PairedRow> {
+/// strategy, then against each of `named` that is neither. Pairs are the trials (house and
+/// target) both strategies of a comparison finished. `seed` seeds the bootstrap, so the table is
+/// reproducible.
+pub fn paired_comparisons(
+    rows: &[TrialRow],
+    order: &[String],
+    named: &[String],
+    seed: u64,
+) -> Vec<PairedRow> {
     let by = costs_by_trial(rows);
     let present: Vec<&str> = order
         .iter()
@@ -725,6 +800,13 @@ pub fn paired_comparisons(rows: &[TrialRow], order: &[String], seed: u64) -> Vec
     let mut references = vec![(first, "first")];
     if let Some(b) = best.filter(|b| *b != first) {
         references.push((b, "best"));
+    }
+    for n in named {
+        if let Some(&n) = present.iter().find(|s| **s == n.as_str())
+            && !references.iter().any(|(r, _)| *r == n)
+        {
+            references.push((n, "named"));
+        }
     }
     let mut out = Vec::new();
     for (reference, role) in references {
@@ -780,10 +862,10 @@ pub fn paired_markdown(paired: &[PairedRow]) -> String {
     for r in paired {
         if current != Some((r.reference.as_str(), r.role)) {
             current = Some((r.reference.as_str(), r.role));
-            let why = if r.role == "first" {
-                "the first strategy"
-            } else {
-                "the lowest mean, oracle excepted"
+            let why = match r.role {
+                "first" => "the first strategy",
+                "best" => "the lowest mean, oracle excepted",
+                _ => "named with --paired-against",
             };
             md.push_str(&format!(
                 "\nAgainst {} ({why}):\n\n| strategy | pairs | mean difference (m) | 95 % CI (m) | Wilcoxon p | wins / ties / losses |\n|---|---:|---:|---:|---:|---:|\n",
@@ -1005,6 +1087,28 @@ mod tests {
     }
 
     #[test]
+    fn reference_means_weight_houses_by_the_reference_draws() {
+        // Houses 10, 11, 12 in file order; strategy b lacks house 12.
+        let rows = vec![
+            trial(10, "a", 1.0),
+            trial(11, "a", 2.0),
+            trial(12, "a", 4.0),
+            trial(10, "b", 3.0),
+            trial(11, "b", 3.0),
+        ];
+        let order = vec!["a".to_string(), "b".to_string(), "c".to_string()];
+        let means = reference_means(&rows, &order, &[10, 11, 12]);
+        let w = ferret_select::numpy::reference_draw_counts(3, 500, 100);
+        let w: Vec<f64> = w.into_iter().map(|c| c as f64).collect();
+        assert_eq!(means.len(), 2, "no rows, no mean for c");
+        let a = (w[0] + 2.0 * w[1] + 4.0 * w[2]) / (w[0] + w[1] + w[2]);
+        assert!((means[0].1 - a).abs() < 1e-12);
+        // Unequal weights: the weighted mean is not the plain one.
+        assert!((a - 7.0 / 3.0).abs() > 1e-6);
+        assert!((means[1].1 - 3.0).abs() < 1e-12);
+    }
+
+    #[test]
     fn strategies_with_failed_trials_are_compared_on_paired_trials_only() {
         let order = vec!["optimistic+greedy".to_string(), "model/x".to_string()];
         // Greedy finished all four houses; model/x failed on house 3, the most expensive one.
@@ -1073,7 +1177,7 @@ mod tests {
         let mut extra = trial(9, "model/x", 1.0);
         extra.target = "Cup".into();
         rows.push(extra);
-        let paired = paired_comparisons(&rows, &order, 0);
+        let paired = paired_comparisons(&rows, &order, &[], 0);
         // Against greedy: x, y, oracle; against the best (model/x): greedy, y, oracle.
         assert_eq!(paired.len(), 6);
         let x = &paired[0];
@@ -1115,6 +1219,36 @@ mod tests {
         );
         assert!(md.contains("| 5 / 1 / 0 |"), "{md}");
         // The same seed gives the same table.
-        assert_eq!(paired_markdown(&paired_comparisons(&rows, &order, 0)), md);
+        assert_eq!(
+            paired_markdown(&paired_comparisons(&rows, &order, &[], 0)),
+            md
+        );
+        // A named reference adds its own table; the first, the best and strategies that ran no
+        // trial add nothing twice.
+        let named: Vec<String> = ["model/y", "model/x", "optimistic+greedy", "model/z"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        let with = paired_comparisons(&rows, &order, &named, 0);
+        assert_eq!(with.len(), 9);
+        assert_eq!(&with[..6], &paired[..]);
+        let y: Vec<(&str, &str, &str)> = with[6..]
+            .iter()
+            .map(|r| (r.role, r.reference.as_str(), r.strategy.as_str()))
+            .collect();
+        assert_eq!(
+            y,
+            [
+                ("named", "model/y", "optimistic+greedy"),
+                ("named", "model/y", "model/x"),
+                ("named", "model/y", "oracle")
+            ]
+        );
+        assert!((with[7].mean_diff_m + 7.0 / 6.0).abs() < 1e-12);
+        assert!(
+            paired_markdown(&with).contains("Against model/y (named with --paired-against)"),
+            "{}",
+            paired_markdown(&with)
+        );
     }
 }

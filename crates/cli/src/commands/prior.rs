@@ -23,6 +23,11 @@ pub struct TrainArgs {
     /// More training files (whole files), e.g. smallhouse-train1000 plus oneroom-train500.
     #[arg(long, value_name = "PATH")]
     also: Vec<PathBuf>,
+    /// Which top-level objects of the training houses are containers: train with the set the
+    /// evaluation will use (`furniture` for `--protocol paper`), so that every container type
+    /// it meets has been seen.
+    #[arg(long, value_name = "receptacles|furniture", default_value_t)]
+    containers: ferret_world::ContainerSet,
     /// Smoothing weight toward the back-off estimate (pseudo-containers).
     #[arg(long, default_value_t = 2.0)]
     smoothing: f64,
@@ -39,14 +44,14 @@ pub fn run(cmd: Command) -> Result<ExitCode> {
 }
 
 fn train(args: TrainArgs) -> Result<ExitCode> {
-    let mut loaded = args.houses.load()?;
+    let mut loaded = args.houses.load_for(args.containers)?;
     for path in &args.also {
         let more = HouseArgs {
             houses: Some(path.clone()),
             range: None,
             ..args.houses.clone()
         }
-        .load()?;
+        .load_for(args.containers)?;
         loaded.scenes.extend(more.scenes);
         loaded.skipped.extend(more.skipped);
     }

@@ -125,6 +125,7 @@ fn load_scene(args: &ShowArgs) -> Result<Scene> {
                 asset_db: db.as_ref(),
                 range: HouseRange::single(args.index),
                 skip_invalid: false,
+                ..Default::default()
             };
             load_scenes(path, &opts)?
                 .scenes

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
 
 use anyhow::{Context, Result, bail};
-use ferret_plan::{DrawMode, ReplayMode, Strategy, draw_trials_with, replay_cost_with};
+use ferret_plan::{DrawMode, ReplayMode, Strategy, draw_trials_with, replay_outcome_with};
 use ferret_report::{CurvePanel, draw_choice_shares, draw_curve_panels};
 use ferret_select::{
     CostTable, ExperimentOptions, Method, ORACLE, PAPER_KS, choice_rows, run_experiment,
@@ -118,15 +118,11 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let protocol = args.protocol.resolve(info.protocol)?;
     if protocol.trial_settings() != info.protocol.trial_settings() {
         bail!(
-            "{} was made with initial belief {}, containers {}, targets {}; select asks for {}, {}, {}: \
-             selecting over trials of another protocol would mix them (run eval again instead)",
+            "{} was made with {}; select asks for {}: selecting over trials of another protocol \
+             would mix them (run eval again instead)",
             args.trials.display(),
-            info.protocol.initial_belief,
-            info.protocol.containers,
-            info.protocol.targets,
-            protocol.initial_belief,
-            protocol.containers,
-            protocol.targets
+            info.protocol.trial_settings(),
+            protocol.trial_settings()
         );
     }
     let trials_path = args.trials.join("trials.csv");
@@ -250,6 +246,11 @@ pub fn run(args: Args) -> Result<ExitCode> {
         seed: args.seed,
         replay_untried_first: args.replay_untried_first,
         with_replacement: protocol.draw == DrawMode::Replacement,
+        ucb_untried_zero: protocol.untried == ferret_plan::UntriedScore::Zero,
+        // The reference's numpy draws are draws with replacement; with distinct houses the
+        // deployments keep ferret's own streams.
+        reference_draws: protocol.rng == ferret_plan::TrialRng::Python
+            && protocol.draw == DrawMode::Replacement,
     };
     let result = run_experiment(&table, &opts)?;
     std::fs::create_dir_all(&args.out)?;
@@ -574,13 +575,13 @@ fn load_or_compute_replays(
         todo.len(),
         path.display()
     );
-    let loaded = info.house_args().load()?;
+    let loaded = info.house_args().load_for(info.protocol.containers)?;
     let scenes: Vec<Scene> = loaded
         .scenes
         .into_iter()
         .filter(|s| todo.contains(&s.house.index))
         .collect();
-    let maps = build_maps(&scenes, &info.grid_args().params());
+    let maps = build_maps(&scenes, &info.grid_args().params_for(info.protocol.access));
     let setup = super::llm_setup::full_registry(&info.planning, &args.llm, candidates)?;
     let strategies: Vec<Arc<dyn Strategy>> = candidates
         .iter()
@@ -682,7 +683,15 @@ pub fn replay_house(
                 house.name
             );
         };
-        replay_trial(scene, distances, strategies, rows, trial, mode, &mut out)?;
+        replay_trial(
+            scene,
+            distances,
+            strategies,
+            rows,
+            trial,
+            (mode, info.protocol.travel_cost),
+            &mut out,
+        )?;
     }
     Ok(out)
 }
@@ -694,7 +703,7 @@ fn replay_trial(
     strategies: &[Arc<dyn Strategy>],
     rows: &HashMap<&str, &TrialRow>,
     trial: &ferret_plan::TrialSpec,
-    mode: ReplayMode,
+    (mode, travel): (ReplayMode, ferret_plan::TravelCost),
     out: &mut Vec<ReplayRow>,
 ) -> Result<()> {
     let house = &scene.house;
@@ -722,7 +731,7 @@ fn replay_trial(
             if s.name() == deployed.name() {
                 continue;
             }
-            let c = replay_cost_with(
+            let c = replay_outcome_with(
                 mode,
                 s.as_ref(),
                 house,
@@ -730,7 +739,8 @@ fn replay_trial(
                 distances,
                 trial,
                 found,
-            )?;
+            )?
+            .reported_cost(house, distances, travel)?;
             out.push(ReplayRow {
                 house_index: house.index,
                 target: trial.target.to_string(),

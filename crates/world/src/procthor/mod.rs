@@ -9,6 +9,7 @@
 //!     asset_db: Some(&db),
 //!     range: "0..150".parse().expect("a valid range"),
 //!     skip_invalid: true,
+//!     ..Default::default()
 //! };
 //! let report = load_scenes(Path::new("multiroom-val150.jsonl.gz"), &opts)?;
 //! for scene in &report.scenes {
@@ -26,6 +27,7 @@ pub mod types;
 pub use assets::AssetDatabase;
 pub use range::{HouseRange, ParseRangeError};
 pub use reader::{
-    LoadOptions, LoadReport, MAX_CONTAINERS, MAX_COORDINATE, MAX_LINE_BYTES, ROOM_TOLERANCE,
-    START_TOLERANCE, load_scenes, parse_house, scene_from_raw,
+    IGNORED_TYPES, LoadOptions, LoadReport, MAX_CONTAINERS, MAX_COORDINATE, MAX_LINE_BYTES,
+    ROOM_TOLERANCE, START_TOLERANCE, is_ignored_type, load_scenes, parse_house, parse_house_with,
+    scene_from_raw, scene_from_raw_with,
 };

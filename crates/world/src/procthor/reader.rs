@@ -20,6 +20,7 @@ use crate::house::{
     Container, Door, GroundTruth, House, ObjectType, Obstacle, Pose, Room, RoomType, Scene,
     SmallObject, Wall,
 };
+use crate::rules::ContainerSet;
 
 /// Coordinates beyond this many metres from the origin are rejected: no house is kilometres
 /// across, and such numbers would make the occupancy grid absurdly large.
@@ -60,6 +61,8 @@ pub struct LoadOptions<'a> {
     pub range: HouseRange,
     /// Put invalid houses into [`LoadReport::skipped`] and go on, instead of failing on the first.
     pub skip_invalid: bool,
+    /// Which top-level objects are containers.
+    pub containers: ContainerSet,
 }
 
 /// What [`load_scenes`] read.
@@ -98,6 +101,7 @@ pub fn load_scenes(path: &Path, opts: &LoadOptions) -> Result<LoadReport> {
         index,
     };
     let db = opts.asset_db;
+    let rule = opts.containers;
 
     let (mut results, total) = if is_single_house_file(path) {
         let mut bytes = Vec::new();
@@ -114,7 +118,7 @@ pub fn load_scenes(path: &Path, opts: &LoadOptions) -> Result<LoadReport> {
             });
         }
         let results = if opts.range.contains(0) {
-            vec![(0, house_from_bytes(bytes, &at(0), db))]
+            vec![(0, house_from_bytes(bytes, &at(0), db, rule))]
         } else {
             Vec::new()
         };
@@ -131,7 +135,7 @@ pub fn load_scenes(path: &Path, opts: &LoadOptions) -> Result<LoadReport> {
         };
         let results: Vec<(usize, Result<Scene>)> = (&mut lines)
             .par_bridge()
-            .map(|(i, bytes)| (i, house_from_bytes(bytes, &at(i), db)))
+            .map(|(i, bytes)| (i, house_from_bytes(bytes, &at(i), db, rule)))
             .collect();
         match lines.error {
             Some(LineError::Io(source)) => return Err(io_err(source)),
@@ -299,12 +303,13 @@ fn house_from_bytes(
     bytes: Vec<u8>,
     at: &HouseLocation,
     db: Option<&AssetDatabase>,
+    containers: ContainerSet,
 ) -> Result<Scene> {
     let text = String::from_utf8(bytes).map_err(|e| WorldError::Malformed {
         at: at.clone(),
         message: format!("not UTF-8: {}", e.utf8_error()),
     })?;
-    parse_house(&text, at, db)
+    parse_house_with(&text, at, db, containers)
 }
 
 /// Parses and validates one house from its JSON text. Malformed JSON and missing fields are
@@ -314,6 +319,16 @@ pub fn parse_house(
     json: &str,
     at: &HouseLocation,
     asset_db: Option<&AssetDatabase>,
+) -> Result<Scene> {
+    parse_house_with(json, at, asset_db, ContainerSet::Receptacles)
+}
+
+/// [`parse_house`] with a choice of container set (see [`scene_from_raw_with`]).
+pub fn parse_house_with(
+    json: &str,
+    at: &HouseLocation,
+    asset_db: Option<&AssetDatabase>,
+    containers: ContainerSet,
 ) -> Result<Scene> {
     let raw: RawHouse = match serde_json::from_str(json) {
         Ok(raw) => raw,
@@ -330,7 +345,7 @@ pub fn parse_house(
             });
         }
     };
-    scene_from_raw(&raw, at, asset_db)
+    scene_from_raw_with(&raw, at, asset_db, containers)
 }
 
 /// Converts a parsed house into a [`Scene`], checking everything the rest of ferret relies on:
@@ -352,6 +367,40 @@ pub fn scene_from_raw(
     at: &HouseLocation,
     asset_db: Option<&AssetDatabase>,
 ) -> Result<Scene> {
+    scene_from_raw_with(raw, at, asset_db, ContainerSet::Receptacles)
+}
+
+/// [`scene_from_raw`] with a choice of container set. [`ContainerSet::Receptacles`] is
+/// [`scene_from_raw`]'s rule. [`ContainerSet::Furniture`] is the reference code's: every
+/// top-level object is a container except those of the [`IGNORED_TYPES`] (which stay obstacles),
+/// and a container's contents are its direct children whose type is not the type of any
+/// top-level object of the house (ignored ones included). Types come from the id when it
+/// starts with one (`Fridge|2|1`, as ProcTHOR-10k writes ids), otherwise as
+/// [`scene_from_raw`] finds them; ignored types and top-level types are compared in lower case.
+pub fn scene_from_raw_with(
+    raw: &RawHouse,
+    at: &HouseLocation,
+    asset_db: Option<&AssetDatabase>,
+    rule: ContainerSet,
+) -> Result<Scene> {
+    let furniture = rule == ContainerSet::Furniture;
+    let type_of = |o: &RawObject| {
+        if furniture {
+            id_type(&o.id).or_else(|| resolve_type(o, asset_db))
+        } else {
+            resolve_type(o, asset_db)
+        }
+    };
+    // The reference's set of top-level types, for dropping children that are furniture too.
+    let top_level: std::collections::HashSet<String> = if furniture {
+        raw.objects
+            .iter()
+            .filter_map(type_of)
+            .map(|t| t.as_str().to_lowercase())
+            .collect()
+    } else {
+        Default::default()
+    };
     let invalid = |field: String, message: String| WorldError::Invalid {
         at: at.clone(),
         field,
@@ -459,7 +508,7 @@ pub fn scene_from_raw(
                 format!("{yaw_deg} is not a finite angle"),
             ));
         }
-        let object_type = match resolve_type(o, asset_db) {
+        let object_type = match type_of(o) {
             Some(t) => t,
             None => {
                 tracing::warn!(
@@ -492,7 +541,12 @@ pub fn scene_from_raw(
             size_z,
             yaw_deg,
         };
-        if is_container_type(&object_type) {
+        let is_container = if furniture {
+            !is_ignored_type(&object_type)
+        } else {
+            is_container_type(&object_type)
+        };
+        if is_container {
             if containers.len() == MAX_CONTAINERS {
                 return Err(WorldError::Limit {
                     at: at.clone(),
@@ -506,8 +560,13 @@ pub fn scene_from_raw(
                 o.children
                     .iter()
                     .filter_map(|c| {
-                        let t = resolve_type(c, asset_db)?;
-                        is_searchable_content(&t).then(|| SmallObject {
+                        let t = type_of(c)?;
+                        let keep = if furniture {
+                            !top_level.contains(&t.as_str().to_lowercase())
+                        } else {
+                            is_searchable_content(&t)
+                        };
+                        keep.then(|| SmallObject {
                             id: c.id.clone(),
                             object_type: t,
                         })
@@ -668,6 +727,43 @@ fn door(d: &RawDoor, wall: &Wall) -> std::result::Result<Door, (&'static str, St
     })
 }
 
+/// The object types the reference code never treats as containers, in lower case: its ignore
+/// list as it takes effect (the list also spells `basketBall`, which never matches a
+/// lower-cased type).
+pub const IGNORED_TYPES: [&str; 15] = [
+    "baseballbat",
+    "boots",
+    "desklamp",
+    "painting",
+    "floorlamp",
+    "houseplant",
+    "roomdecor",
+    "showercurtain",
+    "showerhead",
+    "television",
+    "vacuumcleaner",
+    "photo",
+    "plunger",
+    "basketball",
+    "box",
+];
+
+/// True for a type of [`IGNORED_TYPES`], compared in lower case.
+pub fn is_ignored_type(t: &ObjectType) -> bool {
+    let lower = t.as_str().to_lowercase();
+    IGNORED_TYPES.contains(&lower.as_str())
+}
+
+/// The type an id starts with (`Fridge|2|1` → `Fridge`, `Bowl|surface|6|39` → `Bowl`), as
+/// ProcTHOR-10k writes ids; `None` for ids of other releases (`4|0|0`, `small|4|5`), whose
+/// first field is a number or a lower-case word.
+fn id_type(id: &str) -> Option<ObjectType> {
+    let first = id.split('|').next()?;
+    (first.starts_with(|c: char| c.is_ascii_uppercase())
+        && first.chars().all(|c| c.is_ascii_alphanumeric()))
+    .then(|| ObjectType::new(first))
+}
+
 /// The object type: the `objectType` field, else the asset database, else our own mapping.
 fn resolve_type(o: &RawObject, asset_db: Option<&AssetDatabase>) -> Option<ObjectType> {
     if let Some(t) = o.object_type.as_deref().filter(|t| !t.is_empty()) {
@@ -759,6 +855,18 @@ mod tests {
         assert_eq!(id_room_hint("Fridge|2|0"), Some(2));
         assert_eq!(id_room_hint("Fridge"), None);
         assert_eq!(id_room_hint(""), None);
+    }
+
+    #[test]
+    fn id_types_come_only_from_type_prefixes() {
+        assert_eq!(id_type("Fridge|2|1"), Some(ObjectType::new("Fridge")));
+        assert_eq!(id_type("Bowl|surface|6|39"), Some(ObjectType::new("Bowl")));
+        assert_eq!(id_type("4|0|0"), None);
+        assert_eq!(id_type("small|4|5"), None);
+        assert_eq!(id_type(""), None);
+        assert!(is_ignored_type(&ObjectType::new("BasketBall")));
+        assert!(is_ignored_type(&ObjectType::new("HousePlant")));
+        assert!(!is_ignored_type(&ObjectType::new("Chair")));
     }
 
     #[test]

@@ -126,3 +126,62 @@ pub const ASSET_DB: &str = r#"{
     "Chair": [{"assetId": "Chair_204_1", "objectType": "Chair",
                "boundingBox": {"x": 0.45, "y": 0.9, "z": 0.5}}]
 }"#;
+
+/// A house written the ProcTHOR-10k way: types only in the id prefixes (`Fridge|1|0`,
+/// `Egg|surface|1|3`), no `objectType` fields, no asset known to any database. Besides the
+/// furniture of [`house_a`] it has a box (an ignored type) holding a cup, a chair-typed child
+/// on the sofa (a child whose type is also a top-level type), and a grandchild under the remote.
+pub fn house_10k() -> Value {
+    let mut h = house_a();
+    let renames = [
+        ("1|0", "Fridge|1|0"),
+        ("small|1|0", "Egg|surface|1|10"),
+        ("small|1|1", "Apple|surface|1|11"),
+        ("1|1|0", "CounterTop|1|1"),
+        ("small|1|2", "Microwave|surface|1|12"),
+        ("small|1|3", "CellPhone|surface|1|13"),
+        ("1|2", "Chair|1|2"),
+        ("1|3", "Painting|1|3"),
+        ("2|0", "Sofa|2|0"),
+        ("small|2|4", "RemoteControl|surface|2|14"),
+        ("2|1", "Dresser|2|1"),
+        ("small|2|5", "Book|surface|2|15"),
+        ("2|2", "FloorLamp|2|2"),
+    ];
+    fn rename(o: &mut Value, renames: &[(&str, &str)]) {
+        if let Some((_, new)) = renames.iter().find(|(old, _)| o["id"] == *old) {
+            o["id"] = json!(new);
+        }
+        if let Some(m) = o.as_object_mut() {
+            m.remove("objectType");
+            m.insert("assetId".into(), json!("Unlisted_1"));
+        }
+        if let Some(children) = o.get_mut("children").and_then(Value::as_array_mut) {
+            for c in children {
+                rename(c, renames);
+            }
+        }
+    }
+    let objects = h["objects"].as_array_mut().expect("objects");
+    for o in objects.iter_mut() {
+        rename(o, &renames);
+    }
+    let child = |id: &str, x: f64, z: f64| {
+        json!({"id": id, "assetId": "Unlisted_1",
+               "position": {"x": x, "y": 0.8, "z": z}, "rotation": {"x": 0, "y": 0, "z": 0}})
+    };
+    let sofa = objects
+        .iter_mut()
+        .find(|o| o["id"] == "Sofa|2|0")
+        .expect("sofa");
+    sofa["children"]
+        .as_array_mut()
+        .expect("children")
+        .push(child("Chair|surface|2|16", 6.2, 2.5));
+    sofa["children"][0]["children"] = json!([child("Pen|surface|2|17", 6.0, 2.5)]);
+    let mut bx = child("Box|2|3", 3.0, 2.5);
+    bx["position"]["y"] = json!(0.2);
+    bx["children"] = json!([child("Cup|surface|1|18", 3.0, 2.5)]);
+    objects.push(bx);
+    h
+}

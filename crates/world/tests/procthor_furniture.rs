@@ -1,0 +1,174 @@
+//! The reference code's container set and access points on a ProcTHOR-10k-style house made
+//! here: which objects are containers, what they hold, and the soft cost on its grid.
+
+#[path = "procthor_fixture/mod.rs"]
+mod fixture;
+
+use std::path::{Path, PathBuf};
+
+use ferret_world::procthor::{AssetDatabase, parse_house, parse_house_with};
+use ferret_world::{
+    AccessRule, ContainerSet, Distances, GridParams, HouseLocation, OccupancyGrid, Place, Scene,
+    TravelCost,
+};
+
+fn at() -> HouseLocation {
+    HouseLocation {
+        file: PathBuf::from("procthor-10k-train.jsonl"),
+        index: 1000,
+    }
+}
+
+fn load(rule: ContainerSet) -> Scene {
+    parse_house_with(&fixture::house_10k().to_string(), &at(), None, rule).unwrap()
+}
+
+fn ids(scene: &Scene) -> Vec<&str> {
+    scene
+        .house
+        .containers
+        .iter()
+        .map(|c| c.id.as_str())
+        .collect()
+}
+
+fn contents(scene: &Scene, id: &str) -> Vec<String> {
+    let i = scene.house.container_index(id).unwrap();
+    scene
+        .truth
+        .contents(i)
+        .iter()
+        .map(|o| o.object_type.to_string())
+        .collect()
+}
+
+#[test]
+fn furniture_is_every_top_level_object_but_the_ignored_types() {
+    let scene = load(ContainerSet::Furniture);
+    // Types from the id prefixes; the painting, floor lamp and box are ignored (the painting
+    // hangs on a wall and is not drawn at all; the lamp and the box stay obstacles).
+    assert_eq!(
+        ids(&scene),
+        [
+            "Fridge|1|0",
+            "CounterTop|1|1",
+            "Chair|1|2",
+            "Sofa|2|0",
+            "Dresser|2|1"
+        ]
+    );
+    let types: Vec<&str> = scene
+        .house
+        .containers
+        .iter()
+        .map(|c| c.object_type.as_str())
+        .collect();
+    assert_eq!(types, ["Fridge", "CounterTop", "Chair", "Sofa", "Dresser"]);
+    let obstacles: Vec<&str> = scene
+        .house
+        .obstacles
+        .iter()
+        .map(|o| o.id.as_str())
+        .collect();
+    assert_eq!(obstacles, ["FloorLamp|2|2", "Box|2|3"]);
+    // Direct children only (the pen under the remote is never looked at), every type kept but
+    // those that are also top-level types (the chair on the sofa); the microwave counts.
+    assert_eq!(
+        contents(&scene, "CounterTop|1|1"),
+        ["Microwave", "CellPhone"]
+    );
+    assert_eq!(contents(&scene, "Sofa|2|0"), ["RemoteControl"]);
+    assert_eq!(contents(&scene, "Chair|1|2"), Vec::<String>::new());
+    // The box's cup vanished with the box.
+    assert!(
+        !scene
+            .truth
+            .target_types()
+            .iter()
+            .any(|t| t.as_str() == "Cup")
+    );
+}
+
+#[test]
+fn furniture_contains_the_receptacles() {
+    let db = AssetDatabase::parse(fixture::ASSET_DB, Path::new("db.json")).unwrap();
+    let h = fixture::house_b().to_string();
+    let receptacles = parse_house(&h, &at(), Some(&db)).unwrap();
+    let furniture = parse_house_with(&h, &at(), Some(&db), ContainerSet::Furniture).unwrap();
+    let f = ids(&furniture);
+    assert!(!ids(&receptacles).is_empty());
+    for id in ids(&receptacles) {
+        assert!(f.contains(&id), "{id} is a receptacle but no furniture");
+    }
+    assert!(f.len() > ids(&receptacles).len(), "the chair is furniture");
+    // Ids without a type prefix are typed as before: the 4|0|0-style house gives the same
+    // containers under either rule where both know the type.
+    let a = fixture::house_a().to_string();
+    let plain = parse_house_with(&a, &at(), Some(&db), ContainerSet::Furniture).unwrap();
+    assert!(ids(&plain).contains(&"1|0"));
+    assert!(!ids(&plain).contains(&"2|2"), "the floor lamp is ignored");
+}
+
+#[test]
+fn nearest_free_access_is_the_reachable_cell_nearest_the_centre() {
+    let scene = load(ContainerSet::Furniture);
+    let params = GridParams {
+        access: AccessRule::NearestFree,
+        ..GridParams::default()
+    };
+    let grid = OccupancyGrid::build(&scene.house, &params).unwrap();
+    let footprint = OccupancyGrid::build(&scene.house, &GridParams::default()).unwrap();
+    for (i, c) in scene.house.containers.iter().enumerate() {
+        let cell = grid.access_cell(i).unwrap();
+        assert!(grid.is_reachable(cell));
+        let d = grid.center(cell).distance(c.position);
+        // No reachable cell is nearer the centre.
+        let nearer = grid
+            .cells()
+            .filter(|&(k, _)| grid.is_reachable(k))
+            .any(|(k, _)| grid.center(k).distance(c.position) < d - 1e-12);
+        assert!(!nearer, "{}", c.id);
+        // And never farther from the centre than the footprint rule's cell.
+        let other = footprint.access_cell(i).unwrap();
+        assert!(d <= footprint.center(other).distance(c.position) + 1e-12);
+    }
+    // The rule changes only access points, not the cells.
+    assert_eq!(grid.kind_counts(), footprint.kind_counts());
+}
+
+#[test]
+fn soft_cost_of_a_trajectory_is_at_least_its_plain_length() {
+    let scene = load(ContainerSet::Furniture);
+    let grid = OccupancyGrid::build(&scene.house, &GridParams::default()).unwrap();
+    let d = Distances::compute(&scene.house, &grid).unwrap();
+    let n = scene.house.containers.len();
+    let visits: Vec<Place> = std::iter::once(Place::Start)
+        .chain((0..n).rev().map(Place::Container))
+        .collect();
+    let plain = d.travel_cost(&visits, TravelCost::Plain).unwrap();
+    let soft = d.travel_cost(&visits, TravelCost::Soft).unwrap();
+    assert!(plain > 1.0);
+    assert!(
+        soft >= plain && soft <= 1.28 * plain + 1e-9,
+        "soft {soft}, plain {plain}"
+    );
+    for leg in visits.windows(2) {
+        let p = d.travel_cost(leg, TravelCost::Plain).unwrap();
+        let s = d.travel_cost(leg, TravelCost::Soft).unwrap();
+        assert!(s >= p - 1e-9, "{leg:?}: soft {s} < plain {p}");
+    }
+    // Synthetic distances have no grid, so no soft cost; a bad place has no cost at all.
+    let m = Distances::from_matrix(1, vec![0.0, 1.0, 1.0, 0.0]).unwrap();
+    assert_eq!(
+        m.travel_cost(&[Place::Start, Place::Container(0)], TravelCost::Plain),
+        Some(1.0)
+    );
+    assert_eq!(
+        m.travel_cost(&[Place::Start, Place::Container(0)], TravelCost::Soft),
+        None
+    );
+    assert_eq!(
+        m.travel_cost(&[Place::Container(5)], TravelCost::Plain),
+        None
+    );
+}

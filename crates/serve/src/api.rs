@@ -51,7 +51,8 @@ pub fn scene_schema(limits: &crate::service::SceneLimits) -> serde_json::Value {
         "type": "array", "minItems": 2, "maxItems": 2,
         "items": {"type": "number", "exclusiveMinimum": 0, "maximum": max}
     });
-    let name = json!({"type": "string", "pattern": UPLOAD_NAME_PATTERN, "maxLength": MAX_TYPE_NAME});
+    let name =
+        json!({"type": "string", "pattern": UPLOAD_NAME_PATTERN, "maxLength": MAX_TYPE_NAME});
     let type_name = json!({"type": "string", "pattern": TYPE_NAME_PATTERN});
     json!({
         "type": "object",
@@ -167,9 +168,37 @@ pub struct CreateDeployment {
     #[schema(minimum = 0.0, maximum = 1000.0)]
     pub c: Option<f64>,
     /// Seed of the selector's tie breaks (default 0).
-    #[serde(default)]
+    #[serde(default, deserialize_with = "integer_valued")]
     #[schema(minimum = 0, maximum = 9007199254740991_i64)]
     pub seed: Option<u64>,
+}
+
+/// A non-negative integer as JSON Schema counts one: `2232.0` is the integer 2232, as many JSON
+/// encoders write it. An integral number too large for `u64` becomes `u64::MAX`, so that the
+/// bound check names the field (422) as for any other seed too large.
+fn integer_valued<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<u64>, D::Error> {
+    use serde::de::Error;
+    let Some(n) = Option::<serde_json::Number>::deserialize(d)? else {
+        return Ok(None);
+    };
+    if let Some(v) = n.as_u64() {
+        return Ok(Some(v));
+    }
+    match n.as_f64() {
+        Some(f) if f >= 0.0 && f.fract() == 0.0 => {
+            // Exact below 2^64; the bound check refuses everything from 2^53 on anyway.
+            #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+            let v = if f < 18_446_744_073_709_551_616.0 {
+                f as u64
+            } else {
+                u64::MAX
+            };
+            Ok(Some(v))
+        }
+        _ => Err(D::Error::custom(format!(
+            "invalid value: {n}, expected a non-negative integer"
+        ))),
+    }
 }
 
 /// `POST /deployments/{id}/trials`.
@@ -214,7 +243,6 @@ pub struct Observe {
     #[schema(minimum = 0.0, maximum = 100000.0)]
     pub travelled_m: Option<f64>,
 }
-
 
 /// A scene in the list.
 #[derive(Debug, Serialize, ToSchema)]

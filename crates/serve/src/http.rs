@@ -5,7 +5,8 @@
 //!
 //! Every request passes the guards in this order: `Host` must name this server (403), a
 //! browser's `Origin` must be one allowed for CORS (403), the bearer token must match when one
-//! is set (401), a `POST` body must be JSON (415) and no larger than the limit (413). Together
+//! is set (401); then a route that takes a body wants JSON (415) no larger than the limit
+//! (413), and other methods on a route are 405 whatever their body. Together
 //! they keep a web page the robot's operator happens to open from driving the robot (a form or
 //! `text/plain` post, a DNS-rebinding page).
 
@@ -155,8 +156,22 @@ fn parse<T: DeserializeOwned>(body: &[u8]) -> Result<T, ApiError> {
     Ok(value)
 }
 
-/// The body, or the error axum met reading it (413 past the limit) as a JSON error.
-fn body(b: Result<Bytes, BytesRejection>) -> Result<Bytes, ApiError> {
+/// The body, or the error axum met reading it (413 past the limit) as a JSON error. A body that
+/// is not `application/json` is refused (415) before it is parsed: forms and `text/plain` are
+/// what a web page may post to another site without asking.
+fn body(headers: &HeaderMap, b: Result<Bytes, BytesRejection>) -> Result<Bytes, ApiError> {
+    let json = headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.split(';').next())
+        .is_some_and(|t| t.trim().eq_ignore_ascii_case("application/json"));
+    if !json {
+        return Err(ApiError::new(
+            415,
+            "content-type",
+            "the body must be JSON, sent as `Content-Type: application/json`",
+        ));
+    }
     b.map_err(|e| ApiError::new(e.status().as_u16(), "", e.body_text()))
 }
 
@@ -207,10 +222,11 @@ async fn get_scene(
     (status = 201, body = SceneDetail)))]
 async fn upload_scene(
     State(s): State<Arc<Service>>,
+    headers: HeaderMap,
     b: Result<Bytes, BytesRejection>,
 ) -> Response {
     blocking(move || {
-        let b = body(b)?;
+        let b = body(&headers, b)?;
         let req: UploadScene = parse(&b)?;
         s.upload_scene(req, &b)
     })
@@ -221,10 +237,11 @@ async fn upload_scene(
     responses((status = 201, body = DeploymentState)))]
 async fn create_deployment(
     State(s): State<Arc<Service>>,
+    headers: HeaderMap,
     b: Result<Bytes, BytesRejection>,
 ) -> Response {
     blocking(move || {
-        let b = body(b)?;
+        let b = body(&headers, b)?;
         let req: CreateDeployment = parse(&b)?;
         s.create_deployment(req, &b)
     })
@@ -246,11 +263,12 @@ async fn get_deployment(
 async fn start_trial(
     State(s): State<Arc<Service>>,
     raw: Result<Path<String>, PathRejection>,
+    headers: HeaderMap,
     b: Result<Bytes, BytesRejection>,
 ) -> Response {
     blocking(move || {
         let d = id(&segment(raw, "deployment")?, "deployment")?;
-        let b = body(b)?;
+        let b = body(&headers, b)?;
         let req: StartTrial = parse(&b)?;
         s.start_trial(d, req, &b)
     })
@@ -272,11 +290,12 @@ async fn get_trial(
 async fn observe(
     State(s): State<Arc<Service>>,
     raw: Result<Path<String>, PathRejection>,
+    headers: HeaderMap,
     b: Result<Bytes, BytesRejection>,
 ) -> Response {
     blocking(move || {
         let t = id(&segment(raw, "trial")?, "trial")?;
-        let b = body(b)?;
+        let b = body(&headers, b)?;
         let req: Observe = parse(&b)?;
         s.observe(t, req, &b)
     })
@@ -307,20 +326,32 @@ pub struct ApiDoc;
 
 /// Statuses every route may answer besides its own, and why.
 const COMMON_STATUSES: [(u16, &str); 2] = [
-    (403, "The Host header names another server, or a browser Origin is not allowed"),
+    (
+        403,
+        "The Host header names another server, or a browser Origin is not allowed",
+    ),
     (500, "The server's own failure (its database)"),
 ];
 
 /// Statuses of each route: `(method, path, [(status, description)])`.
 fn route_statuses() -> Vec<(&'static str, &'static str, Vec<(u16, &'static str)>)> {
     let body = [
-        (400, "Malformed JSON, not an object, a missing or mistyped field"),
+        (
+            400,
+            "Malformed JSON, not an object, a missing or mistyped field",
+        ),
         (413, "The body is larger than the server's limit"),
         (415, "The body is not application/json"),
         (422, "A value the server cannot use (named in `field`)"),
     ];
-    let retry = (409, "A request id reused with another body, or a conflicting state");
-    let planning = (503, "A strategy could not plan (an LLM endpoint is down); retry later");
+    let retry = (
+        409,
+        "A request id reused with another body, or a conflicting state",
+    );
+    let planning = (
+        503,
+        "A strategy could not plan (an LLM endpoint is down); retry later",
+    );
     // The first description of a status is kept: specific ones come before the shared ones.
     let with = |extra: &[(u16, &'static str)], base: &[(u16, &'static str)]| {
         extra.iter().chain(base).copied().collect::<Vec<_>>()
@@ -338,7 +369,10 @@ fn route_statuses() -> Vec<(&'static str, &'static str, Vec<(u16, &'static str)>
             "/scenes",
             with(
                 &[
-                    (413, "The body, or the store of uploaded scenes, is over its limit"),
+                    (
+                        413,
+                        "The body, or the store of uploaded scenes, is over its limit",
+                    ),
                     retry,
                 ],
                 &body,
@@ -367,7 +401,11 @@ fn route_statuses() -> Vec<(&'static str, &'static str, Vec<(u16, &'static str)>
             "post",
             "/trials/{id}/observations",
             with(
-                &[(404, "No such trial, or no such container in its scene"), retry, planning],
+                &[
+                    (404, "No such trial, or no such container in its scene"),
+                    retry,
+                    planning,
+                ],
                 &body,
             ),
         ),
@@ -379,8 +417,12 @@ fn route_statuses() -> Vec<(&'static str, &'static str, Vec<(u16, &'static str)>
 /// offers, unique items, patterns of array items, every status a route can answer, the token).
 pub fn document(options: &HttpOptions, strategies: &[String], limits: &SceneLimits) -> Value {
     let mut doc = serde_json::to_value(ApiDoc::openapi()).unwrap_or_default();
-    let error_ref = json!({"application/json": {"schema": {"$ref": "#/components/schemas/ErrorBody"}}});
-    if let Some(schemas) = doc.pointer_mut("/components/schemas").and_then(Value::as_object_mut) {
+    let error_ref =
+        json!({"application/json": {"schema": {"$ref": "#/components/schemas/ErrorBody"}}});
+    if let Some(schemas) = doc
+        .pointer_mut("/components/schemas")
+        .and_then(Value::as_object_mut)
+    {
         schemas.insert("Scene".into(), crate::api::scene_schema(limits));
     }
     if let Some(scene) = doc.pointer_mut("/components/schemas/UploadScene/properties/scene") {
@@ -393,9 +435,7 @@ pub fn document(options: &HttpOptions, strategies: &[String], limits: &SceneLimi
         s["uniqueItems"] = json!(true);
         s["items"] = json!({"type": "string", "enum": strategies});
     }
-    if let Some(items) =
-        doc.pointer_mut("/components/schemas/Observe/properties/objects/items")
-    {
+    if let Some(items) = doc.pointer_mut("/components/schemas/Observe/properties/objects/items") {
         *items = json!({"type": "string", "pattern": crate::api::TYPE_NAME_PATTERN});
     }
     if let Some(pose) = doc.pointer_mut("/components/schemas/StartTrial/properties/pose") {
@@ -426,10 +466,18 @@ pub fn document(options: &HttpOptions, strategies: &[String], limits: &SceneLimi
             .as_object_mut();
         if let Some(responses) = responses {
             for (status, description) in all {
-                responses.entry(status.to_string()).or_insert_with(|| {
-                    json!({"description": description, "content": error_ref})
-                });
+                responses
+                    .entry(status.to_string())
+                    .or_insert_with(|| json!({"description": description, "content": error_ref}));
             }
+        }
+    }
+    for (path, method, status, links) in links() {
+        if let Some(response) = doc.pointer_mut(&format!(
+            "/paths/{}/{method}/responses/{status}",
+            path.replace('/', "~1")
+        )) {
+            response["links"] = links;
         }
     }
     if options.token.is_some() {
@@ -437,6 +485,37 @@ pub fn document(options: &HttpOptions, strategies: &[String], limits: &SceneLimi
             json!({"bearer": {"type": "http", "scheme": "bearer"}});
     }
     doc
+}
+
+/// How the objects one route creates are reached by the others (OpenAPI links), so that a client
+/// generator or a contract tester can follow a deployment to its trials and their observations.
+fn links() -> Vec<(&'static str, &'static str, u16, Value)> {
+    let to = |operation: &str, parameter: &str, from: &str| json!({"operationId": operation, "parameters": {parameter: format!("$response.body#/{from}")}});
+    let trial = || {
+        json!({
+            "GetTrial": to("get_trial", "id", "trial"),
+            "Observe": to("observe", "id", "trial"),
+        })
+    };
+    vec![
+        (
+            "/scenes",
+            "post",
+            201,
+            json!({"GetScene": to("get_scene", "name", "name")}),
+        ),
+        (
+            "/deployments",
+            "post",
+            201,
+            json!({
+                "GetDeployment": to("get_deployment", "id", "id"),
+                "StartTrial": to("start_trial", "id", "id"),
+            }),
+        ),
+        ("/deployments/{id}/trials", "post", 201, trial()),
+        ("/trials/{id}/observations", "post", 200, trial()),
+    ]
 }
 
 async fn not_found() -> Response {
@@ -482,7 +561,13 @@ impl Hosts {
             hosts.names.push(("localhost".into(), Some(port)));
         }
         for a in allowed {
-            let bad = || ApiError::new(400, "allow-host", format!("{a:?} is not a host name or host:port"));
+            let bad = || {
+                ApiError::new(
+                    400,
+                    "allow-host",
+                    format!("{a:?} is not a host name or host:port"),
+                )
+            };
             let (host, port) = split_host(a).ok_or_else(bad)?;
             match host.parse::<IpAddr>() {
                 Ok(ip) => hosts.ips.push((ip, port.unwrap_or(listen.port()))),
@@ -505,8 +590,7 @@ impl Hosts {
                 self.any_ip_on == Some(port) || self.ips.iter().any(|&(i, p)| i == ip && p == port)
             }
             Err(_) => self.names.iter().any(|(n, p)| {
-                n.eq_ignore_ascii_case(host.trim_end_matches('.'))
-                    && p.is_none_or(|p| p == port)
+                n.eq_ignore_ascii_case(host.trim_end_matches('.')) && p.is_none_or(|p| p == port)
             }),
         }
     }
@@ -571,20 +655,6 @@ impl Guards {
                     401,
                     "authorization",
                     "a valid `Authorization: Bearer <token>` header is required",
-                ));
-            }
-        }
-        if req.method() == Method::POST {
-            let json = headers
-                .get(header::CONTENT_TYPE)
-                .and_then(|v| v.to_str().ok())
-                .and_then(|v| v.split(';').next())
-                .is_some_and(|t| t.trim().eq_ignore_ascii_case("application/json"));
-            if !json {
-                return Err(ApiError::new(
-                    415,
-                    "content-type",
-                    "the body must be JSON, sent as `Content-Type: application/json`",
                 ));
             }
         }

@@ -20,9 +20,9 @@ use serde::Serialize;
 use sha2::{Digest, Sha256};
 
 use crate::api::{
-    ContainerInfo, CreateDeployment, DeploymentState, MAX_C, MAX_OBJECTS, MAX_REQUEST_ID,
-    MAX_SEED, MAX_TRAVELLED_M, MAX_TYPE_NAME, NextChoice, NextContainer, Observe, RoomInfo,
-    SceneDetail, SceneSummary, StartTrial, StrategyRow, TrialState, TrialSummary, UploadScene,
+    ContainerInfo, CreateDeployment, DeploymentState, MAX_C, MAX_OBJECTS, MAX_REQUEST_ID, MAX_SEED,
+    MAX_TRAVELLED_M, MAX_TYPE_NAME, NextChoice, NextContainer, Observe, RoomInfo, SceneDetail,
+    SceneSummary, StartTrial, StrategyRow, TrialState, TrialSummary, UploadScene,
 };
 use crate::error::ApiError;
 use crate::store::{DeploymentSpec, ObservationRow, Store, StoredReply, TrialRow, TrialStatus};
@@ -290,7 +290,9 @@ impl Service {
             )));
         }
         if options.concurrent_builds == 0 {
-            return Err(ApiError::internal("concurrent grid builds must be at least 1"));
+            return Err(ApiError::internal(
+                "concurrent grid builds must be at least 1",
+            ));
         }
         let uploaded = store
             .read(|r| r.scene_summaries())?
@@ -340,7 +342,12 @@ impl Service {
 
     /// The scenes with a grid in the cache, each once, sorted.
     pub fn cached_grids(&self) -> Vec<String> {
-        let mut names: Vec<String> = self.lock_cache().entries.keys().map(|k| k.0.clone()).collect();
+        let mut names: Vec<String> = self
+            .lock_cache()
+            .entries
+            .keys()
+            .map(|k| k.0.clone())
+            .collect();
         names.sort();
         names.dedup();
         names
@@ -399,7 +406,11 @@ impl Service {
             return Ok(scene.clone());
         }
         let Some(text) = self.store.read(|r| r.scene(name))? else {
-            return Err(ApiError::new(404, "scene", format!("no scene named {name:?}")));
+            return Err(ApiError::new(
+                404,
+                "scene",
+                format!("no scene named {name:?}"),
+            ));
         };
         let (_, scene) = parse_uploaded(&text).map_err(|e| {
             ApiError::internal(format!(
@@ -435,7 +446,9 @@ impl Service {
             None => ApiError::new(422, field, e.to_string()),
         })?;
         if let Some(pose) = pose {
-            let shift = grid.center(grid.start_cell()).distance(house.start.position);
+            let shift = grid
+                .center(grid.start_cell())
+                .distance(house.start.position);
             if shift > MAX_POSE_SHIFT_M {
                 return Err(ApiError::new(
                     422,
@@ -650,27 +663,31 @@ impl Service {
             if !is_upload_name(name) {
                 return bad(
                     field,
-                    format!("{name:?}: names and ids of uploaded scenes are printable ASCII, 1 to {MAX_TYPE_NAME} characters, not only spaces"),
+                    format!(
+                        "{name:?}: names and ids of uploaded scenes are printable ASCII, 1 to {MAX_TYPE_NAME} characters, not only spaces"
+                    ),
                 );
             }
         }
-        let types = file
-            .rooms
-            .iter()
-            .enumerate()
-            .map(|(i, r)| (format!("scene.rooms[{i}].type"), r.room_type.as_str()))
-            .chain(file.containers.iter().enumerate().flat_map(|(i, c)| {
-                std::iter::once((format!("scene.containers[{i}].type"), c.object_type.as_str()))
-                    .chain(c.contents.iter().enumerate().map(move |(k, t)| {
-                        (format!("scene.containers[{i}].contents[{k}]"), t.as_str())
-                    }))
-            }))
-            .chain(
-                file.obstacles
-                    .iter()
-                    .enumerate()
-                    .map(|(i, o)| (format!("scene.obstacles[{i}].type"), o.object_type.as_str())),
-            );
+        let types =
+            file.rooms
+                .iter()
+                .enumerate()
+                .map(|(i, r)| (format!("scene.rooms[{i}].type"), r.room_type.as_str()))
+                .chain(file.containers.iter().enumerate().flat_map(|(i, c)| {
+                    std::iter::once((
+                        format!("scene.containers[{i}].type"),
+                        c.object_type.as_str(),
+                    ))
+                    .chain(c.contents.iter().enumerate().map(
+                        move |(k, t)| (format!("scene.containers[{i}].contents[{k}]"), t.as_str()),
+                    ))
+                }))
+                .chain(
+                    file.obstacles.iter().enumerate().map(|(i, o)| {
+                        (format!("scene.obstacles[{i}].type"), o.object_type.as_str())
+                    }),
+                );
         for (field, t) in types {
             if !is_type_name(t) {
                 return bad(
@@ -791,7 +808,9 @@ impl Service {
             return Err(ApiError::new(
                 422,
                 "seed",
-                format!("{seed}: at most {MAX_SEED} (2^53 − 1, what every JSON client reads exactly)"),
+                format!(
+                    "{seed}: at most {MAX_SEED} (2^53 − 1, what every JSON client reads exactly)"
+                ),
             ));
         }
         let spec = DeploymentSpec {
@@ -1301,8 +1320,8 @@ fn plan_error(e: ferret_plan::PlanError) -> ApiError {
 
 /// Parses an uploaded scene's text (a scene file without a map).
 fn parse_file(text: &str) -> Result<SceneFile, ApiError> {
-    let parsed = SceneFile::parse(text, std::path::Path::new("<uploaded>"))
-        .map_err(|e| scene_error(&e))?;
+    let parsed =
+        SceneFile::parse(text, std::path::Path::new("<uploaded>")).map_err(|e| scene_error(&e))?;
     if parsed.map.is_some() {
         return Err(ApiError::new(
             422,

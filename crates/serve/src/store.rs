@@ -453,7 +453,13 @@ impl Reader<'_> {
     /// Reads the schema and a row of every table: a damaged file fails here as it would on
     /// every route. Cheap, for health checks.
     pub fn check(&self) -> Result<(), StoreError> {
-        for table in ["scenes", "deployments", "trials", "observations", "requests"] {
+        for table in [
+            "scenes",
+            "deployments",
+            "trials",
+            "observations",
+            "requests",
+        ] {
             self.conn
                 .query_row(
                     &format!("SELECT count(*) FROM (SELECT * FROM {table} LIMIT 1)"),

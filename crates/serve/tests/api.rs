@@ -63,7 +63,13 @@ impl Drop for Server {
 }
 
 async fn start(db: Option<&Path>, token: Option<&str>) -> Server {
-    start_with(db, token, ServiceOptions::default(), ServeOptions::default()).await
+    start_with(
+        db,
+        token,
+        ServiceOptions::default(),
+        ServeOptions::default(),
+    )
+    .await
 }
 
 /// A server on 127.0.0.1 with these options, offering the scene `flat`.

@@ -156,11 +156,19 @@ fn post(s: &Server, path: &str, headers: &[&str], body: &str) -> (u16, Value) {
     req.push_str("\r\n");
     req.push_str(body);
     let (status, bytes) = raw(s.addr, &req);
-    (status, serde_json::from_slice(&bytes).unwrap_or(Value::Null))
+    (
+        status,
+        serde_json::from_slice(&bytes).unwrap_or(Value::Null),
+    )
 }
 
 fn post_json(s: &Server, path: &str, body: &Value) -> (u16, Value) {
-    post(s, path, &["Content-Type: application/json"], &body.to_string())
+    post(
+        s,
+        path,
+        &["Content-Type: application/json"],
+        &body.to_string(),
+    )
 }
 
 fn get(s: &Server, path: &str, headers: &[&str]) -> (u16, Vec<u8>) {
@@ -185,7 +193,11 @@ fn cross_site_requests_and_foreign_hosts_are_refused() {
     let (st, dep) = post_json(&s, "/deployments", &json!({}));
     assert_eq!(st, 201, "{dep}");
     let body = r#"{"scene":"flat","target":"Egg"}"#;
-    for ct in ["text/plain", "application/x-www-form-urlencoded", "multipart/form-data; boundary=x"] {
+    for ct in [
+        "text/plain",
+        "application/x-www-form-urlencoded",
+        "multipart/form-data; boundary=x",
+    ] {
         let (st, reply) = post(
             &s,
             "/deployments/1/trials",
@@ -200,7 +212,10 @@ fn cross_site_requests_and_foreign_hosts_are_refused() {
     let (st, reply) = post(
         &s,
         "/deployments/1/trials",
-        &["Content-Type: application/json", "Origin: http://evil.example"],
+        &[
+            "Content-Type: application/json",
+            "Origin: http://evil.example",
+        ],
         body,
     );
     assert_eq!(st, 403, "{reply}");
@@ -223,6 +238,56 @@ fn cross_site_requests_and_foreign_hosts_are_refused() {
     let (_, state) = get(&s, "/deployments/1", &[]);
     let state: Value = serde_json::from_slice(&state).unwrap();
     assert_eq!(state["trials"], json!([]), "{state}");
+}
+
+/// A `POST` to a route that takes none was answered 415 (no JSON body) instead of 405.
+#[test]
+fn a_method_a_route_does_not_take_is_405_whatever_its_body() {
+    let s = start(Setup::default());
+    for path in ["/health", "/scenes/flat", "/deployments/1", "/trials/1"] {
+        let (st, reply) = post(&s, path, &[], "");
+        assert_eq!(st, 405, "{path}: {reply}");
+        let (st, _) = post(&s, path, &["Content-Type: text/plain"], "x");
+        assert_eq!(st, 405, "{path}");
+    }
+}
+
+/// The document's links lead from a created object to the routes that use it.
+#[test]
+fn the_openapi_links_name_operations_that_exist() {
+    let doc = document(
+        &HttpOptions::default(),
+        &["model/uniform".to_string()],
+        &SceneLimits::default(),
+    );
+    let mut ids = Vec::new();
+    for item in doc["paths"].as_object().unwrap().values() {
+        for op in item.as_object().unwrap().values() {
+            if let Some(id) = op["operationId"].as_str() {
+                ids.push(id.to_string());
+            }
+        }
+    }
+    let mut followed = 0;
+    for (path, method, status) in [
+        ("/scenes", "post", "201"),
+        ("/deployments", "post", "201"),
+        ("/deployments/{id}/trials", "post", "201"),
+        ("/trials/{id}/observations", "post", "200"),
+    ] {
+        let links = doc["paths"][path][method]["responses"][status]["links"]
+            .as_object()
+            .unwrap();
+        for link in links.values() {
+            let id = link["operationId"].as_str().unwrap();
+            assert!(
+                ids.iter().any(|i| i == id),
+                "{path}: {id} is no operation of {ids:?}"
+            );
+            followed += 1;
+        }
+    }
+    assert_eq!(followed, 7);
 }
 
 #[test]
@@ -251,14 +316,27 @@ fn the_bearer_scheme_is_case_insensitive_and_an_empty_token_is_refused() {
         },
         ..Setup::default()
     });
-    for h in ["Authorization: bearer s3cret", "Authorization: BEARER s3cret", "Authorization: Bearer  s3cret"] {
+    for h in [
+        "Authorization: bearer s3cret",
+        "Authorization: BEARER s3cret",
+        "Authorization: Bearer  s3cret",
+    ] {
         assert_eq!(get(&s, "/scenes", &[h]).0, 200, "{h}");
     }
-    for h in ["Authorization: bearer s3cre", "Authorization: Basic s3cret", "Authorization: s3cret"] {
+    for h in [
+        "Authorization: bearer s3cre",
+        "Authorization: Basic s3cret",
+        "Authorization: s3cret",
+    ] {
         assert_eq!(get(&s, "/scenes", &[h]).0, 401, "{h}");
     }
     let service = Arc::new(
-        Service::new(Store::in_memory().unwrap(), GridParams::default(), strategies()).unwrap(),
+        Service::new(
+            Store::in_memory().unwrap(),
+            GridParams::default(),
+            strategies(),
+        )
+        .unwrap(),
     );
     for empty in ["", "  "] {
         let e = ferret_serve::router(
@@ -297,8 +375,41 @@ fn bodies_must_be_objects_and_numbers_within_their_bounds() {
     }
     let (st, _) = post_json(&s, "/deployments", &json!({"c": 1000.0}));
     assert_eq!(st, 201);
+    // JSON Schema's integers: 2232.0 is one, 1.5 is not.
+    let (st, reply) = post(
+        &s,
+        "/deployments",
+        &["Content-Type: application/json"],
+        r#"{"seed": 2232.0}"#,
+    );
+    assert_eq!((st, reply["seed"].clone()), (201, json!(2232)), "{reply}");
+    let (st, reply) = post(
+        &s,
+        "/deployments",
+        &["Content-Type: application/json"],
+        r#"{"seed": 1.5}"#,
+    );
+    assert_eq!(
+        (st, reply["error"]["field"].clone()),
+        (400, json!("seed")),
+        "{reply}"
+    );
+    let (st, reply) = post(
+        &s,
+        "/deployments",
+        &["Content-Type: application/json"],
+        r#"{"seed": 1e300}"#,
+    );
+    assert_eq!(
+        (st, reply["error"]["field"].clone()),
+        (422, json!("seed")),
+        "{reply}"
+    );
     let (st, reply) = post_json(&s, "/deployments", &json!({"request_id": "é".repeat(200)}));
-    assert_eq!(st, 201, "200 characters are fine whatever their bytes: {reply}");
+    assert_eq!(
+        st, 201,
+        "200 characters are fine whatever their bytes: {reply}"
+    );
 }
 
 /// Three legs of 1.7e308 m summed to infinity, and the reply said `"travelled_m": null`.
@@ -306,7 +417,11 @@ fn bodies_must_be_objects_and_numbers_within_their_bounds() {
 fn odometry_is_bounded_so_its_sum_stays_a_number() {
     let s = start(Setup::default());
     post_json(&s, "/deployments", &json!({}));
-    let (_, t) = post_json(&s, "/deployments/1/trials", &json!({"scene": "flat", "target": "Pillow"}));
+    let (_, t) = post_json(
+        &s,
+        "/deployments/1/trials",
+        &json!({"scene": "flat", "target": "Pillow"}),
+    );
     let trial = t["trial"].as_i64().unwrap();
     let next = t["next"]["container"].as_str().unwrap().to_string();
     let (st, reply) = post_json(
@@ -406,16 +521,40 @@ fn uploaded_scenes_are_bounded_in_number_size_and_shape() {
     let (st, reply) = post_json(&s, "/scenes", &json!({"scene": square("huge", 204.0)}));
     assert_eq!(st, 422, "{reply}");
     assert_eq!(reply["error"]["field"], "scene.rooms");
-    assert!(reply["error"]["message"].as_str().unwrap().contains("cells"), "{reply}");
-    assert!(started.elapsed() < Duration::from_secs(1), "refused before building");
+    assert!(
+        reply["error"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("cells"),
+        "{reply}"
+    );
+    assert!(
+        started.elapsed() < Duration::from_secs(1),
+        "refused before building"
+    );
     let mut many = scene("many");
     many["containers"] = json!((0..6).map(|i| json!({"id": format!("c{i}"), "type": "Box", "pose": [1.0 + 0.4 * f64::from(i), 1.0, 0]})).collect::<Vec<_>>());
     let (st, reply) = post_json(&s, "/scenes", &json!({"scene": many}));
-    assert_eq!((st, reply["error"]["field"].clone()), (422, json!("scene.containers")), "{reply}");
+    assert_eq!(
+        (st, reply["error"]["field"].clone()),
+        (422, json!("scene.containers")),
+        "{reply}"
+    );
     let mut jagged = scene("jagged");
-    jagged["rooms"][0]["polygon"] = json!((0..11).map(|i| { let a = f64::from(i) * 0.57; [2.0 + 2.0 * a.cos(), 2.0 + 2.0 * a.sin()] }).collect::<Vec<_>>());
+    jagged["rooms"][0]["polygon"] = json!(
+        (0..11)
+            .map(|i| {
+                let a = f64::from(i) * 0.57;
+                [2.0 + 2.0 * a.cos(), 2.0 + 2.0 * a.sin()]
+            })
+            .collect::<Vec<_>>()
+    );
     let (st, reply) = post_json(&s, "/scenes", &json!({"scene": jagged}));
-    assert_eq!((st, reply["error"]["field"].clone()), (422, json!("scene.rooms")), "{reply}");
+    assert_eq!(
+        (st, reply["error"]["field"].clone()),
+        (422, json!("scene.rooms")),
+        "{reply}"
+    );
     let mut big = scene("big");
     big["padding"] = json!("x".repeat(5000));
     let (st, _) = post_json(&s, "/scenes", &json!({"scene": big}));
@@ -445,16 +584,27 @@ fn grids_live_in_a_bounded_cache() {
     });
     // 40 m × 40 m: about 0.7 M cells, 1.4 MB each.
     for i in 0..12 {
-        let (st, reply) = post_json(&s, "/scenes", &json!({"scene": square(&format!("sq{i}"), 40.0)}));
+        let (st, reply) = post_json(
+            &s,
+            "/scenes",
+            &json!({"scene": square(&format!("sq{i}"), 40.0)}),
+        );
         assert_eq!(st, 201, "{reply}");
-        assert!(s.service.grid_cache_bytes() <= budget, "{} after {i}", s.service.grid_cache_bytes());
+        assert!(
+            s.service.grid_cache_bytes() <= budget,
+            "{} after {i}",
+            s.service.grid_cache_bytes()
+        );
     }
     for i in 0..12 {
         let (st, body) = get(&s, &format!("/scenes/sq{i}"), &[]);
         assert_eq!(st, 200, "{}", String::from_utf8_lossy(&body));
     }
     assert!(s.service.grid_cache_bytes() <= budget);
-    assert!(s.service.grid_cache_bytes() > budget / 4, "the cache is used");
+    assert!(
+        s.service.grid_cache_bytes() > budget / 4,
+        "the cache is used"
+    );
 }
 
 /// Start-up rebuilt every stored scene; now it only lists them.
@@ -468,14 +618,20 @@ fn start_up_reads_no_stored_scene() {
             ..Setup::default()
         });
         for i in 0..5 {
-            assert_eq!(post_json(&s, "/scenes", &json!({"scene": scene(&format!("s{i}"))})).0, 201);
+            assert_eq!(
+                post_json(&s, "/scenes", &json!({"scene": scene(&format!("s{i}"))})).0,
+                201
+            );
         }
     }
     // A stored scene the server can no longer read does not stop it from starting; it fails
     // when used.
     let conn = rusqlite::Connection::open(&db).unwrap();
-    conn.execute("UPDATE scenes SET body = '{\"ferret_scene\": 1}' WHERE name = 's2'", [])
-        .unwrap();
+    conn.execute(
+        "UPDATE scenes SET body = '{\"ferret_scene\": 1}' WHERE name = 's2'",
+        [],
+    )
+    .unwrap();
     drop(conn);
     let started = Instant::now();
     let s = start(Setup {
@@ -507,11 +663,17 @@ fn idle_connections_are_closed_and_cannot_lock_a_client_out() {
     });
     // A connection that never sends a request is closed after the header timeout.
     let mut silent = std::net::TcpStream::connect(s.addr).unwrap();
-    silent.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    silent
+        .set_read_timeout(Some(Duration::from_secs(5)))
+        .unwrap();
     let started = Instant::now();
     let mut buf = [0u8; 64];
     assert!(matches!(silent.read(&mut buf), Ok(0) | Err(_)));
-    assert!(started.elapsed() < Duration::from_secs(3), "{:?}", started.elapsed());
+    assert!(
+        started.elapsed() < Duration::from_secs(3),
+        "{:?}",
+        started.elapsed()
+    );
     // A kept-alive connection after its reply is closed after the idle timeout.
     let mut kept = std::net::TcpStream::connect(s.addr).unwrap();
     kept.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
@@ -521,7 +683,11 @@ fn idle_connections_are_closed_and_cannot_lock_a_client_out() {
     let started = Instant::now();
     let mut rest = Vec::new();
     let _ = kept.read_to_end(&mut rest);
-    assert!(started.elapsed() < Duration::from_secs(3), "{:?}", started.elapsed());
+    assert!(
+        started.elapsed() < Duration::from_secs(3),
+        "{:?}",
+        started.elapsed()
+    );
     // Three times the cap of idle connections, then a normal client.
     let idle: Vec<_> = (0..96)
         .map(|_| std::net::TcpStream::connect(s.addr).unwrap())
@@ -580,21 +746,49 @@ fn the_openapi_document_says_what_the_server_enforces() {
     assert_eq!(schemas["Selector"]["enum"], json!(["replay", "ucb"]));
     assert_eq!(dep["c"]["maximum"], 1000.0);
     let scene = &schemas["Scene"];
-    assert_eq!(scene["required"], json!(["ferret_scene", "name", "rooms", "containers", "start"]));
+    assert_eq!(
+        scene["required"],
+        json!(["ferret_scene", "name", "rooms", "containers", "start"])
+    );
     assert_eq!(scene["properties"]["containers"]["maxItems"], 200);
-    assert_eq!(schemas["StartTrial"]["properties"]["target"]["pattern"], "^[A-Za-z0-9]{1,100}$");
-    assert_eq!(schemas["Observe"]["properties"]["travelled_m"]["maximum"], 100000.0);
+    assert_eq!(
+        schemas["StartTrial"]["properties"]["target"]["pattern"],
+        "^[A-Za-z0-9]{1,100}$"
+    );
+    assert_eq!(
+        schemas["Observe"]["properties"]["travelled_m"]["maximum"],
+        100000.0
+    );
     for (path, method, statuses) in [
-        ("/scenes", "post", &[200, 201, 400, 401, 403, 409, 413, 415, 422, 500][..]),
-        ("/deployments", "post", &[201, 400, 401, 409, 413, 415, 422][..]),
-        ("/deployments/{id}/trials", "post", &[201, 400, 404, 409, 415, 422, 503][..]),
-        ("/trials/{id}/observations", "post", &[200, 400, 404, 409, 415, 422, 503][..]),
+        (
+            "/scenes",
+            "post",
+            &[200, 201, 400, 401, 403, 409, 413, 415, 422, 500][..],
+        ),
+        (
+            "/deployments",
+            "post",
+            &[201, 400, 401, 409, 413, 415, 422][..],
+        ),
+        (
+            "/deployments/{id}/trials",
+            "post",
+            &[201, 400, 404, 409, 415, 422, 503][..],
+        ),
+        (
+            "/trials/{id}/observations",
+            "post",
+            &[200, 400, 404, 409, 415, 422, 503][..],
+        ),
         ("/trials/{id}", "get", &[200, 401, 404, 503][..]),
         ("/health", "get", &[200, 503][..]),
     ] {
         let responses = &doc["paths"][path][method]["responses"];
         for st in statuses {
-            assert!(responses[st.to_string()].is_object(), "{method} {path} {st}: {responses}");
+            assert!(
+                responses[st.to_string()].is_object(),
+                "{method} {path} {st}: {responses}"
+            );
         }
     }
     assert!(doc["paths"]["/health"]["get"]["security"].is_null());

@@ -42,7 +42,8 @@ pub fn csv_bytes<T: Serialize>(rows: &[T]) -> Result<Vec<u8>> {
     for r in rows {
         csv.serialize(r)?;
     }
-    csv.into_inner().map_err(|e| anyhow::anyhow!("{}", e.error()))
+    csv.into_inner()
+        .map_err(|e| anyhow::anyhow!("{}", e.error()))
 }
 
 /// Writes serde rows as CSV to `path` atomically.
@@ -114,9 +115,9 @@ fn remove_stale_temporaries(dir: &Path, name: &str, suffix: &str) {
             continue;
         };
         let stale = match rest.split_once('.') {
-            Some((pid, random)) if !random.is_empty() => {
-                pid.parse::<u32>().is_ok_and(|p| p != std::process::id() && !is_running(p))
-            }
+            Some((pid, random)) if !random.is_empty() => pid
+                .parse::<u32>()
+                .is_ok_and(|p| p != std::process::id() && !is_running(p)),
             // Earlier versions' name: six random characters, no process id.
             None if rest.len() == 6 => entry
                 .metadata()
@@ -197,10 +198,16 @@ mod tests {
     fn temporaries_of_a_killed_writer_are_removed_by_the_next_write() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("summary.md");
-        let dead = dir.path().join(format!(".summary.md.{}.a1b2c3.md", dead_pid()));
-        let ours = dir.path().join(format!(".summary.md.{}.d4e5f6.md", std::process::id()));
+        let dead = dir
+            .path()
+            .join(format!(".summary.md.{}.a1b2c3.md", dead_pid()));
+        let ours = dir
+            .path()
+            .join(format!(".summary.md.{}.d4e5f6.md", std::process::id()));
         let old_style = dir.path().join(".summary.md.Xy12Zq.md");
-        let other_file = dir.path().join(format!(".trials.csv.{}.a1b2c3.csv", dead_pid()));
+        let other_file = dir
+            .path()
+            .join(format!(".trials.csv.{}.a1b2c3.csv", dead_pid()));
         for p in [&dead, &ours, &old_style, &other_file] {
             std::fs::write(p, "partial").unwrap();
         }
@@ -215,7 +222,10 @@ mod tests {
         assert!(!dead.exists(), "a dead writer's temporary is removed");
         assert!(!old_style.exists(), "an old unnamed temporary is removed");
         assert!(ours.exists(), "a live writer's temporary is kept");
-        assert!(other_file.exists(), "other outputs' temporaries wait for their own write");
+        assert!(
+            other_file.exists(),
+            "other outputs' temporaries wait for their own write"
+        );
         assert_eq!(std::fs::read_to_string(&path).unwrap(), "run\n");
     }
 

@@ -38,7 +38,10 @@ fn ferret_within(args: &[&str], limit: Duration) -> (std::process::Output, Durat
         if started.elapsed() > limit {
             let _ = child.kill();
             let o = child.wait_with_output().unwrap();
-            panic!("ferret {args:?} still running after {limit:?}: {}", text(&o));
+            panic!(
+                "ferret {args:?} still running after {limit:?}: {}",
+                text(&o)
+            );
         }
         std::thread::sleep(Duration::from_millis(20));
     }
@@ -60,15 +63,34 @@ fn devices_and_fifos_are_refused_by_every_command_at_once() {
     assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
     let db = dir.path().join("db.sqlite");
     let cases: Vec<(Vec<&str>, &Path)> = vec![
-        (vec!["houses", "check", "--houses", s(&zero_json)], &zero_json),
+        (
+            vec!["houses", "check", "--houses", s(&zero_json)],
+            &zero_json,
+        ),
         (vec!["houses", "check", "--houses", s(&fifo)], &fifo),
         (vec!["scene", "check", s(&zero_yaml)], &zero_yaml),
         (
-            vec!["serve", "--scene", s(&zero_yaml), "--listen", "127.0.0.1:0", "--db", s(&db)],
+            vec![
+                "serve",
+                "--scene",
+                s(&zero_yaml),
+                "--listen",
+                "127.0.0.1:0",
+                "--db",
+                s(&db),
+            ],
             &zero_yaml,
         ),
         (
-            vec!["eval", "--generate", "2", "--prior", s(&zero_json), "--out", s(dir.path())],
+            vec![
+                "eval",
+                "--generate",
+                "2",
+                "--prior",
+                s(&zero_json),
+                "--out",
+                s(dir.path()),
+            ],
             &zero_json,
         ),
     ];
@@ -89,7 +111,15 @@ fn serve_refuses_bad_options_and_an_empty_token_before_creating_its_database() {
     let dir = tempfile::tempdir().unwrap();
     let db = dir.path().join("never.sqlite");
     let scene = apartment();
-    let base = ["serve", "--scene", s(&scene), "--listen", "127.0.0.1:0", "--db", s(&db)];
+    let base = [
+        "serve",
+        "--scene",
+        s(&scene),
+        "--listen",
+        "127.0.0.1:0",
+        "--db",
+        s(&db),
+    ];
     for extra in [
         &["--resolution", "-1"][..],
         &["--max-scenes", "0"],
@@ -103,7 +133,11 @@ fn serve_refuses_bad_options_and_an_empty_token_before_creating_its_database() {
         args.extend_from_slice(extra);
         let (o, _) = ferret_within(&args, Duration::from_secs(60));
         assert!(!o.status.success(), "{extra:?} was accepted");
-        assert!(!db.exists(), "{extra:?}: the database was created: {}", text(&o));
+        assert!(
+            !db.exists(),
+            "{extra:?}: the database was created: {}",
+            text(&o)
+        );
     }
     let o = Command::new(env!("CARGO_BIN_EXE_ferret"))
         .args(base)
@@ -111,7 +145,11 @@ fn serve_refuses_bad_options_and_an_empty_token_before_creating_its_database() {
         .output()
         .unwrap();
     assert!(!o.status.success());
-    assert!(stderr(&o).contains("FERRET_SERVE_TOKEN is set but empty"), "{}", text(&o));
+    assert!(
+        stderr(&o).contains("FERRET_SERVE_TOKEN is set but empty"),
+        "{}",
+        text(&o)
+    );
     assert!(!db.exists());
 }
 
@@ -158,7 +196,11 @@ fn llm_ping_gives_up_on_a_silent_endpoint_after_one_timeout() {
         Duration::from_secs(30),
     );
     assert!(!o.status.success());
-    assert!(stderr(&o).contains("did not answer within 2 s, 1 attempt"), "{}", text(&o));
+    assert!(
+        stderr(&o).contains("did not answer within 2 s, 1 attempt"),
+        "{}",
+        text(&o)
+    );
     assert!(took < Duration::from_secs(8), "{took:?}");
 }
 
@@ -203,7 +245,10 @@ fn llm_ping_escapes_control_characters_of_the_reply() {
     let config = dir.path().join("ferret.toml");
     std::fs::write(
         &config,
-        format!("[llm.m]\nbase_url = \"{}/v1\"\nmodel = \"m\"\n", server.uri()),
+        format!(
+            "[llm.m]\nbase_url = \"{}/v1\"\nmodel = \"m\"\n",
+            server.uri()
+        ),
     )
     .unwrap();
     let o = ferret(&["llm", "ping", "m", "--config", s(&config)]);
@@ -217,7 +262,15 @@ const STRATEGIES: &str = "optimistic+greedy,model/uniform,oracle";
 
 fn eval(out: &Path, seed: &str) -> std::process::Output {
     ferret(&[
-        "eval", "--generate", "6", "--strategies", STRATEGIES, "--seed", seed, "--out", s(out),
+        "eval",
+        "--generate",
+        "6",
+        "--strategies",
+        STRATEGIES,
+        "--seed",
+        seed,
+        "--out",
+        s(out),
     ])
 }
 
@@ -253,8 +306,15 @@ fn a_killed_evals_leftovers_are_cleaned_and_mixed_runs_named() {
     assert!(eval(&other, "2").status.success());
     std::fs::copy(other.join("trials.csv"), out.join("trials.csv")).unwrap();
     let o = ferret(&[
-        "select", "--trials", s(&out), "--deployments", "5", "--trials-per-deployment", "3",
-        "--out", s(&dir.path().join("sel")),
+        "select",
+        "--trials",
+        s(&out),
+        "--deployments",
+        "5",
+        "--trials-per-deployment",
+        "3",
+        "--out",
+        s(&dir.path().join("sel")),
     ]);
     assert!(!o.status.success());
     assert!(
@@ -307,7 +367,12 @@ fn serve(db: &Path, extra: &str, ulimit: Option<u32>) -> Server {
     Server { child, url, addr }
 }
 
-fn http(addr: std::net::SocketAddr, method: &str, path: &str, body: Option<&Value>) -> (u16, Value) {
+fn http(
+    addr: std::net::SocketAddr,
+    method: &str,
+    path: &str,
+    body: Option<&Value>,
+) -> (u16, Value) {
     let mut s = std::net::TcpStream::connect(addr).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
     let body = body.map(Value::to_string).unwrap_or_default();
@@ -320,7 +385,11 @@ fn http(addr: std::net::SocketAddr, method: &str, path: &str, body: Option<&Valu
     let mut out = Vec::new();
     let _ = s.read_to_end(&mut out);
     let text = String::from_utf8_lossy(&out);
-    let status = text.split_whitespace().nth(1).and_then(|c| c.parse().ok()).unwrap_or(0);
+    let status = text
+        .split_whitespace()
+        .nth(1)
+        .and_then(|c| c.parse().ok())
+        .unwrap_or(0);
     let json = text
         .split_once("\r\n\r\n")
         .and_then(|(_, b)| serde_json::from_str(b).ok())
@@ -361,7 +430,12 @@ fn serve_memory_is_bounded_by_its_grid_cache_and_start_up_loads_no_scene() {
     let before = rss_mib(server.child.id());
     // 60 m × 60 m: 1.45 M cells, about 3 MB of grid each; 24 of them, 70 MB if all were kept.
     for i in 0..24 {
-        let (st, reply) = http(server.addr, "POST", "/scenes", Some(&json!({"scene": square(&format!("sq{i}"), 60.0)})));
+        let (st, reply) = http(
+            server.addr,
+            "POST",
+            "/scenes",
+            Some(&json!({"scene": square(&format!("sq{i}"), 60.0)})),
+        );
         assert_eq!(st, 201, "{reply}");
     }
     let grown = rss_mib(server.child.id()) - before;
@@ -373,7 +447,10 @@ fn serve_memory_is_bounded_by_its_grid_cache_and_start_up_loads_no_scene() {
     let (st, list) = http(server.addr, "GET", "/scenes", None);
     assert_eq!(st, 200);
     assert_eq!(list.as_array().unwrap().len(), 25, "{list}");
-    assert!(rss_mib(server.child.id()) < before + 16.0, "no uploaded scene is loaded at start");
+    assert!(
+        rss_mib(server.child.id()) < before + 16.0,
+        "no uploaded scene is loaded at start"
+    );
     let (st, _) = http(server.addr, "GET", "/scenes/sq3", None);
     assert_eq!(st, 200);
     assert!(server.url.starts_with("http://127.0.0.1:"));

@@ -413,7 +413,11 @@ fn serve_asks_a_failed_llm_endpoint_again_after_the_pause() {
     let rt = tokio::runtime::Runtime::new().unwrap();
     let up = std::sync::Arc::new(AtomicBool::new(false));
     let llm = flaky_llm(&rt, up.clone());
-    let asked = || rt.block_on(llm.received_requests()).unwrap_or_default().len();
+    let asked = || {
+        rt.block_on(llm.received_requests())
+            .unwrap_or_default()
+            .len()
+    };
     let dir = tempfile::tempdir().unwrap();
     let config = dir.path().join("ferret.toml");
     std::fs::write(
@@ -428,7 +432,14 @@ fn serve_asks_a_failed_llm_endpoint_again_after_the_pause() {
     let server = Server::start_with(
         &dir.path().join("serve.sqlite"),
         "llm+model/p-yesno/mock",
-        &["--config", s(&config), "--llm-cache", s(&cache), "--llm-retry-after", "2"],
+        &[
+            "--config",
+            s(&config),
+            "--llm-cache",
+            s(&cache),
+            "--llm-retry-after",
+            "2",
+        ],
     );
     let (st, dep) = post(&format!("{}/deployments", server.url), json!({}));
     assert_eq!(st, 201, "{dep}");

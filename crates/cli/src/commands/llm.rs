@@ -104,7 +104,10 @@ fn ping(args: &PingArgs) -> Result<ExitCode> {
         .build()
         .context("starting the async runtime")?;
     if !(args.timeout.is_finite() && args.timeout > 0.0 && args.timeout <= 86_400.0) {
-        anyhow::bail!("--timeout {}: must be a number of seconds in (0, 86400]", args.timeout);
+        anyhow::bail!(
+            "--timeout {}: must be a number of seconds in (0, 86400]",
+            args.timeout
+        );
     }
     let started = Instant::now();
     let reply = rt.block_on(client.complete_once(

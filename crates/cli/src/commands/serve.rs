@@ -146,7 +146,10 @@ fn check(args: &Args) -> Result<Checked> {
         );
     }
     if args.max_scene_vertices < 3 {
-        bail!("--max-scene-vertices {}: a room needs 3", args.max_scene_vertices);
+        bail!(
+            "--max-scene-vertices {}: a room needs 3",
+            args.max_scene_vertices
+        );
     }
     let token = match std::env::var(&args.token_env) {
         Ok(t) if t.trim().is_empty() => bail!(

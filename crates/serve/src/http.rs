@@ -333,8 +333,11 @@ const COMMON_STATUSES: [(u16, &str); 2] = [
     (500, "The server's own failure (its database)"),
 ];
 
+/// A status a route may answer, and when.
+type Status = (u16, &'static str);
+
 /// Statuses of each route: `(method, path, [(status, description)])`.
-fn route_statuses() -> Vec<(&'static str, &'static str, Vec<(u16, &'static str)>)> {
+fn route_statuses() -> Vec<(&'static str, &'static str, Vec<Status>)> {
     let body = [
         (
             400,

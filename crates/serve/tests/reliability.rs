@@ -62,22 +62,12 @@ struct Server {
     _rt: tokio::runtime::Runtime,
 }
 
+#[derive(Default)]
 struct Setup {
     service: ServiceOptions,
     serve: ServeOptions,
     http: HttpOptions,
     db: Option<std::path::PathBuf>,
-}
-
-impl Default for Setup {
-    fn default() -> Self {
-        Self {
-            service: ServiceOptions::default(),
-            serve: ServeOptions::default(),
-            http: HttpOptions::default(),
-            db: None,
-        }
-    }
 }
 
 fn start(setup: Setup) -> Server {

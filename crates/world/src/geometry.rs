@@ -249,6 +249,31 @@ impl Footprint {
     }
 }
 
+/// Distance from `p` to segment `a`–`b`, metres.
+pub fn segment_distance(a: Point, b: Point, p: Point) -> f64 {
+    let (dx, dz) = (b.x - a.x, b.z - a.z);
+    let len2 = dx * dx + dz * dz;
+    if len2 <= 0.0 {
+        return a.distance(p);
+    }
+    let t = (((p.x - a.x) * dx + (p.z - a.z) * dz) / len2).clamp(0.0, 1.0);
+    Point::new(a.x + t * dx, a.z + t * dz).distance(p)
+}
+
+/// Where segment `r`–`s` crosses segment `p`–`q`, as a fraction of the way from `p` to `q`;
+/// `None` for parallel segments or segments that do not meet.
+fn crossing(p: Point, q: Point, r: Point, s: Point) -> Option<f64> {
+    let (dx, dz) = (q.x - p.x, q.z - p.z);
+    let (ex, ez) = (s.x - r.x, s.z - r.z);
+    let denom = dx * ez - dz * ex;
+    if denom.abs() < 1e-12 {
+        return None;
+    }
+    let t = ((r.x - p.x) * ez - (r.z - p.z) * ex) / denom;
+    let u = ((r.x - p.x) * dz - (r.z - p.z) * dx) / denom;
+    ((0.0..=1.0).contains(&t) && (0.0..=1.0).contains(&u)).then_some(t)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -286,29 +311,4 @@ mod tests {
         assert!(f.contains(Point::new(1.0, 2.9)));
         assert!(!f.contains(Point::new(1.9, 2.0)));
     }
-}
-
-/// Distance from `p` to segment `a`–`b`, metres.
-pub fn segment_distance(a: Point, b: Point, p: Point) -> f64 {
-    let (dx, dz) = (b.x - a.x, b.z - a.z);
-    let len2 = dx * dx + dz * dz;
-    if len2 <= 0.0 {
-        return a.distance(p);
-    }
-    let t = (((p.x - a.x) * dx + (p.z - a.z) * dz) / len2).clamp(0.0, 1.0);
-    Point::new(a.x + t * dx, a.z + t * dz).distance(p)
-}
-
-/// Where segment `r`–`s` crosses segment `p`–`q`, as a fraction of the way from `p` to `q`;
-/// `None` for parallel segments or segments that do not meet.
-fn crossing(p: Point, q: Point, r: Point, s: Point) -> Option<f64> {
-    let (dx, dz) = (q.x - p.x, q.z - p.z);
-    let (ex, ez) = (s.x - r.x, s.z - r.z);
-    let denom = dx * ez - dz * ex;
-    if denom.abs() < 1e-12 {
-        return None;
-    }
-    let t = ((r.x - p.x) * ez - (r.z - p.z) * ex) / denom;
-    let u = ((r.x - p.x) * dz - (r.z - p.z) * dx) / denom;
-    ((0.0..=1.0).contains(&t) && (0.0..=1.0).contains(&u)).then_some(t)
 }

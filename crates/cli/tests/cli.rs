@@ -751,19 +751,15 @@ fn deploy_under_the_paper_protocol_reports_evals_soft_costs() {
         "--strategies",
         strategies,
     ];
+    // One command over the shared options; every run must succeed.
+    let run = |command: &str, extra: &[&str]| {
+        let o = ferret(&[&[command][..], &common, extra].concat());
+        assert!(o.status.success(), "{}", text(&o));
+    };
     let eval_out = dir.path().join("eval");
-    let o = ferret(&[&["eval"][..], &common, &["--out", s(&eval_out)]].concat());
-    assert!(o.status.success(), "{}", text(&o));
+    run("eval", &["--out", s(&eval_out)]);
     let plain_out = dir.path().join("plain");
-    let o = ferret(
-        &[
-            &["eval"][..],
-            &common,
-            &["--travel-cost", "plain", "--out", s(&plain_out)],
-        ]
-        .concat(),
-    );
-    assert!(o.status.success(), "{}", text(&o));
+    run("eval", &["--travel-cost", "plain", "--out", s(&plain_out)]);
     let cost = |rows: &[std::collections::HashMap<String, String>]| {
         rows.iter()
             .map(|r| {
@@ -779,15 +775,7 @@ fn deploy_under_the_paper_protocol_reports_evals_soft_costs() {
     // The comparison below can only tell soft from plain where they differ.
     assert!(soft.iter().any(|(k, v)| (v - plain[k]).abs() > 0.01));
     let deploy_out = dir.path().join("deploy");
-    let o = ferret(
-        &[
-            &["deploy"][..],
-            &common,
-            &["--trials", "12", "--out", s(&deploy_out)],
-        ]
-        .concat(),
-    );
-    assert!(o.status.success(), "{}", text(&o));
+    run("deploy", &["--trials", "12", "--out", s(&deploy_out)]);
     let rows = read_csv(&deploy_out.join("deploy.csv"));
     assert_eq!(rows.len(), 12);
     for r in &rows {

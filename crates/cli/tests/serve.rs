@@ -374,3 +374,94 @@ fn a_fused_strategy_is_served_with_its_fusion_file() {
     assert!(!o.status.success());
     assert!(text(&o).contains("--fit-fusion"), "{}", text(&o));
 }
+
+/// An LLM on 127.0.0.1 that answers P-YESNO while `up`, else 500; counts what it is asked.
+fn flaky_llm(
+    rt: &tokio::runtime::Runtime,
+    up: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> wiremock::MockServer {
+    use std::sync::atomic::Ordering;
+    use wiremock::matchers::method;
+    use wiremock::{Mock, MockServer, Request, ResponseTemplate};
+    rt.block_on(async {
+        let server = MockServer::start().await;
+        Mock::given(method("POST"))
+            .respond_with(move |_: &Request| {
+                if !up.load(Ordering::SeqCst) {
+                    return ResponseTemplate::new(500).set_body_string("model unloaded");
+                }
+                ResponseTemplate::new(200).set_body_json(json!({
+                    "id": "x", "object": "chat.completion", "created": 1, "model": "m",
+                    "choices": [{"index": 0, "finish_reason": "stop",
+                        "message": {"role": "assistant", "content": "No"}}],
+                    "usage": {"prompt_tokens": 30, "completion_tokens": 1, "total_tokens": 31}
+                }))
+            })
+            .mount(&server)
+            .await;
+        server
+    })
+}
+
+/// One failure of an LLM endpoint made every later trial of its strategies a 503 until the
+/// server was restarted. Now the endpoint is not asked for `--llm-retry-after` seconds (503 at
+/// once, nothing sent), and the first trial after the pause finds it back.
+#[test]
+fn serve_asks_a_failed_llm_endpoint_again_after_the_pause() {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::time::{Duration, Instant};
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let up = std::sync::Arc::new(AtomicBool::new(false));
+    let llm = flaky_llm(&rt, up.clone());
+    let asked = || {
+        rt.block_on(llm.received_requests())
+            .unwrap_or_default()
+            .len()
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("ferret.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[llm.mock]\nbase_url = \"{}/v1\"\nmodel = \"m\"\nmax_attempts = 1\nretry_base_ms = 10\n",
+            llm.uri()
+        ),
+    )
+    .unwrap();
+    let cache = dir.path().join("c.sqlite");
+    let server = Server::start_with(
+        &dir.path().join("serve.sqlite"),
+        "llm+model/p-yesno/mock",
+        &[
+            "--config",
+            s(&config),
+            "--llm-cache",
+            s(&cache),
+            "--llm-retry-after",
+            "2",
+        ],
+    );
+    let (st, dep) = post(&format!("{}/deployments", server.url), json!({}));
+    assert_eq!(st, 201, "{dep}");
+    let trials = format!("{}/deployments/{}/trials", server.url, dep["id"]);
+    let start = json!({"scene": "apartment", "target": "RemoteControl"});
+    let (st, reply) = post(&trials, start.clone());
+    assert_eq!(st, 503, "{reply}");
+    let failed_at = Instant::now();
+    let before = asked();
+    assert!(before > 0);
+    // Open: refused at once without asking.
+    let (st, reply) = post(&trials, start.clone());
+    assert_eq!(st, 503, "{reply}");
+    assert_eq!(asked(), before, "a paused endpoint was asked");
+    up.store(true, Ordering::SeqCst);
+    let (st, _) = post(&trials, start.clone());
+    if failed_at.elapsed() < Duration::from_millis(1800) {
+        assert_eq!(st, 503, "still paused");
+    }
+    std::thread::sleep(Duration::from_millis(2200).saturating_sub(failed_at.elapsed()));
+    let (st, reply) = post(&trials, start);
+    assert_eq!(st, 201, "the endpoint is back: {reply}");
+    assert!(asked() > before);
+    assert_eq!(reply["strategy"], "llm+model/p-yesno/mock");
+}

@@ -79,6 +79,7 @@ fn service(uri: &str, cache: &std::path::Path, offline: bool) -> Arc<LlmService>
             LlmOptions {
                 cache_path: Some(cache.to_path_buf()),
                 offline,
+                ..LlmOptions::default()
             },
         )
         .expect("service"),

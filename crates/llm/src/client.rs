@@ -33,6 +33,10 @@ const BODY_SNIPPET_CHARS: usize = 300;
 pub const MAX_REPLY_BYTES: usize = 8 << 20;
 /// Longest answer text kept (and cached); a longer one is cut here.
 pub const MAX_ANSWER_BYTES: usize = 64 << 10;
+/// Attempts in a row that may run out of time before a request gives up, whatever
+/// `max_attempts` says: a server that accepts connections and answers nothing within the timeout
+/// twice is not answering (a cut connection or a 5xx, which come fast, are retried as configured).
+pub const MAX_TIMEOUTS_IN_A_ROW: u32 = 2;
 /// Shortest run of a secret's characters that is redacted wherever it shows up.
 const MIN_SECRET_RUN: usize = 8;
 
@@ -102,6 +106,7 @@ impl EndpointClient {
     pub fn new(endpoint: Endpoint) -> Result<Self> {
         let http = reqwest::Client::builder()
             .timeout(endpoint.config.timeout())
+            .connect_timeout(endpoint.config.connect_timeout())
             .build()
             .map_err(|e| LlmError::Connection {
                 endpoint: endpoint.name.clone(),
@@ -192,6 +197,7 @@ impl EndpointClient {
             })?;
         let max_attempts = self.endpoint.config.max_attempts.max(1);
         let mut attempt = 1;
+        let mut timeouts = 0;
         loop {
             let (failure, retry_after) = match self.attempt(&body, key, attempt).await {
                 Attempt::Done(reply) => return Ok(reply),
@@ -201,7 +207,12 @@ impl EndpointClient {
                     retry_after,
                 } => (failure, retry_after),
             };
-            if attempt >= max_attempts {
+            timeouts = if matches!(failure, Failure::Timeout) {
+                timeouts + 1
+            } else {
+                0
+            };
+            if attempt >= max_attempts || timeouts >= MAX_TIMEOUTS_IN_A_ROW {
                 return Err(self.final_error(failure, attempt));
             }
             let delay = self.backoff(attempt, retry_after);
@@ -215,6 +226,36 @@ impl EndpointClient {
             );
             tokio::time::sleep(delay).await;
             attempt += 1;
+        }
+    }
+
+    /// Sends `request` once, without retries, giving up after `timeout` (or the endpoint's own
+    /// timeout, if shorter): a check that the endpoint answers (`ferret llm ping`).
+    pub async fn complete_once(&self, request: &Request, timeout: Duration) -> Result<Reply> {
+        let name = &self.endpoint.name;
+        let url = self.endpoint.config.normalized_base_url();
+        let key = match (&self.endpoint.config.api_key_env, self.endpoint.key()) {
+            (Some(var), None) => {
+                return Err(LlmError::MissingKey {
+                    endpoint: name.clone(),
+                    url: url.to_string(),
+                    var: var.clone(),
+                });
+            }
+            (_, key) => key,
+        };
+        let body = self.request_body(request);
+        let timeout = timeout.min(self.endpoint.config.timeout());
+        match tokio::time::timeout(timeout, self.attempt(&body, key, 1)).await {
+            Ok(Attempt::Done(reply)) => Ok(reply),
+            Ok(Attempt::Fatal(e)) => Err(e),
+            Ok(Attempt::Retry { failure, .. }) => Err(self.final_error(failure, 1)),
+            Err(_) => Err(LlmError::Timeout {
+                endpoint: name.clone(),
+                url,
+                timeout_secs: timeout.as_secs_f64(),
+                attempts: 1,
+            }),
         }
     }
 
@@ -398,10 +439,12 @@ impl EndpointClient {
         Duration::from_millis(half + jitter)
     }
 
-    /// The start of a body, with the API key (should a server echo it) blanked out.
+    /// The start of a body, with the API key (should a server echo it) blanked out and control
+    /// characters escaped (a reply may hold terminal escape sequences).
     fn snippet(&self, bytes: &[u8]) -> String {
         let text = String::from_utf8_lossy(bytes);
-        let mut s: String = text.chars().take(BODY_SNIPPET_CHARS).collect();
+        let mut s =
+            crate::message::printable(&text.chars().take(BODY_SNIPPET_CHARS).collect::<String>());
         if text.chars().count() > BODY_SNIPPET_CHARS {
             s.push('…');
         }

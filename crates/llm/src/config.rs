@@ -92,6 +92,8 @@ pub const MAX_REASKS: u32 = 5;
 pub const MAX_TIMEOUT_SECS: f64 = 86_400.0;
 /// Longest wait between attempts, seconds (an hour).
 pub const MAX_RETRY_MAX_SECS: f64 = 3_600.0;
+/// Largest config file read, bytes (a config is a few kilobytes).
+pub const MAX_CONFIG_BYTES: u64 = 1 << 20;
 /// Most attempts per request.
 pub const MAX_ATTEMPTS: u32 = 20;
 /// Longest first retry delay, milliseconds (ten minutes).
@@ -133,6 +135,9 @@ pub struct EndpointConfig {
     /// Seconds one attempt may take, reply body included.
     #[serde(default = "default_timeout_secs")]
     pub timeout_secs: f64,
+    /// Seconds to wait for the connection to the server (a host that drops packets).
+    #[serde(default = "default_connect_timeout_secs")]
+    pub connect_timeout_secs: f64,
     /// Attempts per request before giving up (1 = no retries).
     #[serde(default = "default_max_attempts")]
     pub max_attempts: u32,
@@ -194,6 +199,9 @@ fn default_concurrency() -> usize {
 fn default_timeout_secs() -> f64 {
     120.0
 }
+fn default_connect_timeout_secs() -> f64 {
+    10.0
+}
 fn default_max_attempts() -> u32 {
     5
 }
@@ -218,6 +226,7 @@ impl EndpointConfig {
             reasoning_effort: None,
             concurrency: default_concurrency(),
             timeout_secs: default_timeout_secs(),
+            connect_timeout_secs: default_connect_timeout_secs(),
             max_attempts: default_max_attempts(),
             retry_base_ms: default_retry_base_ms(),
             retry_max_secs: default_retry_max_secs(),
@@ -285,6 +294,11 @@ impl EndpointConfig {
         Duration::try_from_secs_f64(self.timeout_secs).unwrap_or(Duration::MAX)
     }
 
+    /// [`connect_timeout_secs`](Self::connect_timeout_secs) as a duration.
+    pub fn connect_timeout(&self) -> Duration {
+        Duration::try_from_secs_f64(self.connect_timeout_secs).unwrap_or(Duration::MAX)
+    }
+
     /// USD for a request with these token counts.
     pub fn cost_usd(&self, input: u64, cached_input: u64, output: u64) -> f64 {
         let cached = cached_input.min(input);
@@ -322,13 +336,14 @@ impl EndpointConfig {
         if self.model.trim().is_empty() {
             return Err(bad("model", "is empty".into()));
         }
+        // The value is never repeated: a key pasted here by mistake would be printed.
         if let Some(var) = &self.api_key_env
-            && (var.is_empty() || var.contains('=') || var.contains('\0'))
+            && let Some(why) = not_a_variable_name(var)
         {
             return Err(bad(
                 "api_key_env",
                 format!(
-                    "`{var}` is not an environment variable name (put the key itself in the environment, not here)"
+                    "{why}; it must name the environment variable that holds the key (put the key itself in the environment, never in this file; the value is not shown)"
                 ),
             ));
         }
@@ -352,6 +367,18 @@ impl EndpointConfig {
                 format!(
                     "{} is not a number of seconds in (0, {MAX_TIMEOUT_SECS}]",
                     self.timeout_secs
+                ),
+            ));
+        }
+        if !(self.connect_timeout_secs.is_finite()
+            && self.connect_timeout_secs > 0.0
+            && self.connect_timeout_secs <= MAX_TIMEOUT_SECS)
+        {
+            return Err(bad(
+                "connect_timeout_secs",
+                format!(
+                    "{} is not a number of seconds in (0, {MAX_TIMEOUT_SECS}]",
+                    self.connect_timeout_secs
                 ),
             ));
         }
@@ -501,9 +528,11 @@ pub struct LlmConfig {
 impl LlmConfig {
     /// Reads the `[llm.*]` tables of a TOML file.
     pub fn load(file: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(file).map_err(|source| ConfigError::Read {
-            file: file.to_path_buf(),
-            source,
+        let text = ferret_world::input::read_text(file, MAX_CONFIG_BYTES).map_err(|source| {
+            ConfigError::Read {
+                file: file.to_path_buf(),
+                source,
+            }
         })?;
         Self::parse(&text, file)
     }
@@ -602,6 +631,30 @@ fn refuse_secrets(text: &str, file: &Path) -> Result<(), ConfigError> {
         }
     }
     Ok(())
+}
+
+/// Why `var` is no environment variable name, or looks like an API key instead of one (a name
+/// is letters, digits and `_`, not starting with a digit; keys are long mixes of upper- and
+/// lower-case letters and digits, or start with a provider's prefix).
+fn not_a_variable_name(var: &str) -> Option<&'static str> {
+    let valid = var
+        .chars()
+        .next()
+        .is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+        && var.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+    if !valid {
+        return Some("is not an environment variable name (letters, digits and _)");
+    }
+    let has = |f: fn(&char) -> bool| var.chars().any(|c| f(&c));
+    let mixed =
+        has(char::is_ascii_lowercase) && has(char::is_ascii_uppercase) && has(char::is_ascii_digit);
+    let prefixed = ["hf_", "gsk_", "ghp_", "xai_", "pplx_", "r8_"]
+        .iter()
+        .any(|p| var.starts_with(p));
+    if var.len() >= 20 && (mixed || prefixed) {
+        return Some("looks like an API key, not the name of a variable");
+    }
+    None
 }
 
 /// Endpoint names appear in strategy specs (`llm+model/p-context-a/<name>`), so they must not

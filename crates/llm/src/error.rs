@@ -153,6 +153,19 @@ pub enum LlmError {
         /// The failure that stopped it.
         reason: String,
     },
+    /// The endpoint failed a moment ago; questions fail at once until its pause is over (the
+    /// circuit breaker of long-running servers).
+    #[error(
+        "LLM `{endpoint}` failed a moment ago and is asked again in {retry_in_secs} s ({reason})"
+    )]
+    EndpointPaused {
+        /// Endpoint name.
+        endpoint: String,
+        /// The failure that opened the circuit.
+        reason: String,
+        /// Seconds until a question is let through again.
+        retry_in_secs: f64,
+    },
     /// Offline mode and the prompt is not in the cache.
     #[error(
         "offline: no cached answer from LLM `{endpoint}` (model {model}) for {about}; the prompt begins: {prompt_start}"

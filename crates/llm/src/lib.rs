@@ -70,13 +70,13 @@ pub use likelihood::{Asked, LlmLikelihood, QuestionSet, Resolved, Shape, questio
 pub use logprobs::{
     TokenLogprob, TopLogprob, expected_percentage, label_distribution, yes_probability,
 };
-pub use message::{ChatMessage, MessageRole};
+pub use message::{ChatMessage, MessageRole, printable};
 pub use prompts::{
     P_BATCH, P_CHOICE, P_CONTEXT_A, P_CONTEXT_B, P_DIRECT, P_MINIMAL, P_YESNO, PromptKind,
     PromptLibrary,
 };
 pub use question::{Expect, Question, Request};
-pub use service::{Answer, Llm, LlmOptions, LlmService};
+pub use service::{Answer, FailurePolicy, Llm, LlmOptions, LlmService};
 pub use strategy::{
     FUSED, LLM_DIRECT, LLM_MODEL, LlmDirectPolicy, LlmDirectStrategy, LlmSpec, PrefetchProgress,
     PrefetchSummary, asks_probabilities, prefetch_probabilities, register_fused,

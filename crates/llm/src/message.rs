@@ -121,3 +121,19 @@ pub fn prompt_start(messages: &[ChatMessage], max_chars: usize) -> String {
     let last: String = last.chars().take(2 * max_chars).collect();
     format!("\"{start}…\" (last line: \"{last}\")")
 }
+
+/// `text` with control characters (terminal escape sequences, carriage returns, NULs) written as
+/// `\u{1b}`-style escapes, for showing what a server sent in a message or on a terminal. Line
+/// breaks and tabs are escaped too, so that a reply stays on its line.
+pub fn printable(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        // Bidirectional overrides reorder what a terminal shows, like escape sequences.
+        if c.is_control() || matches!(c, '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}') {
+            out.extend(c.escape_debug());
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}

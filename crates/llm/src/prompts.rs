@@ -54,6 +54,9 @@ pub const P_CHOICE: &str = "p-choice";
 /// P-BATCH: a percentage for every lettered place in one answer.
 pub const P_BATCH: &str = "p-batch";
 
+/// Largest template file read, bytes.
+pub const MAX_TEMPLATE_BYTES: u64 = 1 << 20;
+
 /// The shipped templates, compiled into the binary.
 pub const BUILTIN_TEMPLATES: [(&str, &str); 7] = [
     (P_CONTEXT_A, include_str!("../prompts/p-context-a.j2")),
@@ -206,9 +209,11 @@ impl PromptLibrary {
 
     /// Adds the template in file `path` under `name`.
     pub fn add_file(&mut self, name: &str, path: &Path) -> Result<()> {
-        let source = std::fs::read_to_string(path).map_err(|e| LlmError::Prompt {
-            name: name.to_string(),
-            message: format!("cannot read {}: {e}", path.display()),
+        let source = ferret_world::input::read_text(path, MAX_TEMPLATE_BYTES).map_err(|e| {
+            LlmError::Prompt {
+                name: name.to_string(),
+                message: format!("cannot read {}: {e}", path.display()),
+            }
         })?;
         self.add_template(name, source)
     }

@@ -4,8 +4,8 @@
 use std::collections::{BTreeMap, HashMap};
 use std::future::Future;
 use std::path::PathBuf;
-use std::sync::{Arc, Mutex, RwLock, RwLockReadGuard};
-use std::time::Duration;
+use std::sync::{Arc, Mutex, MutexGuard, RwLock, RwLockReadGuard};
+use std::time::{Duration, Instant};
 
 use crate::cache::{CachedReply, ResponseCache, cache_key, now_unix};
 use crate::client::{EndpointClient, TokenUsage};
@@ -49,9 +49,39 @@ pub struct Llm {
     /// One lock per prompt being asked, so concurrent askers of the same prompt send it once.
     inflight: Mutex<HashMap<String, Arc<tokio::sync::Mutex<()>>>>,
     /// Set when a request failed after all its retries in a way that says the endpoint is down
-    /// (refused or cut connections, timeouts, 429/5xx): every later question of the run then
-    /// fails at once instead of going through the same retries again.
-    down: Mutex<Option<String>>,
+    /// (refused or cut connections, timeouts, 429/5xx): later questions then fail at once instead
+    /// of going through the same retries again, for the run or for a pause (see
+    /// [`FailurePolicy`]).
+    down: Mutex<Option<Down>>,
+    policy: FailurePolicy,
+    /// Held by the question that checks whether a down endpoint is back; the others wait for
+    /// its outcome.
+    probe: tokio::sync::Mutex<()>,
+}
+
+/// What a failure of an endpoint after all its retries means for the questions after it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum FailurePolicy {
+    /// Nothing more is sent to it in this run: every later question fails at once. For batch
+    /// commands, which then stop (or go on without its strategies) instead of waiting through
+    /// every question's retries.
+    #[default]
+    StopForRun,
+    /// A circuit breaker, for a server that runs for days: after a failure, questions fail at
+    /// once for `pause`; then one question is let through while the others wait for it, and its
+    /// success closes the circuit (the others go on) while its failure opens it for another
+    /// pause (the others fail at once).
+    Breaker {
+        /// How long questions fail at once after a failure.
+        pause: Duration,
+    },
+}
+
+/// Why and since when an endpoint is considered down.
+#[derive(Clone, Debug)]
+struct Down {
+    reason: String,
+    since: Instant,
 }
 
 impl Llm {
@@ -63,6 +93,17 @@ impl Llm {
         offline: bool,
         ledger: Arc<Ledger>,
     ) -> Result<Self> {
+        Self::with_policy(endpoint, cache, offline, ledger, FailurePolicy::default())
+    }
+
+    /// The same, with what a failure of the endpoint means for later questions.
+    pub fn with_policy(
+        endpoint: Endpoint,
+        cache: Option<Arc<ResponseCache>>,
+        offline: bool,
+        ledger: Arc<Ledger>,
+        policy: FailurePolicy,
+    ) -> Result<Self> {
         Ok(Self {
             client: EndpointClient::new(endpoint)?,
             cache,
@@ -70,6 +111,8 @@ impl Llm {
             ledger,
             inflight: Mutex::new(HashMap::new()),
             down: Mutex::new(None),
+            policy,
+            probe: tokio::sync::Mutex::new(()),
         })
     }
 
@@ -88,9 +131,54 @@ impl Llm {
         &self.client
     }
 
-    /// Why the endpoint was given up on in this run, if it was.
+    /// Why the endpoint is considered down (given up on for the run, or its circuit open), if
+    /// it is.
     pub fn down(&self) -> Option<String> {
-        self.down.lock().unwrap_or_else(|p| p.into_inner()).clone()
+        self.lock_down().as_ref().map(|d| d.reason.clone())
+    }
+
+    fn lock_down(&self) -> MutexGuard<'_, Option<Down>> {
+        self.down.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Whether a question may go to the server now. With the breaker, after the pause, the
+    /// first question holds the returned guard while it checks whether the endpoint is back;
+    /// the others wait for it and then go on or fail as it found.
+    async fn admit(&self) -> Result<Option<tokio::sync::MutexGuard<'_, ()>>> {
+        let mut probe = None;
+        loop {
+            let paused = {
+                let down = self.lock_down();
+                let Some(d) = down.as_ref() else {
+                    return Ok(None);
+                };
+                let endpoint = self.name().to_string();
+                match self.policy {
+                    FailurePolicy::StopForRun => {
+                        return Err(LlmError::EndpointDown {
+                            endpoint,
+                            reason: d.reason.clone(),
+                        });
+                    }
+                    FailurePolicy::Breaker { pause } => {
+                        let waited = d.since.elapsed();
+                        (waited < pause).then(|| LlmError::EndpointPaused {
+                            endpoint,
+                            reason: d.reason.clone(),
+                            retry_in_secs: pause.saturating_sub(waited).as_secs_f64().ceil(),
+                        })
+                    }
+                }
+            };
+            if let Some(e) = paused {
+                return Err(e);
+            }
+            if probe.is_some() {
+                return Ok(probe);
+            }
+            // Half open: whoever gets the gate first probes; the state is read again after it.
+            probe = Some(self.probe.lock().await);
+        }
     }
 
     /// The ledger it counts into.
@@ -180,29 +268,37 @@ impl Llm {
     }
 
     async fn ask_server(&self, request: &Request, key: &str, strategy: &str) -> Result<Answer> {
-        if let Some(reason) = self.down() {
-            return Err(LlmError::EndpointDown {
-                endpoint: self.name().to_string(),
-                reason,
-            });
-        }
-        let reply = match self.client.complete(request).await {
-            Ok(r) => r,
-            Err(e) => {
-                let endpoint_down = match &e {
-                    LlmError::Timeout { .. } | LlmError::Connection { .. } => true,
-                    LlmError::Status { status, .. } => {
-                        *status == 429 || *status == 408 || *status >= 500
-                    }
-                    _ => false,
-                };
-                if endpoint_down {
-                    let mut down = self.down.lock().unwrap_or_else(|p| p.into_inner());
-                    down.get_or_insert_with(|| e.to_string());
-                }
-                return Err(e);
+        let probe = self.admit().await?;
+        let result = self.client.complete(request).await;
+        let endpoint_down = match &result {
+            Err(LlmError::Timeout { .. } | LlmError::Connection { .. }) => true,
+            Err(LlmError::Status { status, .. }) => {
+                *status == 429 || *status == 408 || *status >= 500
             }
+            _ => false,
         };
+        {
+            let mut down = self.lock_down();
+            match (&result, self.policy) {
+                (Err(e), FailurePolicy::StopForRun) if endpoint_down => {
+                    down.get_or_insert_with(|| Down {
+                        reason: e.to_string(),
+                        since: Instant::now(),
+                    });
+                }
+                (Err(e), FailurePolicy::Breaker { .. }) if endpoint_down => {
+                    *down = Some(Down {
+                        reason: e.to_string(),
+                        since: Instant::now(),
+                    });
+                }
+                // Any answer, even an unusable one, shows the endpoint is up again.
+                (_, FailurePolicy::Breaker { .. }) => *down = None,
+                _ => {}
+            }
+        }
+        drop(probe);
+        let reply = result?;
         let cost = self.cost(&reply.usage);
         self.ledger.record_sent(
             self.name(),
@@ -254,6 +350,8 @@ pub struct LlmOptions {
     pub cache_path: Option<PathBuf>,
     /// Answer from the cache only; a missing answer is an error.
     pub offline: bool,
+    /// What a failed endpoint means for later questions.
+    pub on_failure: FailurePolicy,
 }
 
 /// A tokio runtime that may be dropped anywhere, even inside another runtime.
@@ -279,6 +377,7 @@ pub struct LlmService {
     /// Opened on first use, so runs without LLM strategies leave no cache file behind.
     cache: Mutex<Option<Arc<ResponseCache>>>,
     offline: bool,
+    on_failure: FailurePolicy,
     ledger: Arc<Ledger>,
     llms: Mutex<BTreeMap<String, Arc<Llm>>>,
     prompts: RwLock<PromptLibrary>,
@@ -324,6 +423,7 @@ impl LlmService {
             cache_path: options.cache_path,
             cache: Mutex::new(None),
             offline: options.offline,
+            on_failure: options.on_failure,
             ledger: Arc::new(Ledger::new()),
             llms: Mutex::new(BTreeMap::new()),
             prompts: RwLock::new(prompts),
@@ -337,11 +437,12 @@ impl LlmService {
             return Ok(l.clone());
         }
         let endpoint = self.config.endpoint(name)?;
-        let llm = Arc::new(Llm::new(
+        let llm = Arc::new(Llm::with_policy(
             endpoint,
             self.cache()?,
             self.offline,
             self.ledger.clone(),
+            self.on_failure,
         )?);
         llms.insert(name.to_string(), llm.clone());
         Ok(llm)

@@ -286,6 +286,7 @@ fn p_yesno_asks_per_room_type_and_one_answer_serves_every_house() {
         LlmOptions {
             cache_path: Some(dir.path().join("c.sqlite")),
             offline: false,
+            ..LlmOptions::default()
         },
     );
     let source = LlmLikelihood::new(service.clone(), "p-yesno", "mock", "s").unwrap();

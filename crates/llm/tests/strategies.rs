@@ -72,6 +72,7 @@ impl Server {
                 LlmOptions {
                     cache_path: cache,
                     offline,
+                    ..LlmOptions::default()
                 },
             )
             .unwrap(),
@@ -514,6 +515,7 @@ fn cache_file_is_opened_only_when_needed_and_offline_needs_one() {
         LlmOptions {
             cache_path: Some(path.clone()),
             offline: true,
+            ..LlmOptions::default()
         },
     )
     .err()

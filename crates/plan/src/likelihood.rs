@@ -212,7 +212,8 @@ impl Prior {
             path: path.display().to_string(),
             message,
         };
-        let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
+        let text = ferret_world::input::read_text(path, ferret_world::input::MAX_INPUT_BYTES)
+            .map_err(|e| err(e.to_string()))?;
         serde_json::from_str(&text).map_err(|e| err(format!("not a ferret prior: {e}")))
     }
 }

@@ -1,4 +1,6 @@
-//! The JSON bodies of the HTTP API, with their OpenAPI schemas.
+//! The JSON bodies of the HTTP API, with their OpenAPI schemas. The schemas state what the
+//! service enforces (lengths, patterns, bounds, enums); what JSON Schema cannot express (a
+//! container in no room, a pose in a wall) is a 422 naming the field.
 
 use std::collections::BTreeMap;
 
@@ -7,16 +9,142 @@ use utoipa::ToSchema;
 
 use crate::store::TrialStatus;
 
+/// Longest accepted request id, characters.
+pub const MAX_REQUEST_ID: usize = 200;
+
+/// Largest exploration constant `c`, metres (the default is 5; costs are tens of metres).
+pub const MAX_C: f64 = 1000.0;
+
+/// Largest seed: 2^53 − 1, the largest integer every JSON client reads exactly.
+pub const MAX_SEED: u64 = (1 << 53) - 1;
+
+/// Largest odometry one observation may report, metres (100 km: no leg inside a home is longer,
+/// and sums of such numbers stay exact).
+pub const MAX_TRAVELLED_M: f64 = 100_000.0;
+
+/// Longest object type name, characters.
+pub const MAX_TYPE_NAME: usize = 100;
+
+/// Most object types one observation may list.
+pub const MAX_OBJECTS: usize = 1000;
+
+/// An object or room type as the API takes it: ASCII letters and digits.
+pub const TYPE_NAME_PATTERN: &str = "^[A-Za-z0-9]{1,100}$";
+
+/// A name or id in an uploaded scene: printable ASCII, at least one character not a space.
+pub const UPLOAD_NAME_PATTERN: &str = "^[ -~]{0,99}[!-~][ -~]{0,99}$";
+
+/// The JSON schema of an uploaded scene (the scene file format without `map`), with a server's
+/// limits. What it cannot say is refused with 422 naming the field: a container in no room,
+/// overlapping rooms, more grid cells or polygon vertices in all than the limits, an
+/// unreachable container.
+pub fn scene_schema(limits: &crate::service::SceneLimits) -> serde_json::Value {
+    use serde_json::json;
+    let max = ferret_world::procthor::MAX_COORDINATE;
+    let coordinate = json!({"type": "number", "minimum": -max, "maximum": max});
+    let point = json!({"type": "array", "items": coordinate, "minItems": 2, "maxItems": 2});
+    let pose = json!({
+        "type": "array", "items": coordinate, "minItems": 3, "maxItems": 3,
+        "description": "[x, y, yaw°], metres and degrees counter-clockwise"
+    });
+    let size = json!({
+        "type": "array", "minItems": 2, "maxItems": 2,
+        "items": {"type": "number", "exclusiveMinimum": 0, "maximum": max}
+    });
+    let name =
+        json!({"type": "string", "pattern": UPLOAD_NAME_PATTERN, "maxLength": MAX_TYPE_NAME});
+    let type_name = json!({"type": "string", "pattern": TYPE_NAME_PATTERN});
+    json!({
+        "type": "object",
+        "description": "A home: rooms, containers, the robot's start (see docs/serve.md).",
+        "additionalProperties": false,
+        "required": ["ferret_scene", "name", "rooms", "containers", "start"],
+        "properties": {
+            "ferret_scene": {"type": "integer", "enum": [ferret_world::scene::SCENE_VERSION]},
+            "name": name,
+            "rooms": {
+                "type": "array", "minItems": 1, "maxItems": 254,
+                "items": {
+                    "type": "object", "additionalProperties": false,
+                    "required": ["name", "type", "polygon"],
+                    "properties": {
+                        "name": name,
+                        "type": type_name,
+                        "polygon": {
+                            "type": "array", "items": point, "minItems": 3,
+                            "maxItems": limits.max_vertices
+                        }
+                    }
+                }
+            },
+            "doors": {
+                "type": "array",
+                "items": {
+                    "type": "object", "additionalProperties": false,
+                    "required": ["from", "to"],
+                    "properties": {"from": point, "to": point}
+                }
+            },
+            "containers": {
+                "type": "array", "minItems": 1, "maxItems": limits.max_containers,
+                "items": {
+                    "type": "object", "additionalProperties": false,
+                    "required": ["id", "type", "pose"],
+                    "properties": {
+                        "id": name,
+                        "type": type_name,
+                        "room": name,
+                        "pose": pose,
+                        "size": size,
+                        "access": point,
+                        "contents": {"type": "array", "items": type_name}
+                    }
+                }
+            },
+            "obstacles": {
+                "type": "array", "maxItems": limits.max_containers,
+                "items": {
+                    "type": "object", "additionalProperties": false,
+                    "required": ["id", "type", "pose"],
+                    "properties": {"id": name, "type": type_name, "pose": pose, "size": size}
+                }
+            },
+            "start": pose
+        }
+    })
+}
+
 /// `POST /scenes`.
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct UploadScene {
     /// Makes a retried request harmless.
     #[serde(default)]
+    #[schema(min_length = 1, max_length = 200)]
     pub request_id: Option<String>,
-    /// The scene, as in a scene file (version 1, without `map`).
+    /// The scene, as in a scene file (version 1, without `map`); its schema, with this
+    /// server's limits, is `Scene`.
     #[schema(value_type = Object)]
     pub scene: serde_json::Value,
+}
+
+/// How a deployment selects strategies.
+#[derive(Clone, Copy, Debug, Deserialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum Selector {
+    /// UCB constrained from below by offline replay costs (the default).
+    Replay,
+    /// Black-box UCB on deployed costs only.
+    Ucb,
+}
+
+impl From<Selector> for ferret_select::Method {
+    fn from(s: Selector) -> Self {
+        match s {
+            Selector::Replay => ferret_select::Method::ReplaySelection,
+            Selector::Ucb => ferret_select::Method::Ucb,
+        }
+    }
 }
 
 /// `POST /deployments`.
@@ -25,20 +153,52 @@ pub struct UploadScene {
 pub struct CreateDeployment {
     /// Makes a retried request harmless.
     #[serde(default)]
+    #[schema(min_length = 1, max_length = 200)]
     pub request_id: Option<String>,
-    /// Candidate strategies (names the server was started with); default: all of them.
+    /// Candidate strategies, each once (names of strategies the server was started with);
+    /// default: all of them.
     #[serde(default)]
+    #[schema(min_items = 1)]
     pub strategies: Option<Vec<String>>,
     /// `replay` (default) or `ucb`.
     #[serde(default)]
-    #[schema(value_type = Option<String>, example = "replay")]
-    pub selector: Option<ferret_select::Method>,
+    pub selector: Option<Selector>,
     /// Exploration constant, metres (default 5).
     #[serde(default)]
+    #[schema(minimum = 0.0, maximum = 1000.0)]
     pub c: Option<f64>,
     /// Seed of the selector's tie breaks (default 0).
-    #[serde(default)]
+    #[serde(default, deserialize_with = "integer_valued")]
+    #[schema(minimum = 0, maximum = 9007199254740991_i64)]
     pub seed: Option<u64>,
+}
+
+/// A non-negative integer as JSON Schema counts one: `2232.0` is the integer 2232, as many JSON
+/// encoders write it. An integral number too large for `u64` becomes `u64::MAX`, so that the
+/// bound check names the field (422) as for any other seed too large.
+fn integer_valued<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<u64>, D::Error> {
+    use serde::de::Error;
+    let Some(n) = Option::<serde_json::Number>::deserialize(d)? else {
+        return Ok(None);
+    };
+    if let Some(v) = n.as_u64() {
+        return Ok(Some(v));
+    }
+    match n.as_f64() {
+        Some(f) if f >= 0.0 && f.fract() == 0.0 => {
+            // Exact below 2^64; the bound check refuses everything from 2^53 on anyway.
+            #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+            let v = if f < 18_446_744_073_709_551_616.0 {
+                f as u64
+            } else {
+                u64::MAX
+            };
+            Ok(Some(v))
+        }
+        _ => Err(D::Error::custom(format!(
+            "invalid value: {n}, expected a non-negative integer"
+        ))),
+    }
 }
 
 /// `POST /deployments/{id}/trials`.
@@ -47,13 +207,17 @@ pub struct CreateDeployment {
 pub struct StartTrial {
     /// Makes a retried request harmless.
     #[serde(default)]
+    #[schema(min_length = 1, max_length = 200)]
     pub request_id: Option<String>,
     /// The scene's name.
+    #[schema(min_length = 1)]
     pub scene: String,
     /// The object type to find, CamelCase (`CellPhone`).
+    #[schema(pattern = r"^[A-Za-z0-9]{1,100}$")]
     pub target: String,
     /// The robot's pose `[x, y, yaw°]` in the map frame; default: the scene's start.
     #[serde(default)]
+    #[schema(value_type = Option<Vec<f64>>, min_items = 3, max_items = 3)]
     pub pose: Option<[f64; 3]>,
 }
 
@@ -63,16 +227,20 @@ pub struct StartTrial {
 pub struct Observe {
     /// Makes a retried request harmless.
     #[serde(default)]
+    #[schema(min_length = 1, max_length = 200)]
     pub request_id: Option<String>,
     /// The id of the container searched.
+    #[schema(min_length = 1)]
     pub container: String,
     /// Whether the target was in it.
     pub found: bool,
     /// Other object types seen in it (CamelCase).
     #[serde(default)]
+    #[schema(max_items = 1000)]
     pub objects: Vec<String>,
     /// The robot's own odometry for this leg, metres.
     #[serde(default)]
+    #[schema(minimum = 0.0, maximum = 100000.0)]
     pub travelled_m: Option<f64>,
 }
 

@@ -1,18 +1,28 @@
-//! The HTTP layer: routes, JSON in and out, bearer-token check, optional CORS, the OpenAPI
+//! The HTTP layer: routes, JSON in and out, the request guards, optional CORS, the OpenAPI
 //! document. Handlers parse the body (naming the field a bad body gets wrong) and hand the work
 //! to [`Service`] on a blocking thread: planning and SQLite are synchronous, and an LLM
 //! strategy blocks on its own runtime.
+//!
+//! Every request passes the guards in this order: `Host` must name this server (403), a
+//! browser's `Origin` must be one allowed for CORS (403), the bearer token must match when one
+//! is set (401); then a route that takes a body wants JSON (415) no larger than the limit
+//! (413), and other methods on a route are 405 whatever their body. Together
+//! they keep a web page the robot's operator happens to open from driving the robot (a form or
+//! `text/plain` post, a DNS-rebinding page).
 
+use std::net::{IpAddr, SocketAddr};
 use std::sync::Arc;
 
 use axum::body::Bytes;
-use axum::extract::{Path, Request, State};
+use axum::extract::rejection::{BytesRejection, PathRejection};
+use axum::extract::{DefaultBodyLimit, Path, Request, State};
 use axum::http::{HeaderMap, HeaderValue, Method, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
 use axum::{Json, Router};
 use serde::de::DeserializeOwned;
+use serde_json::{Value, json};
 use tower_http::cors::{AllowOrigin, CorsLayer};
 use utoipa::OpenApi;
 
@@ -21,15 +31,78 @@ use crate::api::{
     StartTrial, TrialState, UploadScene,
 };
 use crate::error::ApiError;
-use crate::service::{Reply, Service};
+use crate::service::{Reply, SceneLimits, Service};
+
+/// Default largest request body, bytes (a scene with hundreds of containers is tens of KB).
+pub const DEFAULT_MAX_BODY_BYTES: usize = 1 << 20;
 
 /// How the router guards itself.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct HttpOptions {
-    /// When set, every route but `/health` needs `Authorization: Bearer <token>`.
+    /// When set, every route but `/health` needs `Authorization: Bearer <token>`. An empty
+    /// token is refused by [`router`].
     pub token: Option<String>,
-    /// Origins allowed to call from a browser; empty = CORS off.
+    /// Origins allowed to call from a browser; empty = CORS off and every request carrying an
+    /// `Origin` refused.
     pub cors_origins: Vec<String>,
+    /// The address the server listens on: a request's `Host` must name it (or, for a loopback
+    /// address, `localhost`; for an unspecified one, any IP address with its port), or one of
+    /// `allowed_hosts`. `None` checks no `Host`.
+    pub listen: Option<SocketAddr>,
+    /// More names a request's `Host` may give: `name` (any port) or `name:port`.
+    pub allowed_hosts: Vec<String>,
+    /// Largest request body, bytes (413 past it).
+    pub max_body_bytes: usize,
+}
+
+impl Default for HttpOptions {
+    fn default() -> Self {
+        Self {
+            token: None,
+            cors_origins: Vec::new(),
+            listen: None,
+            allowed_hosts: Vec::new(),
+            max_body_bytes: DEFAULT_MAX_BODY_BYTES,
+        }
+    }
+}
+
+impl HttpOptions {
+    /// What [`router`] would refuse, checked without a service (so that a command line can be
+    /// refused before anything is opened).
+    ///
+    /// # Errors
+    /// An empty token, a CORS origin that is not a valid header value, an allowed host that is
+    /// not a host name; the field names the option.
+    pub fn validate(&self) -> Result<(), ApiError> {
+        if self.token.as_deref().is_some_and(|t| t.trim().is_empty()) {
+            return Err(ApiError::new(
+                400,
+                "token",
+                "the token is empty: set a non-empty token, or none to run without one",
+            ));
+        }
+        self.origins()?;
+        let listen = self
+            .listen
+            .unwrap_or_else(|| SocketAddr::from(([127, 0, 0, 1], 0)));
+        Hosts::new(listen, &self.allowed_hosts)?;
+        Ok(())
+    }
+
+    fn origins(&self) -> Result<Vec<HeaderValue>, ApiError> {
+        self.cors_origins
+            .iter()
+            .map(|o| {
+                HeaderValue::from_str(o)
+                    .ok()
+                    .filter(|_| !o.trim().is_empty())
+                    .ok_or_else(|| {
+                        ApiError::new(400, "cors-origin", format!("{o:?} is not a valid origin"))
+                    })
+            })
+            .collect()
+    }
 }
 
 impl IntoResponse for ApiError {
@@ -49,19 +122,28 @@ impl IntoResponse for ApiError {
     }
 }
 
+fn json_response(status: u16, body: String) -> Response {
+    (
+        StatusCode::from_u16(status).unwrap_or(StatusCode::OK),
+        [(header::CONTENT_TYPE, "application/json")],
+        body,
+    )
+        .into_response()
+}
+
 fn reply(r: Result<Reply, ApiError>) -> Response {
     match r {
-        Ok((status, body)) => (
-            StatusCode::from_u16(status).unwrap_or(StatusCode::OK),
-            Json(body),
-        )
-            .into_response(),
+        Ok((status, body)) => json_response(status, body),
         Err(e) => e.into_response(),
     }
 }
 
-/// Parses a JSON body; a failure names the field (`objects[2]`, `pose`).
+/// Parses a JSON object body; a failure names the field (`objects[2]`, `pose`).
 fn parse<T: DeserializeOwned>(body: &[u8]) -> Result<T, ApiError> {
+    // serde reads a struct from an array too (`[]` would be a deployment with every default).
+    if body.iter().find(|b| !b.is_ascii_whitespace()) != Some(&b'{') {
+        return Err(ApiError::new(400, "", "the body must be a JSON object"));
+    }
     let mut de = serde_json::Deserializer::from_slice(body);
     let value: T = serde_path_to_error::deserialize(&mut de).map_err(|e| {
         let path = e.path().to_string();
@@ -72,6 +154,31 @@ fn parse<T: DeserializeOwned>(body: &[u8]) -> Result<T, ApiError> {
     de.end()
         .map_err(|e| ApiError::new(400, "", format!("malformed request: {e}")))?;
     Ok(value)
+}
+
+/// The body, or the error axum met reading it (413 past the limit) as a JSON error. A body that
+/// is not `application/json` is refused (415) before it is parsed: forms and `text/plain` are
+/// what a web page may post to another site without asking.
+fn body(headers: &HeaderMap, b: Result<Bytes, BytesRejection>) -> Result<Bytes, ApiError> {
+    let json = headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.split(';').next())
+        .is_some_and(|t| t.trim().eq_ignore_ascii_case("application/json"));
+    if !json {
+        return Err(ApiError::new(
+            415,
+            "content-type",
+            "the body must be JSON, sent as `Content-Type: application/json`",
+        ));
+    }
+    b.map_err(|e| ApiError::new(e.status().as_u16(), "", e.body_text()))
+}
+
+/// A path segment, or 404 for one that is not valid UTF-8 once decoded.
+fn segment(p: Result<Path<String>, PathRejection>, what: &str) -> Result<String, ApiError> {
+    p.map(|Path(s)| s)
+        .map_err(|e| ApiError::new(404, what, e.body_text()))
 }
 
 fn id(raw: &str, what: &str) -> Result<i64, ApiError> {
@@ -89,9 +196,11 @@ async fn blocking(f: impl FnOnce() -> Result<Reply, ApiError> + Send + 'static) 
     }
 }
 
-#[utoipa::path(get, path = "/health", responses((status = 200, description = "The service is up")))]
-async fn health() -> Response {
-    Json(serde_json::json!({"status": "ok"})).into_response()
+#[utoipa::path(get, path = "/health", responses(
+    (status = 200, description = "The service is up and its database answers"),
+    (status = 503, description = "The database cannot be read", body = ErrorBody)))]
+async fn health(State(s): State<Arc<Service>>) -> Response {
+    blocking(move || Ok(s.health())).await
 }
 
 #[utoipa::path(get, path = "/scenes", responses((status = 200, body = [SceneSummary])))]
@@ -100,74 +209,100 @@ async fn list_scenes(State(s): State<Arc<Service>>) -> Response {
 }
 
 #[utoipa::path(get, path = "/scenes/{name}", params(("name" = String, Path, description = "Scene name")),
-    responses((status = 200, body = SceneDetail), (status = 404, body = ErrorBody)))]
-async fn get_scene(State(s): State<Arc<Service>>, Path(name): Path<String>) -> Response {
-    blocking(move || s.get_scene(&name)).await
+    responses((status = 200, body = SceneDetail)))]
+async fn get_scene(
+    State(s): State<Arc<Service>>,
+    name: Result<Path<String>, PathRejection>,
+) -> Response {
+    blocking(move || s.get_scene(&segment(name, "scene")?)).await
 }
 
-#[utoipa::path(post, path = "/scenes", request_body = UploadScene,
-    responses((status = 201, body = SceneDetail), (status = 409, body = ErrorBody), (status = 422, body = ErrorBody)))]
-async fn upload_scene(State(s): State<Arc<Service>>, body: Bytes) -> Response {
+#[utoipa::path(post, path = "/scenes", request_body = UploadScene, responses(
+    (status = 200, description = "The same scene was uploaded before", body = SceneDetail),
+    (status = 201, body = SceneDetail)))]
+async fn upload_scene(
+    State(s): State<Arc<Service>>,
+    headers: HeaderMap,
+    b: Result<Bytes, BytesRejection>,
+) -> Response {
     blocking(move || {
-        let req: UploadScene = parse(&body)?;
-        s.upload_scene(req, &body)
+        let b = body(&headers, b)?;
+        let req: UploadScene = parse(&b)?;
+        s.upload_scene(req, &b)
     })
     .await
 }
 
 #[utoipa::path(post, path = "/deployments", request_body = CreateDeployment,
-    responses((status = 201, body = DeploymentState), (status = 422, body = ErrorBody)))]
-async fn create_deployment(State(s): State<Arc<Service>>, body: Bytes) -> Response {
+    responses((status = 201, body = DeploymentState)))]
+async fn create_deployment(
+    State(s): State<Arc<Service>>,
+    headers: HeaderMap,
+    b: Result<Bytes, BytesRejection>,
+) -> Response {
     blocking(move || {
-        let req: CreateDeployment = parse(&body)?;
-        s.create_deployment(req, &body)
+        let b = body(&headers, b)?;
+        let req: CreateDeployment = parse(&b)?;
+        s.create_deployment(req, &b)
     })
     .await
 }
 
-#[utoipa::path(get, path = "/deployments/{id}", params(("id" = i64, Path, description = "Deployment id")),
-    responses((status = 200, body = DeploymentState), (status = 404, body = ErrorBody)))]
-async fn get_deployment(State(s): State<Arc<Service>>, Path(raw): Path<String>) -> Response {
-    blocking(move || s.get_deployment(id(&raw, "deployment")?)).await
+#[utoipa::path(get, path = "/deployments/{id}", params(("id" = i64, Path, description = "Deployment id", minimum = 1)),
+    responses((status = 200, body = DeploymentState)))]
+async fn get_deployment(
+    State(s): State<Arc<Service>>,
+    raw: Result<Path<String>, PathRejection>,
+) -> Response {
+    blocking(move || s.get_deployment(id(&segment(raw, "deployment")?, "deployment")?)).await
 }
 
 #[utoipa::path(post, path = "/deployments/{id}/trials", request_body = StartTrial,
-    params(("id" = i64, Path, description = "Deployment id")),
-    responses((status = 201, body = TrialState), (status = 404, body = ErrorBody),
-        (status = 409, body = ErrorBody), (status = 422, body = ErrorBody)))]
+    params(("id" = i64, Path, description = "Deployment id", minimum = 1)),
+    responses((status = 201, body = TrialState)))]
 async fn start_trial(
     State(s): State<Arc<Service>>,
-    Path(raw): Path<String>,
-    body: Bytes,
+    raw: Result<Path<String>, PathRejection>,
+    headers: HeaderMap,
+    b: Result<Bytes, BytesRejection>,
 ) -> Response {
     blocking(move || {
-        let d = id(&raw, "deployment")?;
-        let req: StartTrial = parse(&body)?;
-        s.start_trial(d, req, &body)
+        let d = id(&segment(raw, "deployment")?, "deployment")?;
+        let b = body(&headers, b)?;
+        let req: StartTrial = parse(&b)?;
+        s.start_trial(d, req, &b)
     })
     .await
 }
 
-#[utoipa::path(get, path = "/trials/{id}", params(("id" = i64, Path, description = "Trial id")),
-    responses((status = 200, body = TrialState), (status = 404, body = ErrorBody)))]
-async fn get_trial(State(s): State<Arc<Service>>, Path(raw): Path<String>) -> Response {
-    blocking(move || s.get_trial(id(&raw, "trial")?)).await
+#[utoipa::path(get, path = "/trials/{id}", params(("id" = i64, Path, description = "Trial id", minimum = 1)),
+    responses((status = 200, body = TrialState)))]
+async fn get_trial(
+    State(s): State<Arc<Service>>,
+    raw: Result<Path<String>, PathRejection>,
+) -> Response {
+    blocking(move || s.get_trial(id(&segment(raw, "trial")?, "trial")?)).await
 }
 
 #[utoipa::path(post, path = "/trials/{id}/observations", request_body = Observe,
-    params(("id" = i64, Path, description = "Trial id")),
-    responses((status = 200, body = TrialState), (status = 404, body = ErrorBody),
-        (status = 409, body = ErrorBody), (status = 422, body = ErrorBody)))]
-async fn observe(State(s): State<Arc<Service>>, Path(raw): Path<String>, body: Bytes) -> Response {
+    params(("id" = i64, Path, description = "Trial id", minimum = 1)),
+    responses((status = 200, body = TrialState)))]
+async fn observe(
+    State(s): State<Arc<Service>>,
+    raw: Result<Path<String>, PathRejection>,
+    headers: HeaderMap,
+    b: Result<Bytes, BytesRejection>,
+) -> Response {
     blocking(move || {
-        let t = id(&raw, "trial")?;
-        let req: Observe = parse(&body)?;
-        s.observe(t, req, &body)
+        let t = id(&segment(raw, "trial")?, "trial")?;
+        let b = body(&headers, b)?;
+        let req: Observe = parse(&b)?;
+        s.observe(t, req, &b)
     })
     .await
 }
 
-/// The OpenAPI document.
+/// The OpenAPI document as derived from the types; [`document`] adds what the derive cannot say.
 #[derive(OpenApi)]
 #[openapi(
     info(
@@ -189,8 +324,201 @@ async fn observe(State(s): State<Arc<Service>>, Path(raw): Path<String>, body: B
 )]
 pub struct ApiDoc;
 
-async fn openapi() -> Response {
-    Json(ApiDoc::openapi()).into_response()
+/// Statuses every route may answer besides its own, and why.
+const COMMON_STATUSES: [(u16, &str); 2] = [
+    (
+        403,
+        "The Host header names another server, or a browser Origin is not allowed",
+    ),
+    (500, "The server's own failure (its database)"),
+];
+
+/// A status a route may answer, and when.
+type Status = (u16, &'static str);
+
+/// Statuses of each route: `(method, path, [(status, description)])`.
+fn route_statuses() -> Vec<(&'static str, &'static str, Vec<Status>)> {
+    let body = [
+        (
+            400,
+            "Malformed JSON, not an object, a missing or mistyped field",
+        ),
+        (413, "The body is larger than the server's limit"),
+        (415, "The body is not application/json"),
+        (422, "A value the server cannot use (named in `field`)"),
+    ];
+    let retry = (
+        409,
+        "A request id reused with another body, or a conflicting state",
+    );
+    let planning = (
+        503,
+        "A strategy could not plan (an LLM endpoint is down); retry later",
+    );
+    // The first description of a status is kept: specific ones come before the shared ones.
+    let with = |extra: &[(u16, &'static str)], base: &[(u16, &'static str)]| {
+        extra.iter().chain(base).copied().collect::<Vec<_>>()
+    };
+    vec![
+        ("get", "/health", vec![]),
+        ("get", "/scenes", vec![]),
+        (
+            "get",
+            "/scenes/{name}",
+            vec![(404, "No scene of that name")],
+        ),
+        (
+            "post",
+            "/scenes",
+            with(
+                &[
+                    (
+                        413,
+                        "The body, or the store of uploaded scenes, is over its limit",
+                    ),
+                    retry,
+                ],
+                &body,
+            ),
+        ),
+        ("post", "/deployments", with(&[retry], &body)),
+        (
+            "get",
+            "/deployments/{id}",
+            vec![(404, "No deployment of that id")],
+        ),
+        (
+            "post",
+            "/deployments/{id}/trials",
+            with(
+                &[(404, "No such deployment or scene"), retry, planning],
+                &body,
+            ),
+        ),
+        (
+            "get",
+            "/trials/{id}",
+            vec![(404, "No trial of that id"), planning],
+        ),
+        (
+            "post",
+            "/trials/{id}/observations",
+            with(
+                &[
+                    (404, "No such trial, or no such container in its scene"),
+                    retry,
+                    planning,
+                ],
+                &body,
+            ),
+        ),
+    ]
+}
+
+/// The OpenAPI document this server serves: the derived one, plus what the service enforces
+/// and the derive cannot say (the scene schema with this server's limits, the strategies it
+/// offers, unique items, patterns of array items, every status a route can answer, the token).
+pub fn document(options: &HttpOptions, strategies: &[String], limits: &SceneLimits) -> Value {
+    let mut doc = serde_json::to_value(ApiDoc::openapi()).unwrap_or_default();
+    let error_ref =
+        json!({"application/json": {"schema": {"$ref": "#/components/schemas/ErrorBody"}}});
+    if let Some(schemas) = doc
+        .pointer_mut("/components/schemas")
+        .and_then(Value::as_object_mut)
+    {
+        schemas.insert("Scene".into(), crate::api::scene_schema(limits));
+    }
+    if let Some(scene) = doc.pointer_mut("/components/schemas/UploadScene/properties/scene") {
+        *scene = json!({
+            "$ref": "#/components/schemas/Scene",
+            "description": "The scene, as in a scene file (version 1, without `map`)."
+        });
+    }
+    if let Some(s) = doc.pointer_mut("/components/schemas/CreateDeployment/properties/strategies") {
+        s["uniqueItems"] = json!(true);
+        s["items"] = json!({"type": "string", "enum": strategies});
+    }
+    if let Some(items) = doc.pointer_mut("/components/schemas/Observe/properties/objects/items") {
+        *items = json!({"type": "string", "pattern": crate::api::TYPE_NAME_PATTERN});
+    }
+    if let Some(pose) = doc.pointer_mut("/components/schemas/StartTrial/properties/pose") {
+        *pose = json!({
+            "type": ["array", "null"],
+            "items": {"type": "number"},
+            "minItems": 3,
+            "maxItems": 3,
+            "description": "The robot's pose `[x, y, yaw°]` in the map frame; default: the scene's start."
+        });
+    }
+    for (method, path, statuses) in route_statuses() {
+        let Some(op) = doc
+            .pointer_mut(&format!("/paths/{}/{method}", path.replace('/', "~1")))
+            .and_then(Value::as_object_mut)
+        else {
+            continue;
+        };
+        let mut all = statuses;
+        all.extend(COMMON_STATUSES);
+        if options.token.is_some() && path != "/health" {
+            all.push((401, "The bearer token is missing or wrong"));
+            op.insert("security".into(), json!([{"bearer": []}]));
+        }
+        let responses = op
+            .entry("responses")
+            .or_insert_with(|| json!({}))
+            .as_object_mut();
+        if let Some(responses) = responses {
+            for (status, description) in all {
+                responses
+                    .entry(status.to_string())
+                    .or_insert_with(|| json!({"description": description, "content": error_ref}));
+            }
+        }
+    }
+    for (path, method, status, links) in links() {
+        if let Some(response) = doc.pointer_mut(&format!(
+            "/paths/{}/{method}/responses/{status}",
+            path.replace('/', "~1")
+        )) {
+            response["links"] = links;
+        }
+    }
+    if options.token.is_some() {
+        doc["components"]["securitySchemes"] =
+            json!({"bearer": {"type": "http", "scheme": "bearer"}});
+    }
+    doc
+}
+
+/// How the objects one route creates are reached by the others (OpenAPI links), so that a client
+/// generator or a contract tester can follow a deployment to its trials and their observations.
+fn links() -> Vec<(&'static str, &'static str, u16, Value)> {
+    let to = |operation: &str, parameter: &str, from: &str| json!({"operationId": operation, "parameters": {parameter: format!("$response.body#/{from}")}});
+    let trial = || {
+        json!({
+            "GetTrial": to("get_trial", "id", "trial"),
+            "Observe": to("observe", "id", "trial"),
+        })
+    };
+    vec![
+        (
+            "/scenes",
+            "post",
+            201,
+            json!({"GetScene": to("get_scene", "name", "name")}),
+        ),
+        (
+            "/deployments",
+            "post",
+            201,
+            json!({
+                "GetDeployment": to("get_deployment", "id", "id"),
+                "StartTrial": to("start_trial", "id", "id"),
+            }),
+        ),
+        ("/deployments/{id}/trials", "post", 201, trial()),
+        ("/trials/{id}/observations", "post", 200, trial()),
+    ]
 }
 
 async fn not_found() -> Response {
@@ -212,40 +540,171 @@ fn same(a: &[u8], b: &[u8]) -> bool {
     a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
 }
 
-async fn check_token(
-    State(token): State<Option<Arc<str>>>,
-    headers: HeaderMap,
-    req: Request,
-    next: Next,
-) -> Response {
-    if let Some(token) = token
-        && req.uri().path() != "/health"
-    {
-        let given = headers
-            .get(header::AUTHORIZATION)
-            .and_then(|v| v.to_str().ok())
-            .and_then(|v| v.strip_prefix("Bearer "));
-        if !given.is_some_and(|g| same(g.as_bytes(), token.as_bytes())) {
-            return ApiError::new(
-                401,
-                "authorization",
-                "a valid `Authorization: Bearer <token>` header is required",
-            )
-            .into_response();
+/// The `Host` values a request may carry.
+#[derive(Debug, Default)]
+struct Hosts {
+    /// Any IP address with this port (listening on an unspecified address).
+    any_ip_on: Option<u16>,
+    /// Addresses with their port.
+    ips: Vec<(IpAddr, u16)>,
+    /// Names, with a port or any.
+    names: Vec<(String, Option<u16>)>,
+}
+
+impl Hosts {
+    fn new(listen: SocketAddr, allowed: &[String]) -> Result<Hosts, ApiError> {
+        let mut hosts = Hosts::default();
+        let port = listen.port();
+        if listen.ip().is_unspecified() {
+            hosts.any_ip_on = Some(port);
+        } else {
+            hosts.ips.push((listen.ip(), port));
+        }
+        if listen.ip().is_loopback() || listen.ip().is_unspecified() {
+            hosts.names.push(("localhost".into(), Some(port)));
+        }
+        for a in allowed {
+            let bad = || {
+                ApiError::new(
+                    400,
+                    "allow-host",
+                    format!("{a:?} is not a host name or host:port"),
+                )
+            };
+            let (host, port) = split_host(a).ok_or_else(bad)?;
+            match host.parse::<IpAddr>() {
+                Ok(ip) => hosts.ips.push((ip, port.unwrap_or(listen.port()))),
+                Err(_) if !host.is_empty() => {
+                    hosts.names.push((host.to_ascii_lowercase(), port));
+                }
+                Err(_) => return Err(bad()),
+            }
+        }
+        Ok(hosts)
+    }
+
+    fn allows(&self, value: &str) -> bool {
+        let Some((host, port)) = split_host(value) else {
+            return false;
+        };
+        let port = port.unwrap_or(80);
+        match host.parse::<IpAddr>() {
+            Ok(ip) => {
+                self.any_ip_on == Some(port) || self.ips.iter().any(|&(i, p)| i == ip && p == port)
+            }
+            Err(_) => self.names.iter().any(|(n, p)| {
+                n.eq_ignore_ascii_case(host.trim_end_matches('.')) && p.is_none_or(|p| p == port)
+            }),
         }
     }
-    next.run(req).await
+}
+
+/// `host`, `host:port`, `[v6]:port` → host (without brackets) and port.
+fn split_host(value: &str) -> Option<(String, Option<u16>)> {
+    if value.contains('@') {
+        return None;
+    }
+    let authority: axum::http::uri::Authority = value.parse().ok()?;
+    let host = authority.host();
+    let host = host
+        .strip_prefix('[')
+        .and_then(|h| h.strip_suffix(']'))
+        .unwrap_or(host);
+    Some((host.to_string(), authority.port_u16()))
+}
+
+/// What the guards check.
+struct Guards {
+    token: Option<Arc<str>>,
+    origins: Vec<String>,
+    hosts: Option<Hosts>,
+}
+
+impl Guards {
+    fn check(&self, req: &Request) -> Result<(), ApiError> {
+        let headers: &HeaderMap = req.headers();
+        if let Some(hosts) = &self.hosts
+            && let Some(host) = headers.get(header::HOST)
+            && !host.to_str().is_ok_and(|h| hosts.allows(h))
+        {
+            return Err(ApiError::new(
+                403,
+                "host",
+                "the Host header names another server (start the server with --allow-host for names it is reached by)",
+            ));
+        }
+        if let Some(origin) = headers.get(header::ORIGIN)
+            && !origin
+                .to_str()
+                .is_ok_and(|o| self.origins.iter().any(|a| a.eq_ignore_ascii_case(o)))
+        {
+            return Err(ApiError::new(
+                403,
+                "origin",
+                "requests from browser pages are refused unless their origin is allowed (--cors-origin)",
+            ));
+        }
+        if let Some(token) = &self.token
+            && req.uri().path() != "/health"
+        {
+            let given = headers
+                .get(header::AUTHORIZATION)
+                .and_then(|v| v.to_str().ok())
+                .and_then(|v| v.trim_start().split_once(' '))
+                .filter(|(scheme, _)| scheme.eq_ignore_ascii_case("bearer"))
+                .map(|(_, t)| t.trim());
+            if !given.is_some_and(|g| same(g.as_bytes(), token.as_bytes())) {
+                return Err(ApiError::new(
+                    401,
+                    "authorization",
+                    "a valid `Authorization: Bearer <token>` header is required",
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+async fn guard(State(guards): State<Arc<Guards>>, req: Request, next: Next) -> Response {
+    match guards.check(&req) {
+        Ok(()) => next.run(req).await,
+        Err(e) => e.into_response(),
+    }
 }
 
 /// The service's router.
 ///
 /// # Errors
-/// A CORS origin that is not a valid header value.
+/// An empty token, a CORS origin that is not a valid header value, an allowed host that is not
+/// a host name.
 pub fn router(service: Arc<Service>, options: &HttpOptions) -> Result<Router, ApiError> {
-    let token: Option<Arc<str>> = options.token.as_deref().map(Arc::from);
+    options.validate()?;
+    let hosts = options
+        .listen
+        .map(|l| Hosts::new(l, &options.allowed_hosts))
+        .transpose()?;
+    let guards = Arc::new(Guards {
+        token: options.token.as_deref().map(Arc::from),
+        origins: options.cors_origins.clone(),
+        hosts,
+    });
+    let doc: Arc<str> = Arc::from(
+        document(
+            options,
+            &service.strategy_names(),
+            &service.options().limits,
+        )
+        .to_string(),
+    );
     let mut app = Router::new()
         .route("/health", get(health))
-        .route("/openapi.json", get(openapi))
+        .route(
+            "/openapi.json",
+            get(move || {
+                let doc = doc.clone();
+                async move { json_response(200, doc.to_string()) }
+            }),
+        )
         .route("/scenes", get(list_scenes).post(upload_scene))
         .route("/scenes/{name}", get(get_scene))
         .route("/deployments", post(create_deployment))
@@ -256,17 +715,10 @@ pub fn router(service: Arc<Service>, options: &HttpOptions) -> Result<Router, Ap
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
         .with_state(service)
-        .layer(middleware::from_fn_with_state(token, check_token));
+        .layer(DefaultBodyLimit::max(options.max_body_bytes))
+        .layer(middleware::from_fn_with_state(guards, guard));
     if !options.cors_origins.is_empty() {
-        let origins = options
-            .cors_origins
-            .iter()
-            .map(|o| {
-                HeaderValue::from_str(o).map_err(|_| {
-                    ApiError::new(400, "cors-origin", format!("{o:?} is not a valid origin"))
-                })
-            })
-            .collect::<Result<Vec<_>, _>>()?;
+        let origins = options.origins()?;
         app = app.layer(
             CorsLayer::new()
                 .allow_origin(AllowOrigin::list(origins))

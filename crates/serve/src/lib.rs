@@ -12,10 +12,12 @@
 pub mod api;
 pub mod error;
 pub mod http;
+pub mod server;
 pub mod service;
 pub mod store;
 
 pub use error::ApiError;
-pub use http::{ApiDoc, HttpOptions, router};
-pub use service::Service;
+pub use http::{ApiDoc, HttpOptions, document, router};
+pub use server::{ServeOptions, serve};
+pub use service::{SceneLimits, Service, ServiceOptions};
 pub use store::Store;

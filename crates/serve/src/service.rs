@@ -1,43 +1,88 @@
 //! What each route does, without HTTP: scenes, deployments, trials. Every operation reads what
 //! it needs from the store, plans without holding the database, then writes its rows and its
 //! reply in one transaction (checking nothing changed in between).
+//!
+//! Memory is bounded whatever the database holds: uploaded scenes stay in the store and are
+//! read when a request needs them, and the grids and distances planning needs are built on
+//! demand into a cache of bounded size, a few at a time.
 
 use std::collections::{BTreeMap, HashMap};
-use std::sync::{Arc, Mutex, RwLock};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError, RwLock};
 
 use ferret_plan::{
     ReplayMode, Search, SearchProblem, Strategy, TrialSpec, hindsight_truth, replay_costs,
 };
-use ferret_select::{DEFAULT_C, FinishedTrial, LiveDeployment, Method, TrialEnd};
+use ferret_select::{DEFAULT_C, FinishedTrial, LiveDeployment, TrialEnd};
 use ferret_world::distance::{self, Place};
 use ferret_world::{
-    Distances, GridParams, House, ObjectType, Point, Pose, Scene, SceneFile, TravelCost,
+    Distances, GridParams, House, ObjectType, OccupancyGrid, Point, Pose, Scene, SceneFile,
+    TravelCost,
 };
 use serde::Serialize;
 use sha2::{Digest, Sha256};
 
 use crate::api::{
-    ContainerInfo, CreateDeployment, DeploymentState, NextChoice, NextContainer, Observe, RoomInfo,
-    SceneDetail, SceneSummary, StartTrial, StrategyRow, TrialState, TrialSummary, UploadScene,
+    ContainerInfo, CreateDeployment, DeploymentState, MAX_C, MAX_OBJECTS, MAX_REQUEST_ID, MAX_SEED,
+    MAX_TRAVELLED_M, MAX_TYPE_NAME, NextChoice, NextContainer, Observe, RoomInfo, SceneDetail,
+    SceneSummary, StartTrial, StrategyRow, TrialState, TrialSummary, UploadScene,
 };
 use crate::error::ApiError;
 use crate::store::{DeploymentSpec, ObservationRow, Store, StoredReply, TrialRow, TrialStatus};
 
-/// A reply: HTTP status and JSON body.
-pub type Reply = (u16, serde_json::Value);
+/// A reply: HTTP status and JSON text. Kept as text so that a retried request gets the very
+/// bytes of the first reply (a float parsed back from JSON may differ in its last digit).
+pub type Reply = (u16, String);
 
 /// How far a robot's pose may be from free floor (the grid moves it to the nearest free cell),
 /// metres.
 pub const MAX_POSE_SHIFT_M: f64 = 0.5;
 
-/// Longest accepted request id.
-pub const MAX_REQUEST_ID: usize = 200;
+/// What one uploaded scene and the store may hold. Planning a scene costs memory in proportion
+/// to its grid cells and time in proportion to cells × containers, so both are bounded before a
+/// grid is built.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SceneLimits {
+    /// Uploaded scenes the store may hold (413 past it).
+    pub max_scenes: usize,
+    /// Grid cells of an uploaded scene at the server's resolution (422 past it).
+    pub max_cells: u64,
+    /// Containers of an uploaded scene, and obstacles likewise (422 past it).
+    pub max_containers: usize,
+    /// Vertices of all room polygons of an uploaded scene together (422 past it).
+    pub max_vertices: usize,
+}
 
-/// A scene the service knows, with its distances from its own start.
-struct Loaded {
-    scene: Scene,
-    /// The JSON a client uploaded (kept to tell a retry from a different scene of the same name).
-    uploaded: Option<String>,
+impl Default for SceneLimits {
+    fn default() -> Self {
+        Self {
+            max_scenes: 1000,
+            max_cells: 4_000_000,
+            max_containers: 200,
+            max_vertices: 1000,
+        }
+    }
+}
+
+/// How the service bounds its work.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ServiceOptions {
+    /// Limits on uploaded scenes.
+    pub limits: SceneLimits,
+    /// Memory the built grids and distances may hold, bytes; the least recently used are
+    /// dropped past it (and built again when asked for).
+    pub grid_cache_bytes: usize,
+    /// Grids built at once; more requests that need one wait.
+    pub concurrent_builds: usize,
+}
+
+impl Default for ServiceOptions {
+    fn default() -> Self {
+        Self {
+            limits: SceneLimits::default(),
+            grid_cache_bytes: 256 << 20,
+            concurrent_builds: std::thread::available_parallelism().map_or(2, |n| n.get()),
+        }
+    }
 }
 
 /// A scene with the robot at a given pose: the house with that start and its distances.
@@ -46,48 +91,196 @@ struct Placed {
     distances: Distances,
 }
 
-/// Scenes with the robot placed, by scene name and pose (the pose's bits).
-type PlacedCache = HashMap<(String, [u64; 3]), Arc<Placed>>;
+impl Placed {
+    /// Memory it holds, roughly: two bytes per grid cell, the distance matrix, the house.
+    fn bytes(&self) -> usize {
+        let n = self.house.containers.len() + 1;
+        let cells = self.distances.grid().map_or(0, OccupancyGrid::cell_count);
+        cells * 2 + n * n * 8 + n * 64 + 64 * 1024
+    }
+}
+
+/// Placed scenes by scene name and pose (its bits; `None` = the scene's own start).
+type PlaceKey = (String, Option<[u64; 3]>);
+
+/// Built grids, least recently used dropped first once they hold more than `budget` bytes.
+/// Hand-written: the LRU crates count entries, and entries here differ in size by a thousand
+/// times.
+struct GridCache {
+    budget: usize,
+    used: usize,
+    clock: u64,
+    entries: HashMap<PlaceKey, (Arc<Placed>, usize, u64)>,
+}
+
+impl GridCache {
+    fn get(&mut self, key: &PlaceKey) -> Option<Arc<Placed>> {
+        self.clock += 1;
+        let clock = self.clock;
+        self.entries.get_mut(key).map(|e| {
+            e.2 = clock;
+            e.0.clone()
+        })
+    }
+
+    fn insert(&mut self, key: PlaceKey, placed: Arc<Placed>) {
+        let bytes = placed.bytes();
+        if bytes > self.budget {
+            return;
+        }
+        if let Some(old) = self.entries.remove(&key) {
+            self.used -= old.1;
+        }
+        while self.used + bytes > self.budget {
+            let Some(oldest) = self
+                .entries
+                .iter()
+                .min_by_key(|(_, e)| e.2)
+                .map(|(k, _)| k.clone())
+            else {
+                break;
+            };
+            if let Some(e) = self.entries.remove(&oldest) {
+                self.used -= e.1;
+            }
+        }
+        self.clock += 1;
+        self.used += bytes;
+        self.entries.insert(key, (placed, bytes, self.clock));
+    }
+
+    fn remove_scene(&mut self, name: &str) {
+        let used = &mut self.used;
+        self.entries.retain(|k, e| {
+            let keep = k.0 != name;
+            if !keep {
+                *used -= e.1;
+            }
+            keep
+        });
+    }
+}
+
+/// A counting semaphore for grid builds on the blocking threads that run requests.
+struct Permits {
+    free: Mutex<usize>,
+    returned: Condvar,
+}
+
+struct Permit<'a>(&'a Permits);
+
+impl Permits {
+    fn acquire(&self) -> Permit<'_> {
+        let mut free = self.free.lock().unwrap_or_else(PoisonError::into_inner);
+        while *free == 0 {
+            free = self
+                .returned
+                .wait(free)
+                .unwrap_or_else(PoisonError::into_inner);
+        }
+        *free -= 1;
+        Permit(self)
+    }
+}
+
+impl Drop for Permit<'_> {
+    fn drop(&mut self) {
+        *self.0.free.lock().unwrap_or_else(PoisonError::into_inner) += 1;
+        self.0.returned.notify_one();
+    }
+}
+
+/// The scenes the service offers.
+#[derive(Default)]
+struct Scenes {
+    /// Given on the command line: loaded for good.
+    fixed: BTreeMap<String, (Arc<Scene>, SceneSummary)>,
+    /// Uploaded: only what the list shows; the scene is read from the store when needed.
+    uploaded: BTreeMap<String, SceneSummary>,
+}
 
 /// The service.
 pub struct Service {
     store: Store,
     grid: GridParams,
     candidates: Vec<Arc<dyn Strategy>>,
-    scenes: RwLock<BTreeMap<String, Arc<Loaded>>>,
-    placed: Mutex<PlacedCache>,
+    options: ServiceOptions,
+    scenes: RwLock<Scenes>,
+    cache: Mutex<GridCache>,
+    builds: Permits,
 }
 
 impl std::fmt::Debug for Service {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Service")
             .field("candidates", &self.candidates.len())
+            .field("options", &self.options)
             .finish_non_exhaustive()
     }
 }
 
 fn json<T: Serialize>(status: u16, value: &T) -> Result<Reply, ApiError> {
-    serde_json::to_value(value)
+    serde_json::to_string(value)
         .map(|v| (status, v))
         .map_err(|e| ApiError::internal(format!("serializing a reply: {e}")))
 }
 
+/// An object type as the API takes it: ASCII letters and digits, as in `CellPhone`.
 fn is_type_name(s: &str) -> bool {
-    !s.is_empty() && s.len() <= 100 && s.chars().all(char::is_alphanumeric)
+    !s.is_empty() && s.len() <= MAX_TYPE_NAME && s.chars().all(|c| c.is_ascii_alphanumeric())
+}
+
+/// A name or id in an uploaded scene: printable ASCII, not only spaces, at most 100 characters
+/// (they appear in URLs and replies; the scene file format itself is more lenient).
+fn is_upload_name(s: &str) -> bool {
+    s.len() <= MAX_TYPE_NAME
+        && s.chars().all(|c| matches!(c, ' '..='~'))
+        && s.chars().any(|c| matches!(c, '!'..='~'))
+}
+
+fn summary(name: &str, scene: &Scene) -> SceneSummary {
+    SceneSummary {
+        name: name.to_string(),
+        rooms: scene.house.rooms.len(),
+        containers: scene.house.containers.len(),
+        has_map: scene.house.map.is_some(),
+    }
+}
+
+fn start_pose(house: &House) -> [f64; 3] {
+    let start = &house.start;
+    [
+        start.position.x,
+        start.position.z,
+        ferret_world::scene::heading_to_ros(start.yaw_deg),
+    ]
 }
 
 impl Service {
     /// A service over `store`, offering `candidates` (strategies built by the caller, the same
-    /// registry as `ferret eval`), planning on grids with `grid`. Scenes uploaded earlier are
-    /// loaded back from the store.
+    /// registry as `ferret eval`), planning on grids with `grid`, with the default limits.
     ///
     /// # Errors
-    /// No candidates, a candidate that needs the ground truth (the oracle), or a stored scene
-    /// that no longer loads.
+    /// See [`Service::with_options`].
     pub fn new(
         store: Store,
         grid: GridParams,
         candidates: Vec<Arc<dyn Strategy>>,
+    ) -> Result<Service, ApiError> {
+        Self::with_options(store, grid, candidates, ServiceOptions::default())
+    }
+
+    /// A service with `options`. Scenes uploaded earlier are listed from the store without
+    /// being loaded, so start-up takes the same time whatever the store holds.
+    ///
+    /// # Errors
+    /// No candidates, a candidate that needs the ground truth (the oracle), options of zero,
+    /// or a store that cannot be read.
+    pub fn with_options(
+        store: Store,
+        grid: GridParams,
+        candidates: Vec<Arc<dyn Strategy>>,
+        options: ServiceOptions,
     ) -> Result<Service, ApiError> {
         if candidates.is_empty() {
             return Err(ApiError::internal("no candidate strategies"));
@@ -98,134 +291,199 @@ impl Service {
                 s.name()
             )));
         }
-        let service = Service {
+        if options.concurrent_builds == 0 {
+            return Err(ApiError::internal(
+                "concurrent grid builds must be at least 1",
+            ));
+        }
+        let uploaded = store
+            .read(|r| r.scene_summaries())?
+            .into_iter()
+            .map(|(name, rooms, containers)| {
+                let s = SceneSummary {
+                    name: name.clone(),
+                    rooms,
+                    containers,
+                    has_map: false,
+                };
+                (name, s)
+            })
+            .collect();
+        Ok(Service {
             store,
             grid,
             candidates,
-            scenes: RwLock::new(BTreeMap::new()),
-            placed: Mutex::new(HashMap::new()),
-        };
-        let stored = service.store.read(|r| r.scenes())?;
-        for (name, body) in stored {
-            let scene = parse_uploaded(&body).map_err(|e| {
-                ApiError::internal(format!(
-                    "stored scene {name:?} no longer loads: {}",
-                    e.message
-                ))
-            })?;
-            service.insert_scene(name, scene, Some(body));
-        }
-        Ok(service)
+            options,
+            scenes: RwLock::new(Scenes {
+                fixed: BTreeMap::new(),
+                uploaded,
+            }),
+            cache: Mutex::new(GridCache {
+                budget: options.grid_cache_bytes,
+                used: 0,
+                clock: 0,
+                entries: HashMap::new(),
+            }),
+            builds: Permits {
+                free: Mutex::new(options.concurrent_builds),
+                returned: Condvar::new(),
+            },
+        })
     }
 
-    /// Offers `scene` under `name` (scene files and houses named on the command line).
+    /// The limits it enforces.
+    pub fn options(&self) -> &ServiceOptions {
+        &self.options
+    }
+
+    /// Bytes the cached grids and distances hold now (at most
+    /// [`ServiceOptions::grid_cache_bytes`]).
+    pub fn grid_cache_bytes(&self) -> usize {
+        self.lock_cache().used
+    }
+
+    /// The scenes with a grid in the cache, each once, sorted.
+    pub fn cached_grids(&self) -> Vec<String> {
+        let mut names: Vec<String> = self
+            .lock_cache()
+            .entries
+            .keys()
+            .map(|k| k.0.clone())
+            .collect();
+        names.sort();
+        names.dedup();
+        names
+    }
+
+    /// Offers `scene` under `name` (scene files and houses named on the command line; no limits
+    /// apply, the operator chose them). Its grid is built now, to check it.
     ///
     /// # Errors
-    /// 422 when a container cannot be reached from the scene's start, or the name is taken.
+    /// 422 when a container cannot be reached from the scene's start; 409 when the name is
+    /// taken.
     pub fn add_scene(&self, name: &str, scene: Scene) -> Result<(), ApiError> {
-        if self.scene(name).is_ok() {
+        if self.knows(name)? {
             return Err(ApiError::new(
                 409,
                 "scene",
                 format!("a scene named {name:?} exists already"),
             ));
         }
-        let distances = self.check_reachable(&scene, "scene")?;
-        self.remember_start(name, &scene, distances);
-        self.insert_scene(name.to_string(), scene, None);
+        let placed = self.build(&scene.house, None, "scene")?;
+        let s = summary(name, &scene);
+        self.write_scenes()
+            .fixed
+            .insert(name.to_string(), (Arc::new(scene), s));
+        self.lock_cache().insert((name.to_string(), None), placed);
         Ok(())
     }
 
-    /// Caches the distances from the scene's own start, computed while checking it.
-    fn remember_start(&self, name: &str, scene: &Scene, distances: Distances) {
-        let start = &scene.house.start;
-        let pose = [
-            start.position.x,
-            start.position.z,
-            ferret_world::scene::heading_to_ros(start.yaw_deg),
-        ];
-        let placed = Arc::new(Placed {
-            house: scene.house.clone(),
-            distances,
-        });
-        self.lock_placed()
-            .insert((name.to_string(), pose.map(f64::to_bits)), placed);
+    fn read_scenes(&self) -> std::sync::RwLockReadGuard<'_, Scenes> {
+        self.scenes.read().unwrap_or_else(PoisonError::into_inner)
     }
 
-    fn insert_scene(&self, name: String, scene: Scene, uploaded: Option<String>) {
-        let mut scenes = self
-            .scenes
-            .write()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        scenes.insert(name, Arc::new(Loaded { scene, uploaded }));
+    fn write_scenes(&self) -> std::sync::RwLockWriteGuard<'_, Scenes> {
+        self.scenes.write().unwrap_or_else(PoisonError::into_inner)
     }
 
-    fn scene(&self, name: &str) -> Result<Arc<Loaded>, ApiError> {
-        let scenes = self
-            .scenes
-            .read()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        scenes
-            .get(name)
-            .cloned()
-            .ok_or_else(|| ApiError::new(404, "scene", format!("no scene named {name:?}")))
+    fn lock_cache(&self) -> MutexGuard<'_, GridCache> {
+        self.cache.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
-    fn check_reachable(&self, scene: &Scene, field: &str) -> Result<Distances, ApiError> {
-        match distance::build(&scene.house, &self.grid) {
-            Ok((_, d)) => Ok(d),
-            Err(e) => Err(ApiError::new(422, field, e.to_string())),
+    /// True when a scene is offered under `name` (also one another process uploaded to the
+    /// same store).
+    fn knows(&self, name: &str) -> Result<bool, ApiError> {
+        {
+            let scenes = self.read_scenes();
+            if scenes.fixed.contains_key(name) || scenes.uploaded.contains_key(name) {
+                return Ok(true);
+            }
         }
+        Ok(self.store.read(|r| r.scene(name))?.is_some())
+    }
+
+    /// The scene called `name`: a fixed one, or an uploaded one read from the store.
+    fn scene(&self, name: &str) -> Result<Arc<Scene>, ApiError> {
+        if let Some((scene, _)) = self.read_scenes().fixed.get(name) {
+            return Ok(scene.clone());
+        }
+        let Some(text) = self.store.read(|r| r.scene(name))? else {
+            return Err(ApiError::new(
+                404,
+                "scene",
+                format!("no scene named {name:?}"),
+            ));
+        };
+        let (_, scene) = parse_uploaded(&text).map_err(|e| {
+            ApiError::internal(format!(
+                "stored scene {name:?} no longer loads: {}",
+                e.message
+            ))
+        })?;
+        self.write_scenes()
+            .uploaded
+            .entry(name.to_string())
+            .or_insert_with(|| summary(name, &scene));
+        Ok(Arc::new(scene))
+    }
+
+    /// The grid and distances of `house` with the robot at `pose` (its own start when `None`),
+    /// built with at most `concurrent_builds` others at once.
+    fn build(
+        &self,
+        house: &House,
+        pose: Option<[f64; 3]>,
+        field: &str,
+    ) -> Result<Arc<Placed>, ApiError> {
+        let mut house = house.clone();
+        if let Some(pose) = pose {
+            house.start = Pose {
+                position: Point::new(pose[0], pose[1]),
+                yaw_deg: ferret_world::scene::heading_from_ros(pose[2]),
+            };
+        }
+        let _permit = self.builds.acquire();
+        let (grid, distances) = distance::build(&house, &self.grid).map_err(|e| match pose {
+            Some(p) => ApiError::new(422, field, format!("({}, {}): {e}", p[0], p[1])),
+            None => ApiError::new(422, field, e.to_string()),
+        })?;
+        if let Some(pose) = pose {
+            let shift = grid
+                .center(grid.start_cell())
+                .distance(house.start.position);
+            if shift > MAX_POSE_SHIFT_M {
+                return Err(ApiError::new(
+                    422,
+                    field,
+                    format!(
+                        "({}, {}) is {shift:.2} m from the nearest free floor (at most {MAX_POSE_SHIFT_M} m)",
+                        pose[0], pose[1]
+                    ),
+                ));
+            }
+        }
+        Ok(Arc::new(Placed { house, distances }))
     }
 
     /// The scene `name` with the robot at `pose` (cached per pose).
     fn placed(&self, name: &str, pose: Option<[f64; 3]>) -> Result<Arc<Placed>, ApiError> {
-        let loaded = self.scene(name)?;
-        let start = &loaded.scene.house.start;
-        let pose = pose.unwrap_or([
-            start.position.x,
-            start.position.z,
-            ferret_world::scene::heading_to_ros(start.yaw_deg),
-        ]);
-        let key = (name.to_string(), pose.map(f64::to_bits));
-        if let Some(p) = self.lock_placed().get(&key) {
-            return Ok(p.clone());
+        let key = (name.to_string(), pose.map(|p| p.map(f64::to_bits)));
+        if let Some(p) = self.lock_cache().get(&key) {
+            return Ok(p);
         }
-        if pose.iter().any(|v| !v.is_finite()) {
+        if let Some(p) = pose
+            && !p.iter().all(|v| v.is_finite())
+        {
             return Err(ApiError::new(
                 422,
                 "pose",
                 "must be three finite numbers [x, y, yaw]",
             ));
         }
-        let mut house = loaded.scene.house.clone();
-        house.start = Pose {
-            position: Point::new(pose[0], pose[1]),
-            yaw_deg: ferret_world::scene::heading_from_ros(pose[2]),
-        };
-        let (grid, distances) = distance::build(&house, &self.grid)
-            .map_err(|e| ApiError::new(422, "pose", format!("({}, {}): {e}", pose[0], pose[1])))?;
-        let at = grid.center(grid.start_cell());
-        let shift = at.distance(house.start.position);
-        if shift > MAX_POSE_SHIFT_M {
-            return Err(ApiError::new(
-                422,
-                "pose",
-                format!(
-                    "({}, {}) is {shift:.2} m from the nearest free floor (at most {MAX_POSE_SHIFT_M} m)",
-                    pose[0], pose[1]
-                ),
-            ));
-        }
-        let placed = Arc::new(Placed { house, distances });
-        self.lock_placed().insert(key, placed.clone());
+        let scene = self.scene(name)?;
+        let placed = self.build(&scene.house, pose, "pose")?;
+        self.lock_cache().insert(key, placed.clone());
         Ok(placed)
-    }
-
-    fn lock_placed(&self) -> std::sync::MutexGuard<'_, PlacedCache> {
-        self.placed
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
     }
 
     /// The candidates' names, in order.
@@ -236,91 +494,42 @@ impl Service {
             .collect()
     }
 
+    /// `GET /health`: 200 when the store answers, else 503.
+    pub fn health(&self) -> Reply {
+        match self.store.read(|r| r.check()) {
+            Ok(()) => (200, r#"{"status":"ok"}"#.to_string()),
+            Err(e) => {
+                tracing::error!("health check: {e}");
+                let body = crate::api::ErrorBody {
+                    error: crate::api::ErrorDetail {
+                        status: 503,
+                        field: String::new(),
+                        message: "the database cannot be read; see the server's log".into(),
+                    },
+                };
+                (503, serde_json::to_string(&body).unwrap_or_default())
+            }
+        }
+    }
+
     /// `GET /scenes`.
     pub fn list_scenes(&self) -> Result<Reply, ApiError> {
-        let scenes = self
-            .scenes
-            .read()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        let list: Vec<SceneSummary> = scenes
-            .iter()
-            .map(|(name, l)| SceneSummary {
-                name: name.clone(),
-                rooms: l.scene.house.rooms.len(),
-                containers: l.scene.house.containers.len(),
-                has_map: l.scene.house.map.is_some(),
-            })
+        let scenes = self.read_scenes();
+        let mut list: Vec<&SceneSummary> = scenes
+            .fixed
+            .values()
+            .map(|(_, s)| s)
+            .chain(scenes.uploaded.values())
             .collect();
+        list.sort_by(|a, b| a.name.cmp(&b.name));
         json(200, &list)
     }
 
     /// `GET /scenes/{name}`.
     pub fn get_scene(&self, name: &str) -> Result<Reply, ApiError> {
-        let loaded = self.scene(name)?;
+        let scene = self.scene(name)?;
         let placed = self.placed(name, None)?;
-        let (house, truth) = (&loaded.scene.house, &loaded.scene.truth);
-        let grid = placed.distances.grid();
-        let containers = house
-            .containers
-            .iter()
-            .enumerate()
-            .map(|(i, c)| ContainerInfo {
-                id: c.id.clone(),
-                object_type: c.object_type.to_string(),
-                room: house.container_room(i).map(|r| r.id.clone()),
-                x: c.position.x,
-                y: c.position.z,
-                access: grid
-                    .and_then(|g| g.access_cell(i).map(|cell| g.center(cell)))
-                    .map(|p| [p.x, p.z]),
-                contents: truth
-                    .contents(i)
-                    .iter()
-                    .map(|o| o.object_type.to_string())
-                    .collect(),
-            })
-            .collect();
-        let places: Vec<(String, Place)> = std::iter::once(("start".to_string(), Place::Start))
-            .chain(
-                house
-                    .containers
-                    .iter()
-                    .enumerate()
-                    .map(|(i, c)| (c.id.clone(), Place::Container(i))),
-            )
-            .collect();
-        let distances_m = places
-            .iter()
-            .map(|(a, pa)| {
-                let row = places[1..]
-                    .iter()
-                    .map(|(b, pb)| (b.clone(), placed.distances.between(*pa, *pb)))
-                    .collect();
-                (a.clone(), row)
-            })
-            .collect();
-        json(
-            200,
-            &SceneDetail {
-                name: name.to_string(),
-                rooms: house
-                    .rooms
-                    .iter()
-                    .map(|r| RoomInfo {
-                        name: r.id.clone(),
-                        room_type: r.room_type.to_string(),
-                        polygon: r.floor.vertices.iter().map(|p| [p.x, p.z]).collect(),
-                    })
-                    .collect(),
-                containers,
-                start: [
-                    house.start.position.x,
-                    house.start.position.z,
-                    ferret_world::scene::heading_to_ros(house.start.yaw_deg),
-                ],
-                distances_m,
-            },
-        )
+        scene_detail(name, &scene, &placed).and_then(|d| json(200, &d))
     }
 
     /// Runs a write operation with request-id idempotency: a stored reply for the same id and
@@ -333,7 +542,7 @@ impl Service {
         op: impl FnOnce(&crate::store::Writer<'_>) -> Result<Reply, ApiError>,
     ) -> Result<Reply, ApiError> {
         if let Some(id) = request_id
-            && (id.is_empty() || id.len() > MAX_REQUEST_ID)
+            && (id.is_empty() || id.chars().count() > MAX_REQUEST_ID)
         {
             return Err(ApiError::new(
                 400,
@@ -352,7 +561,7 @@ impl Service {
                     &StoredReply {
                         fingerprint: fingerprint(route, body),
                         status: reply.0,
-                        body: reply.1.to_string(),
+                        body: reply.1.clone(),
                     },
                 )?;
             }
@@ -376,33 +585,167 @@ impl Service {
 
     /// `POST /scenes`.
     pub fn upload_scene(&self, req: UploadScene, body: &[u8]) -> Result<Reply, ApiError> {
+        const ROUTE: &str = "POST /scenes";
+        let request_id = req.request_id.as_deref();
+        if let Some(reply) = self.earlier_reply(request_id, ROUTE, body)? {
+            return Ok(reply);
+        }
         let text = req.scene.to_string();
-        let scene = parse_uploaded(&text)?;
-        let name = req
-            .scene
-            .get("name")
-            .and_then(|n| n.as_str())
-            .unwrap_or_default()
-            .to_string();
-        self.check_reachable(&scene, "scene.containers")?;
-        let reply = self.idempotent(req.request_id.as_deref(), "POST /scenes", body, |w| {
-            if let Ok(existing) = self.scene(&name) {
-                return if existing.uploaded.as_deref() == Some(text.as_str()) {
-                    self.get_scene(&name)
-                } else {
-                    Err(ApiError::new(
-                        409,
-                        "scene.name",
-                        format!("a different scene named {name:?} exists already"),
-                    ))
-                };
+        let file = parse_file(&text)?;
+        // Counts first: checking the rooms for overlaps takes time in their vertices squared.
+        self.check_upload(&file)?;
+        let scene = to_scene(&file)?;
+        self.check_cells(&scene)?;
+        let name = file.name;
+        if self.read_scenes().fixed.contains_key(&name) {
+            return Err(taken(&name));
+        }
+        // The same scene again: nothing to build.
+        match self.store.read(|r| r.scene(&name))? {
+            Some(stored) if stored == text => {
+                let reply = self.get_scene(&name)?;
+                return self.idempotent(request_id, ROUTE, body, |_| Ok(reply));
+            }
+            Some(_) => return Err(taken(&name)),
+            None => {}
+        }
+        let placed = self.build(&scene.house, None, "scene.containers")?;
+        let detail = json(201, &scene_detail(&name, &scene, &placed)?)?;
+        let max = self.options.limits.max_scenes;
+        let reply = self.idempotent(request_id, ROUTE, body, |w| {
+            match w.reader().scene(&name)? {
+                Some(stored) if stored == text => return Ok((200, detail.1.clone())),
+                Some(_) => return Err(taken(&name)),
+                None => {}
+            }
+            if w.reader().scene_count()? >= max {
+                return Err(ApiError::new(
+                    413,
+                    "scene",
+                    format!("the server holds {max} uploaded scenes, its limit (--max-scenes)"),
+                ));
             }
             w.insert_scene(&name, &text)?;
-            self.insert_scene(name.clone(), scene, Some(text.clone()));
-            let (_, body) = self.get_scene(&name)?;
-            Ok((201, body))
+            Ok(detail.clone())
         })?;
+        self.lock_cache().remove_scene(&name);
+        self.lock_cache().insert((name.clone(), None), placed);
+        self.write_scenes()
+            .uploaded
+            .insert(name.clone(), summary(&name, &scene));
         Ok(reply)
+    }
+
+    /// The limits of uploaded scenes, and names the API can carry; checked before any grid is
+    /// built.
+    fn check_upload(&self, file: &SceneFile) -> Result<(), ApiError> {
+        let limits = &self.options.limits;
+        let bad = |field: String, message: String| Err(ApiError::new(422, field, message));
+        let names = std::iter::once(("scene.name".to_string(), file.name.as_str()))
+            .chain(
+                file.rooms
+                    .iter()
+                    .enumerate()
+                    .map(|(i, r)| (format!("scene.rooms[{i}].name"), r.name.as_str())),
+            )
+            .chain(file.containers.iter().enumerate().flat_map(|(i, c)| {
+                std::iter::once((format!("scene.containers[{i}].id"), c.id.as_str())).chain(
+                    c.room
+                        .as_deref()
+                        .map(|r| (format!("scene.containers[{i}].room"), r)),
+                )
+            }))
+            .chain(
+                file.obstacles
+                    .iter()
+                    .enumerate()
+                    .map(|(i, o)| (format!("scene.obstacles[{i}].id"), o.id.as_str())),
+            );
+        for (field, name) in names {
+            if !is_upload_name(name) {
+                return bad(
+                    field,
+                    format!(
+                        "{name:?}: names and ids of uploaded scenes are printable ASCII, 1 to {MAX_TYPE_NAME} characters, not only spaces"
+                    ),
+                );
+            }
+        }
+        let types =
+            file.rooms
+                .iter()
+                .enumerate()
+                .map(|(i, r)| (format!("scene.rooms[{i}].type"), r.room_type.as_str()))
+                .chain(file.containers.iter().enumerate().flat_map(|(i, c)| {
+                    std::iter::once((
+                        format!("scene.containers[{i}].type"),
+                        c.object_type.as_str(),
+                    ))
+                    .chain(c.contents.iter().enumerate().map(
+                        move |(k, t)| (format!("scene.containers[{i}].contents[{k}]"), t.as_str()),
+                    ))
+                }))
+                .chain(
+                    file.obstacles.iter().enumerate().map(|(i, o)| {
+                        (format!("scene.obstacles[{i}].type"), o.object_type.as_str())
+                    }),
+                );
+        for (field, t) in types {
+            if !is_type_name(t) {
+                return bad(
+                    field,
+                    format!("{t:?} is not a CamelCase type of ASCII letters and digits"),
+                );
+            }
+        }
+        if file.containers.len() > limits.max_containers {
+            return bad(
+                "scene.containers".into(),
+                format!(
+                    "{} containers; this server takes at most {} per uploaded scene (--max-scene-containers)",
+                    file.containers.len(),
+                    limits.max_containers
+                ),
+            );
+        }
+        if file.obstacles.len() > limits.max_containers {
+            return bad(
+                "scene.obstacles".into(),
+                format!(
+                    "{} obstacles; this server takes at most {} per uploaded scene (--max-scene-containers)",
+                    file.obstacles.len(),
+                    limits.max_containers
+                ),
+            );
+        }
+        let vertices: usize = file.rooms.iter().map(|r| r.polygon.len()).sum();
+        if vertices > limits.max_vertices {
+            return bad(
+                "scene.rooms".into(),
+                format!(
+                    "{vertices} polygon vertices in all; this server takes at most {} per uploaded scene (--max-scene-vertices)",
+                    limits.max_vertices
+                ),
+            );
+        }
+        Ok(())
+    }
+
+    /// The grid cells limit of uploaded scenes.
+    fn check_cells(&self, scene: &Scene) -> Result<(), ApiError> {
+        let limits = &self.options.limits;
+        let cells = OccupancyGrid::planned_cells(&scene.house, &self.grid).unwrap_or(0.0);
+        if cells > limits.max_cells as f64 {
+            return Err(ApiError::new(
+                422,
+                "scene.rooms",
+                format!(
+                    "the rooms span {cells:.0} grid cells at {} m; this server takes at most {} per uploaded scene (--max-scene-cells)",
+                    self.grid.resolution, limits.max_cells
+                ),
+            ));
+        }
+        Ok(())
     }
 
     fn spec(&self, id: i64) -> Result<DeploymentSpec, ApiError> {
@@ -455,18 +798,30 @@ impl Service {
             }
         }
         let c = req.c.unwrap_or(DEFAULT_C);
-        if !(c.is_finite() && c >= 0.0) {
+        if !(c.is_finite() && (0.0..=MAX_C).contains(&c)) {
             return Err(ApiError::new(
                 422,
                 "c",
-                format!("{c}: must be a finite number ≥ 0 m"),
+                format!("{c}: must be a number of metres from 0 to {MAX_C}"),
+            ));
+        }
+        let seed = req.seed.unwrap_or(0);
+        if seed > MAX_SEED {
+            return Err(ApiError::new(
+                422,
+                "seed",
+                format!(
+                    "{seed}: at most {MAX_SEED} (2^53 − 1, what every JSON client reads exactly)"
+                ),
             ));
         }
         let spec = DeploymentSpec {
             strategies,
-            selector: req.selector.unwrap_or(Method::ReplaySelection),
+            selector: req
+                .selector
+                .map_or(ferret_select::Method::ReplaySelection, Into::into),
             c,
-            seed: req.seed.unwrap_or(0),
+            seed,
         };
         self.candidates_of(&spec)?;
         self.idempotent(req.request_id.as_deref(), "POST /deployments", body, |w| {
@@ -574,7 +929,7 @@ impl Service {
                 422,
                 "target",
                 format!(
-                    "{:?} is not a CamelCase object type such as CellPhone",
+                    "{:?} is not a CamelCase object type of ASCII letters and digits such as CellPhone",
                     req.target
                 ),
             ));
@@ -699,6 +1054,13 @@ impl Service {
                 format!("trial {id} has ended ({:?})", row.status).to_lowercase(),
             ));
         }
+        if req.objects.len() > MAX_OBJECTS {
+            return Err(ApiError::new(
+                422,
+                "objects",
+                format!("{} object types; at most {MAX_OBJECTS}", req.objects.len()),
+            ));
+        }
         for (i, o) in req.objects.iter().enumerate() {
             if !is_type_name(o) {
                 return Err(ApiError::new(
@@ -709,12 +1071,12 @@ impl Service {
             }
         }
         if let Some(t) = req.travelled_m
-            && !(t.is_finite() && t >= 0.0)
+            && !(t.is_finite() && (0.0..=MAX_TRAVELLED_M).contains(&t))
         {
             return Err(ApiError::new(
                 422,
                 "travelled_m",
-                format!("{t}: must be a finite distance ≥ 0"),
+                format!("{t}: must be a distance from 0 to {MAX_TRAVELLED_M} m"),
             ));
         }
         let t = self.stored_trial(&row)?;
@@ -861,9 +1223,7 @@ fn stored_reply(
             format!("{id:?} was used for another request"),
         ));
     }
-    let body = serde_json::from_str(&stored.body)
-        .map_err(|e| ApiError::internal(format!("stored reply: {e}")))?;
-    Ok(Some((stored.status, body)))
+    Ok(Some((stored.status, stored.body)))
 }
 
 /// The trial's search rebuilt from its stored observations.
@@ -952,10 +1312,10 @@ fn plan_error(e: ferret_plan::PlanError) -> ApiError {
     ApiError::new(503, "", e.to_string())
 }
 
-/// Parses an uploaded scene (JSON text of a scene file without a map).
-fn parse_uploaded(text: &str) -> Result<Scene, ApiError> {
-    let file = std::path::Path::new("<uploaded>");
-    let parsed = SceneFile::parse(text, file).map_err(|e| scene_error(&e))?;
+/// Parses an uploaded scene's text (a scene file without a map).
+fn parse_file(text: &str) -> Result<SceneFile, ApiError> {
+    let parsed =
+        SceneFile::parse(text, std::path::Path::new("<uploaded>")).map_err(|e| scene_error(&e))?;
     if parsed.map.is_some() {
         return Err(ApiError::new(
             422,
@@ -963,7 +1323,87 @@ fn parse_uploaded(text: &str) -> Result<Scene, ApiError> {
             "a scene with a map is loaded by the server (--scene), not uploaded",
         ));
     }
-    parsed.to_scene(file, None).map_err(|e| scene_error(&e))
+    Ok(parsed)
+}
+
+fn to_scene(file: &SceneFile) -> Result<Scene, ApiError> {
+    file.to_scene(std::path::Path::new("<uploaded>"), None)
+        .map_err(|e| scene_error(&e))
+}
+
+/// Parses a stored uploaded scene.
+fn parse_uploaded(text: &str) -> Result<(SceneFile, Scene), ApiError> {
+    let file = parse_file(text)?;
+    let scene = to_scene(&file)?;
+    Ok((file, scene))
+}
+
+fn taken(name: &str) -> ApiError {
+    ApiError::new(
+        409,
+        "scene.name",
+        format!("a different scene named {name:?} exists already"),
+    )
+}
+
+/// What `GET /scenes/{name}` says about a scene placed at its start.
+fn scene_detail(name: &str, scene: &Scene, placed: &Placed) -> Result<SceneDetail, ApiError> {
+    let (house, truth) = (&scene.house, &scene.truth);
+    let grid = placed.distances.grid();
+    let containers = house
+        .containers
+        .iter()
+        .enumerate()
+        .map(|(i, c)| ContainerInfo {
+            id: c.id.clone(),
+            object_type: c.object_type.to_string(),
+            room: house.container_room(i).map(|r| r.id.clone()),
+            x: c.position.x,
+            y: c.position.z,
+            access: grid
+                .and_then(|g| g.access_cell(i).map(|cell| g.center(cell)))
+                .map(|p| [p.x, p.z]),
+            contents: truth
+                .contents(i)
+                .iter()
+                .map(|o| o.object_type.to_string())
+                .collect(),
+        })
+        .collect();
+    let places: Vec<(String, Place)> = std::iter::once(("start".to_string(), Place::Start))
+        .chain(
+            house
+                .containers
+                .iter()
+                .enumerate()
+                .map(|(i, c)| (c.id.clone(), Place::Container(i))),
+        )
+        .collect();
+    let distances_m = places
+        .iter()
+        .map(|(a, pa)| {
+            let row = places[1..]
+                .iter()
+                .map(|(b, pb)| (b.clone(), placed.distances.between(*pa, *pb)))
+                .collect();
+            (a.clone(), row)
+        })
+        .collect();
+    Ok(SceneDetail {
+        name: name.to_string(),
+        rooms: house
+            .rooms
+            .iter()
+            .map(|r| RoomInfo {
+                name: r.id.clone(),
+                room_type: r.room_type.to_string(),
+                polygon: r.floor.vertices.iter().map(|p| [p.x, p.z]).collect(),
+            })
+            .collect(),
+        containers,
+        start: start_pose(house),
+        distances_m,
+    })
 }
 
 fn scene_error(e: &ferret_world::WorldError) -> ApiError {

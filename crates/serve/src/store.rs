@@ -404,6 +404,73 @@ impl Reader<'_> {
             .map_err(|e| self.store.sql(e))
     }
 
+    /// Every stored scene's name with its numbers of rooms and containers, counted by SQLite
+    /// without loading the scenes (0 for a body that is not JSON).
+    pub fn scene_summaries(&self) -> Result<Vec<(String, usize, usize)>, StoreError> {
+        let mut stmt = self
+            .conn
+            .prepare(
+                "SELECT name,
+                    CASE WHEN json_valid(body) THEN json_array_length(body, '$.rooms') END,
+                    CASE WHEN json_valid(body) THEN json_array_length(body, '$.containers') END
+                 FROM scenes ORDER BY name",
+            )
+            .map_err(|e| self.store.sql(e))?;
+        let rows = stmt
+            .query_map([], |r| {
+                Ok((
+                    r.get::<_, String>(0)?,
+                    r.get::<_, Option<i64>>(1)?,
+                    r.get::<_, Option<i64>>(2)?,
+                ))
+            })
+            .map_err(|e| self.store.sql(e))?;
+        let count = |n: Option<i64>| n.and_then(|n| usize::try_from(n).ok()).unwrap_or(0);
+        rows.map(|r| r.map(|(name, rooms, containers)| (name, count(rooms), count(containers))))
+            .collect::<Result<_, _>>()
+            .map_err(|e| self.store.sql(e))
+    }
+
+    /// A stored scene's body.
+    pub fn scene(&self, name: &str) -> Result<Option<String>, StoreError> {
+        self.conn
+            .query_row("SELECT body FROM scenes WHERE name = ?1", [name], |r| {
+                r.get(0)
+            })
+            .optional()
+            .map_err(|e| self.store.sql(e))
+    }
+
+    /// How many scenes are stored.
+    pub fn scene_count(&self) -> Result<usize, StoreError> {
+        let n: i64 = self
+            .conn
+            .query_row("SELECT count(*) FROM scenes", [], |r| r.get(0))
+            .map_err(|e| self.store.sql(e))?;
+        Ok(usize::try_from(n).unwrap_or(usize::MAX))
+    }
+
+    /// Reads the schema and a row of every table: a damaged file fails here as it would on
+    /// every route. Cheap, for health checks.
+    pub fn check(&self) -> Result<(), StoreError> {
+        for table in [
+            "scenes",
+            "deployments",
+            "trials",
+            "observations",
+            "requests",
+        ] {
+            self.conn
+                .query_row(
+                    &format!("SELECT count(*) FROM (SELECT * FROM {table} LIMIT 1)"),
+                    [],
+                    |r| r.get::<_, i64>(0),
+                )
+                .map_err(|e| self.store.sql(e))?;
+        }
+        Ok(())
+    }
+
     /// A deployment by id.
     pub fn deployment(&self, id: i64) -> Result<Option<DeploymentRow>, StoreError> {
         let spec: Option<String> = self

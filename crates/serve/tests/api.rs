@@ -10,7 +10,7 @@ use ferret_plan::{
     run_trial,
 };
 use ferret_select::{LiveDeployment, Method};
-use ferret_serve::{HttpOptions, Service, Store};
+use ferret_serve::{HttpOptions, ServeOptions, Service, ServiceOptions, Store};
 use ferret_world::{GridParams, ObjectType, SceneFile, TravelCost};
 use serde_json::{Value, json};
 
@@ -64,28 +64,48 @@ impl Drop for Server {
 }
 
 async fn start(db: Option<&Path>, token: Option<&str>) -> Server {
+    start_with(
+        db,
+        token,
+        ServiceOptions::default(),
+        ServeOptions::default(),
+    )
+    .await
+}
+
+/// A server on 127.0.0.1 with these options, offering the scene `flat`.
+async fn start_with(
+    db: Option<&Path>,
+    token: Option<&str>,
+    service_options: ServiceOptions,
+    serve_options: ServeOptions,
+) -> Server {
     let store = match db {
         Some(p) => Store::open(p).unwrap(),
         None => Store::in_memory().unwrap(),
     };
-    let service = Service::new(store, GridParams::default(), strategies()).unwrap();
+    let service =
+        Service::with_options(store, GridParams::default(), strategies(), service_options).unwrap();
     let scene = SceneFile::parse(SCENE, Path::new("flat.json"))
         .unwrap()
         .to_scene(Path::new("flat.json"), None)
         .unwrap();
     service.add_scene("flat", scene).unwrap();
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
     let options = HttpOptions {
         token: token.map(str::to_string),
-        cors_origins: vec![],
+        listen: Some(addr),
+        ..HttpOptions::default()
     };
     let app = ferret_serve::router(Arc::new(service), &options).unwrap();
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-    let url = format!("http://{}", listener.local_addr().unwrap());
     let handle = tokio::spawn(async move {
-        axum::serve(listener, app).await.unwrap();
+        ferret_serve::serve(listener, app, serve_options, std::future::pending())
+            .await
+            .unwrap();
     });
     Server {
-        url,
+        url: format!("http://{addr}"),
         client: reqwest::Client::new(),
         handle,
     }

@@ -127,6 +127,72 @@ impl Polygon {
         Rect::around(self.vertices.iter().copied())
     }
 
+    /// Distance from `p` to the polygon's outline, metres.
+    pub fn distance_to_edge(&self, p: Point) -> f64 {
+        self.edges()
+            .map(|(a, b)| segment_distance(a, b, p))
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// The edges, each from a vertex to the next.
+    pub fn edges(&self) -> impl Iterator<Item = (Point, Point)> + '_ {
+        let v = &self.vertices;
+        (0..v.len()).map(move |i| (v[i], v[(i + 1) % v.len()]))
+    }
+
+    /// True when the two polygons share floor deeper than `tolerance` metres: some point lies
+    /// inside both, farther than `tolerance` from either outline. Polygons that only share (parts
+    /// of) edges or corners do not overlap.
+    ///
+    /// The shared region, if any, is bounded by pieces of the two outlines; every edge is cut
+    /// where the other outline touches or crosses it, and points just off the middle of each
+    /// piece, on both sides, are tried.
+    pub fn overlaps(&self, other: &Polygon, tolerance: f64) -> bool {
+        let (Some(a), Some(b)) = (self.bounds(), other.bounds()) else {
+            return false;
+        };
+        if a.min.x >= b.max.x - tolerance
+            || b.min.x >= a.max.x - tolerance
+            || a.min.z >= b.max.z - tolerance
+            || b.min.z >= a.max.z - tolerance
+        {
+            return false;
+        }
+        let deep =
+            |poly: &Polygon, p: Point| poly.contains(p) && poly.distance_to_edge(p) > tolerance;
+        let offset = 2.0 * tolerance;
+        let tries = |outline: &Polygon, cutter: &Polygon| {
+            outline.edges().any(|(p, q)| {
+                let len = p.distance(q);
+                if len <= 0.0 {
+                    return false;
+                }
+                let mut cuts = vec![0.0, 1.0];
+                for (r, s) in cutter.edges() {
+                    cuts.extend(crossing(p, q, r, s));
+                    for v in [r, s] {
+                        if segment_distance(p, q, v) <= tolerance {
+                            let t = ((v.x - p.x) * (q.x - p.x) + (v.z - p.z) * (q.z - p.z))
+                                / (len * len);
+                            cuts.push(t.clamp(0.0, 1.0));
+                        }
+                    }
+                }
+                cuts.sort_by(f64::total_cmp);
+                let (nx, nz) = (-(q.z - p.z) / len, (q.x - p.x) / len);
+                cuts.windows(2).any(|w| {
+                    let t = (w[0] + w[1]) / 2.0;
+                    let m = Point::new(p.x + t * (q.x - p.x), p.z + t * (q.z - p.z));
+                    [1.0, -1.0].into_iter().any(|side: f64| {
+                        let c = Point::new(m.x + side * offset * nx, m.z + side * offset * nz);
+                        deep(self, c) && deep(other, c)
+                    })
+                })
+            })
+        };
+        tries(self, other) || tries(other, self)
+    }
+
     /// The vertex average, a label position good enough for convex-ish rooms.
     pub fn centroid(&self) -> Point {
         let n = self.vertices.len().max(1) as f64;
@@ -181,6 +247,31 @@ impl Footprint {
         let lz = dx * s + dz * c;
         lx.abs() <= self.size_x / 2.0 && lz.abs() <= self.size_z / 2.0
     }
+}
+
+/// Distance from `p` to segment `a`–`b`, metres.
+pub fn segment_distance(a: Point, b: Point, p: Point) -> f64 {
+    let (dx, dz) = (b.x - a.x, b.z - a.z);
+    let len2 = dx * dx + dz * dz;
+    if len2 <= 0.0 {
+        return a.distance(p);
+    }
+    let t = (((p.x - a.x) * dx + (p.z - a.z) * dz) / len2).clamp(0.0, 1.0);
+    Point::new(a.x + t * dx, a.z + t * dz).distance(p)
+}
+
+/// Where segment `r`–`s` crosses segment `p`–`q`, as a fraction of the way from `p` to `q`;
+/// `None` for parallel segments or segments that do not meet.
+fn crossing(p: Point, q: Point, r: Point, s: Point) -> Option<f64> {
+    let (dx, dz) = (q.x - p.x, q.z - p.z);
+    let (ex, ez) = (s.x - r.x, s.z - r.z);
+    let denom = dx * ez - dz * ex;
+    if denom.abs() < 1e-12 {
+        return None;
+    }
+    let t = ((r.x - p.x) * ez - (r.z - p.z) * ex) / denom;
+    let u = ((r.x - p.x) * dz - (r.z - p.z) * dx) / denom;
+    ((0.0..=1.0).contains(&t) && (0.0..=1.0).contains(&u)).then_some(t)
 }
 
 #[cfg(test)]

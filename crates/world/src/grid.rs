@@ -147,6 +147,17 @@ const NO_ROOM: u8 = u8::MAX;
 /// protects against absurd coordinates in bad input and absurdly fine resolutions.
 pub const MAX_CELLS: u64 = 1 << 24;
 
+/// The origin, width and height (cells) of the grid over `bounds`: the bounds plus an Outside
+/// margin wide enough that inflation never needs to look past the border.
+fn layout(bounds: crate::geometry::Rect, params: &GridParams) -> (Point, f64, f64) {
+    let res = params.resolution;
+    let pad = (params.robot_radius / res).ceil() + 2.0;
+    let origin = Point::new(bounds.min.x - pad * res, bounds.min.z - pad * res);
+    let w = (bounds.width() / res).ceil() + 2.0 * pad + 1.0;
+    let h = (bounds.depth() / res).ceil() + 2.0 * pad + 1.0;
+    (origin, w, h)
+}
+
 /// A free/occupied grid over a house, with the robot's start cell and an access cell for every
 /// container.
 ///
@@ -219,11 +230,7 @@ impl OccupancyGrid {
 
         let res = params.resolution;
         let radius_cells = params.robot_radius / res;
-        // Enough Outside margin that inflation never needs to look past the border.
-        let pad = radius_cells.ceil() + 2.0;
-        let origin = Point::new(bounds.min.x - pad * res, bounds.min.z - pad * res);
-        let w = (bounds.width() / res).ceil() + 2.0 * pad + 1.0;
-        let h = (bounds.depth() / res).ceil() + 2.0 * pad + 1.0;
+        let (origin, w, h) = layout(bounds, params);
         if w * h > MAX_CELLS as f64 {
             return Err(err(format!(
                 "a {w}×{h}-cell grid exceeds the limit of {MAX_CELLS} cells; use a coarser resolution than {res} m"
@@ -236,6 +243,13 @@ impl OccupancyGrid {
         g.draw_furniture(house);
         g.inflate_outside(radius_cells, false);
         g.finish(house)
+    }
+
+    /// How many cells the grid of `house` would have (without a map), before building it: a
+    /// cheap check of what a build would cost. `None` for a house without rooms.
+    pub fn planned_cells(house: &House, params: &GridParams) -> Option<f64> {
+        let (_, w, h) = layout(house.bounds()?, params);
+        Some(w * h)
     }
 
     /// The grid of a house that carries a robot's occupancy map: the map's cells (free, occupied

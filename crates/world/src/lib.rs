@@ -13,6 +13,7 @@ pub mod generate;
 pub mod geometry;
 pub mod grid;
 pub mod house;
+pub mod input;
 pub mod map;
 pub mod procthor;
 pub mod rules;

@@ -46,6 +46,9 @@ pub struct OccupancyMap {
 /// The largest map accepted, in pixels (the same bound as ferret's own grids).
 pub const MAX_MAP_PIXELS: u64 = crate::grid::MAX_CELLS;
 
+/// The largest `map_server` YAML file read, bytes (they hold six fields).
+pub const MAX_MAP_YAML_BYTES: u64 = 1 << 20;
+
 /// The fields of a `map_server` YAML file.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -85,19 +88,28 @@ impl OccupancyMap {
     /// [`WorldError::Map`] naming the file and field for unreadable files, bad fields, an
     /// unreadable or oversized image.
     pub fn load_ros(yaml: &Path) -> Result<OccupancyMap> {
-        let text = std::fs::read_to_string(yaml).map_err(|source| WorldError::Io {
-            file: yaml.to_path_buf(),
-            source,
-        })?;
+        let text =
+            crate::input::read_text(yaml, MAX_MAP_YAML_BYTES).map_err(|source| WorldError::Io {
+                file: yaml.to_path_buf(),
+                source,
+            })?;
         let err = |field: &str, message: String| WorldError::Map {
             file: yaml.to_path_buf(),
             field: field.to_string(),
             message,
         };
+        crate::input::check_nesting(&text, crate::input::MAX_NESTING).map_err(|m| err("", m))?;
         let de = serde_yaml_ng::Deserializer::from_str(&text);
+        // The file is named by a scene, not by the user: it may be anything (a `.env`, a key), so
+        // no value read from it is repeated in the error.
         let meta: RosMapYaml = serde_path_to_error::deserialize(de).map_err(|e| {
-            let field = e.path().to_string();
-            err(&field, e.into_inner().to_string())
+            let message = crate::input::without_values(&e.inner().to_string());
+            let field = if message.starts_with("unknown field") || e.path().to_string() == "." {
+                String::new()
+            } else {
+                e.path().to_string()
+            };
+            err(&field, message)
         })?;
         if !(meta.resolution.is_finite() && meta.resolution > 0.0) {
             return Err(err(
@@ -157,14 +169,18 @@ impl OccupancyMap {
             field: "image".into(),
             message,
         };
-        let reader = image::io::Reader::open(&image_path)
-            .map_err(|source| WorldError::Io {
+        let bytes = crate::input::read_file(&image_path, crate::input::MAX_INPUT_BYTES).map_err(
+            |source| WorldError::Io {
                 file: image_path.clone(),
                 source,
-            })?
-            .with_guessed_format()
-            .map_err(|e| image_err(e.to_string()))?;
-        let (w, h) = reader
+            },
+        )?;
+        let reader = || {
+            image::io::Reader::new(std::io::Cursor::new(&bytes[..]))
+                .with_guessed_format()
+                .map_err(|e| image_err(e.to_string()))
+        };
+        let (w, h) = reader()?
             .into_dimensions()
             .map_err(|e| image_err(e.to_string()))?;
         if u64::from(w) * u64::from(h) > MAX_MAP_PIXELS || w == 0 || h == 0 {
@@ -172,13 +188,7 @@ impl OccupancyMap {
                 "{w}×{h} pixels: a map must have between 1 and {MAX_MAP_PIXELS} pixels"
             )));
         }
-        let img = image::io::Reader::open(&image_path)
-            .map_err(|source| WorldError::Io {
-                file: image_path.clone(),
-                source,
-            })?
-            .with_guessed_format()
-            .map_err(|e| image_err(e.to_string()))?
+        let img = reader()?
             .decode()
             .map_err(|e| image_err(e.to_string()))?
             .into_luma_alpha8();

@@ -41,6 +41,10 @@ use crate::map::OccupancyMap;
 /// The scene format version this build reads and writes.
 pub const SCENE_VERSION: u32 = 1;
 
+/// How deep (metres) two rooms' polygons may run into each other before the scene is refused:
+/// hand-drawn outlines of neighbouring rooms are rarely exact to the centimetre.
+pub const ROOM_OVERLAP_TOLERANCE: f64 = 0.02;
+
 /// Footprint used when a container or obstacle gives no `size`, metres.
 pub const DEFAULT_SIZE: [f64; 2] = [0.5, 0.5];
 
@@ -147,7 +151,7 @@ pub struct ObstacleSpec {
 pub fn is_scene_file(path: &Path) -> bool {
     match path.extension().and_then(|e| e.to_str()) {
         Some("yaml" | "yml") => true,
-        Some("json") => std::fs::read(path)
+        Some("json") => crate::input::read_file(path, crate::procthor::MAX_LINE_BYTES as u64)
             .ok()
             .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
             .is_some_and(|v| v.get("ferret_scene").is_some()),
@@ -168,6 +172,13 @@ impl SceneFile {
                 message: format!("larger than {} bytes", crate::procthor::MAX_LINE_BYTES),
             });
         }
+        crate::input::check_nesting(text, crate::input::MAX_NESTING).map_err(|message| {
+            WorldError::Scene {
+                file: file.to_path_buf(),
+                field: String::new(),
+                message,
+            }
+        })?;
         let de = serde_yaml_ng::Deserializer::from_str(text);
         let scene: SceneFile = serde_path_to_error::deserialize(de).map_err(|e| {
             let field = e.path().to_string();
@@ -195,10 +206,12 @@ impl SceneFile {
     /// # Errors
     /// I/O errors, [`WorldError::Scene`] and [`WorldError::Map`].
     pub fn load(path: &Path) -> Result<Scene> {
-        let text = std::fs::read_to_string(path).map_err(|source| WorldError::Io {
-            file: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::input::read_text(path, crate::procthor::MAX_LINE_BYTES as u64).map_err(
+            |source| WorldError::Io {
+                file: path.to_path_buf(),
+                source,
+            },
+        )?;
         let file = SceneFile::parse(&text, path)?;
         let map = match &file.map {
             Some(m) => {
@@ -311,6 +324,22 @@ impl SceneFile {
                 room_type: RoomType::new(r.room_type.clone()),
                 floor,
             });
+        }
+        // Rooms drawn over each other would give one floor two room types and draw walls across
+        // a room; rooms that only share walls are fine.
+        for (i, r) in rooms.iter().enumerate() {
+            if let Some(j) = rooms[..i]
+                .iter()
+                .position(|earlier| earlier.floor.overlaps(&r.floor, ROOM_OVERLAP_TOLERANCE))
+            {
+                return Err(err(
+                    format!("rooms[{i}].polygon"),
+                    format!(
+                        "overlaps rooms[{j}] ({:?}); rooms may share walls but not floor",
+                        rooms[j].id
+                    ),
+                ));
+            }
         }
         let room_at = |p: Point| rooms.iter().position(|r| r.floor.contains(p));
         // Without a map, a wall runs along every polygon edge; rooms sharing an edge both draw it.
@@ -495,8 +524,11 @@ fn check_object(
 /// clockwise one (see [`Footprint::corners`]).
 fn footprint(pose: [f64; 3], size: Option<[f64; 2]>) -> std::result::Result<Footprint, String> {
     let [sx, sz] = size.unwrap_or(DEFAULT_SIZE);
-    if !(sx.is_finite() && sz.is_finite() && sx > 0.0 && sz > 0.0) {
-        return Err(format!("[{sx}, {sz}] must be two positive sizes in metres"));
+    let max = crate::procthor::MAX_COORDINATE;
+    if !(sx.is_finite() && sz.is_finite() && sx > 0.0 && sz > 0.0 && sx <= max && sz <= max) {
+        return Err(format!(
+            "[{sx}, {sz}] must be two positive sizes in metres, at most {max}"
+        ));
     }
     Ok(Footprint {
         center: Point::new(pose[0], pose[1]),

@@ -179,12 +179,88 @@ fn grids_beyond_the_cell_limit_name_the_house_and_the_limit() {
 
 #[cfg(unix)]
 #[test]
-fn an_endless_asset_database_is_refused_at_the_limit() {
-    match ferret_world::procthor::AssetDatabase::load(Path::new("/dev/zero")) {
-        Err(WorldError::AssetDatabase { file, message }) => {
-            assert_eq!(file, Path::new("/dev/zero"));
-            assert!(message.contains("64 MiB"), "{message}");
-        }
-        other => panic!("{:?}", other.map(|_| ())),
+fn an_endless_asset_database_is_refused_at_once_and_a_huge_one_at_the_limit() {
+    use ferret_world::procthor::AssetDatabase;
+    let e = AssetDatabase::load(Path::new("/dev/zero"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("/dev/zero") && e.contains("device"), "{e}");
+    let dir = tempfile::tempdir().unwrap();
+    let big = dir.path().join("asset-database.json");
+    // Sparse: 64 MiB and one byte of zeros without writing them.
+    std::fs::File::create(&big)
+        .unwrap()
+        .set_len(MAX_LINE_BYTES as u64 + 1)
+        .unwrap();
+    let e = AssetDatabase::load(&big).unwrap_err().to_string();
+    assert!(
+        e.contains("asset-database.json") && e.contains("64 MiB"),
+        "{e}"
+    );
+}
+
+/// A path to something that is not a regular file, named like an input.
+#[cfg(unix)]
+fn special(dir: &Path, name: &str, fifo: bool) -> PathBuf {
+    let path = dir.join(name);
+    if fifo {
+        let c = std::ffi::CString::new(path.to_str().unwrap()).unwrap();
+        // SAFETY: a valid NUL-terminated path.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+    } else {
+        std::os::unix::fs::symlink("/dev/zero", &path).unwrap();
     }
+    path
+}
+
+/// `/dev/zero` behind a `.json` or `.yaml` name used to be read until memory ran out, and a FIFO
+/// blocked forever; both are refused at once, naming the file.
+#[cfg(unix)]
+#[test]
+fn devices_and_fifos_are_refused_at_once_whatever_their_name() {
+    use ferret_world::SceneFile;
+    let dir = tempfile::tempdir().unwrap();
+    for fifo in [false, true] {
+        for name in ["z.json", "z.jsonl.gz", "z.yaml"] {
+            let path = special(dir.path(), &format!("{fifo}-{name}"), fifo);
+            let started = std::time::Instant::now();
+            let e = if name.ends_with(".yaml") {
+                SceneFile::load(&path).unwrap_err()
+            } else {
+                assert!(!ferret_world::scene::is_scene_file(&path));
+                load_scenes(&path, &LoadOptions::default()).unwrap_err()
+            };
+            let text = e.to_string();
+            assert!(text.contains(path.to_str().unwrap()), "{text}");
+            assert!(
+                text.contains(if fifo { "FIFO" } else { "device" }),
+                "{text}"
+            );
+            assert!(
+                started.elapsed().as_secs() < 2,
+                "{name}: {:?}",
+                started.elapsed()
+            );
+        }
+    }
+}
+
+/// A scene nested 100 000 brackets deep took libyaml 34 s to reject; it is refused before
+/// parsing.
+#[test]
+fn deeply_nested_scenes_are_refused_before_parsing() {
+    use ferret_world::SceneFile;
+    let text = format!(
+        "ferret_scene: 1\nname: x\nrooms: {}{}\n",
+        "[".repeat(100_000),
+        "]".repeat(100_000)
+    );
+    let started = std::time::Instant::now();
+    let e = SceneFile::parse(&text, Path::new("deep.yaml")).unwrap_err();
+    assert!(
+        started.elapsed().as_millis() < 500,
+        "{:?}",
+        started.elapsed()
+    );
+    assert!(e.to_string().contains("nest more than 64"), "{e}");
 }

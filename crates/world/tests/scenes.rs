@@ -416,3 +416,75 @@ proptest! {
         }
     }
 }
+
+/// A scene's map reference may point at any file (`map: {ros: .env}`); its contents used to be
+/// repeated in the error (`invalid type: string "OPENAI_API_KEY=sk-..."`).
+#[test]
+fn errors_about_a_referenced_file_never_repeat_its_contents() {
+    let dir = tempfile::tempdir().unwrap();
+    let secrets = [
+        "OPENAI_API_KEY=sk-proj-Zq8xSECRETv1",
+        "sk-proj-Zq8xSECRETv1: 1",
+        "image: sk-proj-Zq8xSECRETv1\nresolution: sk-proj-Zq8xSECRETv2\norigin: [0, 0, 0]",
+        "resolution: 12345678901\nimage: a\norigin: [0, 0, 0]\nnegate: sk-proj-Zq8xSECRETv3",
+        "-----BEGIN OPENSSH PRIVATE KEY-----\nb3BlbnNzaC1rZXktdjEAAAAABG5vbmUAAAAEbm9uZQAAAAAAAAAB\n",
+    ];
+    for (i, text) in secrets.iter().enumerate() {
+        std::fs::write(dir.path().join(".env"), text).unwrap();
+        let scene = dir.path().join(format!("s{i}.yaml"));
+        std::fs::write(
+            &scene,
+            TWO_ROOMS.replace("rooms:", "map: {ros: .env}\nrooms:"),
+        )
+        .unwrap();
+        let e = SceneFile::load(&scene).unwrap_err().to_string();
+        for secret in ["SECRET", "b3BlbnNzaC1", "12345678901", "OPENAI_API_KEY"] {
+            assert!(!e.contains(secret), "case {i} repeats the file: {e}");
+        }
+        assert!(e.contains(".env"), "{e}");
+    }
+}
+
+/// Overlapping rooms were accepted silently: the floor they share got two room types and a
+/// wall was drawn across a room.
+#[test]
+fn overlapping_rooms_are_refused_and_rooms_sharing_a_wall_are_not() {
+    let overlapping = [
+        // The bedroom starts 1 m inside the kitchen.
+        TWO_ROOMS.replace("[[4, 0], [8, 0], [8, 3], [4, 3]]", "[[3, 0], [8, 0], [8, 3], [3, 3]]"),
+        // A closet inside the kitchen, touching none of its walls.
+        TWO_ROOMS.replace(
+            "  - {name: bedroom",
+            "  - {name: closet, type: Closet, polygon: [[1, 1], [2, 1], [2, 2], [1, 2]]}\n  - {name: bedroom",
+        ),
+        // The same outline twice.
+        TWO_ROOMS.replace("[[4, 0], [8, 0], [8, 3], [4, 3]]", "[[0, 0], [4, 0], [4, 3], [0, 3]]"),
+        // A room covering both, vertices on neither's outline.
+        TWO_ROOMS.replace(
+            "  - {name: bedroom",
+            "  - {name: hall, type: Hallway, polygon: [[-1, -1], [9, -1], [9, 4], [-1, 4]]}\n  - {name: bedroom",
+        ),
+    ];
+    for text in &overlapping {
+        assert_ne!(text, TWO_ROOMS);
+        let (field, message) = scene_error(text);
+        assert!(
+            field.starts_with("rooms[") && field.ends_with("].polygon"),
+            "{field}: {message}"
+        );
+        assert!(message.contains("overlaps rooms[0]"), "{field}: {message}");
+    }
+    // Sharing a wall, a corner, or part of a wall (an L around a square) is fine, and so is an
+    // outline 1 cm off.
+    let fine = [
+        TWO_ROOMS.to_string(),
+        TWO_ROOMS.replace("[[4, 0], [8, 0], [8, 3], [4, 3]]", "[[3.99, 0], [8, 0], [8, 3], [3.99, 3]]"),
+        TWO_ROOMS.replace(
+            "  - {name: bedroom",
+            "  - {name: hall, type: Hallway, polygon: [[4, 3], [6, 3], [6, 5], [4, 5]]}\n  - {name: bedroom",
+        ),
+    ];
+    for text in &fine {
+        parse(text).unwrap_or_else(|e| panic!("{e}\n{text}"));
+    }
+}

@@ -159,17 +159,28 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
         bar.inc(1);
     }
     bar.finish_and_clear();
-    let app = ferret_serve::router(Arc::new(service), &ferret_serve::HttpOptions::default())
-        .map_err(|e| anyhow::anyhow!("{}", e.message))?;
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()?;
+    let listener = runtime.block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))?;
+    let addr = listener.local_addr()?;
+    // The server's own guards and connection loop, as `ferret serve` runs them.
+    let options = ferret_serve::HttpOptions {
+        listen: Some(addr),
+        ..ferret_serve::HttpOptions::default()
+    };
+    let app = ferret_serve::router(Arc::new(service), &options)
+        .map_err(|e| anyhow::anyhow!("{}", e.message))?;
     let total_trials = args.deployments * args.trials;
     let bar = crate::common::progress(total_trials, "trials");
     let (latencies, requests, errors, seconds) = runtime.block_on(async {
-        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
-        let url = format!("http://{}", listener.local_addr()?);
-        let server = tokio::spawn(async move { axum::serve(listener, app).await });
+        let url = format!("http://{addr}");
+        let server = tokio::spawn(ferret_serve::serve(
+            listener,
+            app,
+            ferret_serve::ServeOptions::default(),
+            std::future::pending(),
+        ));
         let client = reqwest::Client::new();
         let started = Instant::now();
         let tasks: Vec<_> = plans

@@ -217,6 +217,16 @@ pub struct RunInfo {
     pub protocol: Protocol,
     /// Strategies in order.
     pub strategies: Vec<String>,
+    /// SHA-256 of the trials.csv written with this file, so that a trials.csv of another run
+    /// beside it (an eval stopped between the two) is recognised.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trials_sha256: Option<String>,
+}
+
+/// Lower-case hex SHA-256 of `bytes`.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::{Digest, Sha256};
+    format!("{:x}", Sha256::digest(bytes))
 }
 
 fn is_ferret_protocol(p: &Protocol) -> bool {
@@ -445,7 +455,8 @@ pub fn run(args: Args) -> Result<ExitCode> {
             r.cost_cells = Some(r.cost_m / CELL_M);
         }
     }
-    write_csv(&args.out.join("trials.csv"), &rows)?;
+    let trials_csv = crate::output::csv_bytes(&rows)?;
+    crate::output::write_bytes(&args.out.join("trials.csv"), &trials_csv)?;
     let mut summary = summarize(&outcome.rows, &args.strategies);
     if args.cells {
         summary = summary.into_iter().map(SummaryRow::with_cells).collect();
@@ -494,6 +505,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         trials_per_house: args.trials_per_house,
         protocol,
         strategies: args.strategies.clone(),
+        trials_sha256: Some(sha256_hex(&trials_csv)),
     };
     crate::output::write_bytes(
         &args.out.join("run.json"),

@@ -36,6 +36,10 @@ pub struct PingArgs {
     /// What to ask.
     #[arg(long, default_value = "Reply with the single word: pong")]
     pub message: String,
+    /// Seconds to wait for the answer (or the endpoint's own timeout, if shorter). One attempt:
+    /// a check, not a run, so a server that accepts and never answers is reported quickly.
+    #[arg(long, value_name = "SECS", default_value_t = 30.0)]
+    pub timeout: f64,
 }
 
 /// Runs `ferret llm ...`.
@@ -99,13 +103,17 @@ fn ping(args: &PingArgs) -> Result<ExitCode> {
         .enable_all()
         .build()
         .context("starting the async runtime")?;
+    if !(args.timeout.is_finite() && args.timeout > 0.0 && args.timeout <= 86_400.0) {
+        anyhow::bail!(
+            "--timeout {}: must be a number of seconds in (0, 86400]",
+            args.timeout
+        );
+    }
     let started = Instant::now();
-    let reply =
-        rt.block_on(
-            client.complete(&ferret_llm::Request::plain(vec![ChatMessage::user(
-                args.message.clone(),
-            )])),
-        )?;
+    let reply = rt.block_on(client.complete_once(
+        &ferret_llm::Request::plain(vec![ChatMessage::user(args.message.clone())]),
+        std::time::Duration::from_secs_f64(args.timeout),
+    ))?;
     let total = started.elapsed();
     let u = reply.usage;
     println!(
@@ -121,7 +129,8 @@ fn ping(args: &PingArgs) -> Result<ExitCode> {
             total.as_secs_f64() * 1000.0
         );
     }
-    println!("reply: {}", reply.text.trim());
+    // The model's text may hold terminal escape sequences.
+    println!("reply: {}", ferret_llm::printable(reply.text.trim()));
     println!(
         "tokens: {} in{}, {} out; cost ${:.6}",
         u.prompt_tokens,

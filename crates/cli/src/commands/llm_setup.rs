@@ -6,7 +6,8 @@ use std::sync::Arc;
 
 use anyhow::Result;
 use ferret_llm::{
-    LlmConfig, LlmOptions, LlmService, prefetch_probabilities, register_fused, register_strategies,
+    FailurePolicy, LlmConfig, LlmOptions, LlmService, prefetch_probabilities, register_fused,
+    register_strategies,
 };
 use ferret_plan::StrategyRegistry;
 use ferret_plan::{FusionFile, Prior};
@@ -70,6 +71,17 @@ pub fn full_registry(
     llm: &LlmArgs,
     specs: &[String],
 ) -> Result<Strategies> {
+    full_registry_with(planning, llm, specs, FailurePolicy::StopForRun)
+}
+
+/// The same, with what a failed LLM endpoint means for later questions (batch commands stop
+/// asking it; the server pauses and asks again).
+pub fn full_registry_with(
+    planning: &PlanningArgs,
+    llm: &LlmArgs,
+    specs: &[String],
+    on_failure: FailurePolicy,
+) -> Result<Strategies> {
     let prior = planning.prior_for(specs)?;
     let mut registry = planning.registry_with(prior.clone());
     let fusion = match &llm.fusion {
@@ -85,6 +97,7 @@ pub fn full_registry(
         LlmOptions {
             cache_path: Some(llm.llm_cache.clone()),
             offline: llm.offline,
+            on_failure,
         },
     )?);
     register_strategies(
@@ -229,7 +242,7 @@ pub fn write_token_report(service: &LlmService, dir: &Path) -> Result<()> {
     // classes and a mark on every row whose answers say little.
     let summary = dir.join("summary.md");
     if summary.exists() {
-        let md = std::fs::read_to_string(&summary)?;
+        let md = ferret_world::input::read_text(&summary, ferret_world::input::MAX_INPUT_BYTES)?;
         let mut md = mark_rows(&md, &warnings);
         md.push_str(&format!("\n## LLM tokens and cost\n\n```\n{report}```\n"));
         md.push_str(&answers_markdown(&report));

@@ -110,7 +110,7 @@ fn validate(args: &Args) -> Result<()> {
 /// Runs `ferret select`.
 pub fn run(args: Args) -> Result<ExitCode> {
     validate(&args)?;
-    let run_json = std::fs::read(args.trials.join("run.json")).with_context(|| {
+    let run_json = read_input(&args.trials.join("run.json")).with_context(|| {
         format!(
             "{}: not a `ferret eval` output directory",
             args.trials.display()
@@ -128,8 +128,18 @@ pub fn run(args: Args) -> Result<ExitCode> {
         );
     }
     let trials_path = args.trials.join("trials.csv");
-    let trials_csv = std::fs::read(&trials_path)
-        .with_context(|| format!("reading {}", trials_path.display()))?;
+    let trials_csv =
+        read_input(&trials_path).with_context(|| format!("reading {}", trials_path.display()))?;
+    if let Some(expected) = &info.trials_sha256
+        && *expected != super::eval::sha256_hex(&trials_csv)
+    {
+        bail!(
+            "{}: trials.csv and run.json are from different runs (an eval was stopped between \
+             writing them, or one file was copied from another run); run `ferret eval` into this \
+             directory again",
+            args.trials.display()
+        );
+    }
     let rows: Vec<TrialRow> = parse_csv(&trials_csv, &trials_path)?;
     // Counterfactual replays are other numbers than pessimistic ones: they are cached under a key
     // of their own (the pessimistic key is unchanged, so existing caches stay valid).
@@ -296,6 +306,14 @@ fn parse_csv<T: for<'de> Deserialize<'de>>(bytes: &[u8], path: &Path) -> Result<
         .map(|(i, row)| row.with_context(|| format!("{}: row {}", path.display(), i + 2)))
         .collect()
 }
+
+/// An eval output file, through the bounded reader every input goes through.
+fn read_input(path: &Path) -> std::io::Result<Vec<u8>> {
+    ferret_world::input::read_file(path, MAX_RUN_FILE_BYTES)
+}
+
+/// Largest eval output read (trials.csv of a very large run is tens of megabytes).
+const MAX_RUN_FILE_BYTES: u64 = 1 << 30;
 
 /// The identity of an eval run's trials: SHA-256 of run.json and trials.csv. Replays are only
 /// valid for the exact trials they were computed on.
@@ -507,7 +525,7 @@ fn load_or_compute_replays(
     key: &str,
     mode: ReplayMode,
 ) -> Result<HashMap<ReplayKey, f64>> {
-    let read = match std::fs::read(path) {
+    let read = match read_input(path) {
         Ok(text) => {
             let read = parse_replay_cache(&text, key, candidates, by_house);
             if let Some(why) = &read.stale {

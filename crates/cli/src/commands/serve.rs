@@ -7,15 +7,18 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
+use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
+use ferret_llm::FailurePolicy;
 use ferret_plan::Strategy;
 use ferret_select::ORACLE;
-use ferret_serve::{HttpOptions, Service, Store};
+use ferret_serve::{HttpOptions, SceneLimits, ServeOptions, Service, ServiceOptions, Store};
+use ferret_world::Scene;
 use ferret_world::procthor::HouseRange;
 
 use super::eval::{DEFAULT_STRATEGIES, PlanningArgs};
-use super::llm_setup::{LlmArgs, full_registry};
+use super::llm_setup::{LlmArgs, full_registry_with};
 use crate::common::{GridArgs, HouseArgs};
 
 /// Serve scenes, deployments and trials over HTTP (JSON; OpenAPI at /openapi.json). A robot
@@ -56,18 +59,185 @@ pub struct Args {
     /// `Authorization: Bearer <token>` (all but /health).
     #[arg(long, value_name = "VAR", default_value = "FERRET_SERVE_TOKEN")]
     token_env: String,
-    /// Allow browser pages from this origin (CORS); repeatable. Off by default.
+    /// Allow browser pages from this origin (CORS); repeatable. Off by default: a request
+    /// carrying any other `Origin` is refused (403).
     #[arg(long, value_name = "URL")]
     cors_origin: Vec<String>,
+    /// Another name clients reach the server by (`robot.local`, or `name:port`), accepted in
+    /// the `Host` header besides the --listen address (and `localhost` for a loopback one);
+    /// repeatable. Any other `Host` is refused (403), which stops DNS-rebinding pages.
+    #[arg(long, value_name = "HOST")]
+    allow_host: Vec<String>,
+    /// Most scenes clients may upload (413 past it; scenes given with --scene do not count).
+    #[arg(long, value_name = "N", default_value_t = SceneLimits::default().max_scenes)]
+    max_scenes: usize,
+    /// Most grid cells of an uploaded scene at --resolution (422 past it): memory and planning
+    /// time grow with them (4 M cells = 100 m × 100 m at 0.05 m, 8 MB).
+    #[arg(long, value_name = "N", default_value_t = SceneLimits::default().max_cells)]
+    max_scene_cells: u64,
+    /// Most containers of an uploaded scene, and obstacles likewise (422 past it).
+    #[arg(long, value_name = "N", default_value_t = SceneLimits::default().max_containers)]
+    max_scene_containers: usize,
+    /// Most vertices of all room polygons of an uploaded scene together (422 past it).
+    #[arg(long, value_name = "N", default_value_t = SceneLimits::default().max_vertices)]
+    max_scene_vertices: usize,
+    /// Memory for grids and distances of scenes in use, MiB; the least recently used are
+    /// dropped past it and built again when asked for.
+    #[arg(long, value_name = "MIB", default_value_t = 256)]
+    grid_cache_mib: usize,
+    /// Largest request body, KiB (413 past it).
+    #[arg(long, value_name = "KIB", default_value_t = 1024)]
+    max_body_kib: usize,
+    /// Seconds a client has to send a request's headers (after connecting, or after its last
+    /// reply) and its body.
+    #[arg(long, value_name = "SECS", default_value_t = 10.0)]
+    header_timeout: f64,
+    /// Seconds after which a kept-alive connection without a request is closed.
+    #[arg(long, value_name = "SECS", default_value_t = 60.0)]
+    idle_timeout: f64,
+    /// Most connections open at once; at the cap, the connection idle the longest is closed to
+    /// make room. Lowered to fit the process's open-file limit.
+    #[arg(long, value_name = "N", default_value_t = ServeOptions::default().max_connections)]
+    max_connections: usize,
+    /// Seconds an LLM endpoint that failed (after its retries) is not asked: trials of its
+    /// strategies are refused with 503 at once meanwhile; then one question checks whether it
+    /// is back.
+    #[arg(long, value_name = "SECS", default_value_t = 30.0)]
+    llm_retry_after: f64,
 }
 
-/// Builds the service the arguments describe.
-fn build_service(args: &Args, store: Store) -> Result<Service> {
-    let (grid, planning, llm, strategies) =
-        (&args.grid, &args.planning, &args.llm, &args.strategies);
-    grid.validate()?;
-    planning.validate()?;
-    crate::common::check_distinct("--strategies", strategies)?;
+fn seconds(name: &str, v: f64) -> Result<Duration> {
+    if !(v.is_finite() && v > 0.0 && v <= 86_400.0) {
+        bail!("{name} {v}: must be a number of seconds in (0, 86400]");
+    }
+    Ok(Duration::from_secs_f64(v))
+}
+
+/// Everything the arguments say, checked before any file is touched.
+struct Checked {
+    service: ServiceOptions,
+    serve: ServeOptions,
+    max_body_bytes: usize,
+    llm_retry_after: Duration,
+    token: Option<String>,
+}
+
+fn check(args: &Args) -> Result<Checked> {
+    args.grid.validate()?;
+    args.planning.validate()?;
+    crate::common::check_distinct("--strategies", &args.strategies)?;
+    for (name, v) in [
+        ("--max-scenes", args.max_scenes),
+        ("--max-scene-containers", args.max_scene_containers),
+        ("--max-scene-vertices", args.max_scene_vertices),
+        ("--grid-cache-mib", args.grid_cache_mib),
+        ("--max-body-kib", args.max_body_kib),
+        ("--max-connections", args.max_connections),
+    ] {
+        if v == 0 {
+            bail!("{name} 0: must be at least 1");
+        }
+    }
+    if args.max_scene_cells == 0 || args.max_scene_cells > ferret_world::grid::MAX_CELLS {
+        bail!(
+            "--max-scene-cells {}: must be from 1 to {}",
+            args.max_scene_cells,
+            ferret_world::grid::MAX_CELLS
+        );
+    }
+    if args.max_scene_vertices < 3 {
+        bail!(
+            "--max-scene-vertices {}: a room needs 3",
+            args.max_scene_vertices
+        );
+    }
+    let token = match std::env::var(&args.token_env) {
+        Ok(t) if t.trim().is_empty() => bail!(
+            "{} is set but empty: set a token, or unset it to run without one",
+            args.token_env
+        ),
+        Ok(t) => Some(t.trim().to_string()),
+        Err(std::env::VarError::NotPresent) => None,
+        Err(std::env::VarError::NotUnicode(_)) => {
+            bail!("{} is not valid UTF-8", args.token_env)
+        }
+    };
+    HttpOptions {
+        token: token.clone(),
+        cors_origins: args.cors_origin.clone(),
+        listen: Some(args.listen),
+        allowed_hosts: args.allow_host.clone(),
+        ..HttpOptions::default()
+    }
+    .validate()
+    .map_err(|e| anyhow::anyhow!("--{}: {}", e.field, e.message))?;
+    Ok(Checked {
+        service: ServiceOptions {
+            limits: SceneLimits {
+                max_scenes: args.max_scenes,
+                max_cells: args.max_scene_cells,
+                max_containers: args.max_scene_containers,
+                max_vertices: args.max_scene_vertices,
+            },
+            grid_cache_bytes: args.grid_cache_mib.saturating_mul(1 << 20),
+            ..ServiceOptions::default()
+        },
+        serve: ServeOptions {
+            header_timeout: seconds("--header-timeout", args.header_timeout)?,
+            idle_timeout: seconds("--idle-timeout", args.idle_timeout)?,
+            max_connections: fit_open_files(args.max_connections),
+        },
+        max_body_bytes: args.max_body_kib.saturating_mul(1024),
+        llm_retry_after: seconds("--llm-retry-after", args.llm_retry_after)?,
+        token,
+    })
+}
+
+/// `max` lowered to what the open-file limit leaves after the files the server itself holds,
+/// once the soft limit has been raised to the hard one.
+fn fit_open_files(max: usize) -> usize {
+    // The database, its journal files, the LLM cache, the runtime's own descriptors.
+    const RESERVED: usize = 64;
+    #[cfg(unix)]
+    {
+        let mut lim = libc::rlimit {
+            rlim_cur: 0,
+            rlim_max: 0,
+        };
+        // SAFETY: getrlimit/setrlimit with a valid pointer to a local struct.
+        if unsafe { libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) } == 0 {
+            if lim.rlim_cur < lim.rlim_max {
+                let raised = libc::rlimit {
+                    rlim_cur: lim.rlim_max,
+                    rlim_max: lim.rlim_max,
+                };
+                // SAFETY: as above.
+                if unsafe { libc::setrlimit(libc::RLIMIT_NOFILE, &raised) } == 0 {
+                    lim = raised;
+                }
+            }
+            let room = usize::try_from(lim.rlim_cur)
+                .unwrap_or(usize::MAX)
+                .saturating_sub(RESERVED)
+                .max(1);
+            if room < max {
+                eprintln!(
+                    "warning: --max-connections {max} lowered to {room} to fit the open-file limit ({})",
+                    lim.rlim_cur
+                );
+                return room;
+            }
+        }
+    }
+    max
+}
+
+/// The candidates and the scenes the arguments name, loaded before the database is opened so
+/// that a bad argument leaves no file behind.
+type Loaded = (Vec<Arc<dyn Strategy>>, Vec<(PathBuf, Scene)>);
+
+fn load(args: &Args, llm_retry_after: Duration) -> Result<Loaded> {
+    let (planning, llm, strategies) = (&args.planning, &args.llm, &args.strategies);
     let specs: Vec<String> = strategies
         .iter()
         .filter(|s| s.as_str() != ORACLE)
@@ -76,13 +246,17 @@ fn build_service(args: &Args, store: Store) -> Result<Service> {
     if specs.is_empty() {
         bail!("--strategies: give at least one strategy other than the oracle");
     }
-    let setup = full_registry(planning, llm, &specs)?;
+    // A server runs for days: an LLM endpoint that fails is asked again after a pause, not
+    // given up on until restart as in a batch run.
+    let policy = FailurePolicy::Breaker {
+        pause: llm_retry_after,
+    };
+    let setup = full_registry_with(planning, llm, &specs, policy)?;
     let candidates: Vec<Arc<dyn Strategy>> = specs
         .iter()
         .map(|s| setup.registry.build(s))
         .collect::<Result<_, _>>()?;
-    let service = Service::new(store, grid.params(), candidates)
-        .map_err(|e| anyhow::anyhow!("{}", e.message))?;
+    let mut scenes = Vec::new();
     for path in &args.scenes {
         let houses = HouseArgs {
             houses: Some(path.clone()),
@@ -92,54 +266,56 @@ fn build_service(args: &Args, store: Store) -> Result<Service> {
             generate: 0,
             house_seed: 0,
         };
-        let loaded = houses.load()?;
-        for scene in loaded.scenes {
-            let name = scene.house.name.clone();
-            service
-                .add_scene(&name, scene)
-                .map_err(|e| anyhow::anyhow!("{}: scene {name}: {}", path.display(), e.message))?;
-        }
+        scenes.extend(houses.load()?.scenes.into_iter().map(|s| (path.clone(), s)));
     }
-    Ok(service)
+    Ok((candidates, scenes))
 }
 
 /// Runs `ferret serve`.
 pub fn run(args: Args) -> Result<ExitCode> {
-    let store = Store::open(&args.db)?;
-    let service = build_service(&args, store)?;
-    let token = std::env::var(&args.token_env)
-        .ok()
-        .filter(|t| !t.is_empty());
-    if token.is_none() && !args.listen.ip().is_loopback() {
+    let checked = check(&args)?;
+    if checked.token.is_none() && !args.listen.ip().is_loopback() {
         eprintln!(
             "warning: listening on {} without a token (set {})",
             args.listen, args.token_env
         );
     }
-    let options = HttpOptions {
-        token,
-        cors_origins: args.cors_origin.clone(),
-    };
-    let names = service.strategy_names();
-    let app = ferret_serve::router(Arc::new(service), &options)
-        .map_err(|e| anyhow::anyhow!("--cors-origin: {}", e.message))?;
+    let (candidates, scenes) = load(&args, checked.llm_retry_after)?;
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
         .context("starting the HTTP runtime")?;
+    let listener = runtime
+        .block_on(tokio::net::TcpListener::bind(args.listen))
+        .with_context(|| format!("listening on {}", args.listen))?;
+    let addr = listener.local_addr()?;
+    let store = Store::open(&args.db)?;
+    let service = Service::with_options(store, args.grid.params(), candidates, checked.service)
+        .map_err(|e| anyhow::anyhow!("{}", e.message))?;
+    for (path, scene) in scenes {
+        let name = scene.house.name.clone();
+        service
+            .add_scene(&name, scene)
+            .map_err(|e| anyhow::anyhow!("{}: scene {name}: {}", path.display(), e.message))?;
+    }
+    let options = HttpOptions {
+        token: checked.token,
+        cors_origins: args.cors_origin.clone(),
+        listen: Some(addr),
+        allowed_hosts: args.allow_host.clone(),
+        max_body_bytes: checked.max_body_bytes,
+    };
+    let names = service.strategy_names();
+    let app = ferret_serve::router(Arc::new(service), &options)
+        .map_err(|e| anyhow::anyhow!("--{}: {}", e.field, e.message))?;
     runtime.block_on(async move {
-        let listener = tokio::net::TcpListener::bind(args.listen)
-            .await
-            .with_context(|| format!("listening on {}", args.listen))?;
-        let addr = listener.local_addr()?;
         // Tests and scripts read this line to learn the port (with --listen 127.0.0.1:0).
         println!(
             "ferret serve: listening on http://{addr} (db {}; strategies {})",
             args.db.display(),
             names.join(", ")
         );
-        axum::serve(listener, app)
-            .with_graceful_shutdown(shutdown())
+        ferret_serve::serve(listener, app, checked.serve, shutdown())
             .await
             .context("serving HTTP")
     })?;

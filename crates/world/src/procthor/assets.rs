@@ -50,25 +50,13 @@ pub struct AssetDatabase {
 impl AssetDatabase {
     /// Reads `asset-database.json`.
     pub fn load(path: &Path) -> Result<AssetDatabase> {
-        use std::io::Read;
-        let io_err = |source| WorldError::Io {
-            file: path.to_path_buf(),
-            source,
-        };
         // Bounded like house files, so that a wrong path (/dev/zero) cannot exhaust memory.
-        let limit = super::reader::MAX_LINE_BYTES;
-        let mut text = String::new();
-        std::fs::File::open(path)
-            .map_err(io_err)?
-            .take(limit as u64 + 1)
-            .read_to_string(&mut text)
-            .map_err(io_err)?;
-        if text.len() > limit {
-            return Err(WorldError::AssetDatabase {
+        let text = crate::input::read_text(path, super::reader::MAX_LINE_BYTES as u64).map_err(
+            |source| WorldError::Io {
                 file: path.to_path_buf(),
-                message: format!("larger than the limit of {} MiB", limit >> 20),
-            });
-        }
+                source,
+            },
+        )?;
         Self::parse(&text, path)
     }
 

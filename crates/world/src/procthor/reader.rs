@@ -1,7 +1,6 @@
 //! Reading ProcTHOR house files and turning each house into a validated [`Scene`].
 
 use std::collections::HashMap;
-use std::fs::File;
 use std::io::{self, BufRead, BufReader, Read};
 use std::path::Path;
 
@@ -90,7 +89,7 @@ pub fn load_scenes(path: &Path, opts: &LoadOptions) -> Result<LoadReport> {
         file: path.to_path_buf(),
         source,
     };
-    let mut file = BufReader::new(File::open(path).map_err(io_err)?);
+    let mut file = BufReader::new(crate::input::open_file(path).map_err(io_err)?);
     let gzip = file.fill_buf().map_err(io_err)?.starts_with(&[0x1f, 0x8b]);
     let reader: Box<dyn BufRead + Send> = if gzip {
         Box::new(BufReader::with_capacity(1 << 16, MultiGzDecoder::new(file)))

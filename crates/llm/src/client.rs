@@ -166,22 +166,25 @@ impl EndpointClient {
         }
     }
 
+    /// The endpoint's key, or the error naming the variable it was to be read from.
+    fn api_key(&self) -> Result<Option<&secrecy::SecretString>> {
+        match (&self.endpoint.config.api_key_env, self.endpoint.key()) {
+            (Some(var), None) => Err(LlmError::MissingKey {
+                endpoint: self.endpoint.name.clone(),
+                url: self.endpoint.config.normalized_base_url().to_string(),
+                var: var.clone(),
+            }),
+            (_, key) => Ok(key),
+        }
+    }
+
     /// Asks the endpoint, retrying 429, 5xx, 408, timeouts and cut connections up to
     /// `max_attempts` times with exponential backoff and jitter (or as long as `Retry-After`
     /// says, up to `retry_max_secs`). Waits for a concurrency permit first.
     pub async fn complete(&self, request: &Request) -> Result<Reply> {
         let name = &self.endpoint.name;
         let url = self.endpoint.config.normalized_base_url();
-        let key = match (&self.endpoint.config.api_key_env, self.endpoint.key()) {
-            (Some(var), None) => {
-                return Err(LlmError::MissingKey {
-                    endpoint: name.clone(),
-                    url: url.to_string(),
-                    var: var.clone(),
-                });
-            }
-            (_, key) => key,
-        };
+        let key = self.api_key()?;
         let body = self.request_body(request);
         // Holding the permit across backoff sleeps keeps a rate-limited server from being hit by
         // the other waiting requests in the meantime.
@@ -234,16 +237,7 @@ impl EndpointClient {
     pub async fn complete_once(&self, request: &Request, timeout: Duration) -> Result<Reply> {
         let name = &self.endpoint.name;
         let url = self.endpoint.config.normalized_base_url();
-        let key = match (&self.endpoint.config.api_key_env, self.endpoint.key()) {
-            (Some(var), None) => {
-                return Err(LlmError::MissingKey {
-                    endpoint: name.clone(),
-                    url: url.to_string(),
-                    var: var.clone(),
-                });
-            }
-            (_, key) => key,
-        };
+        let key = self.api_key()?;
         let body = self.request_body(request);
         let timeout = timeout.min(self.endpoint.config.timeout());
         match tokio::time::timeout(timeout, self.attempt(&body, key, 1)).await {

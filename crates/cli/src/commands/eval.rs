@@ -911,13 +911,15 @@ pub fn summary_markdown(
         "# Navigation cost per strategy\n\n{houses} houses from {source}; {drawn}, the same for every strategy.\n\n"
     );
     md.push_str(
-        "| strategy | trials | mean cost (m) | 95 % CI | median (m) | vs optimistic+greedy |\n",
+        "| strategy | trials | mean cost (m) | 95 % CI | median (m) | cost vs optimistic+greedy |\n",
     );
     md.push_str("|---|---:|---:|---:|---:|---:|\n");
     for r in summary {
         let imp = r
             .improvement_pct
-            .map_or_else(|| "–".to_string(), |p| format!("{p:+.1} %"));
+            // Shown as a change of cost, so that lower reads as better (−52.8 % = 52.8 % cheaper);
+            // `0.0 - p` keeps the reference's own row at +0.0 rather than −0.0.
+            .map_or_else(|| "–".to_string(), |p| format!("{:+.1} %", 0.0 - p));
         md.push_str(&format!(
             "| {} | {} | {:.2} | ±{:.2} | {:.2} | {} |\n",
             r.strategy, r.trials, r.mean_m, r.ci95_m, r.median_m, imp
@@ -930,7 +932,7 @@ pub fn summary_markdown(
         .collect();
     if !short.is_empty() {
         md.push_str(&format!(
-            "\n**Failed trials:** {}. Means and medians cover each strategy's own trials; \"vs optimistic+greedy\" compares only the {} paired trials (houses where every strategy finished).\n",
+            "\n**Failed trials:** {}. Means and medians cover each strategy's own trials; \"cost vs optimistic+greedy\" compares only the {} paired trials (houses where every strategy finished).\n",
             short.join("; "),
             summary.first().map_or(0, |r| r.paired_trials)
         ));
@@ -1110,6 +1112,26 @@ mod tests {
         // Unequal weights: the weighted mean is not the plain one.
         assert!((a - 7.0 / 3.0).abs() > 1e-6);
         assert!((means[1].1 - 3.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_summary_table_shows_a_cheaper_strategy_as_a_lower_cost() {
+        let order = vec!["optimistic+greedy".to_string(), "model/x".to_string()];
+        let rows = vec![
+            trial(0, "optimistic+greedy", 10.0),
+            trial(0, "model/x", 4.0),
+        ];
+        let summary = summarize(&rows, &order);
+        assert!((summary[1].improvement_pct.unwrap_or_default() - 60.0).abs() < 1e-9);
+        let md = summary_markdown(&summary, "test", 1, TrialsPerHouse::One, 1);
+        assert!(
+            md.contains("| model/x | 1 | 4.00 | ±0.00 | 4.00 | -60.0 % |"),
+            "{md}"
+        );
+        assert!(
+            md.contains("| optimistic+greedy | 1 | 10.00 | ±0.00 | 10.00 | +0.0 % |"),
+            "{md}"
+        );
     }
 
     #[test]

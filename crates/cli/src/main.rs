@@ -4,6 +4,7 @@
 //! evaluate search strategies, replay and select among them, and benchmark the planner. Each
 //! subcommand lives in its own module under `commands/`; the libraries below do the work.
 
+mod args;
 mod commands;
 mod common;
 mod output;
@@ -81,24 +82,10 @@ fn main() -> std::process::ExitCode {
     match result {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("error: {}", error_chain(&e));
+            eprintln!("error: {}", ferret_world::error_chain(e.as_ref()));
             std::process::ExitCode::FAILURE
         }
     }
-}
-
-/// The error and its causes, skipping a cause already spelled out in the message before it
-/// (library errors often embed their source, e.g. `file: No such file or directory`).
-fn error_chain(e: &anyhow::Error) -> String {
-    let mut msg = e.to_string();
-    for cause in e.chain().skip(1) {
-        let c = cause.to_string();
-        if !msg.contains(&c) {
-            msg.push_str(": ");
-            msg.push_str(&c);
-        }
-    }
-    msg
 }
 
 /// Rust ignores SIGPIPE, so `ferret houses check | head` would make every later `println!` panic

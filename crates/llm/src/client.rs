@@ -522,14 +522,7 @@ pub(crate) fn redact(text: &str, secrets: &[String]) -> String {
 
 /// reqwest's top-level message is often just "error sending request"; the cause chain says why.
 fn error_chain(e: &reqwest::Error) -> String {
-    let mut s = e.to_string();
-    let mut source = std::error::Error::source(e);
-    while let Some(inner) = source {
-        s.push_str(": ");
-        s.push_str(&inner.to_string());
-        source = inner.source();
-    }
-    s
+    ferret_world::error_chain(e)
 }
 
 /// `Retry-After` (seconds or an HTTP date) or OpenAI's `retry-after-ms`.

@@ -319,14 +319,7 @@ impl PromptLibrary {
 
 /// minijinja's message with its cause chain (where the undefined variable is, etc.).
 fn template_error(e: &minijinja::Error) -> String {
-    let mut s = e.to_string();
-    let mut source = std::error::Error::source(e);
-    while let Some(inner) = source {
-        s.push_str(": ");
-        s.push_str(&inner.to_string());
-        source = inner.source();
-    }
-    s
+    ferret_world::error_chain(e)
 }
 
 /// Splits rendered text at `[system]` / `[user]` / `[assistant]` lines.

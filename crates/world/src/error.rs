@@ -119,3 +119,51 @@ pub enum WorldError {
 
 /// Result alias for this crate.
 pub type Result<T, E = WorldError> = std::result::Result<T, E>;
+
+/// An error and its causes as one line, `message: cause: cause…`, skipping a cause already
+/// spelled out in the text before it (many errors embed their source, e.g. `file: No such file
+/// or directory`, and some only say "error sending request" while the cause says why).
+pub fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut msg = e.to_string();
+    let mut source = e.source();
+    while let Some(cause) = source {
+        let c = cause.to_string();
+        if !msg.contains(&c) {
+            msg.push_str(": ");
+            msg.push_str(&c);
+        }
+        source = cause.source();
+    }
+    msg
+}
+
+#[cfg(test)]
+mod chain_tests {
+    use super::error_chain;
+
+    #[derive(Debug)]
+    struct E(&'static str, Option<Box<E>>);
+    impl std::fmt::Display for E {
+        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            f.write_str(self.0)
+        }
+    }
+    impl std::error::Error for E {
+        fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+            self.1.as_deref().map(|e| e as _)
+        }
+    }
+
+    #[test]
+    fn causes_are_joined_and_those_already_said_are_skipped() {
+        let e = E(
+            "error sending request",
+            Some(Box::new(E(
+                "connect: refused",
+                Some(Box::new(E("refused", None))),
+            ))),
+        );
+        assert_eq!(error_chain(&e), "error sending request: connect: refused");
+        assert_eq!(error_chain(&E("alone", None)), "alone");
+    }
+}

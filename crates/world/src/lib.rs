@@ -21,7 +21,7 @@ pub mod scene;
 pub mod soft;
 
 pub use distance::{Distances, Place};
-pub use error::{HouseLocation, Result, WorldError};
+pub use error::{HouseLocation, Result, WorldError, error_chain};
 pub use geometry::{Footprint, Point, Polygon, Rect};
 pub use grid::{GridParams, OccupancyGrid};
 pub use house::{

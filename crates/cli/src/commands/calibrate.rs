@@ -256,7 +256,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     for e in &errors {
         eprintln!("error: {e}");
     }
-    super::eval::write_csv(&args.out.join("calibration.csv"), &rows)?;
+    crate::output::write_csv(&args.out.join("calibration.csv"), &rows)?;
     let md = calibration_markdown(
         &scored,
         &loaded.source,

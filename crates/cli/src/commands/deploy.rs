@@ -6,20 +6,16 @@ use std::process::ExitCode;
 use std::sync::Arc;
 
 use anyhow::{Result, bail};
-use ferret_plan::{
-    DrawMode, Protocol, SearchProblem, Strategy, TrialSpec, TrialsPerHouse, draw_trials_with,
-    replay_costs, run_trial,
-};
-use ferret_select::{LiveDeployment, Method, ORACLE};
+use ferret_lab::{DEFAULT_STRATEGIES, DeploySettings, Deployment, deploy};
+use ferret_plan::{DrawMode, Protocol, Strategy, TrialsPerHouse};
+use ferret_select::{Method, ORACLE};
 use ferret_world::ObjectType;
-use rand::seq::SliceRandom;
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
-use super::eval::{DEFAULT_STRATEGIES, PlanningArgs, write_csv};
 use super::llm_setup::{LlmArgs, full_registry};
-use crate::common::{GridArgs, HouseArgs, ProtocolArgs};
+use crate::args::PlanningArgs;
+use crate::common::{Bars, GridArgs, HouseArgs, ProtocolArgs};
+use crate::output::write_csv;
 
 /// Run a deployment: N trials in distinct houses (random order), choosing a strategy before each
 /// trial with UCB or replay selection, replaying the others after it. Writes DIR/deploy.csv.
@@ -126,112 +122,65 @@ pub fn run(args: Args) -> Result<ExitCode> {
             loaded.scenes.len()
         );
     }
-    let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
-    let order: Vec<usize> = if given_targets {
-        (0..trials).map(|k| k % loaded.scenes.len()).collect()
-    } else {
-        match protocol.draw {
-            DrawMode::Distinct => {
-                let mut order: Vec<usize> = (0..loaded.scenes.len()).collect();
-                order.shuffle(&mut rng);
-                order
-            }
-            DrawMode::Replacement => (0..trials)
-                .map(|_| rng.random_range(0..loaded.scenes.len()))
-                .collect(),
-        }
+    let names: Vec<String> = candidates.iter().map(|s| s.name().to_string()).collect();
+    let mut deployment = Deployment::new(
+        args.method,
+        candidates,
+        args.c,
+        args.seed,
+        (protocol.replay, protocol.travel_cost),
+    )?;
+    let find: Vec<ObjectType> = args
+        .find
+        .iter()
+        .map(|t| ObjectType::new(t.trim()))
+        .collect();
+    let grid = args.grid.params_for(protocol.access);
+    let settings = DeploySettings {
+        trials,
+        find: &find,
+        per_house: args.trials_per_house,
+        seed: args.seed,
+        protocol: &protocol,
+        grid: &grid,
     };
-    let mut deployment = LiveDeployment::new(args.method, candidates.len(), args.c, args.seed)?;
-    let params = args.grid.params_for(protocol.access);
     let mut rows = Vec::new();
     let mut total = 0.0;
     println!(
         "{:>3}  {:<36} {:<16} {:<34} {:>8} {:>9}",
         "k", "house", "target", "chosen", "cost m", "avg m"
     );
-    for (k, &h) in order.iter().take(trials).enumerate() {
-        let scene = &loaded.scenes[h];
-        let (_, distances) = match ferret_world::distance::build(&scene.house, &params) {
-            Ok(m) => m,
-            Err(e) => {
-                eprintln!("skipping {}: {e}", scene.house.name);
-                continue;
-            }
-        };
-        let trial = if given_targets {
-            let target = ObjectType::new(args.find[k].trim());
-            if scene.truth.goal_containers(&target).is_empty() {
-                bail!(
-                    "{}: no container holds {target}, so trial {} cannot end",
-                    scene.house.name,
-                    k + 1
-                );
-            }
-            TrialSpec {
-                target,
-                revealed: Vec::new(),
-            }
-        } else {
-            let mut drawn = draw_trials_with(
-                &scene.house,
-                &scene.truth,
-                args.seed,
-                0.0,
-                args.trials_per_house,
-                &protocol,
-            )?;
-            // One trial is the paper's draw; the generator is touched only when there is a
-            // choice, so single-target deployments are as before.
-            let pick = match args.trials_per_house {
-                TrialsPerHouse::One => 0,
-                _ => rng.random_range(0..drawn.len()),
+    let scenes = &loaded.scenes;
+    deploy(
+        scenes,
+        &mut deployment,
+        &settings,
+        &Bars::default(),
+        &mut |t| {
+            let scene = &scenes[t.house];
+            total += t.step.cost;
+            let row = DeployRow {
+                k: t.k,
+                house: scene.house.name.clone(),
+                target: t.target.to_string(),
+                chosen: names[t.step.chosen].clone(),
+                cost_m: t.step.cost,
+                found_container: scene.house.containers[t.step.found].id.clone(),
+                average_cost_m: total / t.k as f64,
+                replays: names
+                    .iter()
+                    .zip(&t.step.replays)
+                    .map(|(s, r)| format!("{s}={r:.2}"))
+                    .collect::<Vec<_>>()
+                    .join(" "),
             };
-            drawn.swap_remove(pick)
-        };
-        let i = deployment.choose();
-        let problem = SearchProblem::new(&scene.house, &distances, &trial);
-        let outcome = run_trial(candidates[i].as_ref(), &problem, &scene.truth)?;
-        // The selector learns from the cost the protocol reports (soft under the reference's
-        // rules); the strategies themselves planned on plain distances either way.
-        let cost = outcome.reported_cost(&scene.house, &distances, protocol.travel_cost)?;
-        let Some(found) = outcome.found else {
-            bail!(
-                "{}: the target {} was not found",
-                scene.house.name,
-                trial.target
+            println!(
+                "{:>3}  {:<36} {:<16} {:<34} {:>8.2} {:>9.2}",
+                row.k, row.house, row.target, row.chosen, row.cost_m, row.average_cost_m
             );
-        };
-        let replays = replay_costs(
-            (protocol.replay, protocol.travel_cost),
-            &candidates,
-            &problem,
-            &scene.truth,
-            found,
-            (i, cost),
-        )?;
-        deployment.finish(cost, &replays)?;
-        total += cost;
-        let row = DeployRow {
-            k: k + 1,
-            house: scene.house.name.clone(),
-            target: trial.target.to_string(),
-            chosen: candidates[i].name().to_string(),
-            cost_m: cost,
-            found_container: scene.house.containers[found].id.clone(),
-            average_cost_m: total / (k + 1) as f64,
-            replays: candidates
-                .iter()
-                .zip(&replays)
-                .map(|(s, r)| format!("{}={r:.2}", s.name()))
-                .collect::<Vec<_>>()
-                .join(" "),
-        };
-        println!(
-            "{:>3}  {:<36} {:<16} {:<34} {:>8.2} {:>9.2}",
-            row.k, row.house, row.target, row.chosen, row.cost_m, row.average_cost_m
-        );
-        rows.push(row);
-    }
+            rows.push(row);
+        },
+    )?;
     std::fs::create_dir_all(&args.out)?;
     write_csv(&args.out.join("deploy.csv"), &rows)?;
     super::llm_setup::write_token_report(&setup.service, &args.out)?;

@@ -68,10 +68,3 @@ fn train(args: TrainArgs) -> Result<ExitCode> {
     );
     Ok(ExitCode::SUCCESS)
 }
-
-/// The prior used when none is given: trained on generated houses with a seed different from
-/// the evaluation houses', so evaluation never trains on its own test houses.
-pub fn default_prior(count: usize, seed: u64) -> Result<Prior> {
-    let scenes = ferret_world::generate::default_scenes(count, seed)?;
-    Ok(Prior::train(&scenes, 2.0))
-}

@@ -3,18 +3,17 @@
 //! warm cache, then offline. Prints requests, tokens (the server counts characters / 4) and wall
 //! times, and checks that the three runs agree.
 //!
-//! `cargo run -p ferret-llm --release --example mock_eval -- [N]`
+//! `cargo run -p ferret-lab --release --example mock_eval -- [N]`
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::time::Instant;
 
+use ferret_lab::{Silent, TrialDraw, TrialRow, build_maps, evaluate};
 use ferret_llm::{
     EndpointConfig, LlmConfig, LlmOptions, LlmService, prefetch_probabilities, register_strategies,
 };
-use ferret_plan::{
-    PlannerConfig, SearchProblem, StrategyRegistry, TrialOutcome, draw_trial, run_trial,
-};
+use ferret_plan::{PlannerConfig, Protocol, Strategy, StrategyRegistry, TrialsPerHouse};
 use ferret_world::{GridParams, House, ObjectType};
 use serde_json::{Value, json};
 use wiremock::matchers::method;
@@ -102,22 +101,18 @@ fn main() {
     let cache = dir.path().join("cache.sqlite");
 
     let scenes = ferret_world::generate::default_scenes(n, 0).expect("houses");
-    let maps: Vec<_> = scenes
-        .iter()
-        .map(|s| ferret_world::distance::build(&s.house, &GridParams::default()).map(|(_, d)| d))
-        .collect();
-    let trials: Vec<_> = scenes
-        .iter()
-        .map(|s| draw_trial(&s.house, &s.truth, 0, 0.0).ok())
-        .collect();
-    let pairs: Vec<(&House, &ObjectType)> = scenes
-        .iter()
-        .zip(&trials)
-        .filter_map(|(s, t)| t.as_ref().map(|t| (&s.house, &t.target)))
-        .collect();
+    let maps = build_maps(&scenes, &GridParams::default(), &Silent);
+    let draw = TrialDraw {
+        seed: 0,
+        reveal_fraction: 0.0,
+        per_house: TrialsPerHouse::One,
+        protocol: &Protocol::FERRET,
+    };
+    let targets = draw.targets(&scenes, &maps);
+    let pairs: Vec<(&House, &ObjectType)> = targets.iter().map(|(h, t)| (*h, t)).collect();
     let specs: Vec<String> = SPECS.map(String::from).to_vec();
 
-    let run = |label: &str, offline: bool| -> Vec<TrialOutcome> {
+    let run = |label: &str, offline: bool| -> Vec<TrialRow> {
         let started = Instant::now();
         let service = service(&server.uri(), &cache, offline);
         let mut registry = StrategyRegistry::new();
@@ -125,22 +120,13 @@ fn main() {
         let prefetch =
             prefetch_probabilities(&service, &specs, &pairs, &|_, _| {}).expect("prefetch");
         let prefetched = started.elapsed();
-        let mut outs = Vec::new();
-        for spec in SPECS {
-            let s = registry.build(spec).expect("strategy");
-            for ((scene, map), trial) in scenes.iter().zip(&maps).zip(&trials) {
-                if let (Ok(d), Some(t)) = (map, trial) {
-                    outs.push(
-                        run_trial(
-                            s.as_ref(),
-                            &SearchProblem::new(&scene.house, d, t),
-                            &scene.truth,
-                        )
-                        .expect("trial"),
-                    );
-                }
-            }
-        }
+        let strategies: Vec<Arc<dyn Strategy>> = SPECS
+            .iter()
+            .map(|s| registry.build(s).expect("strategy"))
+            .collect();
+        let evaluation = evaluate(&scenes, &maps, &strategies, &draw, &Silent);
+        assert!(evaluation.errors.is_empty(), "{:?}", evaluation.errors);
+        let outs = evaluation.rows;
         let report = service.report();
         let t = &report.per_llm()[0];
         println!(

@@ -1,0 +1,34 @@
+//! # ferret-lab
+//!
+//! The experiment layer between the libraries ({world, plan, llm, select, report}) and ferret's
+//! faces (the command line, the HTTP service, Python). It owns what an experiment is made of:
+//! where houses come from and their maps ([`houses`]), strategy setup without a command line
+//! ([`strategies`]), evaluation of strategies on the same trials ([`evaluate`]), the run files
+//! `trials.csv` and `run.json` ([`runs`]), summaries and paired statistics ([`summary`]), the
+//! replay table behind selection with its resumable cache ([`replay`]), the one deployment loop
+//! — choose, run, replay, learn — with its house order ([`deploy`]), atomic output files
+//! ([`files`]), and how long work reports progress without printing ([`feedback`]). Faces parse
+//! their input, call these functions and print what they return.
+
+pub mod deploy;
+pub mod error;
+pub mod evaluate;
+pub mod feedback;
+pub mod files;
+pub mod houses;
+pub mod replay;
+pub mod runs;
+pub mod strategies;
+pub mod summary;
+
+pub use deploy::{DeploySettings, DeployedTrial, Deployment, DeploymentStep, HouseOrder, deploy};
+pub use error::{LabError, Result};
+pub use evaluate::{Evaluation, TrialDraw, evaluate, trial_row};
+pub use feedback::{Feedback, Silent};
+pub use houses::{HouseSource, LoadedHouses, Mapped, build_maps};
+pub use runs::{CELL_M, EvalRun, RunInfo, TrialRow, sha256_hex};
+pub use strategies::{
+    DEFAULT_STRATEGIES, LlmSettings, PlanningSettings, Strategies, full_registry,
+    full_registry_with,
+};
+pub use summary::{PairedRow, SummaryRow, paired_comparisons, summarize};

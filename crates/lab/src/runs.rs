@@ -1,0 +1,197 @@
+//! The files of an evaluation run: `trials.csv` (one [`TrialRow`] per trial and strategy) and
+//! `run.json` ([`RunInfo`], what rebuilds its houses and strategies), read back with their
+//! identity checked.
+
+use std::path::{Path, PathBuf};
+
+use ferret_plan::{Protocol, TrialsPerHouse};
+use ferret_world::{AccessRule, GridParams};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Context, LabError, Result};
+use crate::houses::HouseSource;
+use crate::strategies::PlanningSettings;
+
+/// One row of `trials.csv`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrialRow {
+    /// House label.
+    pub house: String,
+    /// House index in its file.
+    pub house_index: usize,
+    /// Target object type.
+    pub target: String,
+    /// Strategy spec.
+    pub strategy: String,
+    /// Distance travelled, metres.
+    pub cost_m: f64,
+    /// Containers searched.
+    pub searches: usize,
+    /// Whether the target was found.
+    pub found: bool,
+    /// Id of the container where it was found.
+    pub found_container: String,
+    /// Ids of the containers searched, in order, space separated.
+    pub searched: String,
+    /// Number of containers holding the target.
+    pub goal_containers: usize,
+    /// Distance travelled in the paper's 0.05 m grid cells, when asked for (absent otherwise,
+    /// so that the default file has the columns above only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cost_cells: Option<f64>,
+}
+
+/// The paper's unit of cost: a grid cell of 0.05 m (its table I is in these cells).
+pub const CELL_M: f64 = 0.05;
+
+/// What rebuilds the houses and strategies of an evaluation run.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct RunInfo {
+    /// The house file.
+    pub houses: Option<PathBuf>,
+    /// The range of houses in it.
+    pub range: Option<String>,
+    /// The asset database.
+    pub asset_db: Option<PathBuf>,
+    /// Houses generated when there is no file.
+    pub generate: usize,
+    /// Seed of the generated houses.
+    pub house_seed: u64,
+    /// Grid resolution, robot radius, wall thickness.
+    pub grid: [f64; 3],
+    /// Planner settings.
+    pub planning: PlanningSettings,
+    /// Trial seed.
+    pub seed: u64,
+    /// Reveal fraction.
+    pub reveal_fraction: f64,
+    /// Trials per house; left out when 1, so that single-trial runs keep the shorter file.
+    #[serde(default, skip_serializing_if = "is_one_per_house")]
+    pub trials_per_house: TrialsPerHouse,
+    /// The protocol; left out when it is ferret's, for the same reason.
+    #[serde(default, skip_serializing_if = "is_ferret_protocol")]
+    pub protocol: Protocol,
+    /// Strategies in order.
+    pub strategies: Vec<String>,
+    /// SHA-256 of the trials.csv written with this file, so that a trials.csv of another run
+    /// beside it (an eval stopped between the two) is recognised.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trials_sha256: Option<String>,
+}
+
+fn is_ferret_protocol(p: &Protocol) -> bool {
+    *p == Protocol::FERRET
+}
+
+fn is_one_per_house(t: &TrialsPerHouse) -> bool {
+    *t == TrialsPerHouse::One
+}
+
+impl RunInfo {
+    /// Where the run's houses come from (invalid houses skipped, as the run skipped them).
+    pub fn house_source(&self) -> HouseSource {
+        HouseSource {
+            houses: self.houses.clone(),
+            range: self.range.as_ref().and_then(|r| r.parse().ok()),
+            asset_db: self.asset_db.clone(),
+            skip_invalid: true,
+            generate: self.generate,
+            house_seed: self.house_seed,
+        }
+    }
+
+    /// The grid the run's maps were built on, with access points chosen by `access`.
+    pub fn grid_params(&self, access: AccessRule) -> GridParams {
+        GridParams {
+            resolution: self.grid[0],
+            robot_radius: self.grid[1],
+            wall_thickness: self.grid[2],
+            access,
+            ..GridParams::default()
+        }
+    }
+}
+
+/// Lower-case hex SHA-256 of `bytes`.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::{Digest, Sha256};
+    format!("{:x}", Sha256::digest(bytes))
+}
+
+/// Largest run file read (trials.csv of a very large run is tens of megabytes).
+const MAX_RUN_FILE_BYTES: u64 = 1 << 30;
+
+/// A run file, through the bounded reader every input goes through.
+pub fn read_run_file(path: &Path) -> std::io::Result<Vec<u8>> {
+    ferret_world::input::read_file(path, MAX_RUN_FILE_BYTES)
+}
+
+/// Parses serde rows from the CSV text of `path`; errors name the file and line.
+pub fn parse_csv<T: for<'de> Deserialize<'de>>(bytes: &[u8], path: &Path) -> Result<Vec<T>> {
+    let mut r = csv::Reader::from_reader(bytes);
+    r.deserialize()
+        .enumerate()
+        .map(|(i, row)| {
+            row.map_err(|source| LabError::Csv {
+                context: format!("{}: row {}", path.display(), i + 2),
+                source,
+            })
+        })
+        .collect()
+}
+
+/// An evaluation run read back from its directory.
+#[derive(Clone, Debug)]
+pub struct EvalRun {
+    /// `run.json`.
+    pub info: RunInfo,
+    /// `trials.csv`.
+    pub rows: Vec<TrialRow>,
+    /// The bytes of `run.json`, part of the run's identity.
+    pub run_json: Vec<u8>,
+    /// The bytes of `trials.csv`, part of the run's identity.
+    pub trials_csv: Vec<u8>,
+}
+
+impl EvalRun {
+    /// Reads `dir/run.json` and `dir/trials.csv` and checks that they belong together.
+    pub fn read(dir: &Path) -> Result<Self> {
+        let run_json = read_run_file(&dir.join("run.json"))
+            .map_err(LabError::from_io_plain)
+            .context_with(|| format!("{}: not a `ferret eval` output directory", dir.display()))?;
+        let info: RunInfo = serde_json::from_slice(&run_json).map_err(|source| LabError::Json {
+            context: "reading run.json".into(),
+            source,
+        })?;
+        let trials_path = dir.join("trials.csv");
+        let trials_csv = read_run_file(&trials_path)
+            .map_err(|e| LabError::io(format!("reading {}", trials_path.display()), e))?;
+        if let Some(expected) = &info.trials_sha256
+            && *expected != sha256_hex(&trials_csv)
+        {
+            return Err(LabError::invalid(format!(
+                "{}: trials.csv and run.json are from different runs (an eval was stopped between \
+                 writing them, or one file was copied from another run); run `ferret eval` into this \
+                 directory again",
+                dir.display()
+            )));
+        }
+        let rows = parse_csv(&trials_csv, &trials_path)?;
+        Ok(Self {
+            info,
+            rows,
+            run_json,
+            trials_csv,
+        })
+    }
+}
+
+impl LabError {
+    /// An I/O error whose message is the cause alone (the caller's context says which file).
+    pub(crate) fn from_io_plain(e: std::io::Error) -> Self {
+        LabError::Io {
+            context: e.to_string(),
+            source: e,
+        }
+    }
+}

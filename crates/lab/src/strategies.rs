@@ -1,0 +1,442 @@
+//! Strategy setup without a command line: planner and prior settings, LLM settings, the full
+//! registry (built-in kinds plus the LLM crate's), prefetching LLM answers, and what the LLM
+//! service reports after a run.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use ferret_llm::{
+    FailurePolicy, LlmConfig, LlmOptions, LlmService, TokenReport, prefetch_probabilities,
+    register_fused, register_strategies,
+};
+use ferret_plan::{CandidateLimit, FusionFile, PlannerConfig, Prior, StrategyRegistry};
+use ferret_world::{House, ObjectType};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{LabError, Result};
+use crate::feedback::Feedback;
+
+/// The strategies evaluated when none are named.
+pub const DEFAULT_STRATEGIES: &str =
+    "optimistic+greedy,model/uniform,model/prior,model/prior/exact,oracle";
+
+/// Houses and seed of the prior used when none is given: generated houses with a seed other than
+/// the evaluation houses', so that an evaluation never trains on its own test houses.
+pub const DEFAULT_PRIOR_HOUSES: (usize, u64) = (500, 1_000_003);
+
+/// Smoothing weight of the default prior (pseudo-containers toward the back-off estimate).
+pub const DEFAULT_SMOOTHING: f64 = 2.0;
+
+/// A prior trained on `count` generated houses of `seed`.
+pub fn default_prior(count: usize, seed: u64) -> Result<Prior> {
+    let scenes = ferret_world::generate::default_scenes(count, seed)?;
+    Ok(Prior::train(&scenes, DEFAULT_SMOOTHING))
+}
+
+/// Planner and prior settings shared by evaluations, selections and deployments. Field names
+/// are those of `run.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PlanningSettings {
+    /// A prior file; `None` trains the default one (see [`DEFAULT_PRIOR_HOUSES`]).
+    pub prior: Option<PathBuf>,
+    /// Containers the planner considers per decision (the paper's K = 8).
+    pub max_containers: usize,
+    /// Largest exact problem of `/exact` strategies.
+    pub exact_max: usize,
+    /// Search cost R per container, metres.
+    pub search_cost: f64,
+}
+
+impl Default for PlanningSettings {
+    fn default() -> Self {
+        Self {
+            prior: None,
+            max_containers: 8,
+            exact_max: 16,
+            search_cost: 0.0,
+        }
+    }
+}
+
+impl PlanningSettings {
+    /// Refuses unusable planner settings, naming the option.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.search_cost.is_finite() && self.search_cost >= 0.0) {
+            return Err(LabError::invalid(format!(
+                "--search-cost {}: must be a finite number ≥ 0 m",
+                self.search_cost
+            )));
+        }
+        if self.max_containers == 0 {
+            return Err(LabError::invalid(
+                "--max-containers 0: the planner needs at least one container",
+            ));
+        }
+        let max = ferret_plan::planner::MAX_EXACT;
+        if !(1..=max).contains(&self.exact_max) {
+            return Err(LabError::invalid(format!(
+                "--exact-max {}: must be between 1 and {max}",
+                self.exact_max
+            )));
+        }
+        Ok(())
+    }
+
+    /// The prior these settings name, or the default one.
+    pub fn prior(&self) -> Result<Prior> {
+        match &self.prior {
+            Some(p) => Ok(Prior::load(p)?),
+            None => default_prior(DEFAULT_PRIOR_HOUSES.0, DEFAULT_PRIOR_HOUSES.1),
+        }
+    }
+
+    /// The planner settings of model strategies without a limit suffix.
+    pub fn planner_config(&self) -> PlannerConfig {
+        PlannerConfig {
+            search_cost: self.search_cost,
+            limit: CandidateLimit::Paper {
+                k: self.max_containers.max(1),
+            },
+            cost: ferret_plan::CostModel::Paper,
+        }
+    }
+
+    /// The prior, when one of `specs` plans over it (`model/prior...`, `fused/...`): loaded, or
+    /// the default one trained. `None` when none does.
+    pub fn prior_for(&self, specs: &[String]) -> Result<Option<Arc<Prior>>> {
+        let needs_prior = specs
+            .iter()
+            .any(|s| s.starts_with("model/prior") || s.starts_with("fused/"));
+        Ok(if needs_prior {
+            Some(Arc::new(self.prior()?))
+        } else {
+            None
+        })
+    }
+
+    /// The registry of built-in strategies under these settings over `prior`.
+    pub fn registry_with(&self, prior: Option<Arc<Prior>>) -> StrategyRegistry {
+        StrategyRegistry::builtin(prior, self.planner_config(), self.exact_max)
+    }
+}
+
+/// Where LLM endpoints and cached answers live, and what a failed endpoint means.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LlmSettings {
+    /// Endpoint configuration (TOML); `ferret.toml` in the working directory when `None`.
+    pub config: Option<PathBuf>,
+    /// The response cache (SQLite).
+    pub llm_cache: PathBuf,
+    /// Answer from the cache only.
+    pub offline: bool,
+    /// Go on without the strategies of a failed endpoint instead of stopping.
+    pub keep_going: bool,
+    /// Largest share of unreadable answers an LLM strategy may have.
+    pub max_fallback_share: Option<f64>,
+    /// Fusion weights from a calibration, for `fused/<prompt>/<llm>`.
+    pub fusion: Option<PathBuf>,
+}
+
+impl Default for LlmSettings {
+    fn default() -> Self {
+        Self {
+            config: None,
+            llm_cache: PathBuf::from(ferret_llm::DEFAULT_CACHE_PATH),
+            offline: false,
+            keep_going: false,
+            max_fallback_share: None,
+            fusion: None,
+        }
+    }
+}
+
+/// Strategies and the LLM service behind the LLM ones.
+pub struct Strategies {
+    /// Every kind: built-in and LLM.
+    pub registry: StrategyRegistry,
+    /// The LLM service (endpoints, cache, accounting).
+    pub service: Arc<LlmService>,
+    /// The prior, when a strategy plans over it.
+    pub prior: Option<Arc<Prior>>,
+}
+
+/// Built-in strategies plus the LLM kinds, for the strategies `specs` will build. The LLM
+/// service opens its cache only when an LLM is first asked, so runs without LLM strategies touch
+/// no cache file.
+pub fn full_registry(
+    planning: &PlanningSettings,
+    llm: &LlmSettings,
+    specs: &[String],
+) -> Result<Strategies> {
+    full_registry_with(planning, llm, specs, FailurePolicy::StopForRun)
+}
+
+/// The same, with what a failed LLM endpoint means for later questions (batch runs stop asking
+/// it; a server pauses and asks again).
+pub fn full_registry_with(
+    planning: &PlanningSettings,
+    llm: &LlmSettings,
+    specs: &[String],
+    on_failure: FailurePolicy,
+) -> Result<Strategies> {
+    let prior = planning.prior_for(specs)?;
+    let mut registry = planning.registry_with(prior.clone());
+    let fusion = match &llm.fusion {
+        Some(path) => Some((
+            path.display().to_string(),
+            Arc::new(FusionFile::load(path)?),
+        )),
+        None => None,
+    };
+    let config = LlmConfig::load_default(llm.config.as_deref())?;
+    let service = Arc::new(LlmService::new(
+        config,
+        LlmOptions {
+            cache_path: Some(llm.llm_cache.clone()),
+            offline: llm.offline,
+            on_failure,
+        },
+    )?);
+    register_strategies(
+        &mut registry,
+        service.clone(),
+        planning.planner_config(),
+        planning.exact_max,
+    );
+    register_fused(
+        &mut registry,
+        service.clone(),
+        prior.clone(),
+        fusion,
+        planning.planner_config(),
+        planning.exact_max,
+    );
+    Ok(Strategies {
+        registry,
+        service,
+        prior,
+    })
+}
+
+/// Asks every probability question of the `llm+model` strategies concurrently before trials
+/// run, so trials answer from the cache. When an endpoint fails (after its retries), the run
+/// stops with the endpoint's error, or, with `keep_going`, goes on without the strategies of
+/// `specs` that use a failed LLM: those are returned, for the caller to drop. An offline miss is
+/// not an endpoint failure: the trials that need it fail and are reported.
+pub fn prefetch(
+    service: &Arc<LlmService>,
+    llm: &LlmSettings,
+    specs: &[String],
+    trials: &[(&House, &ObjectType)],
+    feedback: &dyn Feedback,
+) -> Result<Vec<String>> {
+    let asks = |s: &String| {
+        s.split('/')
+            .next()
+            .is_some_and(ferret_llm::asks_probabilities)
+    };
+    if !specs.iter().any(asks) {
+        return Ok(Vec::new());
+    }
+    feedback.begin("LLM questions", 0);
+    let summary = prefetch_probabilities(service, specs, trials, &|done, total| {
+        feedback.set_len(total);
+        feedback.set_done(done);
+    });
+    feedback.end();
+    let summary = summary?;
+    feedback.note(&format!(
+        "LLM questions: {} distinct ({} cached, {} asked now, {} skipped after a failure)",
+        summary.distinct, summary.cached, summary.asked, summary.skipped
+    ));
+    let down = service.failed_llms();
+    if down.is_empty() {
+        for f in &summary.failures {
+            feedback.note(&format!("LLM failure: {f}"));
+        }
+        return Ok(Vec::new());
+    }
+    let reasons: Vec<String> = down.iter().map(|(_, why)| why.clone()).collect();
+    if !llm.keep_going {
+        return Err(LabError::LlmStopped(format!(
+            "{}\nanswers received so far are kept in the response cache; rerun to resume, or pass --keep-going to run the other strategies",
+            reasons.join("\n")
+        )));
+    }
+    let dropped: Vec<String> = specs
+        .iter()
+        .filter(|s| {
+            ferret_plan::StrategySpec::parse(s)
+                .ok()
+                .and_then(|spec| ferret_llm::LlmSpec::parse(&spec))
+                .and_then(|p| p.ok())
+                .is_some_and(|p| down.iter().any(|(name, _)| *name == p.llm))
+        })
+        .cloned()
+        .collect();
+    for r in &reasons {
+        feedback.note(&format!("error: {r}"));
+    }
+    feedback.note(&format!(
+        "--keep-going: going on without {} (their LLM failed)",
+        dropped.join(", ")
+    ));
+    Ok(dropped)
+}
+
+/// Warnings for LLM strategies whose answers mostly fell back or collapsed into one value, by
+/// strategy.
+pub fn answer_warnings(service: &LlmService) -> Vec<(String, String)> {
+    service
+        .report()
+        .rows
+        .iter()
+        .filter_map(|r| r.warning().map(|w| (r.strategy.clone(), w)))
+        .collect()
+}
+
+/// Fails when `max_fallback_share` is set and an LLM strategy's fallback share exceeds it.
+pub fn check_fallback_gate(service: &LlmService, llm: &LlmSettings) -> Result<()> {
+    let Some(max) = llm.max_fallback_share else {
+        return Ok(());
+    };
+    let over: Vec<String> = service
+        .report()
+        .rows
+        .iter()
+        .filter_map(|r| {
+            let share = r.answers.fallback_share()?;
+            (share > max).then(|| {
+                format!(
+                    "{}: {:.1} % of {} answers fell back",
+                    r.strategy,
+                    100.0 * share,
+                    r.answers.answers()
+                )
+            })
+        })
+        .collect();
+    if over.is_empty() {
+        Ok(())
+    } else {
+        Err(LabError::invalid(format!(
+            "fallback share above --max-fallback-share {max}:\n  {}",
+            over.join("\n  ")
+        )))
+    }
+}
+
+/// What an LLM service used in a run, as written beside the run's other files.
+pub struct TokenFiles {
+    /// The token report (the paper's table V).
+    pub report: TokenReport,
+    /// Warnings by strategy (see [`answer_warnings`]).
+    pub warnings: Vec<(String, String)>,
+}
+
+/// Writes `tokens.csv` into `dir` and appends the token report, the answer classes and warnings
+/// to `dir/summary.md` when it exists; `None` when no LLM was used.
+pub fn write_token_files(service: &LlmService, dir: &Path) -> Result<Option<TokenFiles>> {
+    let report = service.report();
+    if report.rows.is_empty() {
+        return Ok(None);
+    }
+    let warnings = answer_warnings(service);
+    // Also in the run's summary, beside the cost table, with the answer classes and a mark on
+    // every row whose answers say little.
+    let summary = dir.join("summary.md");
+    if summary.exists() {
+        let md = ferret_world::input::read_text(&summary, ferret_world::input::MAX_INPUT_BYTES)
+            .map_err(|e| LabError::io(format!("reading {}", summary.display()), e))?;
+        let mut md = mark_rows(&md, &warnings);
+        md.push_str(&format!("\n## LLM tokens and cost\n\n```\n{report}```\n"));
+        md.push_str(&answers_markdown(&report));
+        if !warnings.is_empty() {
+            md.push_str("\n## Warnings\n\n");
+            for (strategy, w) in &warnings {
+                md.push_str(&format!("- ⚠ `{strategy}`: {w}\n"));
+            }
+        }
+        crate::files::write_bytes(&summary, md)?;
+    }
+    std::fs::create_dir_all(dir)
+        .map_err(|e| LabError::io(format!("creating {}", dir.display()), e))?;
+    let tokens = dir.join("tokens.csv");
+    crate::files::write_atomic(&tokens, |w| report.write_csv(w)).map_err(|source| {
+        LabError::Csv {
+            context: format!("writing {}", tokens.display()),
+            source,
+        }
+    })?;
+    Ok(Some(TokenFiles { report, warnings }))
+}
+
+/// `| strategy |` table rows of strategies with a warning get a ⚠ after the name.
+fn mark_rows(md: &str, warnings: &[(String, String)]) -> String {
+    md.lines()
+        .map(|line| {
+            match warnings
+                .iter()
+                .find(|(s, _)| line.starts_with(&format!("| {s} |")))
+            {
+                Some((s, _)) => line.replacen(&format!("| {s} |"), &format!("| {s} ⚠ |"), 1),
+                None => line.to_string(),
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+        + if md.ends_with('\n') { "\n" } else { "" }
+}
+/// How each LLM strategy's answers were read: the class of every first answer, re-asks,
+/// fallbacks, log-probabilities, and the most common probability.
+pub fn answers_markdown(report: &ferret_llm::TokenReport) -> String {
+    use ferret_llm::AnswerClass;
+    let rows: Vec<_> = report
+        .rows
+        .iter()
+        .filter(|r| r.answers.answers() > 0)
+        .collect();
+    if rows.is_empty() {
+        return String::new();
+    }
+    let mut md = String::from(
+        "\n## LLM answers\n\nClass of each distinct question's first answer (P-BATCH: of each place's percentage); unusable ones (several numbers, none, the worked example echoed, no allowed word, a place left out) are asked again, then fall back to 0.01. \"logprobs missing\": read from the text although log-probabilities were wanted (P-YESNO and P-CHOICE: the word with the endpoint's `word_answer_mass`).\n\n| strategy | answers |",
+    );
+    for c in AnswerClass::ALL {
+        md.push_str(&format!(" {} |", c.label()));
+    }
+    md.push_str(
+        " re-asked | fell back | from logprobs | logprobs missing | most common p |\n|---|---:|",
+    );
+    for _ in AnswerClass::ALL {
+        md.push_str("---:|");
+    }
+    md.push_str("---:|---:|---:|---:|---:|\n");
+    for r in rows {
+        let a = &r.answers;
+        let mut line = format!("| {} | {} |", r.strategy, a.answers());
+        for c in AnswerClass::ALL {
+            line.push_str(&format!(" {} |", a.class(c)));
+        }
+        let common = r.most_common_probability().map_or_else(
+            || "–".into(),
+            |(v, share)| format!("{:.1} % ({:.0} %)", 100.0 * v, 100.0 * share),
+        );
+        let direct = if a.direct_answers > 0 {
+            format!(" ({} P-DIRECT unmatched)", a.direct_fallbacks)
+        } else {
+            String::new()
+        };
+        line.push_str(&format!(
+            " {} | {}{} | {} | {} | {} |\n",
+            a.reasked,
+            a.fallbacks(),
+            direct,
+            a.logprob_used,
+            a.logprob_missing,
+            common
+        ));
+        md.push_str(&line);
+    }
+    md
+}

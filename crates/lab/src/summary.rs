@@ -1,0 +1,600 @@
+//! Summaries of an evaluation: per-strategy statistics (the paper's table I), paired
+//! comparisons trial by trial, the reference code's weighted means, and their Markdown.
+
+use std::collections::{BTreeMap, HashMap};
+
+use ferret_plan::TrialsPerHouse;
+use serde::Serialize;
+
+use crate::runs::{CELL_M, TrialRow};
+
+/// Per-strategy statistics for `summary.csv`.
+#[derive(Clone, Debug, Serialize)]
+pub struct SummaryRow {
+    /// Strategy spec.
+    pub strategy: String,
+    /// Trials run.
+    pub trials: usize,
+    /// Mean cost, metres.
+    pub mean_m: f64,
+    /// Median cost, metres.
+    pub median_m: f64,
+    /// Half-width of the 95 % confidence interval of the mean (normal approximation).
+    pub ci95_m: f64,
+    /// Improvement of the mean over optimistic+greedy, percent (positive = cheaper), on the
+    /// paired trials only.
+    pub improvement_pct: Option<f64>,
+    /// Trials in the comparison with optimistic+greedy: the houses where every summarized
+    /// strategy finished, so that a strategy is never credited for skipping hard houses.
+    pub paired_trials: usize,
+    /// Mean cost in 0.05 m cells (`--cells` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mean_cells: Option<f64>,
+    /// Median cost in 0.05 m cells (`--cells` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub median_cells: Option<f64>,
+    /// Half-width of the 95 % interval in 0.05 m cells (`--cells` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ci95_cells: Option<f64>,
+}
+
+impl SummaryRow {
+    /// Fills in the costs in 0.05 m cells.
+    pub fn with_cells(self) -> Self {
+        Self {
+            mean_cells: Some(self.mean_m / CELL_M),
+            median_cells: Some(self.median_m / CELL_M),
+            ci95_cells: Some(self.ci95_m / CELL_M),
+            ..self
+        }
+    }
+}
+
+/// Each strategy's mean cost as the reference code averages its table: 500 runs of 100 houses
+/// drawn with replacement by numpy's legacy generator (`seed(s)`, shuffle, `choice`) from the
+/// houses in file order, i.e. a mean weighted by how often each house is drawn. Houses a
+/// strategy has no trial on are left out of its weights. `(strategy, metres)` in `order`.
+pub fn reference_means(
+    rows: &[TrialRow],
+    order: &[String],
+    houses: &[usize],
+) -> Vec<(String, f64)> {
+    let counts = ferret_select::numpy::reference_draw_counts(houses.len(), 500, 100);
+    let weight: HashMap<usize, f64> = houses
+        .iter()
+        .zip(&counts)
+        .map(|(&h, &c)| (h, c as f64))
+        .collect();
+    order
+        .iter()
+        .filter_map(|s| {
+            let (sum, total) = rows
+                .iter()
+                .filter(|r| &r.strategy == s)
+                .filter_map(|r| weight.get(&r.house_index).map(|w| (w * r.cost_m, *w)))
+                .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+            (total > 0.0).then(|| (s.clone(), sum / total))
+        })
+        .collect()
+}
+
+/// [`reference_means`] as Markdown, in metres and cells.
+pub fn reference_means_markdown(means: &[(String, f64)]) -> String {
+    let mut md = String::from(
+        "\n## As the reference code averages\n\nEach mean weighted by how often 500 seeded runs of 100 draws with replacement (numpy's legacy generator, as the reference's results script) pick each house.\n\n| strategy | mean cost (m) | mean cost (cells) |\n|---|---:|---:|\n",
+    );
+    for (s, m) in means {
+        md.push_str(&format!("| {s} | {m:.2} | {:.1} |\n", m / CELL_M));
+    }
+    md
+}
+
+/// The summary in 0.05 m cells as Markdown: the paper's unit, for comparison with its table I.
+pub fn cells_markdown(summary: &[SummaryRow]) -> String {
+    let mut md = String::from(
+        "\n## In the paper's unit\n\nThe same costs in grid cells of 0.05 m (metres / 0.05), the unit of the paper's table I.\n\n| strategy | trials | mean cost (cells) | 95 % CI | median (cells) |\n|---|---:|---:|---:|---:|\n",
+    );
+    for r in summary {
+        md.push_str(&format!(
+            "| {} | {} | {:.1} | ±{:.1} | {:.1} |\n",
+            r.strategy,
+            r.trials,
+            r.mean_m / CELL_M,
+            r.ci95_m / CELL_M,
+            r.median_m / CELL_M
+        ));
+    }
+    md
+}
+
+/// A trial's identity across strategies: house index and target. Two strategies' rows with the
+/// same key ran the same trial, so their costs pair.
+pub type TrialKey<'a> = (usize, &'a str);
+
+/// Each strategy's cost per trial.
+fn costs_by_trial(rows: &[TrialRow]) -> BTreeMap<&str, BTreeMap<TrialKey<'_>, f64>> {
+    let mut by: BTreeMap<&str, BTreeMap<TrialKey<'_>, f64>> = BTreeMap::new();
+    for r in rows {
+        by.entry(r.strategy.as_str())
+            .or_default()
+            .insert((r.house_index, r.target.as_str()), r.cost_m);
+    }
+    by
+}
+
+/// Mean, median, 95 % CI and improvement over optimistic+greedy, per strategy in `order`. The
+/// improvement compares means over the paired trials only: the trials (house and target) that
+/// every strategy of `order` that finished any trial finished.
+pub fn summarize(rows: &[TrialRow], order: &[String]) -> Vec<SummaryRow> {
+    let mut by: BTreeMap<&str, Vec<f64>> = BTreeMap::new();
+    let by_house = costs_by_trial(rows);
+    for r in rows {
+        by.entry(r.strategy.as_str()).or_default().push(r.cost_m);
+    }
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    let compared: Vec<&BTreeMap<TrialKey<'_>, f64>> = order
+        .iter()
+        .filter_map(|s| by_house.get(s.as_str()))
+        .collect();
+    let paired: Vec<TrialKey<'_>> = compared
+        .first()
+        .map(|first| {
+            first
+                .keys()
+                .copied()
+                .filter(|h| compared.iter().all(|m| m.contains_key(h)))
+                .collect()
+        })
+        .unwrap_or_default();
+    let paired_mean = |s: &str| {
+        let m = by_house.get(s)?;
+        let v: Vec<f64> = paired.iter().filter_map(|h| m.get(h).copied()).collect();
+        (!v.is_empty()).then(|| mean(&v))
+    };
+    let greedy = paired_mean("optimistic+greedy");
+    order
+        .iter()
+        .filter_map(|s| by.get(s.as_str()).map(|v| (s, v)))
+        .map(|(s, v)| {
+            let m = mean(v);
+            let mut sorted = v.clone();
+            sorted.sort_by(f64::total_cmp);
+            let n = sorted.len();
+            let median = if n % 2 == 1 {
+                sorted[n / 2]
+            } else {
+                (sorted[n / 2 - 1] + sorted[n / 2]) / 2.0
+            };
+            let var = if n > 1 {
+                v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1) as f64
+            } else {
+                0.0
+            };
+            SummaryRow {
+                strategy: s.clone(),
+                trials: n,
+                mean_m: m,
+                median_m: median,
+                ci95_m: 1.96 * (var / n as f64).sqrt(),
+                improvement_pct: greedy
+                    .filter(|g| *g > 0.0)
+                    .zip(paired_mean(s))
+                    .map(|(g, m)| 100.0 * (g - m) / g),
+                paired_trials: paired.len(),
+                mean_cells: None,
+                median_cells: None,
+                ci95_cells: None,
+            }
+        })
+        .collect()
+}
+
+/// Bootstrap resamples of the paired confidence intervals: enough that the interval's ends move
+/// by less than a hundredth of a metre between seeds on 150 trials.
+pub const PAIRED_RESAMPLES: usize = 10_000;
+
+/// One row of `paired.csv`: a strategy against a reference on the trials both finished.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PairedRow {
+    /// The strategy compared against.
+    pub reference: String,
+    /// Why it is the reference: `first` (the first strategy named), `best` (the lowest mean
+    /// on the paired trials, the oracle excepted) or `named` (given with `--paired-against`).
+    pub role: &'static str,
+    /// The strategy.
+    pub strategy: String,
+    /// Trials (house and target) both finished.
+    pub pairs: usize,
+    /// Mean of cost(strategy) − cost(reference), metres; negative = the strategy is cheaper.
+    pub mean_diff_m: f64,
+    /// Lower end of the 95 % bootstrap interval of the mean difference, metres.
+    pub ci95_low_m: f64,
+    /// Upper end of that interval, metres.
+    pub ci95_high_m: f64,
+    /// Two-sided Wilcoxon signed-rank p-value; empty when every pair ties.
+    pub wilcoxon_p: Option<f64>,
+    /// Trials where the strategy is cheaper.
+    pub wins: usize,
+    /// Trials within a nanometre.
+    pub ties: usize,
+    /// Trials where the strategy costs more.
+    pub losses: usize,
+}
+
+/// Every strategy of `order` against the first one, and against the best (lowest mean over the
+/// trials every strategy finished; the oracle is a bound, never the best) when that is another
+/// strategy, then against each of `named` that is neither. Pairs are the trials (house and
+/// target) both strategies of a comparison finished. `seed` seeds the bootstrap, so the table is
+/// reproducible.
+pub fn paired_comparisons(
+    rows: &[TrialRow],
+    order: &[String],
+    named: &[String],
+    seed: u64,
+) -> Vec<PairedRow> {
+    let by = costs_by_trial(rows);
+    let present: Vec<&str> = order
+        .iter()
+        .map(String::as_str)
+        .filter(|s| by.contains_key(s))
+        .collect();
+    let Some(&first) = present.first() else {
+        return Vec::new();
+    };
+    let common: Vec<TrialKey<'_>> = by[first]
+        .keys()
+        .copied()
+        .filter(|k| present.iter().all(|s| by[s].contains_key(k)))
+        .collect();
+    let best = present
+        .iter()
+        .copied()
+        .filter(|s| *s != "oracle" && !common.is_empty())
+        .map(|s| (s, common.iter().map(|k| by[s][k]).sum::<f64>()))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(s, _)| s);
+    let mut references = vec![(first, "first")];
+    if let Some(b) = best.filter(|b| *b != first) {
+        references.push((b, "best"));
+    }
+    for n in named {
+        if let Some(&n) = present.iter().find(|s| **s == n.as_str())
+            && !references.iter().any(|(r, _)| *r == n)
+        {
+            references.push((n, "named"));
+        }
+    }
+    let mut out = Vec::new();
+    for (reference, role) in references {
+        for &s in present.iter().filter(|s| **s != reference) {
+            let keys: Vec<&TrialKey<'_>> = by[s]
+                .keys()
+                .filter(|k| by[reference].contains_key(*k))
+                .collect();
+            let a: Vec<f64> = keys.iter().map(|k| by[s][*k]).collect();
+            let b: Vec<f64> = keys.iter().map(|k| by[reference][*k]).collect();
+            let Some(c) = ferret_report::paired::compare_paired(&a, &b, PAIRED_RESAMPLES, seed)
+            else {
+                continue;
+            };
+            out.push(PairedRow {
+                reference: reference.to_string(),
+                role,
+                strategy: s.to_string(),
+                pairs: c.n,
+                mean_diff_m: c.mean_diff,
+                ci95_low_m: c.ci95.0,
+                ci95_high_m: c.ci95.1,
+                wilcoxon_p: c.wilcoxon.map(|w| w.p),
+                wins: c.wins,
+                ties: c.ties,
+                losses: c.losses,
+            });
+        }
+    }
+    out
+}
+
+/// A p-value as people read it: three decimals, two significant digits below 0.001, and
+/// `< 1e-6` below that.
+fn format_p(p: Option<f64>) -> String {
+    match p {
+        None => "–".into(),
+        Some(p) if p < 1e-6 => "< 1e-6".into(),
+        Some(p) if p < 0.001 => format!("{p:.1e}"),
+        Some(p) => format!("{p:.3}"),
+    }
+}
+
+/// The paired comparisons as Markdown, one table per reference; empty without comparisons.
+pub fn paired_markdown(paired: &[PairedRow]) -> String {
+    if paired.is_empty() {
+        return String::new();
+    }
+    let mut md = format!(
+        "\n## Paired comparisons\n\nPairs are the trials (house and target) both strategies finished. Difference = strategy − reference, metres (negative: the strategy is cheaper); 95 % CI of its mean by bootstrap ({PAIRED_RESAMPLES} resamples); p from the two-sided Wilcoxon signed-rank test; wins / ties / losses count the trials where the strategy is cheaper / equal / dearer.\n"
+    );
+    let mut current: Option<(&str, &str)> = None;
+    for r in paired {
+        if current != Some((r.reference.as_str(), r.role)) {
+            current = Some((r.reference.as_str(), r.role));
+            let why = match r.role {
+                "first" => "the first strategy",
+                "best" => "the lowest mean, oracle excepted",
+                _ => "named with --paired-against",
+            };
+            md.push_str(&format!(
+                "\nAgainst {} ({why}):\n\n| strategy | pairs | mean difference (m) | 95 % CI (m) | Wilcoxon p | wins / ties / losses |\n|---|---:|---:|---:|---:|---:|\n",
+                r.reference
+            ));
+        }
+        md.push_str(&format!(
+            "| {} | {} | {:+.2} | [{:+.2}, {:+.2}] | {} | {} / {} / {} |\n",
+            r.strategy,
+            r.pairs,
+            r.mean_diff_m,
+            r.ci95_low_m,
+            r.ci95_high_m,
+            format_p(r.wilcoxon_p),
+            r.wins,
+            r.ties,
+            r.losses
+        ));
+    }
+    md
+}
+
+/// The paper's table I as Markdown; `trials` trials were drawn on `houses` houses.
+pub fn summary_markdown(
+    summary: &[SummaryRow],
+    source: &str,
+    houses: usize,
+    per_house: TrialsPerHouse,
+    trials: usize,
+) -> String {
+    let drawn = match per_house {
+        TrialsPerHouse::One => "one trial per house".to_string(),
+        TrialsPerHouse::Count(n) => {
+            format!("{trials} trials, up to {n} distinct targets per house")
+        }
+        TrialsPerHouse::All => format!("{trials} trials, every target type of each house"),
+    };
+    let mut md = format!(
+        "# Navigation cost per strategy\n\n{houses} houses from {source}; {drawn}, the same for every strategy.\n\n"
+    );
+    md.push_str(
+        "| strategy | trials | mean cost (m) | 95 % CI | median (m) | cost vs optimistic+greedy |\n",
+    );
+    md.push_str("|---|---:|---:|---:|---:|---:|\n");
+    for r in summary {
+        let imp = r
+            .improvement_pct
+            // Shown as a change of cost, so that lower reads as better (−52.8 % = 52.8 % cheaper);
+            // `0.0 - p` keeps the reference's own row at +0.0 rather than −0.0.
+            .map_or_else(|| "–".to_string(), |p| format!("{:+.1} %", 0.0 - p));
+        md.push_str(&format!(
+            "| {} | {} | {:.2} | ±{:.2} | {:.2} | {} |\n",
+            r.strategy, r.trials, r.mean_m, r.ci95_m, r.median_m, imp
+        ));
+    }
+    let short: Vec<String> = summary
+        .iter()
+        .filter(|r| r.trials < trials)
+        .map(|r| format!("{} finished {} of {trials}", r.strategy, r.trials))
+        .collect();
+    if !short.is_empty() {
+        md.push_str(&format!(
+            "\n**Failed trials:** {}. Means and medians cover each strategy's own trials; \"cost vs optimistic+greedy\" compares only the {} paired trials (houses where every strategy finished).\n",
+            short.join("; "),
+            summary.first().map_or(0, |r| r.paired_trials)
+        ));
+    }
+    md
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn trial(house_index: usize, strategy: &str, cost_m: f64) -> TrialRow {
+        TrialRow {
+            house: format!("h#{house_index}"),
+            house_index,
+            target: "Apple".into(),
+            strategy: strategy.into(),
+            cost_m,
+            searches: 1,
+            found: true,
+            found_container: "1|0".into(),
+            searched: "1|0".into(),
+            goal_containers: 1,
+            cost_cells: None,
+        }
+    }
+
+    #[test]
+    fn reference_means_weight_houses_by_the_reference_draws() {
+        // Houses 10, 11, 12 in file order; strategy b lacks house 12.
+        let rows = vec![
+            trial(10, "a", 1.0),
+            trial(11, "a", 2.0),
+            trial(12, "a", 4.0),
+            trial(10, "b", 3.0),
+            trial(11, "b", 3.0),
+        ];
+        let order = vec!["a".to_string(), "b".to_string(), "c".to_string()];
+        let means = reference_means(&rows, &order, &[10, 11, 12]);
+        let w = ferret_select::numpy::reference_draw_counts(3, 500, 100);
+        let w: Vec<f64> = w.into_iter().map(|c| c as f64).collect();
+        assert_eq!(means.len(), 2, "no rows, no mean for c");
+        let a = (w[0] + 2.0 * w[1] + 4.0 * w[2]) / (w[0] + w[1] + w[2]);
+        assert!((means[0].1 - a).abs() < 1e-12);
+        // Unequal weights: the weighted mean is not the plain one.
+        assert!((a - 7.0 / 3.0).abs() > 1e-6);
+        assert!((means[1].1 - 3.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_summary_table_shows_a_cheaper_strategy_as_a_lower_cost() {
+        let order = vec!["optimistic+greedy".to_string(), "model/x".to_string()];
+        let rows = vec![
+            trial(0, "optimistic+greedy", 10.0),
+            trial(0, "model/x", 4.0),
+        ];
+        let summary = summarize(&rows, &order);
+        assert!((summary[1].improvement_pct.unwrap_or_default() - 60.0).abs() < 1e-9);
+        let md = summary_markdown(&summary, "test", 1, TrialsPerHouse::One, 1);
+        assert!(
+            md.contains("| model/x | 1 | 4.00 | ±0.00 | 4.00 | -60.0 % |"),
+            "{md}"
+        );
+        assert!(
+            md.contains("| optimistic+greedy | 1 | 10.00 | ±0.00 | 10.00 | +0.0 % |"),
+            "{md}"
+        );
+    }
+
+    #[test]
+    fn strategies_with_failed_trials_are_compared_on_paired_trials_only() {
+        let order = vec!["optimistic+greedy".to_string(), "model/x".to_string()];
+        // Greedy finished all four houses; model/x failed on house 3, the most expensive one.
+        let mut rows: Vec<TrialRow> = [10.0, 20.0, 30.0, 100.0]
+            .iter()
+            .enumerate()
+            .map(|(h, &c)| trial(h, "optimistic+greedy", c))
+            .collect();
+        rows.extend(
+            [9.0, 18.0, 27.0]
+                .iter()
+                .enumerate()
+                .map(|(h, &c)| trial(h, "model/x", c)),
+        );
+        let summary = summarize(&rows, &order);
+        assert_eq!(summary[0].trials, 4);
+        assert_eq!(summary[1].trials, 3);
+        assert!((summary[0].mean_m - 40.0).abs() < 1e-12);
+        assert!((summary[1].mean_m - 18.0).abs() < 1e-12);
+        // Over the three paired houses greedy averages 20 m, model/x 18 m: 10 % cheaper, not the
+        // 55 % that comparing 18 m with greedy's 40 m over all four houses would claim.
+        assert!((summary[1].improvement_pct.unwrap() - 10.0).abs() < 1e-9);
+        assert!(summary[0].improvement_pct.unwrap().abs() < 1e-9);
+        assert_eq!(summary[1].paired_trials, 3);
+        let md = summary_markdown(&summary, "test houses", 4, TrialsPerHouse::One, 4);
+        // In cells: 18 m is 360 cells of 0.05 m.
+        let cells = cells_markdown(&summary);
+        assert!(cells.contains("| model/x | 3 | 360.0 | ±"), "{cells}");
+        let with = summary[1].clone().with_cells();
+        assert!((with.median_cells.unwrap() - 360.0).abs() < 1e-9);
+        assert!((with.ci95_cells.unwrap() - with.ci95_m * 20.0).abs() < 1e-9);
+        assert!(md.contains("model/x finished 3 of 4"), "{md}");
+        assert!(md.contains("only the 3 paired trials"), "{md}");
+        assert!(!md.contains("optimistic+greedy finished"), "{md}");
+        // Complete runs carry no note.
+        let complete = summarize(&rows[..4], &order[..1]);
+        assert!(
+            !summary_markdown(&complete, "test houses", 4, TrialsPerHouse::One, 4)
+                .contains("Failed trials")
+        );
+    }
+
+    #[test]
+    fn paired_comparisons_pair_by_house_and_target_against_first_and_best() {
+        let order: Vec<String> = ["optimistic+greedy", "model/x", "model/y", "oracle"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        let mut rows = Vec::new();
+        // Two targets in each of three houses; model/x saves 2 m on every trial, model/y 1 m on
+        // all but one (a tie), the oracle 5 m. model/x also has a trial no other strategy ran.
+        for h in 0..3 {
+            for (t, target) in ["Apple", "Book"].iter().enumerate() {
+                let g = 10.0 + 3.0 * h as f64 + t as f64;
+                let mut push = |s: &str, c: f64| {
+                    let mut r = trial(h, s, c);
+                    r.target = target.to_string();
+                    rows.push(r);
+                };
+                push("optimistic+greedy", g);
+                push("model/x", g - 2.0);
+                push("model/y", if h == 0 && t == 0 { g } else { g - 1.0 });
+                push("oracle", g - 5.0);
+            }
+        }
+        let mut extra = trial(9, "model/x", 1.0);
+        extra.target = "Cup".into();
+        rows.push(extra);
+        let paired = paired_comparisons(&rows, &order, &[], 0);
+        // Against greedy: x, y, oracle; against the best (model/x): greedy, y, oracle.
+        assert_eq!(paired.len(), 6);
+        let x = &paired[0];
+        assert_eq!(
+            (x.role, x.strategy.as_str(), x.pairs),
+            ("first", "model/x", 6)
+        );
+        assert!((x.mean_diff_m + 2.0).abs() < 1e-12);
+        assert!((x.ci95_low_m + 2.0).abs() < 1e-12 && (x.ci95_high_m + 2.0).abs() < 1e-12);
+        assert_eq!((x.wins, x.ties, x.losses), (6, 0, 0));
+        // Six equal differences tie in rank: the normal approximation, z = (0 − 10.5 + 0.5)/√(22.75
+        // − 210/48) = −2.33285 → p = 0.0196562 (Python: math.erfc(2.33285 / math.sqrt(2))).
+        assert!(
+            (x.wilcoxon_p.unwrap() - 0.019_656_157).abs() < 1e-8,
+            "{:?}",
+            x.wilcoxon_p
+        );
+        let y = &paired[1];
+        assert_eq!((y.wins, y.ties, y.losses), (5, 1, 0));
+        assert!((y.mean_diff_m + 5.0 / 6.0).abs() < 1e-12);
+        assert_eq!(paired[3].role, "best");
+        assert_eq!(paired[3].reference, "model/x");
+        assert_eq!(paired[3].strategy, "optimistic+greedy");
+        assert!((paired[3].mean_diff_m - 2.0).abs() < 1e-12);
+        assert_eq!(paired[5].strategy, "oracle");
+        let md = paired_markdown(&paired);
+        assert!(
+            md.contains("Against optimistic+greedy (the first strategy)"),
+            "{md}"
+        );
+        assert!(
+            md.contains("Against model/x (the lowest mean, oracle excepted)"),
+            "{md}"
+        );
+        assert!(md.contains("| model/y | 6 | -0.83 | [-1.00, "), "{md}");
+        assert!(
+            md.contains("| optimistic+greedy | 6 | +2.00 | [+2.00, +2.00] | 0.020 | 0 / 0 / 6 |"),
+            "{md}"
+        );
+        assert!(md.contains("| 5 / 1 / 0 |"), "{md}");
+        // The same seed gives the same table.
+        assert_eq!(
+            paired_markdown(&paired_comparisons(&rows, &order, &[], 0)),
+            md
+        );
+        // A named reference adds its own table; the first, the best and strategies that ran no
+        // trial add nothing twice.
+        let named: Vec<String> = ["model/y", "model/x", "optimistic+greedy", "model/z"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        let with = paired_comparisons(&rows, &order, &named, 0);
+        assert_eq!(with.len(), 9);
+        assert_eq!(&with[..6], &paired[..]);
+        let y: Vec<(&str, &str, &str)> = with[6..]
+            .iter()
+            .map(|r| (r.role, r.reference.as_str(), r.strategy.as_str()))
+            .collect();
+        assert_eq!(
+            y,
+            [
+                ("named", "model/y", "optimistic+greedy"),
+                ("named", "model/y", "model/x"),
+                ("named", "model/y", "oracle")
+            ]
+        );
+        assert!((with[7].mean_diff_m + 7.0 / 6.0).abs() < 1e-12);
+        assert!(
+            paired_markdown(&with).contains("Against model/y (named with --paired-against)"),
+            "{}",
+            paired_markdown(&with)
+        );
+    }
+}

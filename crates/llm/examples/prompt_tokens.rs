@@ -1,5 +1,6 @@
 //! Estimates the input tokens each prompt costs per house, with a rough tokenizer (characters / 4),
-//! on generated houses and, when FERRET_PROCTHOR_DIR is set, on the ProcTHOR evaluation houses.
+//! on generated houses and, when FERRET_PROCTHOR_DIR is set to a directory holding
+//! `multiroom-val150.jsonl.gz`, on the ProcTHOR evaluation houses.
 //!
 //! For each house one trial is drawn as `ferret eval` draws it (seed 0). Probability prompts
 //! count every distinct question of the house once; P-DIRECT counts one question per decision of
@@ -162,7 +163,7 @@ fn main() {
         }
     } else {
         println!(
-            "\nProcTHOR houses skipped: set FERRET_PROCTHOR_DIR=../shared/data/procthor to include them"
+            "\nProcTHOR houses skipped: set FERRET_PROCTHOR_DIR to a directory holding multiroom-val150.jsonl.gz to include them"
         );
     }
 }

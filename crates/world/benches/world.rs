@@ -2,8 +2,8 @@
 //! into 0.05 m occupancy grids and full distance matrices, in parallel over houses.
 //!
 //! Target: ≤ 10 s wall for load + grids + distances on a 2-core machine, ≤ 1 GB peak memory.
-//! Needs FERRET_PROCTHOR_DIR (e.g. `../shared/data/procthor`); without it, only a small
-//! hand-built house is measured.
+//! Needs FERRET_PROCTHOR_DIR set to a directory holding `multiroom-val150.jsonl.gz` and
+//! `databases/asset-database.json`; without it, only a small hand-built house is measured.
 
 use std::hint::black_box;
 use std::path::PathBuf;
@@ -20,7 +20,9 @@ use rayon::prelude::*;
 
 fn val150(c: &mut Criterion) {
     let Some(dir) = std::env::var_os("FERRET_PROCTHOR_DIR").map(PathBuf::from) else {
-        println!("skipped val150: set FERRET_PROCTHOR_DIR=../shared/data/procthor to run");
+        println!(
+            "skipped val150: set FERRET_PROCTHOR_DIR to a directory holding multiroom-val150.jsonl.gz and databases/asset-database.json to run"
+        );
         return;
     };
     let db = AssetDatabase::load(&dir.join("databases/asset-database.json"))

@@ -1,14 +1,43 @@
-//! The service's error: an HTTP status, the request field at fault and a message.
+//! The service's error: what kind of failure, the request field at fault and a message. The
+//! HTTP layer turns the kind into a status; nothing else here knows about HTTP.
 
 use crate::store::StoreError;
 
-/// An error reply. 4xx name the request field at fault; 5xx are the server's own trouble (the
-/// database, an LLM endpoint), never the request's.
+/// What kind of failure an [`ApiError`] is. The first ones are the request's fault and name its
+/// field; [`Internal`](ErrorKind::Internal) and [`Unavailable`](ErrorKind::Unavailable) are the
+/// server's own trouble (the database, an LLM endpoint), never the request's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ErrorKind {
+    /// The request cannot be read: malformed JSON, a missing or mistyped field.
+    Malformed,
+    /// The request lacks the credentials the server asks for.
+    Unauthorized,
+    /// The request comes from a host or origin the server does not serve.
+    Forbidden,
+    /// What the request names does not exist.
+    NotFound,
+    /// The route does not take the request's method.
+    MethodNotAllowed,
+    /// The request conflicts with the state (an open trial, a reused request id, a taken name).
+    Conflict,
+    /// The request, or what it would store, is over a limit.
+    TooLarge,
+    /// The body is not JSON.
+    UnsupportedMedia,
+    /// A value the service cannot use.
+    Invalid,
+    /// The server failed where it should not have.
+    Internal,
+    /// Something the service depends on is down for now (an LLM endpoint, the database).
+    Unavailable,
+}
+
+/// An error reply: its kind, the field at fault and what is wrong.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{status} {field}: {message}")]
+#[error("{field}: {message}")]
 pub struct ApiError {
-    /// HTTP status.
-    pub status: u16,
+    /// What kind of failure.
+    pub kind: ErrorKind,
     /// The field, e.g. `container` or `scene.containers[2].pose`; empty for the whole request.
     pub field: String,
     /// What is wrong.
@@ -16,18 +45,48 @@ pub struct ApiError {
 }
 
 impl ApiError {
-    /// An error with a status, field and message.
-    pub fn new(status: u16, field: impl Into<String>, message: impl Into<String>) -> Self {
+    /// An error of a kind, with its field and message.
+    pub fn new(kind: ErrorKind, field: impl Into<String>, message: impl Into<String>) -> Self {
         Self {
-            status,
+            kind,
             field: field.into(),
             message: message.into(),
         }
     }
 
-    /// A 500: something the server should not have run into.
+    /// The request cannot be read.
+    pub fn malformed(field: impl Into<String>, message: impl Into<String>) -> Self {
+        Self::new(ErrorKind::Malformed, field, message)
+    }
+
+    /// What the request names does not exist.
+    pub fn not_found(field: impl Into<String>, message: impl Into<String>) -> Self {
+        Self::new(ErrorKind::NotFound, field, message)
+    }
+
+    /// The request conflicts with the state.
+    pub fn conflict(field: impl Into<String>, message: impl Into<String>) -> Self {
+        Self::new(ErrorKind::Conflict, field, message)
+    }
+
+    /// The request, or what it would store, is over a limit.
+    pub fn too_large(field: impl Into<String>, message: impl Into<String>) -> Self {
+        Self::new(ErrorKind::TooLarge, field, message)
+    }
+
+    /// A value the service cannot use.
+    pub fn invalid(field: impl Into<String>, message: impl Into<String>) -> Self {
+        Self::new(ErrorKind::Invalid, field, message)
+    }
+
+    /// Something the service depends on is down for now.
+    pub fn unavailable(field: impl Into<String>, message: impl Into<String>) -> Self {
+        Self::new(ErrorKind::Unavailable, field, message)
+    }
+
+    /// Something the server should not have run into.
     pub fn internal(message: impl Into<String>) -> Self {
-        Self::new(500, "", message)
+        Self::new(ErrorKind::Internal, "", message)
     }
 }
 

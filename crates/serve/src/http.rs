@@ -19,19 +19,21 @@ use axum::extract::{DefaultBodyLimit, Path, Request, State};
 use axum::http::{HeaderMap, HeaderValue, Method, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
-use axum::routing::{get, post};
+use axum::routing::get;
 use axum::{Json, Router};
 use serde::de::DeserializeOwned;
 use serde_json::{Value, json};
 use tower_http::cors::{AllowOrigin, CorsLayer};
 use utoipa::OpenApi;
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
 
 use crate::api::{
     CreateDeployment, DeploymentState, ErrorBody, ErrorDetail, Observe, SceneDetail, SceneSummary,
     StartTrial, TrialState, UploadScene,
 };
-use crate::error::ApiError;
-use crate::service::{Reply, SceneLimits, Service};
+use crate::error::{ApiError, ErrorKind};
+use crate::service::{Outcome, Reply, SceneLimits, Service};
 
 /// Default largest request body, bytes (a scene with hundreds of containers is tens of KB).
 pub const DEFAULT_MAX_BODY_BYTES: usize = 1 << 20;
@@ -77,7 +79,7 @@ impl HttpOptions {
     pub fn validate(&self) -> Result<(), ApiError> {
         if self.token.as_deref().is_some_and(|t| t.trim().is_empty()) {
             return Err(ApiError::new(
-                400,
+                ErrorKind::Malformed,
                 "token",
                 "the token is empty: set a non-empty token, or none to run without one",
             ));
@@ -98,22 +100,51 @@ impl HttpOptions {
                     .ok()
                     .filter(|_| !o.trim().is_empty())
                     .ok_or_else(|| {
-                        ApiError::new(400, "cors-origin", format!("{o:?} is not a valid origin"))
+                        ApiError::new(
+                            ErrorKind::Malformed,
+                            "cors-origin",
+                            format!("{o:?} is not a valid origin"),
+                        )
                     })
             })
             .collect()
     }
 }
 
+/// The HTTP status of each kind of failure: the one place the service's errors meet HTTP.
+fn status_of(kind: ErrorKind) -> StatusCode {
+    match kind {
+        ErrorKind::Malformed => StatusCode::BAD_REQUEST,
+        ErrorKind::Unauthorized => StatusCode::UNAUTHORIZED,
+        ErrorKind::Forbidden => StatusCode::FORBIDDEN,
+        ErrorKind::NotFound => StatusCode::NOT_FOUND,
+        ErrorKind::MethodNotAllowed => StatusCode::METHOD_NOT_ALLOWED,
+        ErrorKind::Conflict => StatusCode::CONFLICT,
+        ErrorKind::TooLarge => StatusCode::PAYLOAD_TOO_LARGE,
+        ErrorKind::UnsupportedMedia => StatusCode::UNSUPPORTED_MEDIA_TYPE,
+        ErrorKind::Invalid => StatusCode::UNPROCESSABLE_ENTITY,
+        ErrorKind::Internal => StatusCode::INTERNAL_SERVER_ERROR,
+        ErrorKind::Unavailable => StatusCode::SERVICE_UNAVAILABLE,
+    }
+}
+
+/// The status of a request that worked.
+fn status_of_outcome(outcome: Outcome) -> StatusCode {
+    match outcome {
+        Outcome::Done => StatusCode::OK,
+        Outcome::Created => StatusCode::CREATED,
+    }
+}
+
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
-        let status = StatusCode::from_u16(self.status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR);
+        let status = status_of(self.kind);
         if status.is_server_error() {
-            tracing::warn!(status = self.status, message = %self.message, "request failed");
+            tracing::warn!(status = status.as_u16(), message = %self.message, "request failed");
         }
         let body = ErrorBody {
             error: ErrorDetail {
-                status: self.status,
+                status: status.as_u16(),
                 field: self.field,
                 message: self.message,
             },
@@ -122,18 +153,13 @@ impl IntoResponse for ApiError {
     }
 }
 
-fn json_response(status: u16, body: String) -> Response {
-    (
-        StatusCode::from_u16(status).unwrap_or(StatusCode::OK),
-        [(header::CONTENT_TYPE, "application/json")],
-        body,
-    )
-        .into_response()
+fn json_response(status: StatusCode, body: String) -> Response {
+    (status, [(header::CONTENT_TYPE, "application/json")], body).into_response()
 }
 
 fn reply(r: Result<Reply, ApiError>) -> Response {
     match r {
-        Ok((status, body)) => json_response(status, body),
+        Ok(r) => json_response(status_of_outcome(r.outcome), r.body),
         Err(e) => e.into_response(),
     }
 }
@@ -142,17 +168,25 @@ fn reply(r: Result<Reply, ApiError>) -> Response {
 fn parse<T: DeserializeOwned>(body: &[u8]) -> Result<T, ApiError> {
     // serde reads a struct from an array too (`[]` would be a deployment with every default).
     if body.iter().find(|b| !b.is_ascii_whitespace()) != Some(&b'{') {
-        return Err(ApiError::new(400, "", "the body must be a JSON object"));
+        return Err(ApiError::new(
+            ErrorKind::Malformed,
+            "",
+            "the body must be a JSON object",
+        ));
     }
     let mut de = serde_json::Deserializer::from_slice(body);
     let value: T = serde_path_to_error::deserialize(&mut de).map_err(|e| {
         let path = e.path().to_string();
         let inner = e.into_inner();
         let field = if path == "." { String::new() } else { path };
-        ApiError::new(400, field, format!("malformed request: {inner}"))
+        ApiError::new(
+            ErrorKind::Malformed,
+            field,
+            format!("malformed request: {inner}"),
+        )
     })?;
     de.end()
-        .map_err(|e| ApiError::new(400, "", format!("malformed request: {e}")))?;
+        .map_err(|e| ApiError::new(ErrorKind::Malformed, "", format!("malformed request: {e}")))?;
     Ok(value)
 }
 
@@ -167,25 +201,35 @@ fn body(headers: &HeaderMap, b: Result<Bytes, BytesRejection>) -> Result<Bytes, 
         .is_some_and(|t| t.trim().eq_ignore_ascii_case("application/json"));
     if !json {
         return Err(ApiError::new(
-            415,
+            ErrorKind::UnsupportedMedia,
             "content-type",
             "the body must be JSON, sent as `Content-Type: application/json`",
         ));
     }
-    b.map_err(|e| ApiError::new(e.status().as_u16(), "", e.body_text()))
+    b.map_err(|e| {
+        let kind = if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
+            ErrorKind::TooLarge
+        } else {
+            ErrorKind::Malformed
+        };
+        ApiError::new(kind, "", e.body_text())
+    })
 }
 
 /// A path segment, or 404 for one that is not valid UTF-8 once decoded.
 fn segment(p: Result<Path<String>, PathRejection>, what: &str) -> Result<String, ApiError> {
     p.map(|Path(s)| s)
-        .map_err(|e| ApiError::new(404, what, e.body_text()))
+        .map_err(|e| ApiError::new(ErrorKind::NotFound, what, e.body_text()))
 }
 
 fn id(raw: &str, what: &str) -> Result<i64, ApiError> {
-    raw.parse::<i64>()
-        .ok()
-        .filter(|v| *v > 0)
-        .ok_or_else(|| ApiError::new(404, what, format!("{raw:?} is not a {what} id")))
+    raw.parse::<i64>().ok().filter(|v| *v > 0).ok_or_else(|| {
+        ApiError::new(
+            ErrorKind::NotFound,
+            what,
+            format!("{raw:?} is not a {what} id"),
+        )
+    })
 }
 
 /// Runs a service call on the blocking pool.
@@ -200,7 +244,7 @@ async fn blocking(f: impl FnOnce() -> Result<Reply, ApiError> + Send + 'static) 
     (status = 200, description = "The service is up and its database answers"),
     (status = 503, description = "The database cannot be read", body = ErrorBody)))]
 async fn health(State(s): State<Arc<Service>>) -> Response {
-    blocking(move || Ok(s.health())).await
+    blocking(move || s.health()).await
 }
 
 #[utoipa::path(get, path = "/scenes", responses((status = 200, body = [SceneSummary])))]
@@ -209,7 +253,8 @@ async fn list_scenes(State(s): State<Arc<Service>>) -> Response {
 }
 
 #[utoipa::path(get, path = "/scenes/{name}", params(("name" = String, Path, description = "Scene name")),
-    responses((status = 200, body = SceneDetail)))]
+    responses((status = 200, body = SceneDetail),
+        (status = 404, description = "No scene of that name", body = ErrorBody)))]
 async fn get_scene(
     State(s): State<Arc<Service>>,
     name: Result<Path<String>, PathRejection>,
@@ -219,7 +264,8 @@ async fn get_scene(
 
 #[utoipa::path(post, path = "/scenes", request_body = UploadScene, responses(
     (status = 200, description = "The same scene was uploaded before", body = SceneDetail),
-    (status = 201, body = SceneDetail)))]
+    (status = 201, body = SceneDetail),
+    (status = 413, description = "The body, or the store of uploaded scenes, is over its limit", body = ErrorBody)))]
 async fn upload_scene(
     State(s): State<Arc<Service>>,
     headers: HeaderMap,
@@ -249,7 +295,8 @@ async fn create_deployment(
 }
 
 #[utoipa::path(get, path = "/deployments/{id}", params(("id" = i64, Path, description = "Deployment id", minimum = 1)),
-    responses((status = 200, body = DeploymentState)))]
+    responses((status = 200, body = DeploymentState),
+        (status = 404, description = "No deployment of that id", body = ErrorBody)))]
 async fn get_deployment(
     State(s): State<Arc<Service>>,
     raw: Result<Path<String>, PathRejection>,
@@ -259,7 +306,9 @@ async fn get_deployment(
 
 #[utoipa::path(post, path = "/deployments/{id}/trials", request_body = StartTrial,
     params(("id" = i64, Path, description = "Deployment id", minimum = 1)),
-    responses((status = 201, body = TrialState)))]
+    responses((status = 201, body = TrialState),
+        (status = 404, description = "No such deployment or scene", body = ErrorBody),
+        (status = 503, description = "A strategy could not plan (an LLM endpoint is down); retry later", body = ErrorBody)))]
 async fn start_trial(
     State(s): State<Arc<Service>>,
     raw: Result<Path<String>, PathRejection>,
@@ -276,7 +325,9 @@ async fn start_trial(
 }
 
 #[utoipa::path(get, path = "/trials/{id}", params(("id" = i64, Path, description = "Trial id", minimum = 1)),
-    responses((status = 200, body = TrialState)))]
+    responses((status = 200, body = TrialState),
+        (status = 404, description = "No trial of that id", body = ErrorBody),
+        (status = 503, description = "A strategy could not plan (an LLM endpoint is down); retry later", body = ErrorBody)))]
 async fn get_trial(
     State(s): State<Arc<Service>>,
     raw: Result<Path<String>, PathRejection>,
@@ -286,7 +337,9 @@ async fn get_trial(
 
 #[utoipa::path(post, path = "/trials/{id}/observations", request_body = Observe,
     params(("id" = i64, Path, description = "Trial id", minimum = 1)),
-    responses((status = 200, body = TrialState)))]
+    responses((status = 200, body = TrialState),
+        (status = 404, description = "No such trial, or no such container in its scene", body = ErrorBody),
+        (status = 503, description = "A strategy could not plan (an LLM endpoint is down); retry later", body = ErrorBody)))]
 async fn observe(
     State(s): State<Arc<Service>>,
     raw: Result<Path<String>, PathRejection>,
@@ -309,17 +362,6 @@ async fn observe(
         title = "ferret serve",
         description = "LLM-informed object search for a real robot: scenes, deployments with strategy selection, trials step by step. See docs/serve.md."
     ),
-    paths(
-        health,
-        list_scenes,
-        get_scene,
-        upload_scene,
-        create_deployment,
-        get_deployment,
-        start_trial,
-        get_trial,
-        observe
-    ),
     components(schemas(ErrorBody, ErrorDetail))
 )]
 pub struct ApiDoc;
@@ -333,93 +375,41 @@ const COMMON_STATUSES: [(u16, &str); 2] = [
     (500, "The server's own failure (its database)"),
 ];
 
-/// A status a route may answer, and when.
-type Status = (u16, &'static str);
-
-/// Statuses of each route: `(method, path, [(status, description)])`.
-fn route_statuses() -> Vec<(&'static str, &'static str, Vec<Status>)> {
-    let body = [
-        (
-            400,
-            "Malformed JSON, not an object, a missing or mistyped field",
-        ),
-        (413, "The body is larger than the server's limit"),
-        (415, "The body is not application/json"),
-        (422, "A value the server cannot use (named in `field`)"),
-    ];
-    let retry = (
+/// Statuses of every route that takes a body.
+const BODY_STATUSES: [(u16, &str); 5] = [
+    (
+        400,
+        "Malformed JSON, not an object, a missing or mistyped field",
+    ),
+    (
         409,
         "A request id reused with another body, or a conflicting state",
-    );
-    let planning = (
-        503,
-        "A strategy could not plan (an LLM endpoint is down); retry later",
-    );
-    // The first description of a status is kept: specific ones come before the shared ones.
-    let with = |extra: &[(u16, &'static str)], base: &[(u16, &'static str)]| {
-        extra.iter().chain(base).copied().collect::<Vec<_>>()
-    };
-    vec![
-        ("get", "/health", vec![]),
-        ("get", "/scenes", vec![]),
-        (
-            "get",
-            "/scenes/{name}",
-            vec![(404, "No scene of that name")],
-        ),
-        (
-            "post",
-            "/scenes",
-            with(
-                &[
-                    (
-                        413,
-                        "The body, or the store of uploaded scenes, is over its limit",
-                    ),
-                    retry,
-                ],
-                &body,
-            ),
-        ),
-        ("post", "/deployments", with(&[retry], &body)),
-        (
-            "get",
-            "/deployments/{id}",
-            vec![(404, "No deployment of that id")],
-        ),
-        (
-            "post",
-            "/deployments/{id}/trials",
-            with(
-                &[(404, "No such deployment or scene"), retry, planning],
-                &body,
-            ),
-        ),
-        (
-            "get",
-            "/trials/{id}",
-            vec![(404, "No trial of that id"), planning],
-        ),
-        (
-            "post",
-            "/trials/{id}/observations",
-            with(
-                &[
-                    (404, "No such trial, or no such container in its scene"),
-                    retry,
-                    planning,
-                ],
-                &body,
-            ),
-        ),
-    ]
+    ),
+    (413, "The body is larger than the server's limit"),
+    (415, "The body is not application/json"),
+    (422, "A value the server cannot use (named in `field`)"),
+];
+
+/// Every route with its handler, each declared once: the path and method come from the
+/// handler's OpenAPI attribute. Returns the router and the OpenAPI document the attributes say.
+fn routes() -> (Router<Arc<Service>>, utoipa::openapi::OpenApi) {
+    OpenApiRouter::with_openapi(ApiDoc::openapi())
+        .routes(routes!(health))
+        .routes(routes!(list_scenes, upload_scene))
+        .routes(routes!(get_scene))
+        .routes(routes!(create_deployment))
+        .routes(routes!(get_deployment))
+        .routes(routes!(start_trial))
+        .routes(routes!(get_trial))
+        .routes(routes!(observe))
+        .split_for_parts()
 }
 
 /// The OpenAPI document this server serves: the derived one, plus what the service enforces
 /// and the derive cannot say (the scene schema with this server's limits, the strategies it
 /// offers, unique items, patterns of array items, every status a route can answer, the token).
 pub fn document(options: &HttpOptions, strategies: &[String], limits: &SceneLimits) -> Value {
-    let mut doc = serde_json::to_value(ApiDoc::openapi()).unwrap_or_default();
+    let mut doc = serde_json::to_value(routes().1).unwrap_or_default();
     let error_ref =
         json!({"application/json": {"schema": {"$ref": "#/components/schemas/ErrorBody"}}});
     if let Some(schemas) = doc
@@ -450,14 +440,32 @@ pub fn document(options: &HttpOptions, strategies: &[String], limits: &SceneLimi
             "description": "The robot's pose `[x, y, yaw°]` in the map frame; default: the scene's start."
         });
     }
-    for (method, path, statuses) in route_statuses() {
+    let paths: Vec<(String, String)> = doc
+        .pointer("/paths")
+        .and_then(Value::as_object)
+        .map(|paths| {
+            paths
+                .iter()
+                .flat_map(|(path, ops)| {
+                    ops.as_object()
+                        .into_iter()
+                        .flat_map(|o| o.keys())
+                        .map(move |method| (path.clone(), method.clone()))
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    for (path, method) in paths {
         let Some(op) = doc
             .pointer_mut(&format!("/paths/{}/{method}", path.replace('/', "~1")))
             .and_then(Value::as_object_mut)
         else {
             continue;
         };
-        let mut all = statuses;
+        let mut all: Vec<(u16, &str)> = Vec::new();
+        if op.contains_key("requestBody") {
+            all.extend(BODY_STATUSES);
+        }
         all.extend(COMMON_STATUSES);
         if options.token.is_some() && path != "/health" {
             all.push((401, "The bearer token is missing or wrong"));
@@ -468,6 +476,7 @@ pub fn document(options: &HttpOptions, strategies: &[String], limits: &SceneLimi
             .or_insert_with(|| json!({}))
             .as_object_mut();
         if let Some(responses) = responses {
+            // A route's own description of a status (in its attribute) comes first.
             for (status, description) in all {
                 responses
                     .entry(status.to_string())
@@ -522,12 +531,12 @@ fn links() -> Vec<(&'static str, &'static str, u16, Value)> {
 }
 
 async fn not_found() -> Response {
-    ApiError::new(404, "", "no such route; see /openapi.json").into_response()
+    ApiError::new(ErrorKind::NotFound, "", "no such route; see /openapi.json").into_response()
 }
 
 async fn method_not_allowed() -> Response {
     ApiError::new(
-        405,
+        ErrorKind::MethodNotAllowed,
         "",
         "this route does not take that method; see /openapi.json",
     )
@@ -566,7 +575,7 @@ impl Hosts {
         for a in allowed {
             let bad = || {
                 ApiError::new(
-                    400,
+                    ErrorKind::Malformed,
                     "allow-host",
                     format!("{a:?} is not a host name or host:port"),
                 )
@@ -628,7 +637,7 @@ impl Guards {
             && !host.to_str().is_ok_and(|h| hosts.allows(h))
         {
             return Err(ApiError::new(
-                403,
+                ErrorKind::Forbidden,
                 "host",
                 "the Host header names another server (start the server with --allow-host for names it is reached by)",
             ));
@@ -639,7 +648,7 @@ impl Guards {
                 .is_ok_and(|o| self.origins.iter().any(|a| a.eq_ignore_ascii_case(o)))
         {
             return Err(ApiError::new(
-                403,
+                ErrorKind::Forbidden,
                 "origin",
                 "requests from browser pages are refused unless their origin is allowed (--cors-origin)",
             ));
@@ -655,7 +664,7 @@ impl Guards {
                 .map(|(_, t)| t.trim());
             if !given.is_some_and(|g| same(g.as_bytes(), token.as_bytes())) {
                 return Err(ApiError::new(
-                    401,
+                    ErrorKind::Unauthorized,
                     "authorization",
                     "a valid `Authorization: Bearer <token>` header is required",
                 ));
@@ -696,22 +705,15 @@ pub fn router(service: Arc<Service>, options: &HttpOptions) -> Result<Router, Ap
         )
         .to_string(),
     );
-    let mut app = Router::new()
-        .route("/health", get(health))
+    let mut app = routes()
+        .0
         .route(
             "/openapi.json",
             get(move || {
                 let doc = doc.clone();
-                async move { json_response(200, doc.to_string()) }
+                async move { json_response(StatusCode::OK, doc.to_string()) }
             }),
         )
-        .route("/scenes", get(list_scenes).post(upload_scene))
-        .route("/scenes/{name}", get(get_scene))
-        .route("/deployments", post(create_deployment))
-        .route("/deployments/{id}", get(get_deployment))
-        .route("/deployments/{id}/trials", post(start_trial))
-        .route("/trials/{id}", get(get_trial))
-        .route("/trials/{id}/observations", post(observe))
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
         .with_state(service)

@@ -16,8 +16,8 @@ pub mod server;
 pub mod service;
 pub mod store;
 
-pub use error::ApiError;
+pub use error::{ApiError, ErrorKind};
 pub use http::{ApiDoc, HttpOptions, document, router};
 pub use server::{ServeOptions, serve};
-pub use service::{SceneLimits, Service, ServiceOptions};
+pub use service::{Outcome, Reply, SceneLimits, Service, ServiceOptions};
 pub use store::Store;

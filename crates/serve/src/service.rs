@@ -9,9 +9,8 @@
 use std::collections::{BTreeMap, HashMap};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError, RwLock};
 
-use ferret_plan::{
-    ReplayMode, Search, SearchProblem, Strategy, TrialSpec, hindsight_truth, replay_costs,
-};
+use ferret_lab::Deployment;
+use ferret_plan::{ReplayMode, Search, SearchProblem, Strategy, TrialSpec, hindsight_truth};
 use ferret_select::{DEFAULT_C, FinishedTrial, LiveDeployment, TrialEnd};
 use ferret_world::distance::{self, Place};
 use ferret_world::{
@@ -26,12 +25,28 @@ use crate::api::{
     MAX_TRAVELLED_M, MAX_TYPE_NAME, NextChoice, NextContainer, Observe, RoomInfo, SceneDetail,
     SceneSummary, StartTrial, StrategyRow, TrialState, TrialSummary, UploadScene,
 };
-use crate::error::ApiError;
+use crate::error::{ApiError, ErrorKind};
 use crate::store::{DeploymentSpec, ObservationRow, Store, StoredReply, TrialRow, TrialStatus};
 
-/// A reply: HTTP status and JSON text. Kept as text so that a retried request gets the very
-/// bytes of the first reply (a float parsed back from JSON may differ in its last digit).
-pub type Reply = (u16, String);
+/// What a request did: read or changed something, or created it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Outcome {
+    /// Read, or done to something that exists (also: the same upload again).
+    Done,
+    /// Created a scene, a deployment or a trial.
+    Created,
+}
+
+/// A reply: what the request did and the JSON text of its result. Kept as text so that a
+/// retried request gets the very bytes of the first reply (a float parsed back from JSON may
+/// differ in its last digit).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Reply {
+    /// What the request did.
+    pub outcome: Outcome,
+    /// The result as JSON.
+    pub body: String,
+}
 
 /// How far a robot's pose may be from free floor (the grid moves it to the nearest free cell),
 /// metres.
@@ -219,9 +234,9 @@ impl std::fmt::Debug for Service {
     }
 }
 
-fn json<T: Serialize>(status: u16, value: &T) -> Result<Reply, ApiError> {
+fn json<T: Serialize>(outcome: Outcome, value: &T) -> Result<Reply, ApiError> {
     serde_json::to_string(value)
-        .map(|v| (status, v))
+        .map(|body| Reply { outcome, body })
         .map_err(|e| ApiError::internal(format!("serializing a reply: {e}")))
 }
 
@@ -364,7 +379,7 @@ impl Service {
     pub fn add_scene(&self, name: &str, scene: Scene) -> Result<(), ApiError> {
         if self.knows(name)? {
             return Err(ApiError::new(
-                409,
+                ErrorKind::Conflict,
                 "scene",
                 format!("a scene named {name:?} exists already"),
             ));
@@ -409,7 +424,7 @@ impl Service {
         }
         let Some(text) = self.store.read(|r| r.scene(name))? else {
             return Err(ApiError::new(
-                404,
+                ErrorKind::NotFound,
                 "scene",
                 format!("no scene named {name:?}"),
             ));
@@ -444,8 +459,12 @@ impl Service {
         }
         let _permit = self.builds.acquire();
         let (grid, distances) = distance::build(&house, &self.grid).map_err(|e| match pose {
-            Some(p) => ApiError::new(422, field, format!("({}, {}): {e}", p[0], p[1])),
-            None => ApiError::new(422, field, e.to_string()),
+            Some(p) => ApiError::new(
+                ErrorKind::Invalid,
+                field,
+                format!("({}, {}): {e}", p[0], p[1]),
+            ),
+            None => ApiError::new(ErrorKind::Invalid, field, e.to_string()),
         })?;
         if let Some(pose) = pose {
             let shift = grid
@@ -453,7 +472,7 @@ impl Service {
                 .distance(house.start.position);
             if shift > MAX_POSE_SHIFT_M {
                 return Err(ApiError::new(
-                    422,
+                    ErrorKind::Invalid,
                     field,
                     format!(
                         "({}, {}) is {shift:.2} m from the nearest free floor (at most {MAX_POSE_SHIFT_M} m)",
@@ -475,7 +494,7 @@ impl Service {
             && !p.iter().all(|v| v.is_finite())
         {
             return Err(ApiError::new(
-                422,
+                ErrorKind::Invalid,
                 "pose",
                 "must be three finite numbers [x, y, yaw]",
             ));
@@ -494,20 +513,19 @@ impl Service {
             .collect()
     }
 
-    /// `GET /health`: 200 when the store answers, else 503.
-    pub fn health(&self) -> Reply {
+    /// `GET /health`: done when the store answers, else unavailable.
+    pub fn health(&self) -> Result<Reply, ApiError> {
         match self.store.read(|r| r.check()) {
-            Ok(()) => (200, r#"{"status":"ok"}"#.to_string()),
+            Ok(()) => Ok(Reply {
+                outcome: Outcome::Done,
+                body: r#"{"status":"ok"}"#.to_string(),
+            }),
             Err(e) => {
                 tracing::error!("health check: {e}");
-                let body = crate::api::ErrorBody {
-                    error: crate::api::ErrorDetail {
-                        status: 503,
-                        field: String::new(),
-                        message: "the database cannot be read; see the server's log".into(),
-                    },
-                };
-                (503, serde_json::to_string(&body).unwrap_or_default())
+                Err(ApiError::unavailable(
+                    "",
+                    "the database cannot be read; see the server's log",
+                ))
             }
         }
     }
@@ -522,14 +540,14 @@ impl Service {
             .chain(scenes.uploaded.values())
             .collect();
         list.sort_by(|a, b| a.name.cmp(&b.name));
-        json(200, &list)
+        json(Outcome::Done, &list)
     }
 
     /// `GET /scenes/{name}`.
     pub fn get_scene(&self, name: &str) -> Result<Reply, ApiError> {
         let scene = self.scene(name)?;
         let placed = self.placed(name, None)?;
-        scene_detail(name, &scene, &placed).and_then(|d| json(200, &d))
+        scene_detail(name, &scene, &placed).and_then(|d| json(Outcome::Done, &d))
     }
 
     /// Runs a write operation with request-id idempotency: a stored reply for the same id and
@@ -545,7 +563,7 @@ impl Service {
             && (id.is_empty() || id.chars().count() > MAX_REQUEST_ID)
         {
             return Err(ApiError::new(
-                400,
+                ErrorKind::Malformed,
                 "request_id",
                 format!("must have 1 to {MAX_REQUEST_ID} characters"),
             ));
@@ -560,8 +578,8 @@ impl Service {
                     id,
                     &StoredReply {
                         fingerprint: fingerprint(route, body),
-                        status: reply.0,
-                        body: reply.1.clone(),
+                        outcome: reply.outcome,
+                        body: reply.body.clone(),
                     },
                 )?;
             }
@@ -610,17 +628,22 @@ impl Service {
             None => {}
         }
         let placed = self.build(&scene.house, None, "scene.containers")?;
-        let detail = json(201, &scene_detail(&name, &scene, &placed)?)?;
+        let detail = json(Outcome::Created, &scene_detail(&name, &scene, &placed)?)?;
         let max = self.options.limits.max_scenes;
         let reply = self.idempotent(request_id, ROUTE, body, |w| {
             match w.reader().scene(&name)? {
-                Some(stored) if stored == text => return Ok((200, detail.1.clone())),
+                Some(stored) if stored == text => {
+                    return Ok(Reply {
+                        outcome: Outcome::Done,
+                        body: detail.body.clone(),
+                    });
+                }
                 Some(_) => return Err(taken(&name)),
                 None => {}
             }
             if w.reader().scene_count()? >= max {
                 return Err(ApiError::new(
-                    413,
+                    ErrorKind::TooLarge,
                     "scene",
                     format!("the server holds {max} uploaded scenes, its limit (--max-scenes)"),
                 ));
@@ -640,7 +663,8 @@ impl Service {
     /// built.
     fn check_upload(&self, file: &SceneFile) -> Result<(), ApiError> {
         let limits = &self.options.limits;
-        let bad = |field: String, message: String| Err(ApiError::new(422, field, message));
+        let bad =
+            |field: String, message: String| Err(ApiError::new(ErrorKind::Invalid, field, message));
         let names = std::iter::once(("scene.name".to_string(), file.name.as_str()))
             .chain(
                 file.rooms
@@ -737,7 +761,7 @@ impl Service {
         let cells = OccupancyGrid::planned_cells(&scene.house, &self.grid).unwrap_or(0.0);
         if cells > limits.max_cells as f64 {
             return Err(ApiError::new(
-                422,
+                ErrorKind::Invalid,
                 "scene.rooms",
                 format!(
                     "the rooms span {cells:.0} grid cells at {} m; this server takes at most {} per uploaded scene (--max-scene-cells)",
@@ -752,7 +776,13 @@ impl Service {
         self.store
             .read(|r| r.deployment(id))?
             .map(|d| d.spec)
-            .ok_or_else(|| ApiError::new(404, "deployment", format!("no deployment {id}")))
+            .ok_or_else(|| {
+                ApiError::new(
+                    ErrorKind::NotFound,
+                    "deployment",
+                    format!("no deployment {id}"),
+                )
+            })
     }
 
     fn candidates_of(&self, spec: &DeploymentSpec) -> Result<Vec<Arc<dyn Strategy>>, ApiError> {
@@ -766,7 +796,7 @@ impl Service {
                     .cloned()
                     .ok_or_else(|| {
                         ApiError::new(
-                            422,
+                            ErrorKind::Invalid,
                             format!("strategies[{i}]"),
                             format!(
                                 "{name:?} is not offered by this server (it offers {})",
@@ -783,7 +813,7 @@ impl Service {
         let strategies = req.strategies.unwrap_or_else(|| self.strategy_names());
         if strategies.is_empty() {
             return Err(ApiError::new(
-                422,
+                ErrorKind::Invalid,
                 "strategies",
                 "give at least one strategy",
             ));
@@ -791,7 +821,7 @@ impl Service {
         for (i, s) in strategies.iter().enumerate() {
             if strategies[..i].contains(s) {
                 return Err(ApiError::new(
-                    422,
+                    ErrorKind::Invalid,
                     format!("strategies[{i}]"),
                     format!("{s:?} is listed twice"),
                 ));
@@ -800,7 +830,7 @@ impl Service {
         let c = req.c.unwrap_or(DEFAULT_C);
         if !(c.is_finite() && (0.0..=MAX_C).contains(&c)) {
             return Err(ApiError::new(
-                422,
+                ErrorKind::Invalid,
                 "c",
                 format!("{c}: must be a number of metres from 0 to {MAX_C}"),
             ));
@@ -808,7 +838,7 @@ impl Service {
         let seed = req.seed.unwrap_or(0);
         if seed > MAX_SEED {
             return Err(ApiError::new(
-                422,
+                ErrorKind::Invalid,
                 "seed",
                 format!(
                     "{seed}: at most {MAX_SEED} (2^53 − 1, what every JSON client reads exactly)"
@@ -827,7 +857,7 @@ impl Service {
         self.idempotent(req.request_id.as_deref(), "POST /deployments", body, |w| {
             let id = w.insert_deployment(&spec)?;
             let state = self.deployment_state(id, &spec, &w.reader().trials_of(id)?)?;
-            json(201, &state)
+            json(Outcome::Created, &state)
         })
     }
 
@@ -835,28 +865,34 @@ impl Service {
     pub fn get_deployment(&self, id: i64) -> Result<Reply, ApiError> {
         let spec = self.spec(id)?;
         let trials = self.store.read(|r| r.trials_of(id))?;
-        json(200, &self.deployment_state(id, &spec, &trials)?)
+        json(Outcome::Done, &self.deployment_state(id, &spec, &trials)?)
     }
 
     fn live(&self, spec: &DeploymentSpec, trials: &[TrialRow]) -> Result<LiveDeployment, ApiError> {
-        let mut history = Vec::new();
-        let mut pending = None;
-        for t in trials {
-            match t.status {
-                TrialStatus::Done => history.push(TrialEnd::Finished(FinishedTrial {
-                    chosen: t.chosen,
-                    cost: t.cost.unwrap_or(f64::NAN),
-                    replays: t.replays.clone().unwrap_or_default(),
-                })),
-                TrialStatus::Exhausted => history.push(TrialEnd::Abandoned { chosen: t.chosen }),
-                TrialStatus::Searching => pending = Some(t.chosen),
-            }
-        }
+        let (history, pending) = history(trials);
         LiveDeployment::restore(
             spec.selector,
             spec.strategies.len(),
             spec.c,
             spec.seed,
+            &history,
+            pending,
+        )
+        .map_err(|e| ApiError::internal(e.to_string()))
+    }
+
+    /// The deployment loop's state, rebuilt from the stored trials.
+    fn deployment(
+        &self,
+        spec: &DeploymentSpec,
+        trials: &[TrialRow],
+        candidates: Vec<Arc<dyn Strategy>>,
+    ) -> Result<Deployment, ApiError> {
+        let (history, pending) = history(trials);
+        Deployment::restore(
+            (spec.selector, spec.c, spec.seed),
+            candidates,
+            ROBOT_REPLAY,
             &history,
             pending,
         )
@@ -926,7 +962,7 @@ impl Service {
         let spec = self.spec(deployment)?;
         if !is_type_name(&req.target) {
             return Err(ApiError::new(
-                422,
+                ErrorKind::Invalid,
                 "target",
                 format!(
                     "{:?} is not a CamelCase object type of ASCII letters and digits such as CellPhone",
@@ -938,7 +974,7 @@ impl Service {
         let trials = self.store.read(|r| r.trials_of(deployment))?;
         if let Some(open) = trials.iter().find(|t| t.status == TrialStatus::Searching) {
             return Err(ApiError::new(
-                409,
+                ErrorKind::Conflict,
                 "deployment",
                 format!(
                     "trial {} of deployment {deployment} is still searching; finish it first",
@@ -947,8 +983,8 @@ impl Service {
             ));
         }
         let candidates = self.candidates_of(&spec)?;
-        let mut live = self.live(&spec, &trials)?;
-        let chosen = live.choose();
+        let mut state = self.deployment(&spec, &trials, candidates.clone())?;
+        let chosen = state.choose();
         let trial = TrialSpec {
             target: ObjectType::new(req.target.clone()),
             revealed: Vec::new(),
@@ -965,14 +1001,14 @@ impl Service {
             // Another request may have started a trial since the read above.
             if w.reader().trials_of(deployment)?.len() != trials.len() {
                 return Err(ApiError::new(
-                    409,
+                    ErrorKind::Conflict,
                     "deployment",
                     "another trial was started at the same time; read the deployment and retry",
                 ));
             }
             let id = w.insert_trial(deployment, k, &req.scene, &req.target, req.pose, chosen)?;
             json(
-                201,
+                Outcome::Created,
                 &TrialState {
                     trial: id,
                     deployment,
@@ -994,7 +1030,7 @@ impl Service {
     fn trial_row(&self, id: i64) -> Result<TrialRow, ApiError> {
         self.store
             .read(|r| r.trial(id))?
-            .ok_or_else(|| ApiError::new(404, "trial", format!("no trial {id}")))
+            .ok_or_else(|| ApiError::new(ErrorKind::NotFound, "trial", format!("no trial {id}")))
     }
 
     /// What a stored trial's next step needs, read from the store.
@@ -1035,7 +1071,7 @@ impl Service {
             _ => None,
         };
         json(
-            200,
+            Outcome::Done,
             &trial_state(&row, spec, observations, search.belief().travelled(), next),
         )
     }
@@ -1049,14 +1085,14 @@ impl Service {
         let row = self.trial_row(id)?;
         if row.status != TrialStatus::Searching {
             return Err(ApiError::new(
-                409,
+                ErrorKind::Conflict,
                 "trial",
                 format!("trial {id} has ended ({:?})", row.status).to_lowercase(),
             ));
         }
         if req.objects.len() > MAX_OBJECTS {
             return Err(ApiError::new(
-                422,
+                ErrorKind::Invalid,
                 "objects",
                 format!("{} object types; at most {MAX_OBJECTS}", req.objects.len()),
             ));
@@ -1064,7 +1100,7 @@ impl Service {
         for (i, o) in req.objects.iter().enumerate() {
             if !is_type_name(o) {
                 return Err(ApiError::new(
-                    422,
+                    ErrorKind::Invalid,
                     format!("objects[{i}]"),
                     format!("{o:?} is not a CamelCase object type"),
                 ));
@@ -1074,7 +1110,7 @@ impl Service {
             && !(t.is_finite() && (0.0..=MAX_TRAVELLED_M).contains(&t))
         {
             return Err(ApiError::new(
-                422,
+                ErrorKind::Invalid,
                 "travelled_m",
                 format!("{t}: must be a distance from 0 to {MAX_TRAVELLED_M} m"),
             ));
@@ -1085,7 +1121,7 @@ impl Service {
         let house = &placed.house;
         let c = house.container_index(&req.container).ok_or_else(|| {
             ApiError::new(
-                404,
+                ErrorKind::NotFound,
                 "container",
                 format!(
                     "{:?} is not a container of scene {:?}",
@@ -1097,7 +1133,7 @@ impl Service {
         let mut search = t.search()?;
         if search.belief().is_searched(c) {
             return Err(ApiError::new(
-                409,
+                ErrorKind::Conflict,
                 "container",
                 format!("{:?} was already searched in trial {id}", req.container),
             ));
@@ -1121,16 +1157,16 @@ impl Service {
         let cost = search.belief().travelled();
         let (status, next, replays) = if req.found {
             let truth = hindsight_truth(house, target, c).map_err(plan_error)?;
-            // A robot's trial costs what it travelled; replays are plain path lengths to match.
-            let replays = replay_costs(
-                (ReplayMode::Pessimistic, TravelCost::Plain),
-                candidates,
-                &SearchProblem::new(house, &placed.distances, &t.trial),
-                &truth,
-                c,
-                (row.chosen, cost),
-            )
-            .map_err(plan_error)?;
+            let trials = self.store.read(|r| r.trials_of(row.deployment))?;
+            let replays = self
+                .deployment(spec, &trials, candidates.clone())?
+                .replays(
+                    &SearchProblem::new(house, &placed.distances, &t.trial),
+                    &truth,
+                    c,
+                    (row.chosen, cost),
+                )
+                .map_err(lab_error)?;
             (TrialStatus::Done, None, Some(replays))
         } else {
             let from = search.belief().position();
@@ -1151,7 +1187,7 @@ impl Service {
                 .is_some_and(|t| t.status == TrialStatus::Searching);
             if now.len() != observations.len() || !still {
                 return Err(ApiError::new(
-                    409,
+                    ErrorKind::Conflict,
                     "trial",
                     "the trial changed while this observation was planned; read it and retry",
                 ));
@@ -1166,8 +1202,41 @@ impl Service {
             updated.status = status;
             updated.cost = (status != TrialStatus::Searching).then_some(cost);
             updated.replays = replays.clone();
-            json(200, &trial_state(&updated, spec, &all, cost, next.clone()))
+            json(
+                Outcome::Done,
+                &trial_state(&updated, spec, &all, cost, next.clone()),
+            )
         })
+    }
+}
+
+/// What a robot's replays assume: the target only where it was found, and plain path lengths,
+/// since a robot's trial costs what it travelled.
+const ROBOT_REPLAY: (ReplayMode, TravelCost) = (ReplayMode::Pessimistic, TravelCost::Plain);
+
+/// How the stored trials ended, in order, and the choice of the open one.
+fn history(trials: &[TrialRow]) -> (Vec<TrialEnd>, Option<usize>) {
+    let mut history = Vec::new();
+    let mut pending = None;
+    for t in trials {
+        match t.status {
+            TrialStatus::Done => history.push(TrialEnd::Finished(FinishedTrial {
+                chosen: t.chosen,
+                cost: t.cost.unwrap_or(f64::NAN),
+                replays: t.replays.clone().unwrap_or_default(),
+            })),
+            TrialStatus::Exhausted => history.push(TrialEnd::Abandoned { chosen: t.chosen }),
+            TrialStatus::Searching => pending = Some(t.chosen),
+        }
+    }
+    (history, pending)
+}
+
+/// A replay that failed: a plan error as the service reports it, anything else internal.
+fn lab_error(e: ferret_lab::LabError) -> ApiError {
+    match e {
+        ferret_lab::LabError::Plan(p) => plan_error(p),
+        other => ApiError::internal(other.to_string()),
     }
 }
 
@@ -1218,12 +1287,15 @@ fn stored_reply(
     };
     if stored.fingerprint != fingerprint(route, body) {
         return Err(ApiError::new(
-            409,
+            ErrorKind::Conflict,
             "request_id",
             format!("{id:?} was used for another request"),
         ));
     }
-    Ok(Some((stored.status, stored.body)))
+    Ok(Some(Reply {
+        outcome: stored.outcome,
+        body: stored.body,
+    }))
 }
 
 /// The trial's search rebuilt from its stored observations.
@@ -1309,7 +1381,7 @@ fn next_container(placed: &Placed, from: Place, c: usize) -> NextContainer {
 fn plan_error(e: ferret_plan::PlanError) -> ApiError {
     // Planning errors come from strategies (an LLM endpoint down, a policy failing), not from
     // the request: the request was valid and may be retried.
-    ApiError::new(503, "", e.to_string())
+    ApiError::new(ErrorKind::Unavailable, "", e.to_string())
 }
 
 /// Parses an uploaded scene's text (a scene file without a map).
@@ -1318,7 +1390,7 @@ fn parse_file(text: &str) -> Result<SceneFile, ApiError> {
         SceneFile::parse(text, std::path::Path::new("<uploaded>")).map_err(|e| scene_error(&e))?;
     if parsed.map.is_some() {
         return Err(ApiError::new(
-            422,
+            ErrorKind::Invalid,
             "scene.map",
             "a scene with a map is loaded by the server (--scene), not uploaded",
         ));
@@ -1340,7 +1412,7 @@ fn parse_uploaded(text: &str) -> Result<(SceneFile, Scene), ApiError> {
 
 fn taken(name: &str) -> ApiError {
     ApiError::new(
-        409,
+        ErrorKind::Conflict,
         "scene.name",
         format!("a different scene named {name:?} exists already"),
     )
@@ -1409,7 +1481,7 @@ fn scene_detail(name: &str, scene: &Scene, placed: &Placed) -> Result<SceneDetai
 fn scene_error(e: &ferret_world::WorldError) -> ApiError {
     match e {
         ferret_world::WorldError::Scene { field, message, .. } => ApiError::new(
-            422,
+            ErrorKind::Invalid,
             if field.is_empty() {
                 "scene".to_string()
             } else {
@@ -1417,6 +1489,6 @@ fn scene_error(e: &ferret_world::WorldError) -> ApiError {
             },
             message.clone(),
         ),
-        other => ApiError::new(422, "scene", other.to_string()),
+        other => ApiError::new(ErrorKind::Invalid, "scene", other.to_string()),
     }
 }

@@ -7,6 +7,7 @@ use std::path::Path;
 use std::sync::{Mutex, MutexGuard};
 use std::time::Duration;
 
+use crate::service::Outcome;
 use ferret_select::Method;
 use rusqlite::{Connection, OptionalExtension, Transaction, TransactionBehavior, params};
 use serde::{Deserialize, Serialize};
@@ -131,10 +132,27 @@ pub struct ObservationRow {
 pub struct StoredReply {
     /// SHA-256 of route and body, to tell a retry from a reuse of the id.
     pub fingerprint: String,
-    /// HTTP status.
-    pub status: u16,
+    /// What the request did.
+    pub outcome: Outcome,
     /// JSON body.
     pub body: String,
+}
+
+/// How a reply's outcome is stored: as the numbers databases have always held (200, 201), so
+/// that a database written by any version answers its retries the same.
+fn stored_code(o: Outcome) -> u16 {
+    match o {
+        Outcome::Done => 200,
+        Outcome::Created => 201,
+    }
+}
+
+fn outcome_of(code: u16) -> Outcome {
+    if code == 201 {
+        Outcome::Created
+    } else {
+        Outcome::Done
+    }
 }
 
 /// The database.
@@ -383,7 +401,12 @@ impl Writer<'_> {
         self.tx
             .execute(
                 "INSERT INTO requests (id, fingerprint, status, body) VALUES (?1, ?2, ?3, ?4)",
-                params![id, reply.fingerprint, reply.status, reply.body],
+                params![
+                    id,
+                    reply.fingerprint,
+                    stored_code(reply.outcome),
+                    reply.body
+                ],
             )
             .map_err(|e| self.store.sql(e))?;
         Ok(())
@@ -606,7 +629,7 @@ impl Reader<'_> {
                 |r| {
                     Ok(StoredReply {
                         fingerprint: r.get(0)?,
-                        status: r.get(1)?,
+                        outcome: outcome_of(r.get(1)?),
                         body: r.get(2)?,
                     })
                 },

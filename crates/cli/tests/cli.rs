@@ -513,7 +513,7 @@ fn several_targets_per_house_are_trials_of_their_own_for_eval_and_select() {
         serde_json::from_slice(&std::fs::read(one.join("run.json")).unwrap()).unwrap();
     assert!(
         run.get("trials_per_house").is_none(),
-        "the default leaves run.json as before"
+        "the default leaves trials_per_house out of run.json"
     );
     let three = dir.path().join("three");
     let o = ferret(

@@ -393,6 +393,9 @@ pub fn replay_table(
     })
 }
 
+/// Replay costs by key, and the LLM service that computed any new ones (to write its token use).
+type LoadedReplays = (HashMap<ReplayKey, f64>, Option<Arc<LlmService>>);
+
 #[allow(clippy::too_many_arguments)]
 fn load_or_compute_replays(
     info: &RunInfo,
@@ -403,7 +406,7 @@ fn load_or_compute_replays(
     key: &str,
     mode: ReplayMode,
     feedback: &dyn Feedback,
-) -> Result<(HashMap<ReplayKey, f64>, Option<Arc<LlmService>>)> {
+) -> Result<LoadedReplays> {
     let read = match read_run_file(path) {
         Ok(text) => {
             let read = parse_replay_cache(&text, key, candidates, by_house);

@@ -107,7 +107,6 @@ impl RunInfo {
             robot_radius: self.grid[1],
             wall_thickness: self.grid[2],
             access,
-            ..GridParams::default()
         }
     }
 }

@@ -1,7 +1,7 @@
 //! Decision latency of the exact planner (targets: ≤ 50 µs at n = 8, ≤ 100 ms at n = 16).
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use ferret_plan::{Problem, solve_exact};
+use ferret_plan::{TourProblem, solve_exact};
 
 fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("exact_planner_decision");
@@ -9,7 +9,7 @@ fn bench(c: &mut Criterion) {
         if n >= 16 {
             group.sample_size(10);
         }
-        let p = Problem::random(n, n as u64);
+        let p = TourProblem::random(n, n as u64);
         group.bench_with_input(BenchmarkId::from_parameter(n), &p, |b, p| {
             b.iter(|| solve_exact(p))
         });

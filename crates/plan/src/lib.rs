@@ -30,7 +30,7 @@ pub use calibration::{Calibration, ReliabilityBin};
 pub use error::{BoxError, PlanError};
 pub use fusion::{Fused, FusionFile, FusionFit, FusionWeights, TrainingScore, prior_fingerprint};
 pub use likelihood::{LikelihoodSource, OracleLikelihood, Prior, Uniform};
-pub use planner::{Plan, Problem, solve_brute_force, solve_exact};
+pub use planner::{Plan, TourProblem, solve_brute_force, solve_exact};
 pub use policy::{CandidateLimit, CostModel, Greedy, Oracle, Planner, PlannerConfig, Policy};
 pub use probability::Probability;
 pub use protocol::{

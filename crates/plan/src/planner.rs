@@ -19,7 +19,7 @@ use crate::probability::Probability;
 /// A small planning problem in local indices `0..n`: travel from the robot to each candidate, between
 /// candidates, their probabilities and the search cost.
 #[derive(Clone, Debug)]
-pub struct Problem {
+pub struct TourProblem {
     /// Travel from the robot's position to candidate `i`, metres.
     pub from_robot: Vec<f64>,
     /// Travel between candidates, row-major `n × n`, metres.
@@ -34,7 +34,7 @@ pub struct Problem {
     pub leg_extra: Vec<f64>,
 }
 
-impl Problem {
+impl TourProblem {
     /// Number of candidates.
     pub fn len(&self) -> usize {
         self.p.len()
@@ -72,17 +72,17 @@ impl Problem {
     }
 }
 
-impl Problem {
+impl TourProblem {
     /// A random instance for benchmarks: the robot and `n` containers scattered in a 20 m square,
     /// straight-line travel, probabilities in [0.01, 0.5), no search cost. Deterministic per seed.
-    pub fn random(n: usize, seed: u64) -> Problem {
+    pub fn random(n: usize, seed: u64) -> TourProblem {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let pts: Vec<(f64, f64)> = (0..=n)
             .map(|_| (rng.random_range(0.0..20.0), rng.random_range(0.0..20.0)))
             .collect();
         let d = |a: (f64, f64), b: (f64, f64)| (a.0 - b.0).hypot(a.1 - b.1);
-        Problem {
+        TourProblem {
             from_robot: (1..=n).map(|i| d(pts[0], pts[i])).collect(),
             between: (0..n * n)
                 .map(|k| d(pts[1 + k / n], pts[1 + k % n]))
@@ -123,7 +123,7 @@ pub struct Solution {
 /// Solves `problem` exactly by Held–Karp dynamic programming.
 ///
 /// Returns `None` when the problem has more than [`MAX_EXACT`] candidates.
-pub fn solve_exact(problem: &Problem) -> Option<(Plan, Solution)> {
+pub fn solve_exact(problem: &TourProblem) -> Option<(Plan, Solution)> {
     let n = problem.len();
     if n > MAX_EXACT {
         return None;
@@ -189,7 +189,7 @@ impl Solution {
     /// The best next candidate after searching set `searched` (bit mask over local indices),
     /// standing at `at` (`None` = the robot's original position, only valid with nothing searched).
     /// Ties go to the lower index.
-    pub fn next(&self, problem: &Problem, searched: usize, at: Option<usize>) -> Option<usize> {
+    pub fn next(&self, problem: &TourProblem, searched: usize, at: Option<usize>) -> Option<usize> {
         let n = self.n;
         let full = (1usize << n) - 1;
         let mut best: Option<(f64, usize)> = None;
@@ -212,7 +212,7 @@ impl Solution {
 
     fn best_order(
         &self,
-        problem: &Problem,
+        problem: &TourProblem,
         mut searched: usize,
         mut at: Option<usize>,
     ) -> Vec<usize> {
@@ -228,7 +228,7 @@ impl Solution {
 
 /// The best ordering by enumerating all n! orderings (Heap's algorithm); for tests and tiny
 /// problems only. Ties keep the lexicographically first ordering found.
-pub fn solve_brute_force(problem: &Problem) -> Plan {
+pub fn solve_brute_force(problem: &TourProblem) -> Plan {
     let n = problem.len();
     let mut perm: Vec<usize> = (0..n).collect();
     let mut best = Plan {
@@ -266,10 +266,10 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
 
-    fn problem(n: usize, coords: &[(f64, f64)], p: &[f64], r: f64) -> Problem {
+    fn problem(n: usize, coords: &[(f64, f64)], p: &[f64], r: f64) -> TourProblem {
         let d = |a: (f64, f64), b: (f64, f64)| (a.0 - b.0).hypot(a.1 - b.1);
         let robot = (0.0, 0.0);
-        Problem {
+        TourProblem {
             from_robot: (0..n).map(|i| d(robot, coords[i])).collect(),
             between: (0..n * n)
                 .map(|k| d(coords[k / n], coords[k % n]))
@@ -298,7 +298,7 @@ mod tests {
         // containers, so the first choice changes on some instances but not on most.
         let mut differ = 0;
         for seed in 0..200 {
-            let eq3 = Problem::random(6, seed);
+            let eq3 = TourProblem::random(6, seed);
             let mut authors = eq3.clone();
             authors.leg_extra = (0..6).map(|i| eq3.p[i].get() * eq3.from_robot[i]).collect();
             let a = solve_exact(&eq3).unwrap().0.order[0];
@@ -314,7 +314,7 @@ mod tests {
     #[test]
     fn too_large_problems_are_refused() {
         let n = MAX_EXACT + 1;
-        let pr = Problem {
+        let pr = TourProblem {
             from_robot: vec![1.0; n],
             between: vec![1.0; n * n],
             p: vec![Probability::ONE; n],
@@ -357,7 +357,7 @@ mod tests {
             ps in prop::collection::vec(0.0f64..=1.0, 6),
         ) {
             // Not a metric: the DP must still be exact.
-            let pr = Problem {
+            let pr = TourProblem {
                 from_robot: raw[..n].to_vec(),
                 between: raw[6..6 + n * n].to_vec(),
                 p: ps[..n].iter().map(|&x| Probability::clamped(x, 0.0, 1.0)).collect(),
@@ -384,7 +384,7 @@ mod tests {
             prop_assert!((dp.expected_cost - bf.expected_cost).abs() <= 1e-9 * bf.expected_cost.max(1.0),
                 "dp {} vs brute force {}", dp.expected_cost, bf.expected_cost);
             // The objective really is eq. 3 plus Σ weight · p_a · D(robot, a).
-            let eq3 = Problem { leg_extra: Vec::new(), ..pr.clone() };
+            let eq3 = TourProblem { leg_extra: Vec::new(), ..pr.clone() };
             let mut w = 1.0;
             let mut extra = 0.0;
             for &a in &dp.order {

@@ -4,7 +4,7 @@ use ferret_world::Place;
 
 use crate::belief::Belief;
 use crate::error::PlanError;
-use crate::planner::{self, Problem, Solution};
+use crate::planner::{self, Solution, TourProblem};
 use crate::probability::Probability;
 
 /// Maps a belief to the next container to search. A policy lives for one trial and may keep state
@@ -112,7 +112,7 @@ pub struct Planner {
 #[derive(Debug)]
 struct Cached {
     candidates: Vec<usize>,
-    problem: Problem,
+    problem: TourProblem,
     solution: Solution,
 }
 
@@ -177,7 +177,7 @@ impl Planner {
         self.p.get(c).map_or(0.0, |p| p.get())
     }
 
-    fn problem(&self, belief: &Belief<'_>, candidates: &[usize]) -> Problem {
+    fn problem(&self, belief: &Belief<'_>, candidates: &[usize]) -> TourProblem {
         let n = candidates.len();
         let d = belief.distances;
         let from_robot: Vec<f64> = candidates.iter().map(|&c| belief.distance_to(c)).collect();
@@ -189,7 +189,7 @@ impl Planner {
                 .map(|(&c, d)| self.p(c) * d)
                 .collect(),
         };
-        Problem {
+        TourProblem {
             from_robot,
             between: (0..n * n)
                 .map(|k| {

@@ -8,11 +8,11 @@ use plotters::prelude::*;
 use plotters::style::FontStyle;
 use plotters::style::text_anchor::{HPos, VPos};
 
-use crate::color::{Rgb, plan_colors as pc};
-use crate::error::{ReportError, Result};
-use crate::render::{
+use crate::canvas::{
     Drawn, Format, Picture, axis_number, font, px, render, rgba, text, text_size, wrap,
 };
+use crate::color::{Rgb, plan_colors as pc};
+use crate::error::{ReportError, Result};
 
 /// One chart of lines sharing an x axis.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -115,7 +115,7 @@ pub fn draw_choice_shares(
             ));
         }
     }
-    crate::render::ensure_fonts()?;
+    crate::canvas::ensure_fonts()?;
     let legend_font = font(13.0, FontStyle::Normal);
     let names: Vec<Vec<String>> = shares
         .iter()

@@ -26,24 +26,24 @@
 //! # Ok::<(), ferret_report::ReportError>(())
 //! ```
 
+mod canvas;
 mod color;
 mod curves;
 mod error;
+mod floor_plan;
 mod glyphs;
 mod labels;
 pub mod paired;
-mod plan;
-mod render;
 mod stats;
 mod violin;
 
+pub use canvas::Format;
 pub use color::{PALETTE, Rgb, plan_colors, room_tint};
 pub use curves::{CurvePanel, draw_choice_shares, draw_curve_panels, draw_curves};
 pub use error::{ReportError, Result};
-pub use plan::{
+pub use floor_plan::{
     GridImage, PlanLayout, PlanOptions, PlanPath, TrajectoryOptions, TrajectoryPanel,
     draw_floor_plan, draw_trajectories,
 };
-pub use render::Format;
 pub use stats::{gaussian_kde, quartiles, silverman_bandwidth};
 pub use violin::{ViolinOptions, draw_violins};

@@ -12,11 +12,11 @@ use plotters::style::text_anchor::{HPos, VPos};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::color::{Rgb, plan_colors as pc};
-use crate::error::{ReportError, Result};
-use crate::render::{
+use crate::canvas::{
     Drawn, Format, Picture, axis_number, font, render, rgba, text, text_size, wrap,
 };
+use crate::color::{Rgb, plan_colors as pc};
+use crate::error::{ReportError, Result};
 use crate::stats::{gaussian_kde, quartiles, silverman_bandwidth};
 
 /// Options of a violin plot.
@@ -65,7 +65,7 @@ pub fn draw_violins(series: &[(String, Vec<f64>)], opts: &ViolinOptions, out: &P
             ));
         }
     }
-    crate::render::ensure_fonts()?;
+    crate::canvas::ensure_fonts()?;
     let violins: Vec<Violin> = series
         .iter()
         .map(|(name, v)| Violin::new(name, v))

@@ -323,8 +323,8 @@ fn run_deployment(
         )
         .into_vec()
     };
-    // One trial of each drawn house; a house with one trial draws nothing more, so tables of
-    // one trial per house give the same deployments as before grouping existed.
+    // One trial of each drawn house; a house with one trial draws nothing more, so a table of
+    // one trial per house gives the same deployments grouped or not.
     let mut pick = stream(base, d, 3);
     let houses: Vec<usize> = drawn
         .into_iter()

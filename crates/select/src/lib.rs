@@ -20,7 +20,7 @@ mod error;
 mod experiment;
 mod live;
 pub mod numpy;
-mod render;
+mod results;
 mod selector;
 mod table;
 
@@ -30,7 +30,7 @@ pub use experiment::{
     MethodSummary, run_experiment, run_selector,
 };
 pub use live::{FinishedTrial, LiveDeployment, StrategyStats, TrialEnd};
-pub use render::{
+pub use results::{
     ChoiceRow, PAPER_KS, SelectionRow, choice_rows, selection_rows, selection_table_markdown,
     strategy_table_markdown,
 };

@@ -101,8 +101,8 @@ fn furniture_contains_the_receptacles() {
         assert!(f.contains(&id), "{id} is a receptacle but no furniture");
     }
     assert!(f.len() > ids(&receptacles).len(), "the chair is furniture");
-    // Ids without a type prefix are typed as before: the 4|0|0-style house gives the same
-    // containers under either rule where both know the type.
+    // Ids without a type prefix are typed by the asset database alone: the 4|0|0-style house
+    // gives the same containers under either rule where both know the type.
     let a = fixture::house_a().to_string();
     let plain = parse_house_with(&a, &at(), Some(&db), ContainerSet::Furniture).unwrap();
     assert!(ids(&plain).contains(&"1|0"));

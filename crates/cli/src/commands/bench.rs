@@ -5,7 +5,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::Result;
-use ferret_plan::{Problem, solve_exact};
+use ferret_plan::{TourProblem, solve_exact};
 use serde::Serialize;
 
 /// Benchmarks.
@@ -347,7 +347,7 @@ fn planner(args: PlannerArgs) -> Result<ExitCode> {
             .min((2_000_000_000 / work.max(1)).max(5) as usize);
         let mut us: Vec<f64> = (0..instances)
             .map(|i| {
-                let p = Problem::random(
+                let p = TourProblem::random(
                     n,
                     args.seed
                         .wrapping_mul(1_000_003)

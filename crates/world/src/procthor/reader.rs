@@ -15,6 +15,7 @@ use super::types::{
     object_type_for_asset,
 };
 use crate::error::{HouseLocation, Result, WorldError};
+use crate::geometry::segment_distance;
 use crate::geometry::{Footprint, Point, Polygon};
 use crate::house::{
     Container, Door, GroundTruth, House, ObjectType, Obstacle, Pose, Room, RoomType, Scene,
@@ -828,19 +829,8 @@ fn assign_room(
 fn boundary_distance(poly: &Polygon, p: Point) -> f64 {
     let v = &poly.vertices;
     (0..v.len())
-        .map(|i| segment_distance(p, v[i], v[(i + 1) % v.len()]))
+        .map(|i| segment_distance(v[i], v[(i + 1) % v.len()], p))
         .fold(f64::INFINITY, f64::min)
-}
-
-fn segment_distance(p: Point, a: Point, b: Point) -> f64 {
-    let (dx, dz) = (b.x - a.x, b.z - a.z);
-    let len2 = dx * dx + dz * dz;
-    let t = if len2 > 0.0 {
-        (((p.x - a.x) * dx + (p.z - a.z) * dz) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    p.distance(Point::new(a.x + t * dx, a.z + t * dz))
 }
 
 #[cfg(test)]
@@ -872,9 +862,9 @@ mod tests {
     #[test]
     fn segment_distance_handles_ends_and_points() {
         let (a, b) = (Point::new(0.0, 0.0), Point::new(2.0, 0.0));
-        assert!((segment_distance(Point::new(1.0, 1.0), a, b) - 1.0).abs() < 1e-12);
-        assert!((segment_distance(Point::new(3.0, 0.0), a, b) - 1.0).abs() < 1e-12);
-        assert!((segment_distance(Point::new(0.0, 2.0), a, a) - 2.0).abs() < 1e-12);
+        assert!((segment_distance(a, b, Point::new(1.0, 1.0)) - 1.0).abs() < 1e-12);
+        assert!((segment_distance(a, b, Point::new(3.0, 0.0)) - 1.0).abs() < 1e-12);
+        assert!((segment_distance(a, a, Point::new(0.0, 2.0)) - 2.0).abs() < 1e-12);
     }
 
     #[test]

@@ -405,7 +405,7 @@ mod tests {
     }
 
     #[test]
-    fn brief_examples_map() {
+    fn asset_ids_of_common_furniture_map_to_their_types() {
         assert_eq!(ty("RoboTHOR_sofa_kramfors").as_deref(), Some("Sofa"));
         assert_eq!(ty("Countertop_C_10x8").as_deref(), Some("CounterTop"));
         assert_eq!(ty("bin_8").as_deref(), Some("GarbageCan"));

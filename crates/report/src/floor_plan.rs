@@ -6,19 +6,20 @@
 
 use std::path::Path;
 
+use ferret_world::geometry::segment_distance;
 use ferret_world::{Footprint, House, Point, Pose};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 use plotters::style::text_anchor::{HPos, VPos};
 
-use crate::color::{Rgb, plan_colors as pc, room_tint};
-use crate::error::{ReportError, Result};
-use crate::labels::{BoxPx, Placer};
-use crate::render::{
+use crate::canvas::{
     Drawn, Format, Picture, arrow_head, font, nice_step, polyline, px, render, rgba, text,
     text_size, thick_segment, tick_label, wrap,
 };
+use crate::color::{Rgb, plan_colors as pc, room_tint};
+use crate::error::{ReportError, Result};
+use crate::labels::{BoxPx, Placer};
 
 /// A path drawn over a floor plan: a trajectory, or the shortest path between two places.
 #[derive(Clone, Debug, PartialEq)]
@@ -1014,7 +1015,7 @@ fn room_label_point(
                 .count() as f64;
             let mut clear = f64::INFINITY;
             for k in 0..verts.len() {
-                clear = clear.min(segment_distance(p, verts[k], verts[(k + 1) % verts.len()]));
+                clear = clear.min(segment_distance(verts[k], verts[(k + 1) % verts.len()], p));
             }
             let clear_px = (clear * l.px_per_m).min(80.0) / 80.0;
             let on_furniture: f64 = furniture.iter().map(|f| rect.overlap(f)).sum::<f64>() / area;
@@ -1045,17 +1046,6 @@ fn densify(points: &[Point], step: f64) -> Vec<Point> {
     }
     out.extend(points.last().copied());
     out
-}
-
-fn segment_distance(p: Point, a: Point, b: Point) -> f64 {
-    let (dx, dz) = (b.x - a.x, b.z - a.z);
-    let len2 = dx * dx + dz * dz;
-    let t = if len2 > 0.0 {
-        (((p.x - a.x) * dx + (p.z - a.z) * dz) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    p.distance(Point::new(a.x + t * dx, a.z + t * dz))
 }
 
 /// A text label on a translucent white box so it stays readable over walls and paths.

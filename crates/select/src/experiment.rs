@@ -1,5 +1,5 @@
 //! The deployment experiment of the paper (section VI-C): many deployments, each a random
-//! sequence of distinct houses, run once with UCB and once with replay selection.
+//! sequence of distinct houses, run once with every selection method of [`Method::ALL`].
 
 use rand::seq::index;
 use rand::{Rng, RngCore, SeedableRng};
@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::numpy::LegacyRandomState;
 use crate::selector::check_c;
-use crate::{CostTable, DEFAULT_C, Method, ReplaySelection, SelectError, Selector, Ucb};
+use crate::{CostTable, DEFAULT_C, Method, SelectError, Selector};
 
 /// Most deployment trials (`deployments × trials_per_deployment`) one experiment keeps: every
 /// trial is held in memory (about 40 bytes each, so 5 M take 200 MB), and the paper's experiment
@@ -68,6 +68,8 @@ impl Default for ExperimentOptions {
 /// What one method did in one deployment.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct MethodRun {
+    /// The method.
+    pub method: Method,
     /// Strategy chosen at trial `k` (index `k − 1`).
     pub chosen: Vec<usize>,
     /// Real cost of that choice at trial `k` (index `k − 1`), metres.
@@ -78,30 +80,27 @@ pub struct MethodRun {
     pub houses: Option<Vec<usize>>,
 }
 
-/// One deployment: its house order, shared by both methods, and what each method did.
+/// One deployment: its house order, shared by every method, and what each method did.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Deployment {
     /// Row of the cost table used by trial `k` (index `k − 1`): distinct rows from distinct
     /// houses (when the table is [grouped](CostTable::grouped)), unless drawn with replacement.
     pub houses: Vec<usize>,
-    /// UCB selection on these houses.
-    pub ucb: MethodRun,
-    /// Replay selection on these houses.
-    pub replay: MethodRun,
+    /// What each method did on these houses, in the order of [`Method::ALL`].
+    pub runs: Vec<MethodRun>,
 }
 
 impl Deployment {
     /// The rows method `method`'s trials used.
     pub fn houses_of(&self, method: Method) -> &[usize] {
-        self.run(method).houses.as_deref().unwrap_or(&self.houses)
+        self.run(method)
+            .and_then(|r| r.houses.as_deref())
+            .unwrap_or(&self.houses)
     }
 
-    /// The run of method `method`.
-    pub fn run(&self, method: Method) -> &MethodRun {
-        match method {
-            Method::Ucb => &self.ucb,
-            Method::ReplaySelection => &self.replay,
-        }
+    /// The run of method `method`, if it ran.
+    pub fn run(&self, method: Method) -> Option<&MethodRun> {
+        self.runs.iter().find(|r| r.method == method)
     }
 }
 
@@ -138,21 +137,16 @@ pub struct ExperimentResult {
     /// Mean cost of trials `1..=k` had the best single strategy been used throughout, averaged
     /// over deployments (the paper's "best performance" curve).
     pub best_avg_cost: Vec<f64>,
-    /// UCB selection curves.
-    pub ucb: MethodSummary,
-    /// Replay selection curves.
-    pub replay: MethodSummary,
+    /// The curves of each method, in the order of [`Method::ALL`].
+    pub summaries: Vec<MethodSummary>,
     /// Every deployment, in index order.
     pub deployments: Vec<Deployment>,
 }
 
 impl ExperimentResult {
-    /// Curves of method `method`.
-    pub fn summary(&self, method: Method) -> &MethodSummary {
-        match method {
-            Method::Ucb => &self.ucb,
-            Method::ReplaySelection => &self.replay,
-        }
+    /// Curves of method `method`, if it ran.
+    pub fn summary(&self, method: Method) -> Option<&MethodSummary> {
+        self.summaries.iter().find(|s| s.method == method)
     }
 
     /// Number of trials per deployment (`k` runs over `1..=trials()`).
@@ -163,8 +157,8 @@ impl ExperimentResult {
 
 /// Runs the deployment experiment on `table`.
 ///
-/// Each deployment draws `trials_per_deployment` distinct houses in random order; UCB and replay
-/// selection then run over that same order, each trial observing the chosen strategy's real cost
+/// Each deployment draws `trials_per_deployment` distinct houses in random order; every method
+/// of [`Method::ALL`] then runs over that same order, each trial observing the chosen strategy's real cost
 /// and the replay costs of all strategies given that choice. Deployments run in parallel, and the
 /// result depends only on the table and the options, not on the number of threads.
 ///
@@ -172,7 +166,7 @@ impl ExperimentResult {
 /// trials per deployment than houses, or an invalid `c`.
 ///
 /// ```
-/// use ferret_select::{CostTable, ExperimentOptions, run_experiment};
+/// use ferret_select::{CostTable, ExperimentOptions, Method, run_experiment};
 /// let table = CostTable::with_exact_replay(
 ///     vec!["good".into(), "bad".into()],
 ///     (0..10).map(|h| format!("house-{h}")).collect(),
@@ -186,7 +180,8 @@ impl ExperimentResult {
 /// };
 /// let result = run_experiment(&table, &opts)?;
 /// assert_eq!(result.best_strategy, 0);
-/// assert!(result.replay.cum_regret[9] <= result.ucb.cum_regret[9]);
+/// let regret = |m| result.summary(m).map(|s| s.cum_regret[9]);
+/// assert!(regret(Method::ReplaySelection) <= regret(Method::Ucb));
 /// # Ok::<(), ferret_select::SelectError>(())
 /// ```
 pub fn run_experiment(
@@ -226,31 +221,24 @@ pub fn run_experiment(
         mean_costs: table.mean_costs(),
         best_strategy: best,
         best_avg_cost: best_avg,
-        ucb: summarise(
-            table,
-            &deployments,
-            (best, best_mean),
-            opts.trials_per_deployment,
-            Method::Ucb,
-        ),
-        replay: summarise(
-            table,
-            &deployments,
-            (best, best_mean),
-            opts.trials_per_deployment,
-            Method::ReplaySelection,
-        ),
+        summaries: Method::ALL
+            .into_iter()
+            .map(|method| {
+                summarise(
+                    table,
+                    &deployments,
+                    (best, best_mean),
+                    opts.trials_per_deployment,
+                    method,
+                )
+            })
+            .collect(),
         deployments,
     };
-    if let (Some(u), Some(r)) = (
-        result.ucb.cum_regret.last(),
-        result.replay.cum_regret.last(),
-    ) {
-        tracing::debug!(
-            ucb_regret = u,
-            replay_regret = r,
-            "deployment experiment done"
-        );
+    for s in &result.summaries {
+        if let Some(regret) = s.cum_regret.last() {
+            tracing::debug!(method = %s.method, regret, "deployment experiment done");
+        }
     }
     Ok(result)
 }
@@ -294,9 +282,24 @@ fn check_options(table: &CostTable, opts: &ExperimentOptions) -> Result<(), Sele
 }
 
 /// Independent random stream `purpose` of deployment `d`: depends on `(seed, d, purpose)` only.
+/// Purposes: 0 the house draw, 3 a trial's pick among a house's trials, and the tie-breaks of
+/// method `m` (see [`method_stream`]).
 fn stream(base: &ChaCha8Rng, d: usize, purpose: u64) -> ChaCha8Rng {
     let mut rng = base.clone();
     rng.set_stream((d as u64).wrapping_mul(4).wrapping_add(purpose));
+    rng
+}
+
+/// The tie-break stream of the `m`-th method of [`Method::ALL`] in deployment `d`. The first
+/// two methods use purposes 1 and 2 of [`stream`], so their deployments stay what they have
+/// always been; further methods use streams with the top bit set, which `stream` never reaches
+/// below 2^61 deployments.
+fn method_stream(base: &ChaCha8Rng, d: usize, m: usize) -> ChaCha8Rng {
+    if m < 2 {
+        return stream(base, d, 1 + m as u64);
+    }
+    let mut rng = base.clone();
+    rng.set_stream((1 << 63) | (d as u64).wrapping_mul(64).wrapping_add(m as u64));
     rng
 }
 
@@ -333,29 +336,20 @@ fn run_deployment(
             rows => rows[pick.random_range(0..rows.len())],
         })
         .collect();
-    let untried = if opts.ucb_untried_zero {
-        0.0
-    } else {
-        f64::NEG_INFINITY
-    };
-    let ucb = run_selector(
-        &mut Ucb::new(table.n_strategies(), opts.c)?.untried_score(untried),
-        table,
-        &houses,
-        &mut stream(base, d, 1),
-    )?;
-    let replay = run_selector(
-        &mut ReplaySelection::new(table.n_strategies(), opts.c)?
-            .untried_first(opts.replay_untried_first),
-        table,
-        &houses,
-        &mut stream(base, d, 2),
-    )?;
-    Ok(Deployment {
-        houses,
-        ucb,
-        replay,
-    })
+    let runs = Method::ALL
+        .into_iter()
+        .enumerate()
+        .map(|(m, method)| {
+            let mut selector = method.configured(table.n_strategies(), opts)?;
+            run_selector(
+                selector.as_mut(),
+                table,
+                &houses,
+                &mut method_stream(base, d, m),
+            )
+        })
+        .collect::<Result<_, _>>()?;
+    Ok(Deployment { houses, runs })
 }
 
 /// A deployment drawn as the reference code draws it (see
@@ -386,6 +380,7 @@ fn run_reference_deployment(
         .map(|_| row_of(order[np.choice(order.len())]))
         .collect();
     let mut run = |selector: &mut dyn Selector| -> Result<MethodRun, SelectError> {
+        let method = selector.method();
         let (mut np, order) = shuffled();
         let mut rows = Vec::with_capacity(opts.trials_per_deployment);
         let mut chosen = Vec::with_capacity(opts.trials_per_deployment);
@@ -406,24 +401,17 @@ fn run_reference_deployment(
             costs.push(cost);
         }
         Ok(MethodRun {
+            method,
             chosen,
             costs,
             houses: Some(rows),
         })
     };
-    let untried = if opts.ucb_untried_zero {
-        0.0
-    } else {
-        f64::NEG_INFINITY
-    };
-    let ucb = run(&mut Ucb::new(table.n_strategies(), opts.c)?.untried_score(untried))?;
-    let replay = run(&mut ReplaySelection::new(table.n_strategies(), opts.c)?
-        .untried_first(opts.replay_untried_first))?;
-    Ok(Deployment {
-        houses,
-        ucb,
-        replay,
-    })
+    let runs = Method::ALL
+        .into_iter()
+        .map(|method| run(method.configured(table.n_strategies(), opts)?.as_mut()))
+        .collect::<Result<_, _>>()?;
+    Ok(Deployment { houses, runs })
 }
 
 /// The strategy with the lowest mean, over deployments, of its average cost on each
@@ -471,6 +459,7 @@ pub fn run_selector(
         costs.push(cost);
     }
     Ok(MethodRun {
+        method: selector.method(),
         chosen,
         costs,
         houses: None,
@@ -508,7 +497,9 @@ fn summarise(
     let mut cum_regret = vec![0.0; trials];
     let mut counts = vec![vec![0usize; s]; trials];
     for dep in deployments {
-        let run = dep.run(method);
+        let Some(run) = dep.run(method) else {
+            continue;
+        };
         let mut sum = 0.0;
         let mut regret = 0.0;
         for (k, ((&h, &i), &c)) in dep

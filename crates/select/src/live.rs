@@ -265,28 +265,14 @@ impl LiveDeployment {
         if self.pending.is_some() {
             return format!("{name} was chosen for the trial in progress");
         }
-        let stats = self.stats();
-        let s = &stats[next];
         if self.finished.is_empty() {
             return format!(
                 "{name}: nothing is known before the first trial, so the choice is uniform"
             );
         }
-        match (self.method, s.score) {
-            (Method::Ucb, score) if score == f64::NEG_INFINITY => {
-                format!("{name}: UCB deploys every strategy once, and it has not been deployed")
-            }
-            (Method::Ucb, score) => format!(
-                "{name}: lowest UCB score {score:.2} m (mean cost {:.2} m over {} trial(s), less the exploration bonus)",
-                s.mean_cost.unwrap_or(f64::NAN),
-                s.deployed
-            ),
-            (Method::ReplaySelection, score) => format!(
-                "{name}: lowest replay-selection score {score:.2} m (replay mean {:.2} m over {} trial(s); deployed {} time(s))",
-                s.replay_mean.unwrap_or(f64::NAN),
-                self.finished.len(),
-                s.deployed
-            ),
+        match self.stats().get(next) {
+            Some(s) => self.selector.why_lowest(name, s),
+            None => format!("{name}: no statistics"),
         }
     }
 }

@@ -51,15 +51,15 @@ pub struct ChoiceRow {
     pub fraction: f64,
 }
 
-/// Rows for `selection.csv`: every method (UCB first) at every `k`.
+/// Rows for `selection.csv`: every method (in the order of [`Method::ALL`]) at every `k`.
 pub fn selection_rows(result: &ExperimentResult) -> Vec<SelectionRow> {
     let best = result.best_strategy;
-    Method::ALL
+    result
+        .summaries
         .iter()
-        .flat_map(|&method| {
-            let summary = result.summary(method);
+        .flat_map(|summary| {
             (0..result.trials()).map(move |t| SelectionRow {
-                method,
+                method: summary.method,
                 k: t + 1,
                 avg_cost: at(&summary.avg_cost, t),
                 cum_regret: at(&summary.cum_regret, t),
@@ -77,13 +77,13 @@ pub fn selection_rows(result: &ExperimentResult) -> Vec<SelectionRow> {
 /// Rows of how often each strategy is chosen at every `k`, for every method (long format, one
 /// row per method, `k` and strategy).
 pub fn choice_rows(result: &ExperimentResult) -> Vec<ChoiceRow> {
-    let mut rows = Vec::with_capacity(2 * result.trials() * result.strategies.len());
-    for method in Method::ALL {
-        let summary = result.summary(method);
+    let mut rows =
+        Vec::with_capacity(result.summaries.len() * result.trials() * result.strategies.len());
+    for summary in &result.summaries {
         for (t, fractions) in summary.choice_fraction.iter().enumerate() {
             for (name, &fraction) in result.strategies.iter().zip(fractions) {
                 rows.push(ChoiceRow {
-                    method,
+                    method: summary.method,
                     k: t + 1,
                     strategy: name.clone(),
                     fraction,
@@ -94,8 +94,9 @@ pub fn choice_rows(result: &ExperimentResult) -> Vec<ChoiceRow> {
     rows
 }
 
-/// The paper's selection table (figure 4): average cost and cumulative regret of UCB and replay
-/// selection at each `k` of `ks`, with the relative difference of replay selection to UCB.
+/// The paper's selection table (figure 4): average cost and cumulative regret of every method at
+/// each `k` of `ks`, with the relative difference of each later method to the first (replay
+/// selection to UCB).
 ///
 /// Regret is given twice: per trial against the best single strategy on the same house
 /// (`cum_regret`, the project's definition), and as the paper computes it (`paper_regret`).
@@ -120,7 +121,7 @@ pub fn selection_table_markdown(result: &ExperimentResult, ks: &[usize]) -> Stri
     out.push_str("\n|---|---|");
     out.push_str(&"---:|".repeat(ks.len()));
     out.push('\n');
-    let value = |curve: Curve, method: Method, k: usize| at(curve(result.summary(method)), k - 1);
+    let value = |curve: Curve, summary: &MethodSummary, k: usize| at(curve(summary), k - 1);
     let metrics: [(&str, Curve, usize); 3] = [
         ("Avg. cost (m)", |s| &s.avg_cost, 2),
         ("Cumul. regret (m)", |s| &s.cum_regret, 1),
@@ -131,24 +132,35 @@ pub fn selection_table_markdown(result: &ExperimentResult, ks: &[usize]) -> Stri
         ),
     ];
     for (name, curve, decimals) in metrics {
-        for (row, method) in Method::ALL.iter().enumerate() {
+        for (row, summary) in result.summaries.iter().enumerate() {
             if row == 0 {
-                let _ = write!(out, "| {name} | {} |", method.label());
+                let _ = write!(out, "| {name} | {} |", summary.method.label());
             } else {
-                let _ = write!(out, "| | {} |", method.label());
+                let _ = write!(out, "| | {} |", summary.method.label());
             }
             for &k in &ks {
-                let _ = write!(out, " {:.*} |", decimals, value(curve, *method, k));
+                let _ = write!(out, " {:.*} |", decimals, value(curve, summary, k));
             }
             out.push('\n');
         }
-        out.push_str("| | Replay vs. UCB |");
-        for &k in &ks {
-            let ucb = value(curve, Method::Ucb, k);
-            let replay = value(curve, Method::ReplaySelection, k);
-            let _ = write!(out, " {} |", relative_difference(replay, ucb));
+        if let Some((baseline, others)) = result.summaries.split_first() {
+            for other in others {
+                let _ = write!(
+                    out,
+                    "| | {} vs. {} |",
+                    other.method.short_label(),
+                    baseline.method.short_label()
+                );
+                for &k in &ks {
+                    let _ = write!(
+                        out,
+                        " {} |",
+                        relative_difference(value(curve, other, k), value(curve, baseline, k))
+                    );
+                }
+                out.push('\n');
+            }
         }
-        out.push('\n');
     }
     let _ = write!(
         out,
@@ -181,12 +193,15 @@ pub fn selection_table_markdown(result: &ExperimentResult, ks: &[usize]) -> Stri
 /// A table of the candidates: mean cost over all houses and the share of all trials (of all
 /// deployments) in which each method chose them.
 pub fn strategy_table_markdown(result: &ExperimentResult) -> String {
-    let mut out = String::from(
-        "| Strategy | Mean cost (m) | UCB: share of trials | Replay selection: share of trials |\n\
-         |---|---:|---:|---:|\n",
-    );
-    let share = |method: Method, i: usize| {
-        let fractions = &result.summary(method).choice_fraction;
+    let mut out = String::from("| Strategy | Mean cost (m) |");
+    for s in &result.summaries {
+        let _ = write!(out, " {}: share of trials |", s.method.label());
+    }
+    out.push_str("\n|---|---:|");
+    out.push_str(&"---:|".repeat(result.summaries.len()));
+    out.push('\n');
+    let share = |summary: &MethodSummary, i: usize| {
+        let fractions = &summary.choice_fraction;
         let total: f64 = fractions.iter().map(|row| at(row, i)).sum();
         100.0 * total / fractions.len().max(1) as f64
     };
@@ -196,13 +211,15 @@ pub fn strategy_table_markdown(result: &ExperimentResult) -> String {
         } else {
             ""
         };
-        let _ = writeln!(
+        let _ = write!(
             out,
-            "| `{name}`{marker} | {:.2} | {:.1} % | {:.1} % |",
-            at(&result.mean_costs, i),
-            share(Method::Ucb, i),
-            share(Method::ReplaySelection, i),
+            "| `{name}`{marker} | {:.2} |",
+            at(&result.mean_costs, i)
         );
+        for s in &result.summaries {
+            let _ = write!(out, " {:.1} % |", share(s, i));
+        }
+        out.push('\n');
     }
     out
 }

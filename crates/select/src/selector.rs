@@ -20,6 +20,8 @@ use rand::{Rng, RngCore};
 use serde::{Deserialize, Serialize};
 
 use crate::SelectError;
+use crate::experiment::ExperimentOptions;
+use crate::live::StrategyStats;
 
 /// Default exploration constant `c` in metres: the paper's 100 grid cells of 0.05 m.
 pub const DEFAULT_C: f64 = 5.0;
@@ -88,9 +90,26 @@ pub trait Selector {
         cost: f64,
         replay_costs: &[f64],
     ) -> Result<(), SelectError>;
+
+    /// Why strategy `name`, whose statistics are `stats`, has the lowest score, in one sentence
+    /// for a person watching a deployment (called after at least one trial).
+    fn why_lowest(&self, name: &str, stats: &StrategyStats) -> String {
+        format!(
+            "{name}: lowest {} score {:.2} m",
+            self.method().label(),
+            stats.score
+        )
+    }
 }
 
 /// A selection method, as named in reports and on the command line.
+///
+/// This enum is the registry of selectors: a new one is a type implementing [`Selector`] plus
+/// a variant here, with its [`name`](Method::name), [`label`](Method::label),
+/// [`short_label`](Method::short_label) and
+/// [`configured`](Method::configured) constructor. Everything else — the deployment
+/// experiment, its tables and pictures, live deployments, `ferret deploy` and `ferret serve` —
+/// goes through [`Method::ALL`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 pub enum Method {
     /// Black-box UCB on deployed costs only (paper eq. 2).
@@ -102,10 +121,11 @@ pub enum Method {
 }
 
 impl Method {
-    /// Both methods, in report order.
+    /// Every method, in report order: the first is the baseline the others are compared with.
     pub const ALL: [Method; 2] = [Method::Ucb, Method::ReplaySelection];
 
-    /// Short machine name (`ucb`, `replay`), used in CSV files and on the command line.
+    /// Short machine name (`ucb`, `replay`), used in CSV files, on the command line and in the
+    /// HTTP API.
     pub fn name(self) -> &'static str {
         match self {
             Method::Ucb => "ucb",
@@ -121,16 +141,49 @@ impl Method {
         }
     }
 
+    /// A short label for comparisons ("Replay vs. UCB").
+    pub fn short_label(self) -> &'static str {
+        match self {
+            Method::Ucb => "UCB",
+            Method::ReplaySelection => "Replay",
+        }
+    }
+
     /// A fresh selector of this method over `strategies` candidates with exploration constant
-    /// `c` (metres).
+    /// `c` (metres), in its default variant.
     pub fn selector(
         self,
         strategies: usize,
         c: f64,
     ) -> Result<Box<dyn Selector + Send>, SelectError> {
+        self.configured(
+            strategies,
+            &ExperimentOptions {
+                c,
+                ..ExperimentOptions::default()
+            },
+        )
+    }
+
+    /// A fresh selector of this method over `strategies` candidates in the variant `options`
+    /// ask for (its `c` and the reference code's switches).
+    pub fn configured(
+        self,
+        strategies: usize,
+        options: &ExperimentOptions,
+    ) -> Result<Box<dyn Selector + Send>, SelectError> {
+        let c = options.c;
         Ok(match self {
-            Method::Ucb => Box::new(Ucb::new(strategies, c)?),
-            Method::ReplaySelection => Box::new(ReplaySelection::new(strategies, c)?),
+            Method::Ucb => Box::new(Ucb::new(strategies, c)?.untried_score(
+                if options.ucb_untried_zero {
+                    0.0
+                } else {
+                    f64::NEG_INFINITY
+                },
+            )),
+            Method::ReplaySelection => Box::new(
+                ReplaySelection::new(strategies, c)?.untried_first(options.replay_untried_first),
+            ),
         })
     }
 }
@@ -145,14 +198,19 @@ impl FromStr for Method {
     type Err = SelectError;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s {
-            "ucb" => Ok(Method::Ucb),
-            "replay" | "replay-selection" => Ok(Method::ReplaySelection),
-            other => Err(SelectError::InvalidOption {
-                name: "method",
-                reason: format!("unknown method `{other}` (expected `ucb` or `replay`)"),
-            }),
+        if s == "replay-selection" {
+            return Ok(Method::ReplaySelection);
         }
+        Method::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| SelectError::InvalidOption {
+                name: "method",
+                reason: format!(
+                    "unknown method `{s}` (expected {})",
+                    Method::ALL.map(|m| format!("`{}`", m.name())).join(" or ")
+                ),
+            })
     }
 }
 
@@ -296,6 +354,20 @@ impl Selector for Ucb {
         self.stats.record(chosen, cost);
         Ok(())
     }
+
+    fn why_lowest(&self, name: &str, stats: &StrategyStats) -> String {
+        if stats.score == f64::NEG_INFINITY {
+            return format!(
+                "{name}: UCB deploys every strategy once, and it has not been deployed"
+            );
+        }
+        format!(
+            "{name}: lowest UCB score {:.2} m (mean cost {:.2} m over {} trial(s), less the exploration bonus)",
+            stats.score,
+            stats.mean_cost.unwrap_or(f64::NAN),
+            stats.deployed
+        )
+    }
 }
 
 /// Replay selection (paper eq. 5):
@@ -398,6 +470,16 @@ impl Selector for ReplaySelection {
             *sum += if i == chosen { cost } else { replay };
         }
         Ok(())
+    }
+
+    fn why_lowest(&self, name: &str, stats: &StrategyStats) -> String {
+        format!(
+            "{name}: lowest replay-selection score {:.2} m (replay mean {:.2} m over {} trial(s); deployed {} time(s))",
+            stats.score,
+            stats.replay_mean.unwrap_or(f64::NAN),
+            self.stats.trials,
+            stats.deployed
+        )
     }
 }
 

@@ -76,7 +76,7 @@ fn both_methods_converge_to_the_best_arm_of_a_gaussian_bandit() {
     let table = gaussian_table(&means, 5.0, 400, 11);
     assert_eq!(table.best_strategy(), 0);
     let result = run_experiment(&table, &opts(300, 100, 5)).unwrap();
-    let at_100 = |m: Method| result.summary(m).choice_fraction[99][0];
+    let at_100 = |m: Method| result.summary(m).unwrap().choice_fraction[99][0];
     let ucb = at_100(Method::Ucb);
     let replay = at_100(Method::ReplaySelection);
     assert!(
@@ -87,7 +87,7 @@ fn both_methods_converge_to_the_best_arm_of_a_gaussian_bandit() {
         replay >= 0.95,
         "replay chose the best arm in {replay} at k = 100"
     );
-    let regret = |m: Method| result.summary(m).cum_regret[99];
+    let regret = |m: Method| result.summary(m).unwrap().cum_regret[99];
     assert!(
         regret(Method::ReplaySelection) <= 0.5 * regret(Method::Ucb),
         "replay regret {} > UCB regret {}",
@@ -95,14 +95,15 @@ fn both_methods_converge_to_the_best_arm_of_a_gaussian_bandit() {
         regret(Method::Ucb)
     );
     assert!(
-        result.replay.avg_cost[99] <= result.ucb.avg_cost[99],
+        result.summary(Method::ReplaySelection).unwrap().avg_cost[99]
+            <= result.summary(Method::Ucb).unwrap().avg_cost[99],
         "replay avg cost {} > UCB {}",
-        result.replay.avg_cost[99],
-        result.ucb.avg_cost[99]
+        result.summary(Method::ReplaySelection).unwrap().avg_cost[99],
+        result.summary(Method::Ucb).unwrap().avg_cost[99]
     );
     // UCB's first five trials try all five arms, so it cannot be converged yet.
     for k in 0..5 {
-        let fractions = &result.ucb.choice_fraction[k];
+        let fractions = &result.summary(Method::Ucb).unwrap().choice_fraction[k];
         assert!(fractions[0] < 0.5, "UCB at k = {}: {fractions:?}", k + 1);
     }
 }
@@ -118,10 +119,11 @@ fn replay_regret_is_no_higher_than_ucb_across_bandits() {
         let result = run_experiment(&table, &opts(200, 100, seed)).unwrap();
         for k in [20, 50, 100] {
             assert!(
-                result.replay.cum_regret[k - 1] <= result.ucb.cum_regret[k - 1],
+                result.summary(Method::ReplaySelection).unwrap().cum_regret[k - 1]
+                    <= result.summary(Method::Ucb).unwrap().cum_regret[k - 1],
                 "means {means:?}, k = {k}: replay {} > UCB {}",
-                result.replay.cum_regret[k - 1],
-                result.ucb.cum_regret[k - 1]
+                result.summary(Method::ReplaySelection).unwrap().cum_regret[k - 1],
+                result.summary(Method::Ucb).unwrap().cum_regret[k - 1]
             );
         }
     }
@@ -143,14 +145,26 @@ fn replay_untried_first_option_reaches_the_selector() {
         paper
             .deployments
             .iter()
-            .all(|d| !d.replay.chosen[1..].contains(&2))
+            .all(|d| !d.run(Method::ReplaySelection).unwrap().chosen[1..].contains(&2))
     );
     o.replay_untried_first = true;
     let forced = run_experiment(&table, &o).unwrap();
     for dep in &forced.deployments {
-        let first: HashSet<usize> = dep.replay.chosen[..3].iter().copied().collect();
-        assert_eq!(first.len(), 3, "{:?}", dep.replay.chosen);
-        assert!(dep.replay.chosen[3..].iter().all(|&i| i == 0));
+        let first: HashSet<usize> = dep.run(Method::ReplaySelection).unwrap().chosen[..3]
+            .iter()
+            .copied()
+            .collect();
+        assert_eq!(
+            first.len(),
+            3,
+            "{:?}",
+            dep.run(Method::ReplaySelection).unwrap().chosen
+        );
+        assert!(
+            dep.run(Method::ReplaySelection).unwrap().chosen[3..]
+                .iter()
+                .all(|&i| i == 0)
+        );
     }
 }
 
@@ -190,7 +204,7 @@ fn deployments_draw_distinct_houses_shared_by_both_methods() {
         assert_eq!(distinct.len(), 4, "{:?}", dep.houses);
         orders.insert(dep.houses.clone());
         for method in Method::ALL {
-            let run = dep.run(method);
+            let run = dep.run(method).unwrap();
             for ((&h, &i), &c) in dep.houses.iter().zip(&run.chosen).zip(&run.costs) {
                 assert_eq!(c, table.costs(h).unwrap()[i]);
             }
@@ -381,13 +395,13 @@ fn check_invariants(table: &CostTable, result: &ExperimentResult) {
     assert!(means.iter().all(|&m| means[best] <= m));
     let s = table.n_strategies();
     for method in Method::ALL {
-        let summary = result.summary(method);
+        let summary = result.summary(method).unwrap();
         for t in 0..result.trials() {
             let k = (t + 1) as f64;
             let mut avg = 0.0;
             let mut regret = 0.0;
             for dep in &result.deployments {
-                let run = dep.run(method);
+                let run = dep.run(method).unwrap();
                 assert_eq!(
                     run.costs[t],
                     table.costs(dep.houses[t]).unwrap()[run.chosen[t]]
@@ -415,7 +429,10 @@ fn check_invariants(table: &CostTable, result: &ExperimentResult) {
         };
         if untried_first && result.trials() >= s {
             for dep in &result.deployments {
-                let first: HashSet<usize> = dep.run(method).chosen[..s].iter().copied().collect();
+                let first: HashSet<usize> = dep.run(method).unwrap().chosen[..s]
+                    .iter()
+                    .copied()
+                    .collect();
                 assert_eq!(first.len(), s);
             }
         }
@@ -527,8 +544,14 @@ fn grouped_tables_draw_one_trial_per_house_per_deployment() {
     };
     let a = run_experiment(&table, &opts).unwrap();
     let b = run_experiment(&singletons, &opts).unwrap();
-    assert_eq!(a.ucb.avg_cost, b.ucb.avg_cost);
-    assert_eq!(a.replay.avg_cost, b.replay.avg_cost);
+    assert_eq!(
+        a.summary(Method::Ucb).unwrap().avg_cost,
+        b.summary(Method::Ucb).unwrap().avg_cost
+    );
+    assert_eq!(
+        a.summary(Method::ReplaySelection).unwrap().avg_cost,
+        b.summary(Method::ReplaySelection).unwrap().avg_cost
+    );
     assert!(table.grouped(vec![0; 3]).is_err());
 }
 
@@ -620,6 +643,9 @@ fn reference_draws_follow_the_reference_script() {
     // Without reference draws every method sees the deployment's houses.
     let plain = run_experiment(&table, &opts(5, 100, 0)).unwrap();
     for d in &plain.deployments {
-        assert!(d.ucb.houses.is_none() && d.houses_of(Method::Ucb) == d.houses.as_slice());
+        assert!(
+            d.run(Method::Ucb).unwrap().houses.is_none()
+                && d.houses_of(Method::Ucb) == d.houses.as_slice()
+        );
     }
 }

@@ -38,20 +38,22 @@ fn paper_like_result() -> ExperimentResult {
         mean_costs: vec![230.0, 240.0, 250.0],
         best_strategy: 0,
         best_avg_cost: vec![230.0; 100],
-        ucb: MethodSummary {
-            method: Method::Ucb,
-            avg_cost: curve([258.72, 254.63, 247.25]),
-            cum_regret: curve([862.6, 1952.0, 3166.0]),
-            paper_regret: curve([884.7, 2102.8, 3800.2]),
-            choice_fraction: fractions(1),
-        },
-        replay: MethodSummary {
-            method: Method::ReplaySelection,
-            avg_cost: curve([248.12, 240.40, 231.29]),
-            cum_regret: curve([650.6, 1240.6, 1570.0]),
-            paper_regret: curve([751.0, 1579.8, 2516.5]),
-            choice_fraction: fractions(0),
-        },
+        summaries: vec![
+            MethodSummary {
+                method: Method::Ucb,
+                avg_cost: curve([258.72, 254.63, 247.25]),
+                cum_regret: curve([862.6, 1952.0, 3166.0]),
+                paper_regret: curve([884.7, 2102.8, 3800.2]),
+                choice_fraction: fractions(1),
+            },
+            MethodSummary {
+                method: Method::ReplaySelection,
+                avg_cost: curve([248.12, 240.40, 231.29]),
+                cum_regret: curve([650.6, 1240.6, 1570.0]),
+                paper_regret: curve([751.0, 1579.8, 2516.5]),
+                choice_fraction: fractions(0),
+            },
+        ],
         deployments: vec![],
     }
 }
@@ -137,7 +139,7 @@ fn selection_rows_cover_every_method_and_k() {
         };
         let t = n % 5;
         assert_eq!((row.method, row.k), (method, t + 1));
-        let summary = result.summary(method);
+        let summary = result.summary(method).unwrap();
         assert_eq!(row.avg_cost, summary.avg_cost[t]);
         assert_eq!(row.cum_regret, summary.cum_regret[t]);
         assert_eq!(row.paper_regret, summary.paper_regret[t]);
@@ -153,4 +155,38 @@ fn selection_rows_cover_every_method_and_k() {
     for pair in choices.chunks(2) {
         assert!((pair[0].fraction + pair[1].fraction - 1.0).abs() < 1e-12);
     }
+}
+
+#[test]
+fn tables_show_the_methods_a_result_holds() {
+    // Tables and rows come from the result's summaries, not from a fixed pair of methods.
+    let mut result = paper_like_result();
+    result
+        .summaries
+        .retain(|s| s.method == Method::ReplaySelection);
+    let md = selection_table_markdown(&result, &PAPER_KS);
+    assert!(
+        md.contains("| Avg. cost (m) | Replay selection | 248.12 |"),
+        "{md}"
+    );
+    assert!(!md.contains("UCB"), "{md}");
+    assert!(!md.contains(" vs. "), "{md}");
+    let strategies = strategy_table_markdown(&result);
+    assert!(
+        strategies.starts_with(
+            "| Strategy | Mean cost (m) | Replay selection: share of trials |\n|---|---:|---:|\n"
+        ),
+        "{strategies}"
+    );
+    assert!(
+        strategies.contains("| `a` (best) | 230.00 | 100.0 % |"),
+        "{strategies}"
+    );
+    assert!(
+        selection_rows(&result)
+            .iter()
+            .all(|r| r.method == Method::ReplaySelection)
+    );
+    assert_eq!(choice_rows(&result).len(), 100 * 3);
+    assert!(result.summary(Method::Ucb).is_none());
 }

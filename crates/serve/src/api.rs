@@ -128,24 +128,45 @@ pub struct UploadScene {
     pub scene: serde_json::Value,
 }
 
-/// How a deployment selects strategies.
-#[derive(Clone, Copy, Debug, Deserialize, ToSchema)]
-#[serde(rename_all = "lowercase")]
-pub enum Selector {
-    /// UCB constrained from below by offline replay costs (the default).
-    Replay,
-    /// Black-box UCB on deployed costs only.
-    Ucb,
-}
+/// How a deployment selects strategies: the name of a selection method (`replay`, the default,
+/// or `ucb`). Its schema lists every method the select crate registers, so a new selector is
+/// offered here without a change to the API code.
+#[derive(Clone, Copy, Debug)]
+pub struct Selector(pub ferret_select::Method);
 
-impl From<Selector> for ferret_select::Method {
-    fn from(s: Selector) -> Self {
-        match s {
-            Selector::Replay => ferret_select::Method::ReplaySelection,
-            Selector::Ucb => ferret_select::Method::Ucb,
-        }
+impl<'de> Deserialize<'de> for Selector {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let name = std::borrow::Cow::<'de, str>::deserialize(d)?;
+        ferret_select::Method::ALL
+            .into_iter()
+            .find(|m| m.name() == name)
+            .map(Selector)
+            .ok_or_else(|| {
+                let names = ferret_select::Method::ALL.map(|m| format!("`{}`", m.name()));
+                serde::de::Error::custom(format!(
+                    "unknown selector `{name}`, expected one of {}",
+                    names.join(", ")
+                ))
+            })
     }
 }
+
+impl utoipa::PartialSchema for Selector {
+    fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
+        utoipa::openapi::ObjectBuilder::new()
+            .schema_type(utoipa::openapi::schema::Type::String)
+            .enum_values(Some(
+                ferret_select::Method::ALL.map(ferret_select::Method::name),
+            ))
+            .description(Some(
+                "How a deployment selects strategies: the name of a selection method \
+                 (default `replay`, UCB constrained from below by offline replay costs).",
+            ))
+            .into()
+    }
+}
+
+impl ToSchema for Selector {}
 
 /// `POST /deployments`.
 #[derive(Debug, Deserialize, ToSchema)]

@@ -849,7 +849,7 @@ impl Service {
             strategies,
             selector: req
                 .selector
-                .map_or(ferret_select::Method::ReplaySelection, Into::into),
+                .map_or(ferret_select::Method::ReplaySelection, |s| s.0),
             c,
             seed,
         };

@@ -733,7 +733,12 @@ fn the_openapi_document_says_what_the_server_enforces() {
     assert_eq!(dep["strategies"]["items"]["enum"], json!(names));
     let selector = serde_json::to_string(&dep["selector"]).unwrap();
     assert!(selector.contains("Selector"), "{selector}");
-    assert_eq!(schemas["Selector"]["enum"], json!(["replay", "ucb"]));
+    let methods: Vec<&str> = ferret_select::Method::ALL
+        .iter()
+        .map(|m| m.name())
+        .collect();
+    assert_eq!(schemas["Selector"]["enum"], json!(methods));
+    assert!(methods.contains(&"replay") && methods.contains(&"ucb"));
     assert_eq!(dep["c"]["maximum"], 1000.0);
     let scene = &schemas["Scene"];
     assert_eq!(

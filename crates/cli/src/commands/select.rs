@@ -174,9 +174,14 @@ pub fn run(args: Args) -> Result<ExitCode> {
     crate::output::write_bytes(&args.out.join("selection.md"), &md)?;
     draw_selection(&result, &args.out)?;
     println!("{md}");
+    let choices: Vec<String> = Method::ALL
+        .iter()
+        .map(|m| format!("choices-{}.png", m.name()))
+        .collect();
     println!(
-        "wrote {}/{{selection.csv,choices.csv,selection.md,selection.png,choices-ucb.png,choices-replay.png}}",
-        args.out.display()
+        "wrote {}/{{selection.csv,choices.csv,selection.md,selection.png,{}}}",
+        args.out.display(),
+        choices.join(",")
     );
     Ok(ExitCode::SUCCESS)
 }
@@ -194,32 +199,28 @@ fn draw_selection(result: &ferret_select::ExperimentResult, out: &Path) -> Resul
         .map(|&k| k as f64)
         .filter(|&k| k <= result.trials() as f64)
         .collect();
+    let curves = |curve: fn(&ferret_select::MethodSummary) -> &[f64]| {
+        result
+            .summaries
+            .iter()
+            .map(|s| (s.method.label().to_string(), ks(curve(s))))
+            .collect::<Vec<_>>()
+    };
+    let mut average = curves(|s| &s.avg_cost);
+    average.push((format!("best single: {best}"), ks(&result.best_avg_cost)));
     let panels = vec![
         CurvePanel {
             title: "Average cost of trials 1..k".into(),
             x_label: "trials k".into(),
             y_label: "average cost (m)".into(),
-            series: vec![
-                (Method::Ucb.label().into(), ks(&result.ucb.avg_cost)),
-                (
-                    Method::ReplaySelection.label().into(),
-                    ks(&result.replay.avg_cost),
-                ),
-                (format!("best single: {best}"), ks(&result.best_avg_cost)),
-            ],
+            series: average,
             marks_at: marks.clone(),
         },
         CurvePanel {
             title: "Cumulative regret".into(),
             x_label: "trials k".into(),
             y_label: "cumulative regret (m)".into(),
-            series: vec![
-                (Method::Ucb.label().into(), ks(&result.ucb.cum_regret)),
-                (
-                    Method::ReplaySelection.label().into(),
-                    ks(&result.replay.cum_regret),
-                ),
-            ],
+            series: curves(|s| &s.cum_regret),
             marks_at: marks,
         },
     ];
@@ -227,8 +228,8 @@ fn draw_selection(result: &ferret_select::ExperimentResult, out: &Path) -> Resul
         Ok(draw_curve_panels(&panels, p)?)
     })?;
     let x: Vec<f64> = (1..=result.trials()).map(|k| k as f64).collect();
-    for method in Method::ALL {
-        let s = result.summary(method);
+    for s in &result.summaries {
+        let method = s.method;
         let shares: Vec<(String, Vec<f64>)> = result
             .strategies
             .iter()

@@ -133,6 +133,11 @@ impl Method {
         }
     }
 
+    /// The method whose [`name`](Method::name) is exactly `name`.
+    pub fn from_name(name: &str) -> Option<Method> {
+        Method::ALL.into_iter().find(|m| m.name() == name)
+    }
+
     /// Human label as in the paper's table.
     pub fn label(self) -> &'static str {
         match self {
@@ -201,16 +206,13 @@ impl FromStr for Method {
         if s == "replay-selection" {
             return Ok(Method::ReplaySelection);
         }
-        Method::ALL
-            .into_iter()
-            .find(|m| m.name() == s)
-            .ok_or_else(|| SelectError::InvalidOption {
-                name: "method",
-                reason: format!(
-                    "unknown method `{s}` (expected {})",
-                    Method::ALL.map(|m| format!("`{}`", m.name())).join(" or ")
-                ),
-            })
+        Method::from_name(s).ok_or_else(|| SelectError::InvalidOption {
+            name: "method",
+            reason: format!(
+                "unknown method `{s}` (expected {})",
+                Method::ALL.map(|m| format!("`{}`", m.name())).join(" or ")
+            ),
+        })
     }
 }
 

@@ -137,9 +137,7 @@ pub struct Selector(pub ferret_select::Method);
 impl<'de> Deserialize<'de> for Selector {
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
         let name = std::borrow::Cow::<'de, str>::deserialize(d)?;
-        ferret_select::Method::ALL
-            .into_iter()
-            .find(|m| m.name() == name)
+        ferret_select::Method::from_name(&name)
             .map(Selector)
             .ok_or_else(|| {
                 let names = ferret_select::Method::ALL.map(|m| format!("`{}`", m.name()));

@@ -15,8 +15,7 @@ use super::types::{
     object_type_for_asset,
 };
 use crate::error::{HouseLocation, Result, WorldError};
-use crate::geometry::segment_distance;
-use crate::geometry::{Footprint, Point, Polygon};
+use crate::geometry::{Footprint, Point, Polygon, segment_distance};
 use crate::house::{
     Container, Door, GroundTruth, House, ObjectType, Obstacle, Pose, Room, RoomType, Scene,
     SmallObject, Wall,

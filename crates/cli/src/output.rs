@@ -11,11 +11,6 @@ pub fn write_bytes(path: &Path, bytes: impl AsRef<[u8]>) -> Result<()> {
     Ok(ferret_lab::files::write_bytes(path, bytes)?)
 }
 
-/// Serde rows as CSV text.
-pub fn csv_bytes<T: Serialize>(rows: &[T]) -> Result<Vec<u8>> {
-    Ok(ferret_lab::files::csv_bytes(rows)?)
-}
-
 /// Writes serde rows as CSV to `path` atomically.
 pub fn write_csv<T: Serialize>(path: &Path, rows: &[T]) -> Result<()> {
     Ok(ferret_lab::files::write_csv(path, rows)?)

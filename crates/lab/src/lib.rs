@@ -4,12 +4,14 @@
 //! faces (the command line, the HTTP service, Python). It owns what an experiment is made of:
 //! where houses come from and their maps ([`houses`]), strategy setup without a command line
 //! ([`strategies`]), evaluation of strategies on the same trials ([`evaluate`]), the run files
-//! `trials.csv` and `run.json` ([`runs`]), summaries and paired statistics ([`summary`]), the
-//! replay table behind selection with its resumable cache ([`replay`]), the one deployment loop
-//! — choose, run, replay, learn — with its house order ([`deploy`]), atomic output files
-//! ([`files`]), and how long work reports progress without printing ([`feedback`]). Faces parse
-//! their input, call these functions and print what they return.
+//! `trials.csv` and `run.json` ([`runs`]), summaries and paired statistics ([`summary`]),
+//! calibration of likelihood sources ([`calibrate`]), the replay table behind selection with its
+//! resumable cache ([`replay`]), selection over an evaluation run ([`selection`]), the one
+//! deployment loop — choose, run, replay, learn — with its house order ([`deploy`]), atomic
+//! output files ([`files`]), and how long work reports progress without printing
+//! ([`feedback`]). Faces parse their input, call these functions and print what they return.
 
+pub mod calibrate;
 pub mod deploy;
 pub mod error;
 pub mod evaluate;
@@ -18,6 +20,7 @@ pub mod files;
 pub mod houses;
 pub mod replay;
 pub mod runs;
+pub mod selection;
 pub mod strategies;
 pub mod summary;
 

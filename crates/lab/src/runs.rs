@@ -153,6 +153,32 @@ pub struct EvalRun {
 }
 
 impl EvalRun {
+    /// The run of `rows` that `info` describes, as `ferret eval` writes it: `info`'s
+    /// `trials_sha256` is set to the hash of the rows' CSV text.
+    pub fn new(mut info: RunInfo, rows: Vec<TrialRow>) -> Result<Self> {
+        let trials_csv = crate::files::csv_bytes(&rows)?;
+        info.trials_sha256 = Some(sha256_hex(&trials_csv));
+        let run_json = serde_json::to_string_pretty(&info)
+            .map_err(|source| LabError::Json {
+                context: "writing run.json".into(),
+                source,
+            })?
+            .into_bytes();
+        Ok(Self {
+            info,
+            rows,
+            run_json,
+            trials_csv,
+        })
+    }
+
+    /// Writes `dir/trials.csv`, then `dir/run.json` (each atomically; [`EvalRun::read`] tells
+    /// a pair of different runs apart by the hash).
+    pub fn write(&self, dir: &Path) -> Result<()> {
+        crate::files::write_bytes(&dir.join("trials.csv"), &self.trials_csv)?;
+        crate::files::write_bytes(&dir.join("run.json"), &self.run_json)
+    }
+
     /// Reads `dir/run.json` and `dir/trials.csv` and checks that they belong together.
     pub fn read(dir: &Path) -> Result<Self> {
         let run_json = read_run_file(&dir.join("run.json"))

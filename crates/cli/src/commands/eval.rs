@@ -6,7 +6,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use ferret_lab::runs::{CELL_M, RunInfo, TrialRow, sha256_hex};
+use ferret_lab::runs::{CELL_M, EvalRun, RunInfo, TrialRow};
 use ferret_lab::summary::{
     SummaryRow, cells_markdown, paired_comparisons, paired_markdown, reference_means,
     reference_means_markdown, summarize, summary_markdown,
@@ -150,8 +150,6 @@ pub fn run(args: Args) -> Result<ExitCode> {
             r.cost_cells = Some(r.cost_m / CELL_M);
         }
     }
-    let trials_csv = crate::output::csv_bytes(&rows)?;
-    crate::output::write_bytes(&args.out.join("trials.csv"), &trials_csv)?;
     let mut summary = summarize(&outcome.rows, &args.strategies);
     if args.cells {
         summary = summary.into_iter().map(SummaryRow::with_cells).collect();
@@ -200,12 +198,9 @@ pub fn run(args: Args) -> Result<ExitCode> {
         trials_per_house: args.trials_per_house,
         protocol,
         strategies: args.strategies.clone(),
-        trials_sha256: Some(sha256_hex(&trials_csv)),
+        trials_sha256: None,
     };
-    crate::output::write_bytes(
-        &args.out.join("run.json"),
-        serde_json::to_string_pretty(&info)?,
-    )?;
+    EvalRun::new(info, rows)?.write(&args.out)?;
     let pictures = draw_pictures(&args, &loaded.scenes, &maps, &strategies, &outcome.rows)?;
     println!("{md}");
     super::llm_setup::write_token_report(&setup.service, &args.out)?;

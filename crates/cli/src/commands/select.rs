@@ -3,15 +3,11 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{Result, bail};
-use ferret_lab::replay::replay_table;
-use ferret_lab::{EvalRun, LabError};
-use ferret_plan::DrawMode;
+use anyhow::Result;
+use ferret_lab::EvalRun;
+use ferret_lab::selection::{SelectionSettings, select};
 use ferret_report::{CurvePanel, draw_choice_shares, draw_curve_panels};
-use ferret_select::{
-    ExperimentOptions, Method, PAPER_KS, choice_rows, run_experiment, selection_rows,
-    selection_table_markdown, strategy_table_markdown,
-};
+use ferret_select::{Method, PAPER_KS, choice_rows, selection_rows};
 
 use crate::common::Bars;
 use crate::output::write_csv;
@@ -58,122 +54,37 @@ pub struct Args {
     protocol: crate::common::ProtocolArgs,
 }
 
-/// Refuses unusable options, naming the option, before any replay runs or output is touched.
-fn validate(args: &Args) -> Result<()> {
-    if args.deployments == 0 {
-        bail!("--deployments 0: must be at least 1");
-    }
-    if args.trials_per_deployment == 0 {
-        bail!("--trials-per-deployment 0: must be at least 1");
-    }
-    let max = ferret_select::MAX_EXPERIMENT_TRIALS;
-    if args
-        .deployments
-        .checked_mul(args.trials_per_deployment)
-        .is_none_or(|n| n > max)
-    {
-        bail!(
-            "--deployments {} × --trials-per-deployment {}: at most {max} deployment trials in all",
-            args.deployments,
-            args.trials_per_deployment
-        );
-    }
-    if !(args.c.is_finite() && args.c >= 0.0) {
-        bail!("--c {}: must be a finite number ≥ 0 m", args.c);
-    }
-    Ok(())
-}
-
 /// Runs `ferret select`.
 pub fn run(args: Args) -> Result<ExitCode> {
-    validate(&args)?;
-    let run = EvalRun::read(&args.trials)?;
-    let info = &run.info;
-    let protocol = args.protocol.resolve(info.protocol)?;
-    if protocol.trial_settings() != info.protocol.trial_settings() {
-        bail!(
-            "{} was made with {}; select asks for {}: selecting over trials of another protocol \
-             would mix them (run eval again instead)",
-            args.trials.display(),
-            info.protocol.trial_settings(),
-            protocol.trial_settings()
-        );
-    }
-    let min_houses = match protocol.draw {
-        DrawMode::Distinct => args.trials_per_deployment,
-        DrawMode::Replacement => 0,
-    };
-    let replay = match replay_table(
-        &run,
-        &protocol,
-        &args.llm.settings(),
-        &args.trials.join("replay.csv"),
-        min_houses,
-        &Bars::default(),
-    ) {
-        Ok(r) => r,
-        Err(LabError::TooFewCandidates) => bail!(
-            "selection needs at least two non-oracle strategies in {}",
-            args.trials.display()
-        ),
-        Err(LabError::TooFewHouses { have, need }) => bail!(
-            "--trials-per-deployment {need}: only {have} houses of {} have a trial of every strategy",
-            args.trials.display()
-        ),
-        Err(e) => return Err(e.into()),
-    };
-    if let Some(service) = &replay.service {
-        super::llm_setup::write_token_report(service, &args.out)?;
-    }
-    let (table, distinct_houses, several) = (
-        &replay.table,
-        replay.distinct_houses,
-        replay.several_per_house(),
-    );
-    let houses = &replay.trials;
-    let opts = ExperimentOptions {
+    let settings = SelectionSettings {
         deployments: args.deployments,
         trials_per_deployment: args.trials_per_deployment,
         c: args.c,
         seed: args.seed,
         replay_untried_first: args.replay_untried_first,
-        with_replacement: protocol.draw == DrawMode::Replacement,
-        ucb_untried_zero: protocol.untried == ferret_plan::UntriedScore::Zero,
-        // The reference's numpy draws are draws with replacement; with distinct houses the
-        // deployments keep ferret's own streams.
-        reference_draws: protocol.rng == ferret_plan::TrialRng::Python
-            && protocol.draw == DrawMode::Replacement,
     };
-    let result = run_experiment(table, &opts)?;
+    // Options are checked before the run is read, so a typo is reported first.
+    settings.validate()?;
+    let run = EvalRun::read(&args.trials)?;
+    let protocol = args.protocol.resolve(run.info.protocol)?;
+    let done = select(
+        &run,
+        &args.trials,
+        &protocol,
+        &args.llm.settings(),
+        &settings,
+        &Bars::default(),
+    )?;
+    if let Some(service) = &done.replay.service {
+        super::llm_setup::write_token_report(service, &args.out)?;
+    }
+    let result = &done.result;
     std::fs::create_dir_all(&args.out)?;
-    write_csv(&args.out.join("selection.csv"), &selection_rows(&result))?;
-    write_csv(&args.out.join("choices.csv"), &choice_rows(&result))?;
-    let ks: Vec<usize> = PAPER_KS
-        .iter()
-        .copied()
-        .filter(|&k| k <= result.trials())
-        .collect();
-    let md = format!(
-        "# Strategy selection\n\n{} deployments × {} trials over {} houses{}, c = {} m, seed {}.\n\n{}\n{}",
-        opts.deployments,
-        opts.trials_per_deployment,
-        distinct_houses,
-        if several {
-            format!(
-                " ({} trials; one per house in each deployment)",
-                houses.len()
-            )
-        } else {
-            String::new()
-        },
-        opts.c,
-        opts.seed,
-        selection_table_markdown(&result, &ks),
-        strategy_table_markdown(&result)
-    );
-    crate::output::write_bytes(&args.out.join("selection.md"), &md)?;
-    draw_selection(&result, &args.out)?;
-    println!("{md}");
+    write_csv(&args.out.join("selection.csv"), &selection_rows(result))?;
+    write_csv(&args.out.join("choices.csv"), &choice_rows(result))?;
+    crate::output::write_bytes(&args.out.join("selection.md"), &done.markdown)?;
+    draw_selection(result, &args.out)?;
+    println!("{}", done.markdown);
     let choices: Vec<String> = Method::ALL
         .iter()
         .map(|m| format!("choices-{}.png", m.name()))

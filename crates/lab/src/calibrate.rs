@@ -1,0 +1,442 @@
+//! Calibration of likelihood sources: every (house, target, container) of the houses is a pair
+//! (P_S, whether the container holds the target); each source gets a Brier score, log loss,
+//! AUROC and reliability bins, and an LLM source can be fused with the prior by a logistic fit on
+//! the same pairs.
+
+use std::sync::Arc;
+
+use ferret_llm::LlmService;
+use ferret_plan::{
+    Calibration, FusionFile, FusionFit, FusionWeights, LikelihoodSource, Prior, TrainingScore,
+    draw_trial, prior_fingerprint,
+};
+use ferret_world::{House, ObjectType, Scene};
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::error::{LabError, Result};
+use crate::feedback::Feedback;
+use crate::houses::LoadedHouses;
+use crate::strategies::{LlmSettings, PlanningSettings, full_registry, prefetch};
+
+/// The sources scored when none are named.
+pub const DEFAULT_SOURCES: &str = "model/uniform,model/prior";
+
+/// How many targets per house.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TargetCount {
+    /// Every target type present.
+    All,
+    /// At most this many.
+    N(usize),
+}
+
+impl std::str::FromStr for TargetCount {
+    type Err = String;
+
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        if s.eq_ignore_ascii_case("all") {
+            return Ok(TargetCount::All);
+        }
+        match s.parse::<usize>() {
+            Ok(0) | Err(_) => Err(format!("`{s}` is neither `all` nor a positive number")),
+            Ok(n) => Ok(TargetCount::N(n)),
+        }
+    }
+}
+
+impl TargetCount {
+    fn per_house(self, noun: &str) -> String {
+        match self {
+            TargetCount::All => "every target type present".to_string(),
+            TargetCount::N(n) => format!("up to {n} {noun}"),
+        }
+    }
+}
+
+/// One row of `calibration.csv`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct CalibrationRow {
+    /// The source's spec.
+    pub source: String,
+    /// (house, target, container) pairs.
+    pub pairs: u64,
+    /// Pairs whose container holds the target.
+    pub positives: u64,
+    /// Brier score.
+    pub brier: f64,
+    /// Log loss.
+    pub log_loss: f64,
+    /// AUROC (empty without both classes).
+    pub auroc: Option<f64>,
+    /// Mean P_S of holders.
+    pub mean_p_pos: Option<f64>,
+    /// Mean P_S of non-holders.
+    pub mean_p_neg: Option<f64>,
+}
+
+/// What a calibration scores.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CalibrationSettings {
+    /// Likelihood sources as strategy specs (any planner suffix is ignored).
+    pub sources: Vec<String>,
+    /// Targets per house.
+    pub targets_per_house: TargetCount,
+    /// Seed of the target choice (with [`TargetCount::N`]).
+    pub seed: u64,
+    /// Bins of the reliability diagram.
+    pub bins: usize,
+    /// Also fit the fusion of the prior with each LLM source among `sources`.
+    pub fit_fusion: bool,
+}
+
+impl Default for CalibrationSettings {
+    fn default() -> Self {
+        Self {
+            sources: DEFAULT_SOURCES.split(',').map(String::from).collect(),
+            targets_per_house: TargetCount::All,
+            seed: 0,
+            bins: 10,
+            fit_fusion: false,
+        }
+    }
+}
+
+/// What a calibration found. Failures of single sources or trials are in `errors`; everything
+/// else was scored.
+pub struct Calibrated {
+    /// One row per scored source, in the order asked.
+    pub rows: Vec<CalibrationRow>,
+    /// Each scored source's full calibration (with its reliability bins).
+    pub scored: Vec<(String, Calibration)>,
+    /// The fitted fusions, when asked for.
+    pub fusion: Option<FusionFile>,
+    /// (house, target) pairs scored.
+    pub trials: usize,
+    /// `calibration.md`: the table of scores.
+    pub markdown: String,
+    /// What failed, one message each.
+    pub errors: Vec<String>,
+    /// The LLM service the sources asked (for its token report).
+    pub service: Arc<LlmService>,
+}
+
+/// The targets scored in one house: with `N`, the eval's target first, then others in a seeded
+/// order.
+pub fn targets_for(scene: &Scene, count: TargetCount, seed: u64) -> Vec<ObjectType> {
+    let all: Vec<ObjectType> = scene.truth.target_types().into_iter().collect();
+    match count {
+        TargetCount::All => all,
+        TargetCount::N(n) => {
+            let first = draw_trial(&scene.house, &scene.truth, seed, 0.0)
+                .ok()
+                .map(|t| t.target);
+            let mut rest: Vec<ObjectType> = all
+                .into_iter()
+                .filter(|t| Some(t) != first.as_ref())
+                .collect();
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
+                seed ^ (scene.house.index as u64).wrapping_mul(0x2545_F491_4F6C_DD1D),
+            );
+            rest.shuffle(&mut rng);
+            first.into_iter().chain(rest).take(n).collect()
+        }
+    }
+}
+
+/// Scores `settings.sources` on `loaded`: every question an LLM source asks goes through the
+/// response cache first, each at most once.
+///
+/// Errors (before anything is scored): no houses, no sources, no house holding a target, a
+/// source that plans over no likelihood source, a fusion fit without an LLM source, and the
+/// errors of strategy setup and of LLM prefetching.
+pub fn calibrate(
+    loaded: &LoadedHouses,
+    planning: &PlanningSettings,
+    llm: &LlmSettings,
+    settings: &CalibrationSettings,
+    feedback: &dyn Feedback,
+) -> Result<Calibrated> {
+    if loaded.scenes.is_empty() {
+        return Err(LabError::invalid(format!(
+            "no houses to score in {}",
+            loaded.source
+        )));
+    }
+    if settings.sources.is_empty() {
+        return Err(LabError::invalid("--sources names no source"));
+    }
+    if !(1..=100).contains(&settings.bins) {
+        return Err(LabError::invalid(format!(
+            "--bins {}: must be between 1 and 100",
+            settings.bins
+        )));
+    }
+    let fitted: Vec<String> = if settings.fit_fusion {
+        let fit: Vec<String> = settings
+            .sources
+            .iter()
+            .filter(|s| s.starts_with(&format!("{}/", ferret_llm::LLM_MODEL)))
+            .cloned()
+            .collect();
+        if fit.is_empty() {
+            return Err(LabError::invalid(
+                "--fit-fusion: --sources names no llm+model/<prompt>/<llm> source to fuse with the prior",
+            ));
+        }
+        fit
+    } else {
+        Vec::new()
+    };
+    // The prior is needed to fit a fusion even when it is not scored itself.
+    let mut needed = settings.sources.clone();
+    if !fitted.is_empty() {
+        needed.push("model/prior".into());
+    }
+    let setup = full_registry(planning, llm, &needed)?;
+    let mut sources: Vec<(String, Arc<dyn LikelihoodSource>)> = Vec::new();
+    for spec in &settings.sources {
+        let strategy = setup.registry.build(spec)?;
+        let source = strategy.likelihood_source().cloned().ok_or_else(|| {
+            LabError::invalid(format!(
+                "{spec} plans over no likelihood source (use model/... or llm+model/...)"
+            ))
+        })?;
+        sources.push((spec.clone(), source));
+    }
+    let trials: Vec<(&House, ObjectType, &Scene)> = loaded
+        .scenes
+        .iter()
+        .flat_map(|s| {
+            targets_for(s, settings.targets_per_house, settings.seed)
+                .into_iter()
+                .map(move |t| (&s.house, t, s))
+        })
+        .collect();
+    if trials.is_empty() {
+        return Err(LabError::invalid(format!(
+            "no house in {} holds a target object",
+            loaded.source
+        )));
+    }
+    let pairs: Vec<(&House, &ObjectType)> = trials.iter().map(|(h, t, _)| (*h, t)).collect();
+    let dropped = prefetch(&setup.service, llm, &settings.sources, &pairs, feedback)?;
+    sources.retain(|(spec, _)| !dropped.contains(spec));
+
+    let mut rows = Vec::new();
+    let mut scored = Vec::new();
+    let mut errors = Vec::new();
+    let holds: Vec<Vec<bool>> = trials
+        .iter()
+        .map(|(house, target, scene)| {
+            (0..house.containers.len())
+                .map(|c| scene.truth.holds(c, target))
+                .collect()
+        })
+        .collect();
+    // Each source's probabilities per trial (None where it failed), kept for the fusion fit.
+    let mut per_source: Vec<(String, Vec<Option<Vec<f64>>>)> = Vec::new();
+    for (spec, source) in &sources {
+        let probabilities =
+            source_probabilities(spec, source.as_ref(), &trials, &mut errors, feedback);
+        let all: Vec<(f64, bool)> = probabilities
+            .iter()
+            .zip(&holds)
+            .filter_map(|(p, h)| p.as_ref().map(|p| p.iter().copied().zip(h.iter().copied())))
+            .flatten()
+            .collect();
+        per_source.push((spec.clone(), probabilities));
+        let Some(c) = Calibration::score(&all, settings.bins) else {
+            errors.push(format!("{spec}: no pairs scored"));
+            continue;
+        };
+        rows.push(CalibrationRow {
+            source: spec.clone(),
+            pairs: c.pairs,
+            positives: c.positives,
+            brier: c.brier,
+            log_loss: c.log_loss,
+            auroc: c.auroc,
+            mean_p_pos: c.mean_p_pos,
+            mean_p_neg: c.mean_p_neg,
+        });
+        scored.push((spec.clone(), c));
+    }
+    let fusion = if settings.fit_fusion {
+        let prior = setup
+            .prior
+            .clone()
+            .ok_or_else(|| LabError::invalid("--fit-fusion needs the prior"))?;
+        let prior_p = source_probabilities(
+            "model/prior",
+            prior.as_ref(),
+            &trials,
+            &mut errors,
+            feedback,
+        );
+        let trained_on = format!(
+            "{} houses from {}, {} ({} house–target pairs)",
+            loaded.scenes.len(),
+            loaded.source,
+            settings
+                .targets_per_house
+                .per_house("target types per house"),
+            trials.len()
+        );
+        let mut fits = Vec::new();
+        for (spec, probabilities) in per_source.iter().filter(|(s, _)| fitted.contains(s)) {
+            match fit_fusion(spec, &prior, &prior_p, probabilities, &holds, &trained_on) {
+                Ok(f) => fits.push(f),
+                Err(e) => errors.push(format!("--fit-fusion: {spec}: {e}")),
+            }
+        }
+        Some(FusionFile::new(fits))
+    } else {
+        None
+    };
+    let markdown = calibration_markdown(
+        &scored,
+        &loaded.source,
+        loaded.scenes.len(),
+        trials.len(),
+        settings.targets_per_house,
+    );
+    Ok(Calibrated {
+        rows,
+        scored,
+        fusion,
+        trials: trials.len(),
+        markdown,
+        errors,
+        service: setup.service,
+    })
+}
+
+/// The probabilities `source` gives on every trial; a failure is recorded in `errors` and
+/// leaves that trial's entry `None`.
+fn source_probabilities(
+    spec: &str,
+    source: &dyn LikelihoodSource,
+    trials: &[(&House, ObjectType, &Scene)],
+    errors: &mut Vec<String>,
+    feedback: &dyn Feedback,
+) -> Vec<Option<Vec<f64>>> {
+    feedback.begin("calibrating", trials.len());
+    let per_trial: Vec<std::result::Result<Vec<f64>, String>> = trials
+        .par_iter()
+        .map(|(house, target, _)| {
+            let p = source
+                .likelihoods(house, target)
+                .map(|p| p.iter().map(|p| p.get()).collect())
+                .map_err(|e| format!("{spec}: {}: {e}", house.name));
+            feedback.tick();
+            p
+        })
+        .collect();
+    feedback.end();
+    per_trial
+        .into_iter()
+        .map(|r| r.map_err(|e| errors.push(e)).ok())
+        .collect()
+}
+
+/// The fusion of the prior with the LLM source `spec`, fitted on every trial both answered.
+fn fit_fusion(
+    spec: &str,
+    prior: &Prior,
+    prior_p: &[Option<Vec<f64>>],
+    llm_p: &[Option<Vec<f64>>],
+    holds: &[Vec<bool>],
+    trained_on: &str,
+) -> Result<FusionFit> {
+    let samples: Vec<(f64, f64, bool)> = prior_p
+        .iter()
+        .zip(llm_p)
+        .zip(holds)
+        .filter_map(|((p, l), h)| Some((p.as_ref()?, l.as_ref()?, h)))
+        .flat_map(|(p, l, h)| p.iter().zip(l).zip(h).map(|((&p, &l), &h)| (p, l, h)))
+        .collect();
+    let weights = FusionWeights::fit(&samples).ok_or_else(|| {
+        LabError::invalid("the fit needs containers that hold the target and ones that do not")
+    })?;
+    let score = |f: &dyn Fn(&(f64, f64, bool)) -> f64| -> Result<TrainingScore> {
+        let pairs: Vec<(f64, bool)> = samples.iter().map(|s| (f(s), s.2)).collect();
+        let c = Calibration::score(&pairs, 10).ok_or_else(|| LabError::invalid("no pairs"))?;
+        Ok(TrainingScore {
+            brier: c.brier,
+            auroc: c.auroc,
+        })
+    };
+    let parsed = ferret_plan::StrategySpec::parse(spec)?;
+    let llm = ferret_llm::LlmSpec::parse(&parsed)
+        .ok_or_else(|| LabError::invalid("not an LLM source"))??;
+    Ok(FusionFit {
+        source: format!("{}/{}", llm.prompt, llm.llm),
+        weights,
+        prior: prior_fingerprint(prior),
+        trained_on: trained_on.to_string(),
+        pairs: samples.len() as u64,
+        positives: samples.iter().filter(|s| s.2).count() as u64,
+        prior_score: score(&|s| s.0)?,
+        source_score: score(&|s| s.1)?,
+        fused_score: score(&|s| weights.fuse(s.0, s.1))?,
+    })
+}
+
+/// The fitted fusions as Markdown.
+pub fn fusion_markdown(file: &FusionFile) -> String {
+    let mut md = String::from(
+        "## Fusion with the prior (logit P = a·logit P_prior + b·logit P_llm + c)\n\n| source | a | b | c | pairs | Brier prior / LLM / fused | AUROC prior / LLM / fused |\n|---|---:|---:|---:|---:|---|---|\n",
+    );
+    let auroc = |a: Option<f64>| a.map_or_else(|| "–".into(), |a| format!("{a:.3}"));
+    for f in &file.fits {
+        md.push_str(&format!(
+            "| {} | {:.3} | {:.3} | {:.3} | {} | {:.4} / {:.4} / {:.4} | {} / {} / {} |\n",
+            f.source,
+            f.weights.a,
+            f.weights.b,
+            f.weights.c,
+            f.pairs,
+            f.prior_score.brier,
+            f.source_score.brier,
+            f.fused_score.brier,
+            auroc(f.prior_score.auroc),
+            auroc(f.source_score.auroc),
+            auroc(f.fused_score.auroc),
+        ));
+    }
+    md
+}
+
+/// The table of scores as Markdown.
+pub fn calibration_markdown(
+    scored: &[(String, Calibration)],
+    source: &str,
+    houses: usize,
+    trials: usize,
+    targets: TargetCount,
+) -> String {
+    let per_house = targets.per_house("target types");
+    let mut md = format!(
+        "# Calibration of likelihood sources\n\n{houses} houses from {source}, {per_house} per house ({trials} house–target pairs), every container: P_S(target, container) against whether it holds the target. Brier and log loss: lower is better; AUROC: 0.5 is chance.\n\n"
+    );
+    md.push_str("| source | pairs | holders | Brier | log loss | AUROC | mean p (holders) | mean p (others) |\n");
+    md.push_str("|---|---:|---:|---:|---:|---:|---:|---:|\n");
+    let opt =
+        |v: Option<f64>, digits: usize| v.map_or_else(|| "–".into(), |v| format!("{v:.digits$}"));
+    for (name, c) in scored {
+        md.push_str(&format!(
+            "| {name} | {} | {} | {:.4} | {:.4} | {} | {} | {} |\n",
+            c.pairs,
+            c.positives,
+            c.brier,
+            c.log_loss,
+            opt(c.auroc, 3),
+            opt(c.mean_p_pos, 3),
+            opt(c.mean_p_neg, 3),
+        ));
+    }
+    md
+}

@@ -1,0 +1,196 @@
+//! Strategy selection over an evaluation run (the paper's deployment experiment): every
+//! strategy replayed on every trial of the run (the replay table, cached beside the run), then
+//! many deployments of distinct houses, each run by every selection method.
+
+use std::path::Path;
+
+use ferret_plan::{DrawMode, Protocol, TrialRng, UntriedScore};
+use ferret_select::{
+    DEFAULT_C, ExperimentOptions, ExperimentResult, MAX_EXPERIMENT_TRIALS, PAPER_KS,
+    run_experiment, selection_table_markdown, strategy_table_markdown,
+};
+
+use crate::error::{LabError, Result};
+use crate::feedback::Feedback;
+use crate::replay::{ReplayTable, replay_table};
+use crate::runs::EvalRun;
+use crate::strategies::LlmSettings;
+
+/// The name of the replay cache in an evaluation run's directory.
+pub const REPLAY_CACHE: &str = "replay.csv";
+
+/// How many deployments, how long, and how selectors explore.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SelectionSettings {
+    /// Number of deployments.
+    pub deployments: usize,
+    /// Trials per deployment, each in a distinct house unless the protocol draws with
+    /// replacement.
+    pub trials_per_deployment: usize,
+    /// Exploration constant c, metres.
+    pub c: f64,
+    /// Seed of the deployment orders and tie breaks.
+    pub seed: u64,
+    /// Make replay selection deploy every strategy once before trusting replay costs.
+    pub replay_untried_first: bool,
+}
+
+impl Default for SelectionSettings {
+    fn default() -> Self {
+        Self {
+            deployments: 500,
+            trials_per_deployment: 100,
+            c: DEFAULT_C,
+            seed: 0,
+            replay_untried_first: false,
+        }
+    }
+}
+
+impl SelectionSettings {
+    /// Refuses unusable settings, naming the option, before any replay runs.
+    pub fn validate(&self) -> Result<()> {
+        if self.deployments == 0 {
+            return Err(LabError::invalid("--deployments 0: must be at least 1"));
+        }
+        if self.trials_per_deployment == 0 {
+            return Err(LabError::invalid(
+                "--trials-per-deployment 0: must be at least 1",
+            ));
+        }
+        if self
+            .deployments
+            .checked_mul(self.trials_per_deployment)
+            .is_none_or(|n| n > MAX_EXPERIMENT_TRIALS)
+        {
+            return Err(LabError::invalid(format!(
+                "--deployments {} × --trials-per-deployment {}: at most {MAX_EXPERIMENT_TRIALS} deployment trials in all",
+                self.deployments, self.trials_per_deployment
+            )));
+        }
+        if !(self.c.is_finite() && self.c >= 0.0) {
+            return Err(LabError::invalid(format!(
+                "--c {}: must be a finite number ≥ 0 m",
+                self.c
+            )));
+        }
+        Ok(())
+    }
+
+    /// The experiment's options under `protocol`.
+    pub fn options(&self, protocol: &Protocol) -> ExperimentOptions {
+        ExperimentOptions {
+            deployments: self.deployments,
+            trials_per_deployment: self.trials_per_deployment,
+            c: self.c,
+            seed: self.seed,
+            replay_untried_first: self.replay_untried_first,
+            with_replacement: protocol.draw == DrawMode::Replacement,
+            ucb_untried_zero: protocol.untried == UntriedScore::Zero,
+            // The reference's numpy draws are draws with replacement; with distinct houses the
+            // deployments keep ferret's own streams.
+            reference_draws: protocol.rng == TrialRng::Python
+                && protocol.draw == DrawMode::Replacement,
+        }
+    }
+}
+
+/// A finished selection: the replay table it ran on and what the deployments did.
+pub struct Selection {
+    /// The replay table (with the LLM service, when replays asked an LLM).
+    pub replay: ReplayTable,
+    /// The experiment's result.
+    pub result: ExperimentResult,
+    /// `selection.md`: the paper's table II and the strategies' mean costs.
+    pub markdown: String,
+}
+
+/// Selects over the evaluation run `run`, read from `dir`, under `protocol`: its trial
+/// settings must be the run's (a run is never mixed with another protocol's trials); its replay
+/// mode and house draw act here. Replays are read from and appended to `dir/replay.csv`.
+///
+/// Errors: unusable settings, another protocol's trials, fewer than two candidates, too few
+/// houses for deployments of distinct houses, and the errors of replaying.
+pub fn select(
+    run: &EvalRun,
+    dir: &Path,
+    protocol: &Protocol,
+    llm: &LlmSettings,
+    settings: &SelectionSettings,
+    feedback: &dyn Feedback,
+) -> Result<Selection> {
+    settings.validate()?;
+    let info = &run.info;
+    if protocol.trial_settings() != info.protocol.trial_settings() {
+        return Err(LabError::invalid(format!(
+            "{} was made with {}; select asks for {}: selecting over trials of another protocol \
+             would mix them (run eval again instead)",
+            dir.display(),
+            info.protocol.trial_settings(),
+            protocol.trial_settings()
+        )));
+    }
+    let min_houses = match protocol.draw {
+        DrawMode::Distinct => settings.trials_per_deployment,
+        DrawMode::Replacement => 0,
+    };
+    let replay = match replay_table(
+        run,
+        protocol,
+        llm,
+        &dir.join(REPLAY_CACHE),
+        min_houses,
+        feedback,
+    ) {
+        Ok(r) => r,
+        Err(LabError::TooFewCandidates) => {
+            return Err(LabError::invalid(format!(
+                "selection needs at least two non-oracle strategies in {}",
+                dir.display()
+            )));
+        }
+        Err(LabError::TooFewHouses { have, need }) => {
+            return Err(LabError::invalid(format!(
+                "--trials-per-deployment {need}: only {have} houses of {} have a trial of every strategy",
+                dir.display()
+            )));
+        }
+        Err(e) => return Err(e),
+    };
+    let opts = settings.options(protocol);
+    let result = run_experiment(&replay.table, &opts)?;
+    let markdown = selection_markdown(&replay, &result);
+    Ok(Selection {
+        replay,
+        result,
+        markdown,
+    })
+}
+
+/// `selection.md` of a selection: what ran, table II at the paper's k and the strategies.
+fn selection_markdown(replay: &ReplayTable, result: &ExperimentResult) -> String {
+    let opts = &result.options;
+    let ks: Vec<usize> = PAPER_KS
+        .iter()
+        .copied()
+        .filter(|&k| k <= result.trials())
+        .collect();
+    format!(
+        "# Strategy selection\n\n{} deployments × {} trials over {} houses{}, c = {} m, seed {}.\n\n{}\n{}",
+        opts.deployments,
+        opts.trials_per_deployment,
+        replay.distinct_houses,
+        if replay.several_per_house() {
+            format!(
+                " ({} trials; one per house in each deployment)",
+                replay.trials.len()
+            )
+        } else {
+            String::new()
+        },
+        opts.c,
+        opts.seed,
+        selection_table_markdown(result, &ks),
+        strategy_table_markdown(result)
+    )
+}

@@ -1,8 +1,9 @@
 //! The deployment loop: before each trial a selector chooses a strategy, the trial runs, every
 //! other candidate is replayed on what the trial revealed, and the selector learns from the
 //! costs. [`Deployment`] is the loop's state, shared by batch deployments ([`deploy`]) and by
-//! a service that runs one step per request; [`HouseOrder`] is the order of houses a batch
-//! deployment visits.
+//! a service that runs one step per request; [`house_order`] is the order of houses a batch
+//! deployment visits. The selection experiment drives the same selector loop
+//! ([`LiveDeployment`]) over a table of costs instead of trials.
 
 use std::sync::Arc;
 
@@ -10,10 +11,9 @@ use ferret_plan::{
     DrawMode, Protocol, ReplayMode, SearchProblem, Strategy, TrialSpec, TrialsPerHouse,
     replay_costs, run_trial,
 };
-use ferret_select::{LiveDeployment, Method, TrialEnd};
+use ferret_select::{HouseOrder, LiveDeployment, Method, TrialEnd};
 use ferret_world::{GridParams, GroundTruth, ObjectType, Scene, TravelCost};
-use rand::seq::SliceRandom;
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use crate::error::{LabError, Result};
@@ -140,53 +140,34 @@ impl Deployment {
     }
 }
 
-/// The houses a batch deployment visits, in order, and the stream that picks among a house's
-/// drawn targets.
-pub struct HouseOrder {
-    houses: Vec<usize>,
-    rng: ChaCha8Rng,
-}
-
-impl HouseOrder {
-    /// `trials` visits of `count` houses: cycling through them in file order when the targets
-    /// are given (a robot in one home), else shuffled distinct houses or draws with replacement
-    /// as `draw` says, from `seed`.
-    pub fn new(
-        count: usize,
-        trials: usize,
-        given_targets: bool,
-        draw: DrawMode,
-        seed: u64,
-    ) -> Result<Self> {
-        if count == 0 {
-            return Err(LabError::invalid("no houses to deploy in"));
-        }
-        if !given_targets && draw == DrawMode::Distinct && trials > count {
-            return Err(LabError::invalid(format!(
-                "{trials} trials need {trials} distinct houses; there are {count}"
-            )));
-        }
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let mut houses: Vec<usize> = if given_targets {
-            (0..trials).map(|k| k % count).collect()
-        } else {
-            match draw {
-                DrawMode::Distinct => {
-                    let mut order: Vec<usize> = (0..count).collect();
-                    order.shuffle(&mut rng);
-                    order
-                }
-                DrawMode::Replacement => (0..trials).map(|_| rng.random_range(0..count)).collect(),
-            }
-        };
-        houses.truncate(trials);
-        Ok(Self { houses, rng })
+/// The houses a batch deployment visits: `trials` visits of `count` houses, cycling through
+/// them in file order when the targets are given (a robot in one home), else shuffled distinct
+/// houses or draws with replacement as `draw` says, from `seed`; the same stream then picks
+/// among a house's drawn targets.
+pub fn house_order(
+    count: usize,
+    trials: usize,
+    given_targets: bool,
+    draw: DrawMode,
+    seed: u64,
+) -> Result<HouseOrder> {
+    if count == 0 {
+        return Err(LabError::invalid("no houses to deploy in"));
     }
-
-    /// The house (position in the loaded houses) of each trial.
-    pub fn houses(&self) -> &[usize] {
-        &self.houses
+    if !given_targets && draw == DrawMode::Distinct && trials > count {
+        return Err(LabError::invalid(format!(
+            "{trials} trials need {trials} distinct houses; there are {count}"
+        )));
     }
+    let rng = ChaCha8Rng::seed_from_u64(seed);
+    Ok(if given_targets {
+        HouseOrder::cycling(count, trials, seed)?
+    } else {
+        match draw {
+            DrawMode::Distinct => HouseOrder::shuffled(count, trials, rng)?,
+            DrawMode::Replacement => HouseOrder::with_replacement(count, trials, rng)?,
+        }
+    })
 }
 
 /// What a batch deployment runs.
@@ -236,7 +217,7 @@ pub fn deploy(
             settings.find.len()
         )));
     }
-    let mut order = HouseOrder::new(
+    let mut order = house_order(
         scenes.len(),
         settings.trials,
         given,
@@ -250,7 +231,7 @@ pub fn deploy(
         protocol: settings.protocol,
     };
     let mut done = Vec::new();
-    let houses = order.houses.clone();
+    let houses = order.houses().to_vec();
     for (k, &h) in houses.iter().enumerate() {
         let scene = &scenes[h];
         let (_, distances) = match ferret_world::distance::build(&scene.house, settings.grid) {
@@ -279,7 +260,7 @@ pub fn deploy(
             // so that single-target deployments do not depend on it.
             let pick = match settings.per_house {
                 TrialsPerHouse::One => 0,
-                _ => order.rng.random_range(0..drawn.len()),
+                _ => order.pick(drawn.len()),
             };
             drawn.swap_remove(pick)
         };

@@ -24,10 +24,11 @@ pub mod selection;
 pub mod strategies;
 pub mod summary;
 
-pub use deploy::{DeploySettings, DeployedTrial, Deployment, DeploymentStep, HouseOrder, deploy};
+pub use deploy::{DeploySettings, DeployedTrial, Deployment, DeploymentStep, deploy, house_order};
 pub use error::{LabError, Result};
 pub use evaluate::{Evaluation, TrialDraw, evaluate, trial_row};
 pub use feedback::{Feedback, Silent};
+pub use ferret_select::HouseOrder;
 pub use houses::{HouseSource, LoadedHouses, Mapped, build_maps};
 pub use runs::{CELL_M, EvalRun, RunInfo, TrialRow, sha256_hex};
 pub use strategies::{

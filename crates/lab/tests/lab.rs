@@ -5,8 +5,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use ferret_lab::{
-    DeploySettings, Deployment, Feedback, HouseOrder, PlanningSettings, Silent, TrialDraw,
-    build_maps, deploy, evaluate, summarize,
+    DeploySettings, Deployment, Feedback, PlanningSettings, Silent, TrialDraw, build_maps, deploy,
+    evaluate, house_order, summarize,
 };
 use ferret_plan::{
     DrawMode, Protocol, ReplayMode, SearchProblem, Strategy, TrialsPerHouse, replay_costs,
@@ -156,7 +156,7 @@ proptest! {
     #[test]
     fn house_orders_visit_what_their_draw_says(count in 1usize..40, trials in 1usize..60, seed: u64, given: bool, replacement: bool) {
         let draw = if replacement { DrawMode::Replacement } else { DrawMode::Distinct };
-        match HouseOrder::new(count, trials, given, draw, seed) {
+        match house_order(count, trials, given, draw, seed) {
             Err(_) => prop_assert!(!given && !replacement && trials > count),
             Ok(order) => {
                 let h = order.houses();
@@ -170,7 +170,7 @@ proptest! {
                     seen.dedup();
                     prop_assert_eq!(seen.len(), trials, "distinct houses");
                 }
-                let again = HouseOrder::new(count, trials, given, draw, seed).unwrap();
+                let again = house_order(count, trials, given, draw, seed).unwrap();
                 prop_assert_eq!(again.houses(), h, "the seed decides the order");
             }
         }

@@ -1,15 +1,16 @@
 //! The deployment experiment of the paper (section VI-C): many deployments, each a random
-//! sequence of distinct houses, run once with every selection method of [`Method::ALL`].
+//! sequence of distinct houses ([`HouseOrder`]), run once with every selection method of
+//! [`Method::ALL`], each method a [`LiveDeployment`] whose trials are looked up in a cost table
+//! instead of run.
 
-use rand::seq::index;
-use rand::{Rng, RngCore, SeedableRng};
+use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::numpy::LegacyRandomState;
 use crate::selector::check_c;
-use crate::{CostTable, DEFAULT_C, Method, SelectError, Selector};
+use crate::{CostTable, DEFAULT_C, HouseOrder, LiveDeployment, Method, SelectError};
 
 /// Most deployment trials (`deployments × trials_per_deployment`) one experiment keeps: every
 /// trial is held in memory (about 40 bytes each, so 5 M take 200 MB), and the paper's experiment
@@ -313,40 +314,33 @@ fn run_deployment(
         return run_reference_deployment(table, opts, base, d);
     }
     let groups = table.groups();
-    let drawn = if opts.with_replacement {
-        let mut rng = stream(base, d, 0);
-        (0..opts.trials_per_deployment)
-            .map(|_| rng.random_range(0..groups.len()))
-            .collect()
+    let draw = stream(base, d, 0);
+    let order = if opts.with_replacement {
+        HouseOrder::with_replacement(groups.len(), opts.trials_per_deployment, draw)?
     } else {
-        index::sample(
-            &mut stream(base, d, 0),
-            groups.len(),
-            opts.trials_per_deployment,
-        )
-        .into_vec()
+        HouseOrder::sampled(groups.len(), opts.trials_per_deployment, draw)?
     };
     // One trial of each drawn house; a house with one trial draws nothing more, so a table of
     // one trial per house gives the same deployments grouped or not.
-    let mut pick = stream(base, d, 3);
+    let mut order = order.picking_from(stream(base, d, 3));
+    let drawn = order.houses().to_vec();
     let houses: Vec<usize> = drawn
         .into_iter()
         .map(|g| match groups[g].as_slice() {
             [only] => *only,
-            rows => rows[pick.random_range(0..rows.len())],
+            rows => rows[order.pick(rows.len())],
         })
         .collect();
     let runs = Method::ALL
         .into_iter()
         .enumerate()
         .map(|(m, method)| {
-            let mut selector = method.configured(table.n_strategies(), opts)?;
-            run_selector(
-                selector.as_mut(),
-                table,
-                &houses,
-                &mut method_stream(base, d, m),
-            )
+            let mut live = LiveDeployment::with_selector(
+                method.configured(table.n_strategies(), opts)?,
+                opts.c,
+                method_stream(base, d, m),
+            );
+            run_on_table(&mut live, table, &houses)
         })
         .collect::<Result<_, _>>()?;
     Ok(Deployment { houses, runs })
@@ -379,23 +373,17 @@ fn run_reference_deployment(
     let houses: Vec<usize> = (0..opts.trials_per_deployment)
         .map(|_| row_of(order[np.choice(order.len())]))
         .collect();
-    let mut run = |selector: &mut dyn Selector| -> Result<MethodRun, SelectError> {
-        let method = selector.method();
+    let mut run = |mut live: LiveDeployment| -> Result<MethodRun, SelectError> {
+        let method = live.method();
         let (mut np, order) = shuffled();
         let mut rows = Vec::with_capacity(opts.trials_per_deployment);
         let mut chosen = Vec::with_capacity(opts.trials_per_deployment);
         let mut costs = Vec::with_capacity(opts.trials_per_deployment);
         for _ in 0..opts.trials_per_deployment {
             let h = row_of(order[np.choice(order.len())]);
-            let i = selector.choose_with(&mut |ties| np.choice(ties));
-            let replay = table
-                .replay_costs(h, i)
-                .ok_or(SelectError::StrategyOutOfRange {
-                    index: i,
-                    strategies: table.n_strategies(),
-                })?;
-            let cost = table.cost_at(h, i);
-            selector.observe(i, cost, replay)?;
+            let i = live.choose_with(&mut |ties| np.choice(ties));
+            let (cost, replay) = trial_costs(table, h, i)?;
+            live.finish(cost, replay)?;
             rows.push(h);
             chosen.push(i);
             costs.push(cost);
@@ -409,7 +397,15 @@ fn run_reference_deployment(
     };
     let runs = Method::ALL
         .into_iter()
-        .map(|method| run(method.configured(table.n_strategies(), opts)?.as_mut()))
+        .map(|method| {
+            let selector = method.configured(table.n_strategies(), opts)?;
+            // Ties come from numpy's stream; ferret's is never drawn from.
+            run(LiveDeployment::with_selector(
+                selector,
+                opts.c,
+                stream(base, d, 1),
+            ))
+        })
         .collect::<Result<_, _>>()?;
     Ok(Deployment { houses, runs })
 }
@@ -426,44 +422,53 @@ fn reference_best(table: &CostTable, deployments: &[Deployment], trials: usize) 
         .map_or(0, |(_, s)| s)
 }
 
-/// Runs `selector` over `houses` of `table`, one trial at a time, exactly as a robot would.
+/// Runs the live deployment `live` over `houses` (rows) of `table`, one trial at a time, exactly
+/// as a robot would: choose, pay the chosen strategy's real cost, learn it with every
+/// candidate's replay cost.
 ///
-/// Exposed so that custom selectors can be evaluated on a table the same way as the built-in
-/// ones. Houses must be valid indices into `table`.
-pub fn run_selector(
-    selector: &mut dyn Selector,
+/// Exposed so that custom selectors ([`LiveDeployment::with_selector`]) can be evaluated on a
+/// table the same way as the built-in ones.
+///
+/// # Errors
+/// A house outside the table or a choice outside its strategies.
+pub fn run_on_table(
+    live: &mut LiveDeployment,
     table: &CostTable,
     houses: &[usize],
-    rng: &mut dyn RngCore,
 ) -> Result<MethodRun, SelectError> {
     let mut chosen = Vec::with_capacity(houses.len());
     let mut costs = Vec::with_capacity(houses.len());
     for &h in houses {
-        let i = selector.choose(rng);
-        if h >= table.n_houses() {
-            return Err(SelectError::HouseOutOfRange {
-                index: h,
-                houses: table.n_houses(),
-            });
-        }
-        let replay = table
-            .replay_costs(h, i)
-            .ok_or(SelectError::StrategyOutOfRange {
-                index: i,
-                strategies: table.n_strategies(),
-            })?;
-        // Indices were just checked; the real cost, not its (equal) replay, is what was paid.
-        let cost = table.cost_at(h, i);
-        selector.observe(i, cost, replay)?;
+        let i = live.choose();
+        let (cost, replay) = trial_costs(table, h, i)?;
+        live.finish(cost, replay)?;
         chosen.push(i);
         costs.push(cost);
     }
     Ok(MethodRun {
-        method: selector.method(),
+        method: live.method(),
         chosen,
         costs,
         houses: None,
     })
+}
+
+/// The real cost of strategy `i` on row `h` (what was paid; its replay is equal) and every
+/// candidate's replay cost given that `i` was deployed.
+fn trial_costs(table: &CostTable, h: usize, i: usize) -> Result<(f64, &[f64]), SelectError> {
+    if h >= table.n_houses() {
+        return Err(SelectError::HouseOutOfRange {
+            index: h,
+            houses: table.n_houses(),
+        });
+    }
+    let replay = table
+        .replay_costs(h, i)
+        .ok_or(SelectError::StrategyOutOfRange {
+            index: i,
+            strategies: table.n_strategies(),
+        })?;
+    Ok((table.cost_at(h, i), replay))
 }
 
 fn best_avg_cost(

@@ -9,7 +9,8 @@
 //!   [`ReplaySelection`] (paper eq. 5). The same trait drives the live robot loop and the
 //!   experiment, so they cannot drift apart.
 //! * [`LiveDeployment`]: the selector between a robot's trials, rebuilt exactly from its stored
-//!   finished trials after a restart (`ferret deploy` and `ferret serve`).
+//!   finished trials after a restart; `ferret deploy`, `ferret serve` and the experiment all
+//!   drive it. [`HouseOrder`]: the houses a deployment visits.
 //! * [`CostTable`]: real and replay costs of every candidate on one trial per house.
 //! * [`run_experiment`]: the paper's deployment experiment (section VI-C) on a table: average cost
 //!   and cumulative regret against the best single strategy, per trial count `k`.
@@ -20,6 +21,7 @@ mod error;
 mod experiment;
 mod live;
 pub mod numpy;
+mod order;
 mod results;
 mod selector;
 mod table;
@@ -27,9 +29,10 @@ mod table;
 pub use error::SelectError;
 pub use experiment::{
     Deployment, ExperimentOptions, ExperimentResult, MAX_EXPERIMENT_TRIALS, MethodRun,
-    MethodSummary, run_experiment, run_selector,
+    MethodSummary, run_experiment, run_on_table,
 };
 pub use live::{FinishedTrial, LiveDeployment, StrategyStats, TrialEnd};
+pub use order::HouseOrder;
 pub use results::{
     ChoiceRow, PAPER_KS, SelectionRow, choice_rows, selection_rows, selection_table_markdown,
     strategy_table_markdown,

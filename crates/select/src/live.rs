@@ -3,7 +3,8 @@
 //!
 //! Everything it knows is the list of finished trials and its seed, so it can be rebuilt exactly
 //! from storage after a restart: [`LiveDeployment::restore`] replays the same choices, drawing the
-//! same tie-breaks from the same random stream. `ferret deploy` and `ferret serve` both drive it.
+//! same tie-breaks from the same random stream. `ferret deploy`, `ferret serve` and the
+//! deployment experiment all drive it.
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -55,10 +56,9 @@ pub struct StrategyStats {
 pub struct LiveDeployment {
     method: Method,
     c: f64,
-    seed: u64,
+    seed: Option<u64>,
     selector: Box<dyn Selector + Send>,
     rng: ChaCha8Rng,
-    finished: Vec<FinishedTrial>,
     history: Vec<TrialEnd>,
     /// The choice made for the trial in progress, if any.
     pending: Option<usize>,
@@ -70,7 +70,7 @@ impl std::fmt::Debug for LiveDeployment {
             .field("method", &self.method)
             .field("c", &self.c)
             .field("seed", &self.seed)
-            .field("finished", &self.finished.len())
+            .field("finished", &self.finished().count())
             .field("pending", &self.pending)
             .finish()
     }
@@ -82,16 +82,28 @@ impl LiveDeployment {
     /// # Errors
     /// No strategies, or `c` negative or not finite.
     pub fn new(method: Method, strategies: usize, c: f64, seed: u64) -> Result<Self, SelectError> {
-        Ok(Self {
-            method,
+        let mut d = Self::with_selector(
+            method.selector(strategies, c)?,
             c,
-            seed,
-            selector: method.selector(strategies, c)?,
-            rng: ChaCha8Rng::seed_from_u64(seed),
-            finished: Vec::new(),
+            ChaCha8Rng::seed_from_u64(seed),
+        );
+        d.seed = Some(seed);
+        Ok(d)
+    }
+
+    /// A deployment of a configured `selector` (exploration constant `c`) whose tie-breaks come
+    /// from `ties`: how the deployment experiment runs each method on its own stream, and how a
+    /// custom selector runs the same loop.
+    pub fn with_selector(selector: Box<dyn Selector + Send>, c: f64, ties: ChaCha8Rng) -> Self {
+        Self {
+            method: selector.method(),
+            c,
+            seed: None,
+            selector,
+            rng: ties,
             history: Vec::new(),
             pending: None,
-        })
+        }
     }
 
     /// Rebuilds a deployment from how its trials ended (in order) and, if one is in progress,
@@ -165,6 +177,18 @@ impl LiveDeployment {
         i
     }
 
+    /// Like [`choose`](Self::choose), with ties among `t > 1` strategies broken by `pick(t)`
+    /// instead of the deployment's stream (another generator's tie-breaks, such as the reference
+    /// code's numpy `choice`).
+    pub fn choose_with(&mut self, pick: &mut dyn FnMut(usize) -> usize) -> usize {
+        if let Some(p) = self.pending {
+            return p;
+        }
+        let i = self.selector.choose_with(pick);
+        self.pending = Some(i);
+        i
+    }
+
     /// What [`choose`](Self::choose) would return, without committing to it.
     pub fn peek(&self) -> usize {
         match self.pending {
@@ -199,8 +223,7 @@ impl LiveDeployment {
             cost,
             replays,
         };
-        self.history.push(TrialEnd::Finished(trial.clone()));
-        self.finished.push(trial);
+        self.history.push(TrialEnd::Finished(trial));
         self.pending = None;
         Ok(())
     }
@@ -215,14 +238,17 @@ impl LiveDeployment {
         self.c
     }
 
-    /// The seed of the tie-breaking stream.
-    pub fn seed(&self) -> u64 {
+    /// The seed of the tie-breaking stream, when the deployment was made from one.
+    pub fn seed(&self) -> Option<u64> {
         self.seed
     }
 
-    /// The finished trials, in order.
-    pub fn finished(&self) -> &[FinishedTrial] {
-        &self.finished
+    /// The finished trials, in order (the abandoned ones left out).
+    pub fn finished(&self) -> impl Iterator<Item = &FinishedTrial> + '_ {
+        self.history.iter().filter_map(|end| match end {
+            TrialEnd::Finished(t) => Some(t),
+            TrialEnd::Abandoned { .. } => None,
+        })
     }
 
     /// The choice of the trial in progress.
@@ -233,18 +259,16 @@ impl LiveDeployment {
     /// Per-strategy statistics and scores for the next choice.
     pub fn stats(&self) -> Vec<StrategyStats> {
         let n = self.selector.n_strategies();
-        let k = self.finished.len();
+        let k = self.finished().count();
         (0..n)
             .map(|i| {
                 let own: Vec<f64> = self
-                    .finished
-                    .iter()
+                    .finished()
                     .filter(|t| t.chosen == i)
                     .map(|t| t.cost)
                     .collect();
                 let replay_sum: f64 = self
-                    .finished
-                    .iter()
+                    .finished()
                     .map(|t| t.replays.get(i).copied().unwrap_or(f64::NAN))
                     .sum();
                 StrategyStats {
@@ -265,7 +289,7 @@ impl LiveDeployment {
         if self.pending.is_some() {
             return format!("{name} was chosen for the trial in progress");
         }
-        if self.finished.is_empty() {
+        if self.finished().next().is_none() {
             return format!(
                 "{name}: nothing is known before the first trial, so the choice is uniform"
             );

@@ -303,7 +303,9 @@ fn data_dir() -> Option<PathBuf> {
     match std::env::var_os("FERRET_PROCTHOR_DIR") {
         Some(d) => Some(PathBuf::from(d)),
         None => {
-            eprintln!("skipped: set FERRET_PROCTHOR_DIR=../shared/data/procthor to run");
+            eprintln!(
+                "skipped: set FERRET_PROCTHOR_DIR to the directory of ProcTHOR house files to run"
+            );
             None
         }
     }

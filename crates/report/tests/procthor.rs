@@ -18,7 +18,9 @@ use ferret_world::{GridParams, Place};
 fn data_dir() -> Option<PathBuf> {
     let dir = std::env::var_os("FERRET_PROCTHOR_DIR").map(PathBuf::from);
     if dir.is_none() {
-        println!("skipped: set FERRET_PROCTHOR_DIR=../shared/data/procthor to run");
+        println!(
+            "skipped: set FERRET_PROCTHOR_DIR to the directory of ProcTHOR house files to run"
+        );
     }
     dir
 }

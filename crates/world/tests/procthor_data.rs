@@ -1,5 +1,5 @@
 //! Tests on the real ProcTHOR data. They run only when FERRET_PROCTHOR_DIR names the data
-//! directory (`../shared/data/procthor`), and print the figures they measure.
+//! directory (the ProcTHOR house files and the generator's databases), and print the figures they measure.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -12,7 +12,9 @@ fn data_dir() -> Option<PathBuf> {
     match std::env::var_os("FERRET_PROCTHOR_DIR") {
         Some(d) => Some(PathBuf::from(d)),
         None => {
-            println!("skipped: set FERRET_PROCTHOR_DIR=../shared/data/procthor to run");
+            println!(
+                "skipped: set FERRET_PROCTHOR_DIR to the directory of ProcTHOR house files to run"
+            );
             None
         }
     }

@@ -33,6 +33,14 @@ pub fn default_prior(count: usize, seed: u64) -> Result<Prior> {
     Ok(Prior::train(&scenes, DEFAULT_SMOOTHING))
 }
 
+/// True when one of `specs` plans over the prior (`model/prior...`, `fused/...`), so that a
+/// face can supply a prior it already holds instead of loading or training one per call.
+pub fn needs_prior(specs: &[String]) -> bool {
+    specs
+        .iter()
+        .any(|s| s.starts_with("model/prior") || s.starts_with("fused/"))
+}
+
 /// Planner and prior settings shared by evaluations, selections and deployments. Field names
 /// are those of `run.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -104,10 +112,7 @@ impl PlanningSettings {
     /// The prior, when one of `specs` plans over it (`model/prior...`, `fused/...`): loaded, or
     /// the default one trained. `None` when none does.
     pub fn prior_for(&self, specs: &[String]) -> Result<Option<Arc<Prior>>> {
-        let needs_prior = specs
-            .iter()
-            .any(|s| s.starts_with("model/prior") || s.starts_with("fused/"));
-        Ok(if needs_prior {
+        Ok(if needs_prior(specs) {
             Some(Arc::new(self.prior()?))
         } else {
             None
@@ -179,7 +184,19 @@ pub fn full_registry_with(
     specs: &[String],
     on_failure: FailurePolicy,
 ) -> Result<Strategies> {
-    let prior = planning.prior_for(specs)?;
+    full_registry_over(planning, llm, planning.prior_for(specs)?, on_failure)
+}
+
+/// The same over a prior the caller already holds (`planning.prior` is not read): a face that
+/// keeps a prior in memory (a Python `Prior` object) builds the very registry `ferret eval`
+/// builds from the same prior's file. `None` leaves `model/prior...` and `fused/...` specs
+/// unbuildable, as for [`StrategyRegistry::builtin`].
+pub fn full_registry_over(
+    planning: &PlanningSettings,
+    llm: &LlmSettings,
+    prior: Option<Arc<Prior>>,
+    on_failure: FailurePolicy,
+) -> Result<Strategies> {
     let mut registry = planning.registry_with(prior.clone());
     let fusion = match &llm.fusion {
         Some(path) => Some((
@@ -439,4 +456,50 @@ pub fn answers_markdown(report: &ferret_llm::TokenReport) -> String {
         md.push_str(&line);
     }
     md
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn specs(s: &[&str]) -> Vec<String> {
+        s.iter().map(|s| s.to_string()).collect()
+    }
+
+    #[test]
+    fn only_prior_and_fused_specs_need_the_prior() {
+        assert!(needs_prior(&specs(&["oracle", "model/prior/exact"])));
+        assert!(needs_prior(&specs(&["fused/p-yesno/gpt"])));
+        assert!(!needs_prior(&specs(&[
+            "optimistic+greedy",
+            "model/uniform",
+            "oracle"
+        ])));
+        assert!(!needs_prior(&[]));
+    }
+
+    #[test]
+    fn a_registry_over_a_held_prior_builds_prior_strategies() {
+        let dir = tempfile::tempdir().unwrap();
+        let llm = LlmSettings {
+            llm_cache: dir.path().join("cache.sqlite"),
+            ..LlmSettings::default()
+        };
+        let planning = PlanningSettings::default();
+        let prior = Arc::new(default_prior(5, 7).unwrap());
+        let over = full_registry_over(
+            &planning,
+            &llm,
+            Some(prior.clone()),
+            FailurePolicy::StopForRun,
+        )
+        .unwrap();
+        assert!(over.registry.build("model/prior").is_ok());
+        assert!(Arc::ptr_eq(over.prior.as_ref().unwrap(), &prior));
+        let none = full_registry_over(&planning, &llm, None, FailurePolicy::StopForRun).unwrap();
+        assert!(none.registry.build("model/prior").is_err());
+        assert!(none.registry.build("model/uniform").is_ok());
+        // Nothing was asked, so no cache file was made.
+        assert!(!dir.path().join("cache.sqlite").exists());
+    }
 }

@@ -8,8 +8,9 @@ use crate::planner::{self, Solution, TourProblem};
 use crate::probability::Probability;
 
 /// Maps a belief to the next container to search. A policy lives for one trial and may keep state
-/// between decisions (a cached plan, a conversation).
-pub trait Policy {
+/// between decisions (a cached plan, a conversation). Policies are `Send` so that a search in
+/// progress can move between threads with its robot's driver (a Python or ROS executor thread).
+pub trait Policy: Send {
     /// The next container to search: an unsearched container of `belief.house`. Called only while
     /// at least one container is unsearched.
     fn choose(&mut self, belief: &Belief<'_>) -> Result<usize, PlanError>;

@@ -1,0 +1,53 @@
+"""ferret: LLM-informed model-based object search in ProcTHOR houses, from Python.
+
+Load or generate houses, train or load a likelihood prior, evaluate search strategies on the
+same trials as ``ferret eval`` (identical costs for the same houses, strategies and seed), and
+drive a search step by step from a robot loop with :class:`Search`.
+
+The work is done by ferret's Rust crates; this package only converts arguments and results.
+Long calls (``evaluate``, ``load_houses``, ``Prior.train``, building maps) release the GIL.
+"""
+
+from ._ferret import (
+    DEFAULT_STRATEGIES,
+    ConfigError,
+    Container,
+    Evaluation,
+    FerretError,
+    House,
+    HouseError,
+    LlmError,
+    Object,
+    Prior,
+    PriorError,
+    Room,
+    Search,
+    SearchError,
+    StrategyError,
+    __version__,
+    evaluate,
+    generate_houses,
+    load_houses,
+)
+
+__all__ = [
+    "DEFAULT_STRATEGIES",
+    "ConfigError",
+    "Container",
+    "Evaluation",
+    "FerretError",
+    "House",
+    "HouseError",
+    "LlmError",
+    "Object",
+    "Prior",
+    "PriorError",
+    "Room",
+    "Search",
+    "SearchError",
+    "StrategyError",
+    "__version__",
+    "evaluate",
+    "generate_houses",
+    "load_houses",
+]

@@ -1,0 +1,275 @@
+"""Type stubs of ferret's extension module (re-exported by ``ferret``)."""
+
+import os
+from typing import Any, Dict, List, Literal, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+DEFAULT_STRATEGIES: str
+"""The strategies ``evaluate`` runs when given none (comma separated)."""
+
+_Path = Union[str, "os.PathLike[str]"]
+_Protocol = Literal["ferret", "paper"]
+_ContainerArg = Union[str, "Container"]
+
+class FerretError(Exception):
+    """Base class of every error ferret raises."""
+
+class HouseError(FerretError):
+    """A house file, scene file or asset database that cannot be read, or a house that cannot
+    be mapped; the message names the file, the house index and the field."""
+
+class StrategyError(FerretError):
+    """A strategy spec that names no known strategy, or a strategy that cannot be built."""
+
+class PriorError(FerretError):
+    """A prior file that cannot be read or written."""
+
+class ConfigError(FerretError):
+    """An unusable setting: a keyword argument, a protocol, grid or planner option, or the LLM
+    endpoint configuration."""
+
+class LlmError(FerretError):
+    """An LLM endpoint or the LLM response cache failed."""
+
+class SearchError(FerretError):
+    """A search cannot go on: a container not in the house or already searched, or a policy
+    that failed to choose."""
+
+class Container:
+    """A container: a piece of furniture the robot can search."""
+
+    @property
+    def index(self) -> int:
+        """Its position in ``House.containers``."""
+    @property
+    def id(self) -> str:
+        """Its id in the house file."""
+    @property
+    def type(self) -> str:
+        """Its object type, e.g. ``Fridge``."""
+    @property
+    def room(self) -> Optional[str]:
+        """The id of the room it stands in."""
+    @property
+    def room_type(self) -> Optional[str]:
+        """The type of that room, e.g. ``Kitchen``."""
+    @property
+    def position(self) -> Tuple[float, float]:
+        """The centre of its footprint (x, y), metres."""
+    @property
+    def access(self) -> Optional[Tuple[float, float]]:
+        """Where the robot stands to search it (x, y), metres."""
+
+class Room:
+    """A room."""
+
+    @property
+    def id(self) -> str:
+        """Its id in the house file."""
+    @property
+    def type(self) -> str:
+        """Its type, e.g. ``Kitchen``."""
+    @property
+    def polygon(self) -> List[Tuple[float, float]]:
+        """Its floor polygon's vertices (x, y), metres."""
+
+class Object:
+    """A small object inside or on a container."""
+
+    @property
+    def id(self) -> str:
+        """Its id in the house file."""
+    @property
+    def type(self) -> str:
+        """Its object type, e.g. ``CellPhone``."""
+    @property
+    def container(self) -> str:
+        """The id of the container holding it."""
+
+class House:
+    """A house: rooms, containers and what the containers hold, with its maps built on first
+    use. Immutable."""
+
+    @property
+    def name(self) -> str:
+        """A label naming where the house came from, e.g. ``multiroom-val150.jsonl.gz#3``."""
+    @property
+    def index(self) -> int:
+        """The house's index in its file (or among the generated houses)."""
+    @property
+    def start(self) -> Tuple[float, float]:
+        """The robot's start (x, y) on the floor, metres."""
+    @property
+    def rooms(self) -> List[Room]:
+        """The rooms, in the house's order."""
+    @property
+    def containers(self) -> List[Container]:
+        """The containers, in the house's order (row/column ``i + 1`` of ``distances()``)."""
+    @property
+    def objects(self) -> List[Object]:
+        """Every small object and the container holding it."""
+    def contents(self, container: _ContainerArg) -> List[str]:
+        """The object types a container holds (its ground truth)."""
+    def target_types(self) -> List[str]:
+        """The object types held by some container, in name order."""
+    def container_by_id(self, id: str) -> Container:
+        """The container with this id."""
+    def distances(
+        self,
+        *,
+        resolution: float = 0.05,
+        robot_radius: float = 0.18,
+        wall_thickness: float = 0.05,
+        protocol: _Protocol = "ferret",
+    ) -> npt.NDArray[np.float64]:
+        """Shortest travel distances, metres, ``(n + 1) × (n + 1)``: index 0 is the robot's
+        start, ``i + 1`` container ``i``."""
+
+class Prior:
+    """A likelihood prior: P(container holds target | container type, room type)."""
+
+    @staticmethod
+    def train(houses: Sequence[House], smoothing: float = 2.0) -> "Prior":
+        """Learns a prior from training houses, as ``ferret prior train``."""
+    @staticmethod
+    def load(path: _Path) -> "Prior":
+        """Reads a prior written by ``Prior.save`` or ``ferret prior train``."""
+    @staticmethod
+    def default() -> "Prior":
+        """The prior ``ferret eval`` uses when given none."""
+    def save(self, path: _Path) -> None:
+        """Writes the prior as JSON."""
+    def probability(self, target: str, container: str, room: Optional[str] = None) -> float:
+        """P(a container of type ``container`` in a room of type ``room`` holds ``target``)."""
+    @property
+    def houses(self) -> int:
+        """Number of training houses."""
+    @property
+    def containers(self) -> int:
+        """Number of training containers."""
+    @property
+    def smoothing(self) -> float:
+        """The smoothing weight it was trained with."""
+
+class Search:
+    """One trial in progress, driven step by step by a robot loop."""
+
+    def __init__(
+        self,
+        house: House,
+        target: str,
+        strategy: str = "model/prior",
+        *,
+        prior: Union[Prior, _Path, None] = None,
+        config: Optional[_Path] = None,
+        llm_cache: Optional[_Path] = None,
+        offline: bool = False,
+        fusion: Optional[_Path] = None,
+        max_containers: int = 8,
+        exact_max: int = 16,
+        search_cost: float = 0.0,
+        resolution: float = 0.05,
+        robot_radius: float = 0.18,
+        wall_thickness: float = 0.05,
+        protocol: _Protocol = "ferret",
+    ) -> None:
+        """Starts a search for ``target`` in ``house`` with the strategy spec ``strategy``."""
+    def next_container(self) -> Optional[Container]:
+        """The container to search next, or None once found or everything was searched."""
+    def record(
+        self, container: _ContainerArg, found: bool, objects: Optional[Sequence[str]] = None
+    ) -> float:
+        """Records a searched container and what it held; returns the leg's length, metres."""
+    def distance_to(self, container: _ContainerArg) -> float:
+        """Travel distance from where the robot is to ``container``, metres."""
+    def path_to(self, container: _ContainerArg) -> List[Tuple[float, float]]:
+        """The shortest grid path from where the robot is to ``container``, (x, y) metres."""
+    @property
+    def cost(self) -> float:
+        """Metres travelled so far."""
+    @property
+    def searched(self) -> List[str]:
+        """Ids of the containers searched, in order."""
+    @property
+    def found(self) -> Optional[Container]:
+        """The container where the target was found, or None."""
+    @property
+    def done(self) -> bool:
+        """True once the target was found or every container was searched."""
+    @property
+    def target(self) -> str:
+        """The object type searched for."""
+    @property
+    def strategy(self) -> str:
+        """The strategy's spec."""
+    @property
+    def house(self) -> House:
+        """The house searched."""
+
+class Evaluation:
+    """The result of ``evaluate``: rows with the columns of ``trials.csv``."""
+
+    @property
+    def rows(self) -> List[Dict[str, Any]]:
+        """One dict per trial and strategy, with ``trials.csv``'s columns."""
+    @property
+    def columns(self) -> List[str]:
+        """The rows' column names, in order."""
+    @property
+    def errors(self) -> List[str]:
+        """One message per house or trial that failed."""
+    @property
+    def houses_run(self) -> int:
+        """Houses with a map and a target."""
+    @property
+    def trials_run(self) -> int:
+        """Trials (house and target) drawn on those houses."""
+    @property
+    def strategies(self) -> List[str]:
+        """The strategies evaluated, in order."""
+    def summary(self) -> List[Dict[str, Any]]:
+        """Per strategy, the rows of ``summary.csv``."""
+    def to_pandas(self) -> Any:
+        """The rows as a ``pandas.DataFrame`` (needs pandas)."""
+    def __len__(self) -> int: ...
+
+def load_houses(
+    path: _Path,
+    *,
+    asset_db: Optional[_Path] = None,
+    range: Union[str, "range", None] = None,
+    skip_invalid: bool = False,
+    containers: Literal["receptacles", "furniture"] = "receptacles",
+) -> List[House]:
+    """Loads ProcTHOR houses (.json, .jsonl, .jsonl.gz) or a ferret scene file."""
+
+def generate_houses(n: int, seed: int = 0) -> List[House]:
+    """Generates ``n`` houses from ``seed`` (``ferret eval --generate n --house-seed seed``)."""
+
+def evaluate(
+    houses: Sequence[House],
+    strategies: Union[Sequence[str], str, None] = None,
+    *,
+    prior: Union[Prior, _Path, None] = None,
+    seed: int = 0,
+    trials_per_house: Union[int, Literal["all"], None] = None,
+    reveal_fraction: float = 0.0,
+    protocol: _Protocol = "ferret",
+    cells: bool = False,
+    max_containers: int = 8,
+    exact_max: int = 16,
+    search_cost: float = 0.0,
+    config: Optional[_Path] = None,
+    llm_cache: Optional[_Path] = None,
+    offline: bool = False,
+    keep_going: bool = False,
+    fusion: Optional[_Path] = None,
+    resolution: float = 0.05,
+    robot_radius: float = 0.18,
+    wall_thickness: float = 0.05,
+    progress: bool = False,
+) -> Evaluation:
+    """Evaluates strategies on houses as ``ferret eval`` does (identical costs)."""

@@ -1,0 +1,289 @@
+//! `ferret.evaluate`: every strategy on the same trials of every house — `ferret eval`'s
+//! experiment through the same experiment-layer calls, so the rows are `trials.csv`'s rows.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use ferret_lab::runs::{CELL_M, TrialRow};
+use ferret_lab::{DEFAULT_STRATEGIES, Feedback, Silent, TrialDraw};
+use ferret_llm::FailurePolicy;
+use ferret_plan::{Strategy, TrialsPerHouse};
+use ferret_world::Scene;
+use pyo3::prelude::*;
+use pyo3::types::PyList;
+
+use crate::convert;
+use crate::errors;
+use crate::houses::{House, scenes_of};
+use crate::progress;
+use crate::settings::{self, Grid, Planning, RESOLUTION, ROBOT_RADIUS, WALL_THICKNESS};
+
+/// The result of `ferret.evaluate`: one row per trial and strategy that finished, houses in
+/// order, each a dict with exactly the columns of `ferret eval`'s `trials.csv`.
+#[pyclass(name = "Evaluation", module = "ferret", frozen)]
+pub struct PyEvaluation {
+    rows: Vec<TrialRow>,
+    errors: Vec<String>,
+    houses_run: usize,
+    trials_run: usize,
+    strategies: Vec<String>,
+}
+
+#[pymethods]
+impl PyEvaluation {
+    /// The rows: dicts with `trials.csv`'s columns (`house`, `house_index`, `target`,
+    /// `strategy`, `cost_m`, `searches`, `found`, `found_container`, `searched`,
+    /// `goal_containers`, and `cost_cells` with `cells=True`).
+    #[getter]
+    fn rows(&self, py: Python<'_>) -> PyResult<Py<PyList>> {
+        convert::rows_to_py(py, &self.rows)
+    }
+
+    /// The column names of the rows, in order (`trials.csv`'s header).
+    #[getter]
+    fn columns(&self, py: Python<'_>) -> PyResult<Vec<String>> {
+        let first = convert::rows_to_py(py, &self.rows[..self.rows.len().min(1)])?;
+        match first.bind(py).iter().next() {
+            Some(row) => row.downcast::<pyo3::types::PyDict>()?.keys().extract(),
+            None => Ok(Vec::new()),
+        }
+    }
+
+    /// One message per house or trial that failed (a house without a map or a target, a
+    /// strategy that failed); every finished trial is in `rows`.
+    #[getter]
+    fn errors(&self) -> Vec<String> {
+        self.errors.clone()
+    }
+
+    /// Houses with a map and a target.
+    #[getter]
+    fn houses_run(&self) -> usize {
+        self.houses_run
+    }
+
+    /// Trials (house and target) drawn on those houses.
+    #[getter]
+    fn trials_run(&self) -> usize {
+        self.trials_run
+    }
+
+    /// The strategies evaluated, in order.
+    #[getter]
+    fn strategies(&self) -> Vec<String> {
+        self.strategies.clone()
+    }
+
+    /// Per strategy: trials, mean, median and spread of the cost, as the rows of `ferret eval`'s
+    /// `summary.csv` (dicts with its columns).
+    fn summary(&self, py: Python<'_>) -> PyResult<Py<PyList>> {
+        convert::rows_to_py(py, &ferret_lab::summarize(&self.rows, &self.strategies))
+    }
+
+    /// The rows as a `pandas.DataFrame` with `trials.csv`'s columns. Needs pandas, which ferret
+    /// does not install (`pip install pandas`).
+    fn to_pandas<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let pandas = py.import("pandas").map_err(|e| {
+            if e.is_instance_of::<pyo3::exceptions::PyImportError>(py) {
+                pyo3::exceptions::PyImportError::new_err(
+                    "Evaluation.to_pandas() needs pandas, which is not installed: pip install pandas",
+                )
+            } else {
+                e
+            }
+        })?;
+        let kwargs = pyo3::types::PyDict::new(py);
+        kwargs.set_item("columns", self.columns(py)?)?;
+        pandas.call_method("DataFrame", (self.rows(py)?,), Some(&kwargs))
+    }
+
+    fn __len__(&self) -> usize {
+        self.rows.len()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Evaluation(rows={}, houses_run={}, trials_run={}, errors={}, strategies={:?})",
+            self.rows.len(),
+            self.houses_run,
+            self.trials_run,
+            self.errors.len(),
+            self.strategies
+        )
+    }
+}
+
+fn trials_per_house(arg: &Bound<'_, PyAny>) -> PyResult<TrialsPerHouse> {
+    let text = if let Ok(n) = arg.extract::<i64>() {
+        n.to_string()
+    } else if let Ok(s) = arg.extract::<String>() {
+        s
+    } else {
+        return Err(errors::config(
+            "trials_per_house: expected a number ≥ 1 or \"all\"",
+        ));
+    };
+    text.parse::<TrialsPerHouse>()
+        .map_err(|e| errors::config(format!("trials_per_house={text}: {e}")))
+}
+
+/// Evaluates strategies on houses as `ferret eval` does: the same trials (targets drawn by
+/// `seed`) for every strategy, in parallel over houses, with the GIL released; the same houses,
+/// strategies, seed and options give the very costs of `ferret eval`'s `trials.csv`.
+///
+/// `strategies` (a list or a comma-separated string; default `DEFAULT_STRATEGIES`) are specs as
+/// in `ferret eval --strategies`. `prior` is a `Prior`, a prior file, or `None` for the default
+/// prior. `protocol` is `"ferret"` or `"paper"` (houses of ProcTHOR files must then be loaded
+/// with `containers="furniture"`, as `ferret eval --protocol paper` reads them). LLM strategies
+/// use the endpoint configuration `config` (default `ferret.toml` when present) and the SQLite
+/// response cache `llm_cache`; their questions are asked before the trials run. `progress`
+/// prints progress to stderr. Raises `FerretError` when no trial finished.
+#[pyfunction]
+#[pyo3(signature = (
+    houses, strategies = None, *, prior = None, seed = 0, trials_per_house = None,
+    reveal_fraction = 0.0, protocol = "ferret", cells = false, max_containers = 8,
+    exact_max = 16, search_cost = 0.0, config = None, llm_cache = None, offline = false,
+    keep_going = false, fusion = None, resolution = RESOLUTION, robot_radius = ROBOT_RADIUS,
+    wall_thickness = WALL_THICKNESS, progress = false
+))]
+#[allow(clippy::too_many_arguments)]
+pub fn evaluate(
+    py: Python<'_>,
+    houses: Vec<Py<House>>,
+    strategies: Option<&Bound<'_, PyAny>>,
+    prior: Option<&Bound<'_, PyAny>>,
+    seed: u64,
+    trials_per_house: Option<&Bound<'_, PyAny>>,
+    reveal_fraction: f64,
+    protocol: &str,
+    cells: bool,
+    max_containers: usize,
+    exact_max: usize,
+    search_cost: f64,
+    config: Option<PathBuf>,
+    llm_cache: Option<PathBuf>,
+    offline: bool,
+    keep_going: bool,
+    fusion: Option<PathBuf>,
+    resolution: f64,
+    robot_radius: f64,
+    wall_thickness: f64,
+    progress: bool,
+) -> PyResult<PyEvaluation> {
+    // Every argument is checked before any work, as the command line checks its options.
+    let grid = Grid::new(resolution, robot_radius, wall_thickness)?;
+    let planning = Planning::new(prior, max_containers, exact_max, search_cost)?;
+    if !(0.0..=1.0).contains(&reveal_fraction) {
+        return Err(errors::config(format!(
+            "reveal_fraction={reveal_fraction}: must be a fraction between 0 and 1"
+        )));
+    }
+    let specs = match strategies.filter(|s| !s.is_none()) {
+        Some(s) => convert::spec_list(s, "strategies")?,
+        None => DEFAULT_STRATEGIES.split(',').map(String::from).collect(),
+    };
+    settings::check_distinct("strategies", &specs)?;
+    let per_house = match trials_per_house.filter(|t| !t.is_none()) {
+        Some(t) => self::trials_per_house(t)?,
+        None => TrialsPerHouse::One,
+    };
+    let protocol = settings::protocol(protocol)?;
+    if houses.is_empty() {
+        return Err(errors::config("houses: no houses to evaluate"));
+    }
+    for h in &houses {
+        let h = h.get();
+        if let Some(read) = h.read_with
+            && read != protocol.containers
+        {
+            return Err(errors::config(format!(
+                "{}: read with containers=\"{read}\", but this protocol's container set is \"{}\": load the houses with containers=\"{}\"",
+                h.scene.house.name, protocol.containers, protocol.containers
+            )));
+        }
+    }
+    let llm = settings::llm(config, llm_cache, offline, keep_going, fusion);
+    let scenes: Vec<Scene> = scenes_of(py, &houses)
+        .iter()
+        .map(|s| Scene::clone(s))
+        .collect();
+    let params = grid.params(&protocol);
+    let feedback: Box<dyn Feedback + Send> = if progress {
+        Box::new(progress::Stderr::default())
+    } else {
+        Box::new(Silent)
+    };
+    let outcome = py.allow_threads(|| {
+        errors::guarded("evaluate", || {
+            let setup = settings::registry(&planning, &llm, &specs, FailurePolicy::StopForRun)
+                .map_err(errors::lab)?;
+            let built: Vec<Arc<dyn Strategy>> = specs
+                .iter()
+                .map(|s| setup.registry.build(s))
+                .collect::<Result<_, _>>()
+                .map_err(errors::plan)?;
+            let maps = ferret_lab::build_maps(&scenes, &params, feedback.as_ref());
+            let draw = TrialDraw {
+                seed,
+                reveal_fraction,
+                per_house,
+                protocol: &protocol,
+            };
+            let targets = draw.targets(&scenes, &maps);
+            let pairs: Vec<_> = targets.iter().map(|(h, t)| (*h, t)).collect();
+            let dropped = ferret_lab::strategies::prefetch(
+                &setup.service,
+                &llm,
+                &specs,
+                &pairs,
+                feedback.as_ref(),
+            )
+            .map_err(errors::lab)?;
+            let kept: Vec<Arc<dyn Strategy>> = built
+                .into_iter()
+                .filter(|s| !dropped.iter().any(|d| d == s.name()))
+                .collect();
+            Ok(ferret_lab::evaluate(
+                &scenes,
+                &maps,
+                &kept,
+                &draw,
+                feedback.as_ref(),
+            ))
+        })
+    })?;
+    if outcome.rows.is_empty() {
+        return Err(errors::FerretError::new_err(format!(
+            "no trial finished{}",
+            if outcome.errors.is_empty() {
+                String::new()
+            } else {
+                format!(":\n  {}", outcome.errors.join("\n  "))
+            }
+        )));
+    }
+    if !outcome.errors.is_empty() {
+        let warnings = py.import("warnings")?;
+        warnings.call_method1(
+            "warn",
+            (format!(
+                "{} trial(s) failed; every finished trial is in the rows, the failures in .errors: {}",
+                outcome.errors.len(),
+                outcome.errors.join("; ")
+            ),),
+        )?;
+    }
+    let mut rows = outcome.rows;
+    if cells {
+        for r in &mut rows {
+            r.cost_cells = Some(r.cost_m / CELL_M);
+        }
+    }
+    Ok(PyEvaluation {
+        rows,
+        errors: outcome.errors,
+        houses_run: outcome.houses_run,
+        trials_run: outcome.trials_run,
+        strategies: specs,
+    })
+}

@@ -1,0 +1,39 @@
+//! # ferret-python
+//!
+//! ferret's Python package (`import ferret`): a thin face over the experiment layer that owns
+//! the conversion between Python and ferret's types — houses loaded or generated
+//! ([`houses`]), priors ([`prior`]), a search driven step by step ([`search`]), evaluations
+//! with `trials.csv`'s rows ([`evaluate`]), the keyword arguments they share ([`settings`]),
+//! progress on stderr ([`progress`]) and exception classes carrying the command line's messages
+//! ([`errors`]). It plans, simulates and evaluates nothing itself: every call goes to the crates
+//! `ferret eval` and `ferret serve` use.
+
+use pyo3::prelude::*;
+
+pub mod convert;
+pub mod errors;
+pub mod evaluate;
+pub mod houses;
+pub mod prior;
+pub mod progress;
+pub mod search;
+pub mod settings;
+
+/// The extension module `ferret._ferret`, re-exported by the `ferret` package.
+#[pymodule]
+fn _ferret(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    errors::register(m)?;
+    m.add_class::<houses::House>()?;
+    m.add_class::<houses::PyContainer>()?;
+    m.add_class::<houses::PyRoom>()?;
+    m.add_class::<houses::PyObject_>()?;
+    m.add_class::<prior::PyPrior>()?;
+    m.add_class::<search::PySearch>()?;
+    m.add_class::<evaluate::PyEvaluation>()?;
+    m.add_function(wrap_pyfunction!(houses::load_houses, m)?)?;
+    m.add_function(wrap_pyfunction!(houses::generate_houses, m)?)?;
+    m.add_function(wrap_pyfunction!(evaluate::evaluate, m)?)?;
+    m.add("DEFAULT_STRATEGIES", ferret_lab::DEFAULT_STRATEGIES)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

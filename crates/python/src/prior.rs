@@ -1,0 +1,115 @@
+//! `ferret.Prior`: the learned P(target | container type, room type) that `model/prior`
+//! strategies plan over.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use ferret_plan::Prior;
+use ferret_world::ObjectType;
+use pyo3::prelude::*;
+
+use crate::errors;
+use crate::houses::{House, scenes_of};
+
+/// A likelihood prior: the chance that a container of some type, in a room of some type, holds
+/// an object type, learned from training houses. Immutable; shared without copying.
+#[pyclass(name = "Prior", module = "ferret", frozen)]
+pub struct PyPrior {
+    pub inner: Arc<Prior>,
+}
+
+#[pymethods]
+impl PyPrior {
+    /// Learns a prior from training houses (their contents are what training reads), as
+    /// `ferret prior train`. `smoothing` is the weight (pseudo-containers) toward the back-off
+    /// estimate. Releases the GIL while it trains.
+    #[staticmethod]
+    #[pyo3(signature = (houses, smoothing = ferret_lab::strategies::DEFAULT_SMOOTHING))]
+    fn train(py: Python<'_>, houses: Vec<Py<House>>, smoothing: f64) -> PyResult<Self> {
+        if !(smoothing.is_finite() && smoothing >= 0.0) {
+            return Err(errors::config(format!(
+                "smoothing={smoothing}: must be a finite number ≥ 0"
+            )));
+        }
+        let scenes = scenes_of(py, &houses);
+        let prior = py.allow_threads(|| {
+            errors::guarded("Prior.train", || {
+                Ok(Prior::train(scenes.iter().map(|s| s.as_ref()), smoothing))
+            })
+        })?;
+        Ok(Self {
+            inner: Arc::new(prior),
+        })
+    }
+
+    /// Reads a prior written by `Prior.save` or `ferret prior train --out`.
+    #[staticmethod]
+    fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
+        let prior = py
+            .allow_threads(|| Prior::load(&path))
+            .map_err(errors::plan)?;
+        Ok(Self {
+            inner: Arc::new(prior),
+        })
+    }
+
+    /// The prior `ferret eval` uses when given none: trained on 500 generated houses of seed
+    /// 1000003 (never the evaluation houses) with smoothing 2. Trained once per process.
+    #[staticmethod]
+    fn default(py: Python<'_>) -> PyResult<Self> {
+        let inner = py.allow_threads(|| {
+            errors::guarded("Prior.default", || {
+                crate::settings::default().map_err(errors::lab)
+            })
+        })?;
+        Ok(Self { inner })
+    }
+
+    /// Writes the prior as JSON (the file `ferret eval --prior` reads).
+    fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        let inner = self.inner.clone();
+        py.allow_threads(|| inner.save(&path)).map_err(errors::plan)
+    }
+
+    /// The probability that a container of type `container` (in a room of type `room`, when
+    /// known) holds an object of type `target`.
+    #[pyo3(signature = (target, container, room = None))]
+    fn probability(&self, target: &str, container: &str, room: Option<&str>) -> f64 {
+        self.inner
+            .probability(&ObjectType::new(target), &ObjectType::new(container), room)
+            .get()
+    }
+
+    /// Number of training houses.
+    #[getter]
+    fn houses(&self) -> usize {
+        self.inner.houses
+    }
+
+    /// Number of training containers.
+    #[getter]
+    fn containers(&self) -> u32 {
+        self.inner.container_count()
+    }
+
+    /// The smoothing weight it was trained with.
+    #[getter]
+    fn smoothing(&self) -> f64 {
+        self.inner.smoothing
+    }
+
+    fn __eq__(&self, other: &Bound<'_, PyAny>) -> bool {
+        other
+            .downcast::<PyPrior>()
+            .is_ok_and(|o| *o.get().inner == *self.inner)
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Prior(houses={}, containers={}, smoothing={})",
+            self.inner.houses,
+            self.inner.container_count(),
+            self.inner.smoothing
+        )
+    }
+}

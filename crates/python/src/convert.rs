@@ -60,3 +60,17 @@ pub fn spec_list(arg: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<String>> {
     }
     Ok(specs)
 }
+
+/// A string as Python's `repr` writes it (single quotes unless the text holds one).
+pub fn quote(s: &str) -> String {
+    if s.contains('\'') && !s.contains('"') {
+        format!("\"{}\"", s.replace('\\', "\\\\"))
+    } else {
+        format!("'{}'", s.replace('\\', "\\\\").replace('\'', "\\'"))
+    }
+}
+
+/// An optional string as Python's `repr` writes it.
+pub fn quote_opt(s: Option<&str>) -> String {
+    s.map_or_else(|| "None".to_string(), quote)
+}

@@ -103,12 +103,16 @@ impl PyEvaluation {
 
     fn __repr__(&self) -> String {
         format!(
-            "Evaluation(rows={}, houses_run={}, trials_run={}, errors={}, strategies={:?})",
+            "Evaluation(rows={}, houses_run={}, trials_run={}, errors={}, strategies=[{}])",
             self.rows.len(),
             self.houses_run,
             self.trials_run,
             self.errors.len(),
             self.strategies
+                .iter()
+                .map(|s| convert::quote(s))
+                .collect::<Vec<_>>()
+                .join(", ")
         )
     }
 }

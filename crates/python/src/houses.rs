@@ -235,8 +235,8 @@ impl House {
 
     fn __repr__(&self) -> String {
         format!(
-            "House(name={:?}, index={}, rooms={}, containers={}, objects={})",
-            self.scene.house.name,
+            "House(name={}, index={}, rooms={}, containers={}, objects={})",
+            convert::quote(&self.scene.house.name),
             self.scene.house.index,
             self.scene.house.rooms.len(),
             self.scene.house.containers.len(),
@@ -276,8 +276,10 @@ pub struct PyContainer {
 impl PyContainer {
     fn __repr__(&self) -> String {
         format!(
-            "Container(id={:?}, type={:?}, room={:?})",
-            self.id, self.object_type, self.room
+            "Container(id={}, type={}, room={})",
+            convert::quote(&self.id),
+            convert::quote(&self.object_type),
+            convert::quote_opt(self.room.as_deref())
         )
     }
 }
@@ -300,7 +302,11 @@ pub struct PyRoom {
 #[pymethods]
 impl PyRoom {
     fn __repr__(&self) -> String {
-        format!("Room(id={:?}, type={:?})", self.id, self.room_type)
+        format!(
+            "Room(id={}, type={})",
+            convert::quote(&self.id),
+            convert::quote(&self.room_type)
+        )
     }
 }
 
@@ -323,8 +329,10 @@ pub struct PyObject_ {
 impl PyObject_ {
     fn __repr__(&self) -> String {
         format!(
-            "Object(id={:?}, type={:?}, container={:?})",
-            self.id, self.object_type, self.container
+            "Object(id={}, type={}, container={})",
+            convert::quote(&self.id),
+            convert::quote(&self.object_type),
+            convert::quote(&self.container)
         )
     }
 }

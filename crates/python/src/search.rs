@@ -289,10 +289,10 @@ impl PySearch {
             (s.belief().travelled(), s.belief().searched_in_order().len())
         });
         format!(
-            "Search(house={:?}, target={:?}, strategy={:?}, searched={n}, cost={cost:.2})",
-            self.house.get().scene.house.name,
-            self.target,
-            self.strategy
+            "Search(house={}, target={}, strategy={}, searched={n}, cost={cost:.2})",
+            crate::convert::quote(&self.house.get().scene.house.name),
+            crate::convert::quote(&self.target),
+            crate::convert::quote(&self.strategy)
         )
     }
 }

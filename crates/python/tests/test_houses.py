@@ -15,7 +15,8 @@ def test_generate_houses_is_deterministic_and_indexed():
     assert [h.index for h in a] == [0, 1, 2]
     assert [h.name for h in a] == [h.name for h in b]
     assert [[c.id for c in h.containers] for h in a] == [[c.id for c in h.containers] for h in b]
-    assert [h.name for h in ferret.generate_houses(3, 12)] != [] 
+    other = ferret.generate_houses(3, 12)
+    assert [[c.type for c in h.containers] for h in other] != [[c.type for c in h.containers] for h in a]
 
 
 def test_house_parts(houses):
@@ -36,7 +37,10 @@ def test_house_parts(houses):
         assert o.container in ids
         assert o.type in h.contents(o.container)
     assert h.target_types() == sorted({o.type for o in h.objects})
-    assert "House(" in repr(h) and h.name in repr(h)
+    assert repr(h).startswith(f"House(name={h.name!r}, index=0,")
+    c = h.containers[0]
+    assert repr(c) == f"Container(id={c.id!r}, type={c.type!r}, room={c.room!r})"
+    assert repr(h.rooms[0]) == f"Room(id={h.rooms[0].id!r}, type={h.rooms[0].type!r})"
 
 
 def test_distances_are_the_matrix_over_start_and_containers(houses):

@@ -106,7 +106,7 @@ impl PyPrior {
 
     fn __repr__(&self) -> String {
         format!(
-            "Prior(houses={}, containers={}, smoothing={})",
+            "Prior(houses={}, containers={}, smoothing={:?})",
             self.inner.houses,
             self.inner.container_count(),
             self.inner.smoothing

@@ -111,3 +111,20 @@ def test_searches_run_on_other_threads(houses):
     t.start()
     t.join()
     assert isinstance(out[0], ferret.Container)
+
+
+def test_the_robot_loop_example_runs():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    example = Path(__file__).resolve().parents[3] / "examples" / "python_robot_loop.py"
+    out = subprocess.run([sys.executable, str(example), "--seed", "4"], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    last = out.stdout.strip().splitlines()[-1]
+    assert last.startswith("found the ")
+    # The example's search is the one ferret.evaluate's simulator runs on the same trial.
+    [house] = ferret.generate_houses(1, 4)
+    target = house.target_types()[0]
+    s = simulate(house, target, "model/prior")
+    assert last.endswith(f"after {len(s.searched)} searches, {s.cost:.2f} m")

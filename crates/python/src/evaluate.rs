@@ -16,7 +16,7 @@ use crate::convert;
 use crate::errors;
 use crate::houses::{House, scenes_of};
 use crate::progress;
-use crate::settings::{self, Grid, Planning, RESOLUTION, ROBOT_RADIUS, WALL_THICKNESS};
+use crate::settings::{self, Grid, Planning};
 
 /// The result of `ferret.evaluate`: one row per trial and strategy that finished, houses in
 /// order, each a dict with exactly the columns of `ferret eval`'s `trials.csv`.
@@ -147,8 +147,8 @@ fn trials_per_house(arg: &Bound<'_, PyAny>) -> PyResult<TrialsPerHouse> {
     houses, strategies = None, *, prior = None, seed = 0, trials_per_house = None,
     reveal_fraction = 0.0, protocol = "ferret", cells = false, max_containers = 8,
     exact_max = 16, search_cost = 0.0, config = None, llm_cache = None, offline = false,
-    keep_going = false, fusion = None, resolution = RESOLUTION, robot_radius = ROBOT_RADIUS,
-    wall_thickness = WALL_THICKNESS, progress = false
+    keep_going = false, fusion = None, resolution = 0.05, robot_radius = 0.18,
+    wall_thickness = 0.05, progress = false
 ))]
 #[allow(clippy::too_many_arguments)]
 pub fn evaluate(

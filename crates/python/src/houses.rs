@@ -12,7 +12,7 @@ use pyo3::types::PyList;
 
 use crate::convert;
 use crate::errors;
-use crate::settings::{self, Grid, RESOLUTION, ROBOT_RADIUS, WALL_THICKNESS};
+use crate::settings::{self, Grid};
 
 /// A house's map: its occupancy grid and the travel distances on it.
 pub type Map = Arc<(OccupancyGrid, Distances)>;
@@ -63,8 +63,13 @@ impl House {
                 ferret_world::distance::build(&scene.house, &params).map_err(errors::world)
             })
         })?;
+        let mut maps = self.lock();
+        // Another thread may have built the same map meanwhile: keep one.
+        if let Some((_, m)) = maps.iter().find(|(k, _)| *k == key) {
+            return Ok(m.clone());
+        }
         let map = Arc::new(built);
-        self.lock().push((key, map.clone()));
+        maps.push((key, map.clone()));
         Ok(map)
     }
 
@@ -110,7 +115,7 @@ impl House {
     }
 
     fn default_map(&self, py: Python<'_>) -> Option<Map> {
-        let grid = Grid::new(RESOLUTION, ROBOT_RADIUS, WALL_THICKNESS).ok()?;
+        let grid = Grid::default();
         self.map(py, &grid, &ferret_plan::Protocol::FERRET).ok()
     }
 }
@@ -215,7 +220,7 @@ impl House {
     /// containers: row and column 0 are the robot's start, `i + 1` container `i`. Measured on the
     /// occupancy grid `ferret eval` builds with the same options (built once per options, without
     /// the GIL). Raises `HouseError` for a house with an unreachable container.
-    #[pyo3(signature = (*, resolution = RESOLUTION, robot_radius = ROBOT_RADIUS, wall_thickness = WALL_THICKNESS, protocol = "ferret"))]
+    #[pyo3(signature = (*, resolution = 0.05, robot_radius = 0.18, wall_thickness = 0.05, protocol = "ferret"))]
     fn distances<'py>(
         &self,
         py: Python<'py>,

@@ -24,7 +24,7 @@ impl PyPrior {
     /// `ferret prior train`. `smoothing` is the weight (pseudo-containers) toward the back-off
     /// estimate. Releases the GIL while it trains.
     #[staticmethod]
-    #[pyo3(signature = (houses, smoothing = ferret_lab::strategies::DEFAULT_SMOOTHING))]
+    #[pyo3(signature = (houses, smoothing = 2.0))]
     fn train(py: Python<'_>, houses: Vec<Py<House>>, smoothing: f64) -> PyResult<Self> {
         if !(smoothing.is_finite() && smoothing >= 0.0) {
             return Err(errors::config(format!(

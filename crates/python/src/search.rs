@@ -12,7 +12,7 @@ use self_cell::self_cell;
 
 use crate::errors;
 use crate::houses::{House, Map, PyContainer};
-use crate::settings::{self, Grid, Planning, RESOLUTION, ROBOT_RADIUS, WALL_THICKNESS};
+use crate::settings::{self, Grid, Planning};
 
 /// What a search borrows from: the house, its map, the trial and the strategy.
 struct Owner {
@@ -78,7 +78,7 @@ impl PySearch {
     #[pyo3(signature = (
         house, target, strategy = "model/prior", *, prior = None, config = None, llm_cache = None,
         offline = false, fusion = None, max_containers = 8, exact_max = 16, search_cost = 0.0,
-        resolution = RESOLUTION, robot_radius = ROBOT_RADIUS, wall_thickness = WALL_THICKNESS,
+        resolution = 0.05, robot_radius = 0.18, wall_thickness = 0.05,
         protocol = "ferret"
     ))]
     #[allow(clippy::too_many_arguments)]

@@ -62,10 +62,19 @@ impl Grid {
     }
 }
 
-/// The defaults of the grid keywords (the command line's).
-pub const RESOLUTION: f64 = 0.05;
-pub const ROBOT_RADIUS: f64 = 0.18;
-pub const WALL_THICKNESS: f64 = 0.05;
+/// The command line's defaults. The keyword defaults in the functions' signatures are the same
+/// numbers written out (a signature shows only literals to Python); the tests compare them with
+/// `ferret eval --help`.
+impl Default for Grid {
+    fn default() -> Self {
+        let d = GridParams::default();
+        Self {
+            resolution: d.resolution,
+            robot_radius: d.robot_radius,
+            wall_thickness: d.wall_thickness,
+        }
+    }
+}
 
 /// A protocol by name, `"ferret"` or `"paper"`, as `--protocol`.
 pub fn protocol(name: &str) -> PyResult<Protocol> {

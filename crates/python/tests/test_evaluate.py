@@ -115,3 +115,25 @@ def test_progress_goes_to_stderr_only_when_asked(houses, capfd):
     ferret.evaluate(houses[:2], ["model/uniform"], progress=True)
     err = capfd.readouterr().err
     assert "maps: 2/2" in err and "trials: 2/2" in err
+
+
+def test_evaluate_releases_the_gil(houses):
+    import threading
+
+    started, done = threading.Event(), threading.Event()
+    ticks = 0
+
+    def work():
+        started.set()
+        ferret.evaluate(houses, ["model/prior/exact", "model/uniform/exact"], seed=9)
+        done.set()
+
+    t = threading.Thread(target=work)
+    t.start()
+    started.wait()
+    # While evaluate runs (about a second), this thread keeps running Python; were the GIL
+    # held, it would get one switch interval (5 ms, some ten thousand ticks) at most.
+    while not done.is_set():
+        ticks += 1
+    t.join()
+    assert ticks > 1_000_000

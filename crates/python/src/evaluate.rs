@@ -33,7 +33,8 @@ pub struct PyEvaluation {
 impl PyEvaluation {
     /// The rows: dicts with `trials.csv`'s columns (`house`, `house_index`, `target`,
     /// `strategy`, `cost_m`, `searches`, `found`, `found_container`, `searched`,
-    /// `goal_containers`, and `cost_cells` with `cells=True`).
+    /// `goal_containers`, and `cost_cells` with `cells=True`). A new list on every access: keep
+    /// it in a variable rather than indexing `rows` in a loop.
     #[getter]
     fn rows(&self, py: Python<'_>) -> PyResult<Py<PyList>> {
         convert::rows_to_py(py, &self.rows)
@@ -207,10 +208,7 @@ pub fn evaluate(
         }
     }
     let llm = settings::llm(config, llm_cache, offline, keep_going, fusion);
-    let scenes: Vec<Scene> = scenes_of(py, &houses)
-        .iter()
-        .map(|s| Scene::clone(s))
-        .collect();
+    let scenes: Vec<Scene> = scenes_of(&houses).iter().map(|s| Scene::clone(s)).collect();
     let params = grid.params(&protocol);
     let feedback: Box<dyn Feedback + Send> = if progress {
         Box::new(progress::Stderr::default())

@@ -121,7 +121,7 @@ impl House {
 }
 
 /// The scenes of a list of houses, shared.
-pub fn scenes_of(_py: Python<'_>, houses: &[Py<House>]) -> Vec<Arc<Scene>> {
+pub fn scenes_of(houses: &[Py<House>]) -> Vec<Arc<Scene>> {
     houses.iter().map(|h| h.get().scene.clone()).collect()
 }
 

@@ -31,7 +31,7 @@ impl PyPrior {
                 "smoothing={smoothing}: must be a finite number ≥ 0"
             )));
         }
-        let scenes = scenes_of(py, &houses);
+        let scenes = scenes_of(&houses);
         let prior = py.allow_threads(|| {
             errors::guarded("Prior.train", || {
                 Ok(Prior::train(scenes.iter().map(|s| s.as_ref()), smoothing))

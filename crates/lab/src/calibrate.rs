@@ -5,7 +5,6 @@
 
 use std::sync::Arc;
 
-use ferret_llm::LlmService;
 use ferret_plan::{
     Calibration, FusionFile, FusionFit, FusionWeights, LikelihoodSource, Prior, TrainingScore,
     draw_trial, prior_fingerprint,
@@ -19,7 +18,7 @@ use serde::Serialize;
 use crate::error::{LabError, Result};
 use crate::feedback::Feedback;
 use crate::houses::LoadedHouses;
-use crate::strategies::{LlmSettings, PlanningSettings, full_registry, prefetch};
+use crate::strategies::{LlmSettings, Strategies, prefetch};
 
 /// The sources scored when none are named.
 pub const DEFAULT_SOURCES: &str = "model/uniform,model/prior";
@@ -92,6 +91,45 @@ pub struct CalibrationSettings {
     pub fit_fusion: bool,
 }
 
+impl CalibrationSettings {
+    /// The LLM sources whose fusion with the prior is fitted.
+    fn fitted(&self) -> Vec<String> {
+        if !self.fit_fusion {
+            return Vec::new();
+        }
+        self.sources
+            .iter()
+            .filter(|s| s.starts_with(&format!("{}/", ferret_llm::LLM_MODEL)))
+            .cloned()
+            .collect()
+    }
+
+    /// Refuses unusable settings, naming the option, and returns the strategy specs the
+    /// registry given to [`calibrate`] must build: the sources, and the prior when a fusion is
+    /// fitted (even when it is not scored itself).
+    pub fn specs_to_build(&self) -> Result<Vec<String>> {
+        if self.sources.is_empty() {
+            return Err(LabError::invalid("--sources names no source"));
+        }
+        if !(1..=100).contains(&self.bins) {
+            return Err(LabError::invalid(format!(
+                "--bins {}: must be between 1 and 100",
+                self.bins
+            )));
+        }
+        let mut needed = self.sources.clone();
+        if self.fit_fusion {
+            if self.fitted().is_empty() {
+                return Err(LabError::invalid(
+                    "--fit-fusion: --sources names no llm+model/<prompt>/<llm> source to fuse with the prior",
+                ));
+            }
+            needed.push("model/prior".into());
+        }
+        Ok(needed)
+    }
+}
+
 impl Default for CalibrationSettings {
     fn default() -> Self {
         Self {
@@ -119,8 +157,6 @@ pub struct Calibrated {
     pub markdown: String,
     /// What failed, one message each.
     pub errors: Vec<String>,
-    /// The LLM service the sources asked (for its token report).
-    pub service: Arc<LlmService>,
 }
 
 /// The targets scored in one house: with `N`, the eval's target first, then others in a seeded
@@ -146,15 +182,16 @@ pub fn targets_for(scene: &Scene, count: TargetCount, seed: u64) -> Vec<ObjectTy
     }
 }
 
-/// Scores `settings.sources` on `loaded`: every question an LLM source asks goes through the
-/// response cache first, each at most once.
+/// Scores `settings.sources` on `loaded` with strategies from `setup` (a registry that builds
+/// [`CalibrationSettings::specs_to_build`]): every question an LLM source asks goes through the
+/// response cache first, each at most once; `llm` says what a failed endpoint means.
 ///
-/// Errors (before anything is scored): no houses, no sources, no house holding a target, a
-/// source that plans over no likelihood source, a fusion fit without an LLM source, and the
-/// errors of strategy setup and of LLM prefetching.
+/// Errors (before anything is scored): no houses, unusable settings, no house holding a target,
+/// a source that plans over no likelihood source, and the errors of building strategies and of
+/// LLM prefetching.
 pub fn calibrate(
     loaded: &LoadedHouses,
-    planning: &PlanningSettings,
+    setup: &Strategies,
     llm: &LlmSettings,
     settings: &CalibrationSettings,
     feedback: &dyn Feedback,
@@ -165,37 +202,8 @@ pub fn calibrate(
             loaded.source
         )));
     }
-    if settings.sources.is_empty() {
-        return Err(LabError::invalid("--sources names no source"));
-    }
-    if !(1..=100).contains(&settings.bins) {
-        return Err(LabError::invalid(format!(
-            "--bins {}: must be between 1 and 100",
-            settings.bins
-        )));
-    }
-    let fitted: Vec<String> = if settings.fit_fusion {
-        let fit: Vec<String> = settings
-            .sources
-            .iter()
-            .filter(|s| s.starts_with(&format!("{}/", ferret_llm::LLM_MODEL)))
-            .cloned()
-            .collect();
-        if fit.is_empty() {
-            return Err(LabError::invalid(
-                "--fit-fusion: --sources names no llm+model/<prompt>/<llm> source to fuse with the prior",
-            ));
-        }
-        fit
-    } else {
-        Vec::new()
-    };
-    // The prior is needed to fit a fusion even when it is not scored itself.
-    let mut needed = settings.sources.clone();
-    if !fitted.is_empty() {
-        needed.push("model/prior".into());
-    }
-    let setup = full_registry(planning, llm, &needed)?;
+    settings.specs_to_build()?;
+    let fitted = settings.fitted();
     let mut sources: Vec<(String, Arc<dyn LikelihoodSource>)> = Vec::new();
     for spec in &settings.sources {
         let strategy = setup.registry.build(spec)?;
@@ -310,7 +318,6 @@ pub fn calibrate(
         trials: trials.len(),
         markdown,
         errors,
-        service: setup.service,
     })
 }
 

@@ -6,7 +6,7 @@ use ferret_lab::calibrate::{CalibrationSettings, TargetCount, calibrate, targets
 use ferret_lab::selection::{SelectionSettings, select};
 use ferret_lab::{
     EvalRun, HouseSource, LlmSettings, PlanningSettings, RunInfo, Silent, TrialDraw, build_maps,
-    evaluate,
+    evaluate, full_registry,
 };
 use ferret_plan::{Protocol, Strategy, TrialsPerHouse};
 use ferret_select::Method;
@@ -38,14 +38,14 @@ fn calibration_scores_every_container_of_every_target_and_the_prior_beats_unifor
         targets_per_house: TargetCount::N(2),
         ..CalibrationSettings::default()
     };
-    let done = calibrate(
-        &loaded,
+    let llm = offline_llm(dir.path());
+    let setup = full_registry(
         &PlanningSettings::default(),
-        &offline_llm(dir.path()),
-        &settings,
-        &Silent,
+        &llm,
+        &settings.specs_to_build().unwrap(),
     )
     .unwrap();
+    let done = calibrate(&loaded, &setup, &llm, &settings, &Silent).unwrap();
     assert!(done.errors.is_empty(), "{:?}", done.errors);
     // Every (house, target, container) is one pair; holders are the containers holding it.
     let (mut pairs, mut holders, mut trials) = (0u64, 0u64, 0usize);
@@ -85,16 +85,16 @@ fn calibration_refuses_a_strategy_without_probabilities_and_a_fit_without_an_llm
             fit_fusion,
             ..CalibrationSettings::default()
         };
-        calibrate(
-            &loaded,
-            &PlanningSettings::default(),
-            &offline_llm(dir.path()),
-            &settings,
-            &Silent,
-        )
-        .err()
-        .map(|e| e.to_string())
-        .unwrap_or_default()
+        let llm = offline_llm(dir.path());
+        let specs = match settings.specs_to_build() {
+            Ok(specs) => specs,
+            Err(e) => return e.to_string(),
+        };
+        let setup = full_registry(&PlanningSettings::default(), &llm, &specs).unwrap();
+        calibrate(&loaded, &setup, &llm, &settings, &Silent)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default()
     };
     assert!(
         run(&["optimistic+greedy"], false).contains("plans over no likelihood source"),

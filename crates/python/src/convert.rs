@@ -74,3 +74,27 @@ pub fn quote(s: &str) -> String {
 pub fn quote_opt(s: Option<&str>) -> String {
     s.map_or_else(|| "None".to_string(), quote)
 }
+
+/// `rows` (dicts) as a `pandas.DataFrame`, with `columns` in order when given; pandas is not a
+/// dependency of ferret, so its absence is an `ImportError` saying how to install it.
+pub fn data_frame<'py>(
+    py: Python<'py>,
+    what: &str,
+    rows: Py<PyList>,
+    columns: Option<Vec<String>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let pandas = py.import("pandas").map_err(|e| {
+        if e.is_instance_of::<pyo3::exceptions::PyImportError>(py) {
+            pyo3::exceptions::PyImportError::new_err(format!(
+                "{what}.to_pandas() needs pandas, which is not installed: pip install pandas"
+            ))
+        } else {
+            e
+        }
+    })?;
+    let kwargs = pyo3::types::PyDict::new(py);
+    if let Some(columns) = columns {
+        kwargs.set_item("columns", columns)?;
+    }
+    pandas.call_method("DataFrame", (rows,), Some(&kwargs))
+}

@@ -124,6 +124,16 @@ pub fn lab(e: LabError) -> PyErr {
     lab_kind(&e).err(error_chain(&e))
 }
 
+/// The same, with the command line's option names in the message written as the keywords
+/// that set them (`("--c ", "c=")`).
+pub fn lab_as_keywords(e: LabError, keywords: &[(&str, &str)]) -> PyErr {
+    let mut message = error_chain(&e);
+    for (option, keyword) in keywords {
+        message = message.replace(option, keyword);
+    }
+    lab_kind(&e).err(message)
+}
+
 /// The exception of a planning error.
 pub fn plan(e: PlanError) -> PyErr {
     plan_kind(&e).err(error_chain(&e))

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use ferret_lab::runs::{CELL_M, TrialRow};
+use ferret_lab::runs::{CELL_M, EvalRun, RunInfo, TrialRow};
 use ferret_lab::{DEFAULT_STRATEGIES, Feedback, Silent, TrialDraw};
 use ferret_llm::FailurePolicy;
 use ferret_plan::{Strategy, TrialsPerHouse};
@@ -16,7 +16,7 @@ use crate::convert;
 use crate::errors;
 use crate::houses::{House, scenes_of};
 use crate::progress;
-use crate::settings::{self, Grid, Planning};
+use crate::settings::{self, Grid, Planning, PriorArg};
 
 /// The result of `ferret.evaluate`: one row per trial and strategy that finished, houses in
 /// order, each a dict with exactly the columns of `ferret eval`'s `trials.csv`.
@@ -27,6 +27,8 @@ pub struct PyEvaluation {
     houses_run: usize,
     trials_run: usize,
     strategies: Vec<String>,
+    /// What `run.json` says of this evaluation, or why it cannot say it.
+    run_info: Result<RunInfo, String>,
 }
 
 #[pymethods]
@@ -84,18 +86,26 @@ impl PyEvaluation {
     /// The rows as a `pandas.DataFrame` with `trials.csv`'s columns. Needs pandas, which ferret
     /// does not install (`pip install pandas`).
     fn to_pandas<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        let pandas = py.import("pandas").map_err(|e| {
-            if e.is_instance_of::<pyo3::exceptions::PyImportError>(py) {
-                pyo3::exceptions::PyImportError::new_err(
-                    "Evaluation.to_pandas() needs pandas, which is not installed: pip install pandas",
-                )
-            } else {
-                e
-            }
-        })?;
-        let kwargs = pyo3::types::PyDict::new(py);
-        kwargs.set_item("columns", self.columns(py)?)?;
-        pandas.call_method("DataFrame", (self.rows(py)?,), Some(&kwargs))
+        convert::data_frame(py, "Evaluation", self.rows(py)?, Some(self.columns(py)?))
+    }
+
+    /// Writes the run files of `ferret eval` into `dir` (created if missing): `trials.csv`
+    /// with these rows and `run.json`, which names the houses' source, the prior, the planner,
+    /// grid and protocol settings, so that `ferret.select(dir)` and `ferret select --trials dir`
+    /// can replay the run. Possible when the houses come from one `load_houses` or
+    /// `generate_houses` call and the prior is the default or a file; raises `ConfigError`
+    /// saying why otherwise.
+    fn save(&self, py: Python<'_>, dir: PathBuf) -> PyResult<()> {
+        let info = self.run_info.clone().map_err(errors::config)?;
+        let rows = self.rows.clone();
+        py.allow_threads(|| {
+            std::fs::create_dir_all(&dir).map_err(|e| {
+                errors::FerretError::new_err(format!("creating {}: {e}", dir.display()))
+            })?;
+            EvalRun::new(info, rows)
+                .and_then(|run| run.write(&dir))
+                .map_err(errors::lab)
+        })
     }
 
     fn __len__(&self) -> usize {
@@ -207,6 +217,16 @@ pub fn evaluate(
             )));
         }
     }
+    let run_info = run_info(
+        &houses,
+        &planning,
+        &grid,
+        seed,
+        reveal_fraction,
+        per_house,
+        protocol,
+        &specs,
+    );
     let llm = settings::llm(config, llm_cache, offline, keep_going, fusion);
     let scenes: Vec<Scene> = scenes_of(&houses).iter().map(|s| Scene::clone(s)).collect();
     let params = grid.params(&protocol);
@@ -287,5 +307,59 @@ pub fn evaluate(
         houses_run: outcome.houses_run,
         trials_run: outcome.trials_run,
         strategies: specs,
+        run_info,
+    })
+}
+
+/// What `run.json` says of an evaluation of `houses` under these settings: one house source,
+/// and a prior that a file names (paths made absolute, since the run may be replayed from
+/// another working directory).
+#[allow(clippy::too_many_arguments)]
+fn run_info(
+    houses: &[Py<House>],
+    planning: &Planning,
+    grid: &Grid,
+    seed: u64,
+    reveal_fraction: f64,
+    trials_per_house: TrialsPerHouse,
+    protocol: ferret_plan::Protocol,
+    strategies: &[String],
+) -> Result<RunInfo, String> {
+    let Some(first) = houses.first().map(|h| h.get().origin.clone()) else {
+        return Err("no houses".into());
+    };
+    if houses.iter().any(|h| !Arc::ptr_eq(&h.get().origin, &first)) {
+        return Err(
+            "the houses come from several load_houses or generate_houses calls; run.json names one source of houses"
+                .into(),
+        );
+    }
+    if let PriorArg::Held(_) = planning.prior {
+        return Err(
+            "prior is a Prior object, which run.json cannot name: save it (prior.save(path)) and pass prior=path"
+                .into(),
+        );
+    }
+    let absolute = |p: &Option<PathBuf>| -> Result<Option<PathBuf>, String> {
+        p.as_ref()
+            .map(|p| std::path::absolute(p).map_err(|e| format!("{}: {e}", p.display())))
+            .transpose()
+    };
+    let mut planning_settings = planning.settings.clone();
+    planning_settings.prior = absolute(&planning_settings.prior)?;
+    Ok(RunInfo {
+        houses: absolute(&first.houses)?,
+        range: first.range.as_ref().map(ToString::to_string),
+        asset_db: absolute(&first.asset_db)?,
+        generate: first.generate,
+        house_seed: first.house_seed,
+        grid: [grid.resolution, grid.robot_radius, grid.wall_thickness],
+        planning: planning_settings,
+        seed,
+        reveal_fraction,
+        trials_per_house,
+        protocol,
+        strategies: strategies.to_vec(),
+        trials_sha256: None,
     })
 }

@@ -28,14 +28,18 @@ pub struct House {
     /// The container set a ProcTHOR file was read with; `None` for houses that name their
     /// containers themselves (generated houses, scene files).
     pub read_with: Option<ContainerSet>,
+    /// Where the house was loaded or generated from, shared by the houses of one call: what
+    /// `run.json` names so that `ferret select` can load the houses again.
+    pub origin: Arc<HouseSource>,
     maps: Mutex<Vec<(MapKey, Map)>>,
 }
 
 impl House {
-    fn new(scene: Scene, read_with: Option<ContainerSet>) -> Self {
+    fn new(scene: Scene, read_with: Option<ContainerSet>, origin: Arc<HouseSource>) -> Self {
         Self {
             scene: Arc::new(scene),
             read_with,
+            origin,
             maps: Mutex::new(Vec::new()),
         }
     }
@@ -353,6 +357,7 @@ fn into_houses(
     read_with: Option<ContainerSet>,
 ) -> PyResult<Vec<Py<House>>> {
     let containers = read_with.unwrap_or_default();
+    let origin = Arc::new(source.clone());
     let loaded = py.allow_threads(|| {
         errors::guarded("loading houses", || {
             source.load_for(containers).map_err(errors::lab)
@@ -374,7 +379,11 @@ fn into_houses(
         .map(|s| {
             Py::new(
                 py,
-                House::new(s, if from_file { Some(containers) } else { None }),
+                House::new(
+                    s,
+                    if from_file { Some(containers) } else { None },
+                    origin.clone(),
+                ),
             )
         })
         .collect()

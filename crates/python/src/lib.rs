@@ -3,13 +3,15 @@
 //! ferret's Python package (`import ferret`): a thin face over the experiment layer that owns
 //! the conversion between Python and ferret's types — houses loaded or generated
 //! ([`houses`]), priors ([`prior`]), a search driven step by step ([`search`]), evaluations
-//! with `trials.csv`'s rows ([`evaluate`]), the keyword arguments they share ([`settings`]),
-//! progress on stderr ([`progress`]) and exception classes carrying the command line's messages
-//! ([`errors`]). It plans, simulates and evaluates nothing itself: every call goes to the crates
-//! `ferret eval` and `ferret serve` use.
+//! with `trials.csv`'s rows ([`evaluate`]), calibration of likelihood sources ([`calibrate`]),
+//! selection over an evaluation run ([`select`]), the keyword arguments they share
+//! ([`settings`]), progress on stderr ([`progress`]) and exception classes carrying the command
+//! line's messages ([`errors`]). It plans, simulates and evaluates nothing itself: every call
+//! goes to the crates `ferret eval` and `ferret serve` use.
 
 use pyo3::prelude::*;
 
+pub mod calibrate;
 pub mod convert;
 pub mod errors;
 pub mod evaluate;
@@ -17,6 +19,7 @@ pub mod houses;
 pub mod prior;
 pub mod progress;
 pub mod search;
+pub mod select;
 pub mod settings;
 
 /// The extension module `ferret._ferret`, re-exported by the `ferret` package.
@@ -30,9 +33,13 @@ fn _ferret(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<prior::PyPrior>()?;
     m.add_class::<search::PySearch>()?;
     m.add_class::<evaluate::PyEvaluation>()?;
+    m.add_class::<calibrate::PyCalibration>()?;
+    m.add_class::<select::PySelection>()?;
     m.add_function(wrap_pyfunction!(houses::load_houses, m)?)?;
     m.add_function(wrap_pyfunction!(houses::generate_houses, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate::evaluate, m)?)?;
+    m.add_function(wrap_pyfunction!(calibrate::calibrate, m)?)?;
+    m.add_function(wrap_pyfunction!(select::select, m)?)?;
     m.add("DEFAULT_STRATEGIES", ferret_lab::DEFAULT_STRATEGIES)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

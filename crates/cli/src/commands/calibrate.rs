@@ -71,9 +71,14 @@ pub fn run(args: Args) -> Result<ExitCode> {
         bins: usize::from(args.bins),
         fit_fusion: args.fit_fusion.is_some(),
     };
+    if loaded.scenes.is_empty() {
+        anyhow::bail!("no houses to score in {}", loaded.source);
+    }
+    let setup =
+        super::llm_setup::full_registry(&args.planning, &args.llm, &settings.specs_to_build()?)?;
     let done = calibrate(
         &loaded,
-        &args.planning.settings(),
+        &setup,
         &args.llm.settings(),
         &settings,
         &Bars::default(),
@@ -98,8 +103,8 @@ pub fn run(args: Args) -> Result<ExitCode> {
         println!("{}", fusion_markdown(file));
         println!("wrote {}", path.display());
     }
-    super::llm_setup::write_token_report(&done.service, &args.out)?;
-    super::llm_setup::check_fallback_gate(&done.service, &args.llm)?;
+    super::llm_setup::write_token_report(&setup.service, &args.out)?;
+    super::llm_setup::check_fallback_gate(&setup.service, &args.llm)?;
     println!(
         "{} sources over {} (house, target) pairs in {:.1} s; wrote {}/{{calibration.csv,calibration.md,reliability.png,reliability.svg}}",
         done.scored.len(),

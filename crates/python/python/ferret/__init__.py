@@ -1,8 +1,9 @@
 """ferret: LLM-informed model-based object search in ProcTHOR houses, from Python.
 
 Load or generate houses, train or load a likelihood prior, evaluate search strategies on the
-same trials as ``ferret eval`` (identical costs for the same houses, strategies and seed), and
-drive a search step by step from a robot loop with :class:`Search`.
+same trials as ``ferret eval`` (identical costs for the same houses, strategies and seed), score
+likelihood sources with :func:`calibrate`, select among strategies over an evaluation run with
+:func:`select`, and drive a search step by step from a robot loop with :class:`Search`.
 
 The work is done by ferret's Rust crates; this package only converts arguments and results.
 Long calls (``evaluate``, ``load_houses``, ``Prior.train``, building maps) release the GIL.
@@ -10,6 +11,7 @@ Long calls (``evaluate``, ``load_houses``, ``Prior.train``, building maps) relea
 
 from ._ferret import (
     DEFAULT_STRATEGIES,
+    CalibrationResult,
     ConfigError,
     Container,
     Evaluation,
@@ -23,15 +25,19 @@ from ._ferret import (
     Room,
     Search,
     SearchError,
+    SelectionResult,
     StrategyError,
     __version__,
+    calibrate,
     evaluate,
     generate_houses,
     load_houses,
+    select,
 )
 
 __all__ = [
     "DEFAULT_STRATEGIES",
+    "CalibrationResult",
     "ConfigError",
     "Container",
     "Evaluation",
@@ -45,9 +51,12 @@ __all__ = [
     "Room",
     "Search",
     "SearchError",
+    "SelectionResult",
     "StrategyError",
     "__version__",
+    "calibrate",
     "evaluate",
     "generate_houses",
     "load_houses",
+    "select",
 ]

@@ -234,7 +234,73 @@ class Evaluation:
         """Per strategy, the rows of ``summary.csv``."""
     def to_pandas(self) -> Any:
         """The rows as a ``pandas.DataFrame`` (needs pandas)."""
+    def save(self, dir: _Path) -> None:
+        """Writes ``trials.csv`` and ``run.json`` into ``dir``, as ``ferret eval`` does."""
     def __len__(self) -> int: ...
+
+class CalibrationResult:
+    """The result of ``calibrate``: one row per source with ``calibration.csv``'s columns."""
+
+    @property
+    def rows(self) -> List[Dict[str, Any]]:
+        """One dict per scored source, with ``calibration.csv``'s columns."""
+    @property
+    def reliability(self) -> Dict[str, List[Dict[str, float]]]:
+        """Per source, its reliability bins (``lo``, ``hi``, ``count``, ``mean_p``, ``observed``)."""
+    @property
+    def trials(self) -> int:
+        """(house, target) pairs scored."""
+    @property
+    def markdown(self) -> str:
+        """The table of scores as Markdown (``calibration.md``)."""
+    @property
+    def fusion(self) -> Optional[str]:
+        """The fitted fusion weights as JSON (for ``fusion=``), or ``None``."""
+    @property
+    def fusion_markdown(self) -> Optional[str]:
+        """The fitted fusions as Markdown, or ``None``."""
+    @property
+    def errors(self) -> List[str]:
+        """One message per source or trial that failed."""
+    def to_pandas(self) -> Any:
+        """The rows as a ``pandas.DataFrame`` (needs pandas)."""
+    def __len__(self) -> int: ...
+
+class SelectionResult:
+    """The result of ``select``: curves against the trial count k per selection method."""
+
+    @property
+    def strategies(self) -> List[str]:
+        """The candidate strategies, in the run's order."""
+    @property
+    def best_strategy(self) -> str:
+        """The strategy with the lowest mean cost over the run's houses."""
+    @property
+    def mean_costs(self) -> Dict[str, float]:
+        """Each candidate's mean cost over the run's houses, metres."""
+    @property
+    def methods(self) -> List[str]:
+        """The selection methods that ran (``ucb``, ``replay``)."""
+    @property
+    def curves(self) -> Dict[str, Dict[str, List[float]]]:
+        """Per method: ``avg_cost``, ``cum_regret``, ``paper_regret`` against k; ``best``: ``avg_cost``."""
+    @property
+    def rows(self) -> List[Dict[str, Any]]:
+        """The rows of ``selection.csv``."""
+    @property
+    def choices(self) -> List[Dict[str, Any]]:
+        """The rows of ``choices.csv``."""
+    @property
+    def markdown(self) -> str:
+        """The tables of ``selection.md``."""
+    @property
+    def deployments(self) -> int:
+        """Deployments run."""
+    @property
+    def trials_per_deployment(self) -> int:
+        """Trials per deployment."""
+    def to_pandas(self) -> Any:
+        """The rows of ``selection.csv`` as a ``pandas.DataFrame`` (needs pandas)."""
 
 def load_houses(
     path: _Path,
@@ -273,3 +339,43 @@ def evaluate(
     progress: bool = False,
 ) -> Evaluation:
     """Evaluates strategies on houses as ``ferret eval`` does (identical costs)."""
+
+def calibrate(
+    houses: Sequence[House],
+    sources: Union[Sequence[str], str, None] = None,
+    *,
+    targets_per_house: Union[int, Literal["all"], None] = None,
+    seed: int = 0,
+    bins: int = 10,
+    fit_fusion: bool = False,
+    prior: Union[Prior, _Path, None] = None,
+    max_containers: int = 8,
+    exact_max: int = 16,
+    search_cost: float = 0.0,
+    config: Optional[_Path] = None,
+    llm_cache: Optional[_Path] = None,
+    offline: bool = False,
+    keep_going: bool = False,
+    fusion: Optional[_Path] = None,
+    progress: bool = False,
+) -> CalibrationResult:
+    """Scores likelihood sources against the houses' ground truth as ``ferret calibrate`` does."""
+
+def select(
+    trials: _Path,
+    *,
+    deployments: int = 500,
+    trials_per_deployment: int = 100,
+    c: float = 5.0,
+    seed: int = 0,
+    replay_untried_first: bool = False,
+    replay: Optional[Literal["pessimistic", "counterfactual"]] = None,
+    draw: Optional[Literal["distinct", "replacement"]] = None,
+    config: Optional[_Path] = None,
+    llm_cache: Optional[_Path] = None,
+    offline: bool = False,
+    keep_going: bool = False,
+    fusion: Optional[_Path] = None,
+    progress: bool = False,
+) -> SelectionResult:
+    """UCB and replay selection over an evaluation run, as ``ferret select --trials`` does."""

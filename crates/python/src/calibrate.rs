@@ -3,8 +3,8 @@
 
 use std::path::PathBuf;
 
+use ferret_lab::LoadedHouses;
 use ferret_lab::calibrate::{CalibrationSettings, DEFAULT_SOURCES, TargetCount, fusion_markdown};
-use ferret_lab::{Feedback, LoadedHouses, Silent};
 use ferret_llm::FailurePolicy;
 use ferret_plan::{Calibration, FusionFile};
 use ferret_world::Scene;
@@ -108,20 +108,6 @@ impl PyCalibration {
     }
 }
 
-fn targets_per_house(arg: &Bound<'_, PyAny>) -> PyResult<TargetCount> {
-    let text = if let Ok(n) = arg.extract::<i64>() {
-        n.to_string()
-    } else if let Ok(s) = arg.extract::<String>() {
-        s
-    } else {
-        return Err(errors::config(
-            "targets_per_house: expected a number ≥ 1 or \"all\"",
-        ));
-    };
-    text.parse::<TargetCount>()
-        .map_err(|e| errors::config(format!("targets_per_house={text}: {e}")))
-}
-
 /// Scores likelihood sources as `ferret calibrate` does: for every house, every target type
 /// present (or `targets_per_house` of them, the first the one `evaluate` draws with the same
 /// `seed`) and every container, P_S(target, container) against whether the container holds the
@@ -166,7 +152,7 @@ pub fn calibrate(
     };
     settings::check_distinct("sources", &specs)?;
     let per_house = match targets_per_house.filter(|t| !t.is_none()) {
-        Some(t) => self::targets_per_house(t)?,
+        Some(t) => convert::count_or_all(t, "targets_per_house")?,
         None => TargetCount::All,
     };
     let settings = CalibrationSettings {
@@ -196,11 +182,7 @@ pub fn calibrate(
         skipped: Vec::new(),
         source: "a Python list".into(),
     };
-    let feedback: Box<dyn Feedback + Send> = if progress {
-        Box::new(progress::Stderr::default())
-    } else {
-        Box::new(Silent)
-    };
+    let feedback = progress::feedback(progress);
     let done = py.allow_threads(|| {
         errors::guarded("calibrate", || {
             let setup = settings::registry(&planning, &llm, &needed, FailurePolicy::StopForRun)

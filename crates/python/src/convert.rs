@@ -98,3 +98,23 @@ pub fn data_frame<'py>(
     }
     pandas.call_method("DataFrame", (rows,), Some(&kwargs))
 }
+
+/// A count keyword that takes a number or `"all"` (`trials_per_house`, `targets_per_house`),
+/// parsed as the command line parses the option.
+pub fn count_or_all<T>(arg: &Bound<'_, PyAny>, name: &str) -> PyResult<T>
+where
+    T: std::str::FromStr,
+    T::Err: std::fmt::Display,
+{
+    let text = if let Ok(n) = arg.extract::<i64>() {
+        n.to_string()
+    } else if let Ok(s) = arg.extract::<String>() {
+        s
+    } else {
+        return Err(errors::config(format!(
+            "{name}: expected a number ≥ 1 or \"all\""
+        )));
+    };
+    text.parse::<T>()
+        .map_err(|e| errors::config(format!("{name}={text}: {e}")))
+}

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use ferret_lab::runs::{CELL_M, EvalRun, RunInfo, TrialRow};
-use ferret_lab::{DEFAULT_STRATEGIES, Feedback, Silent, TrialDraw};
+use ferret_lab::{DEFAULT_STRATEGIES, TrialDraw};
 use ferret_llm::FailurePolicy;
 use ferret_plan::{Strategy, TrialsPerHouse};
 use ferret_world::Scene;
@@ -128,20 +128,6 @@ impl PyEvaluation {
     }
 }
 
-fn trials_per_house(arg: &Bound<'_, PyAny>) -> PyResult<TrialsPerHouse> {
-    let text = if let Ok(n) = arg.extract::<i64>() {
-        n.to_string()
-    } else if let Ok(s) = arg.extract::<String>() {
-        s
-    } else {
-        return Err(errors::config(
-            "trials_per_house: expected a number ≥ 1 or \"all\"",
-        ));
-    };
-    text.parse::<TrialsPerHouse>()
-        .map_err(|e| errors::config(format!("trials_per_house={text}: {e}")))
-}
-
 /// Evaluates strategies on houses as `ferret eval` does: the same trials (targets drawn by
 /// `seed`) for every strategy, in parallel over houses, with the GIL released; the same houses,
 /// strategies, seed and options give the very costs of `ferret eval`'s `trials.csv`.
@@ -199,7 +185,7 @@ pub fn evaluate(
     };
     settings::check_distinct("strategies", &specs)?;
     let per_house = match trials_per_house.filter(|t| !t.is_none()) {
-        Some(t) => self::trials_per_house(t)?,
+        Some(t) => convert::count_or_all(t, "trials_per_house")?,
         None => TrialsPerHouse::One,
     };
     let protocol = settings::protocol(protocol)?;
@@ -230,11 +216,7 @@ pub fn evaluate(
     let llm = settings::llm(config, llm_cache, offline, keep_going, fusion);
     let scenes: Vec<Scene> = scenes_of(&houses).iter().map(|s| Scene::clone(s)).collect();
     let params = grid.params(&protocol);
-    let feedback: Box<dyn Feedback + Send> = if progress {
-        Box::new(progress::Stderr::default())
-    } else {
-        Box::new(Silent)
-    };
+    let feedback = progress::feedback(progress);
     let outcome = py.allow_threads(|| {
         errors::guarded("evaluate", || {
             let setup = settings::registry(&planning, &llm, &specs, FailurePolicy::StopForRun)

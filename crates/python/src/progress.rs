@@ -97,3 +97,12 @@ impl Feedback for Stderr {
         let _ = writeln!(std::io::stderr().lock(), "{message}");
     }
 }
+
+/// Progress on stderr when asked for, else none.
+pub fn feedback(progress: bool) -> Box<dyn Feedback + Send> {
+    if progress {
+        Box::new(Stderr::default())
+    } else {
+        Box::new(ferret_lab::Silent)
+    }
+}

@@ -3,8 +3,8 @@
 
 use std::path::PathBuf;
 
+use ferret_lab::EvalRun;
 use ferret_lab::selection::SelectionSettings;
-use ferret_lab::{EvalRun, Feedback, Silent};
 use ferret_plan::{DrawMode, ReplayMode};
 use ferret_select::{ExperimentResult, choice_rows, selection_rows};
 use pyo3::prelude::*;
@@ -195,11 +195,7 @@ pub fn select(
         })
         .transpose()?;
     let llm = settings::llm(config, llm_cache, offline, keep_going, fusion);
-    let feedback: Box<dyn Feedback + Send> = if progress {
-        Box::new(progress::Stderr::default())
-    } else {
-        Box::new(Silent)
-    };
+    let feedback = progress::feedback(progress);
     let done = py.allow_threads(|| {
         errors::guarded("select", || {
             let run = EvalRun::read(&trials).map_err(errors::lab)?;

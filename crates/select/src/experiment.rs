@@ -376,6 +376,7 @@ fn run_reference_deployment(
     let mut run = |mut live: LiveDeployment| -> Result<MethodRun, SelectError> {
         let method = live.method();
         let (mut np, order) = shuffled();
+        live.reserve(opts.trials_per_deployment);
         let mut rows = Vec::with_capacity(opts.trials_per_deployment);
         let mut chosen = Vec::with_capacity(opts.trials_per_deployment);
         let mut costs = Vec::with_capacity(opts.trials_per_deployment);
@@ -436,6 +437,7 @@ pub fn run_on_table(
     table: &CostTable,
     houses: &[usize],
 ) -> Result<MethodRun, SelectError> {
+    live.reserve(houses.len());
     let mut chosen = Vec::with_capacity(houses.len());
     let mut costs = Vec::with_capacity(houses.len());
     for &h in houses {

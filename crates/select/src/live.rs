@@ -59,9 +59,26 @@ pub struct LiveDeployment {
     seed: Option<u64>,
     selector: Box<dyn Selector + Send>,
     rng: ChaCha8Rng,
-    history: Vec<TrialEnd>,
+    /// How each trial ended; the replays of finished ones are in `replays`, in order, so that a
+    /// trial costs no allocation of its own (the deployment experiment runs 10⁵ of them).
+    ends: Vec<End>,
+    replays: Vec<f64>,
     /// The choice made for the trial in progress, if any.
     pending: Option<usize>,
+}
+
+/// A trial's end as stored: a [`TrialEnd`] without its replay costs.
+#[derive(Clone, Copy, Debug)]
+enum End {
+    Finished {
+        chosen: usize,
+        cost: f64,
+        /// How many replay costs it has in `LiveDeployment::replays`.
+        replays: usize,
+    },
+    Abandoned {
+        chosen: usize,
+    },
 }
 
 impl std::fmt::Debug for LiveDeployment {
@@ -70,7 +87,7 @@ impl std::fmt::Debug for LiveDeployment {
             .field("method", &self.method)
             .field("c", &self.c)
             .field("seed", &self.seed)
-            .field("finished", &self.finished().count())
+            .field("finished", &self.finished_parts().count())
             .field("pending", &self.pending)
             .finish()
     }
@@ -101,7 +118,8 @@ impl LiveDeployment {
             seed: None,
             selector,
             rng: ties,
-            history: Vec::new(),
+            ends: Vec::new(),
+            replays: Vec::new(),
             pending: None,
         }
     }
@@ -149,6 +167,14 @@ impl LiveDeployment {
         Ok(d)
     }
 
+    /// Makes room for `trials` more trials, so that a deployment of known length grows its
+    /// history once.
+    pub fn reserve(&mut self, trials: usize) {
+        self.ends.reserve(trials);
+        self.replays
+            .reserve(trials.saturating_mul(self.selector.n_strategies()));
+    }
+
     /// Ends the trial in progress without learning from it.
     ///
     /// # Errors
@@ -157,13 +183,20 @@ impl LiveDeployment {
         let chosen = self.pending.take().ok_or_else(|| {
             SelectError::Live("no trial in progress: choose a strategy first".into())
         })?;
-        self.history.push(TrialEnd::Abandoned { chosen });
+        self.ends.push(End::Abandoned { chosen });
         Ok(())
     }
 
     /// How every trial so far ended, in order.
-    pub fn history(&self) -> &[TrialEnd] {
-        &self.history
+    pub fn history(&self) -> Vec<TrialEnd> {
+        let mut finished = self.finished();
+        self.ends
+            .iter()
+            .filter_map(|end| match *end {
+                End::Finished { .. } => finished.next().map(TrialEnd::Finished),
+                End::Abandoned { chosen } => Some(TrialEnd::Abandoned { chosen }),
+            })
+            .collect()
     }
 
     /// The strategy for the next trial. Asking again before [`finish`](Self::finish) returns the
@@ -214,16 +247,16 @@ impl LiveDeployment {
             SelectError::Live("no trial in progress: choose a strategy first".into())
         })?;
         self.selector.observe(chosen, cost, replays)?;
-        let mut replays = replays.to_vec();
-        if let Some(r) = replays.get_mut(chosen) {
+        let start = self.replays.len();
+        self.replays.extend_from_slice(replays);
+        if let Some(r) = self.replays[start..].get_mut(chosen) {
             *r = cost;
         }
-        let trial = FinishedTrial {
+        self.ends.push(End::Finished {
             chosen,
             cost,
-            replays,
-        };
-        self.history.push(TrialEnd::Finished(trial));
+            replays: replays.len(),
+        });
         self.pending = None;
         Ok(())
     }
@@ -244,10 +277,29 @@ impl LiveDeployment {
     }
 
     /// The finished trials, in order (the abandoned ones left out).
-    pub fn finished(&self) -> impl Iterator<Item = &FinishedTrial> + '_ {
-        self.history.iter().filter_map(|end| match end {
-            TrialEnd::Finished(t) => Some(t),
-            TrialEnd::Abandoned { .. } => None,
+    pub fn finished(&self) -> impl Iterator<Item = FinishedTrial> + '_ {
+        self.finished_parts()
+            .map(|(chosen, cost, replays)| FinishedTrial {
+                chosen,
+                cost,
+                replays: replays.to_vec(),
+            })
+    }
+
+    /// The finished trials as (chosen, cost, replays) without copying.
+    fn finished_parts(&self) -> impl Iterator<Item = (usize, f64, &[f64])> + '_ {
+        let mut at = 0;
+        self.ends.iter().filter_map(move |end| match *end {
+            End::Finished {
+                chosen,
+                cost,
+                replays,
+            } => {
+                let r = &self.replays[at..at + replays];
+                at += replays;
+                Some((chosen, cost, r))
+            }
+            End::Abandoned { .. } => None,
         })
     }
 
@@ -259,17 +311,17 @@ impl LiveDeployment {
     /// Per-strategy statistics and scores for the next choice.
     pub fn stats(&self) -> Vec<StrategyStats> {
         let n = self.selector.n_strategies();
-        let k = self.finished().count();
+        let k = self.finished_parts().count();
         (0..n)
             .map(|i| {
                 let own: Vec<f64> = self
-                    .finished()
-                    .filter(|t| t.chosen == i)
-                    .map(|t| t.cost)
+                    .finished_parts()
+                    .filter(|t| t.0 == i)
+                    .map(|t| t.1)
                     .collect();
                 let replay_sum: f64 = self
-                    .finished()
-                    .map(|t| t.replays.get(i).copied().unwrap_or(f64::NAN))
+                    .finished_parts()
+                    .map(|t| t.2.get(i).copied().unwrap_or(f64::NAN))
                     .sum();
                 StrategyStats {
                     deployed: own.len(),
@@ -289,7 +341,7 @@ impl LiveDeployment {
         if self.pending.is_some() {
             return format!("{name} was chosen for the trial in progress");
         }
-        if self.finished().next().is_none() {
+        if self.finished_parts().next().is_none() {
             return format!(
                 "{name}: nothing is known before the first trial, so the choice is uniform"
             );

@@ -32,7 +32,7 @@ proptest! {
         let costs: Vec<Vec<f64>> = costs.iter().map(|r| r.iter().map(|&c| f64::from(c)).collect()).collect();
         let more: Vec<Vec<f64>> = more.iter().map(|r| r.iter().map(|&c| f64::from(c)).collect()).collect();
         let mut original = run(method, &costs, seed);
-        let mut restored = LiveDeployment::restore(method, 3, 5.0, seed, original.history(), None).unwrap();
+        let mut restored = LiveDeployment::restore(method, 3, 5.0, seed, &original.history(), None).unwrap();
         prop_assert_eq!(restored.stats(), original.stats());
         prop_assert_eq!(restored.peek(), original.peek());
         for row in &more {
@@ -66,7 +66,7 @@ proptest! {
 fn a_stored_choice_the_selector_would_not_make_is_refused() {
     let costs = vec![vec![1.0, 9.0, 9.0]; 6];
     let d = run(Method::ReplaySelection, &costs, 3);
-    let mut tampered: Vec<TrialEnd> = d.history().to_vec();
+    let mut tampered: Vec<TrialEnd> = d.history();
     let last = tampered.len() - 1;
     let TrialEnd::Finished(t) = &mut tampered[last] else {
         panic!("every trial finished")
@@ -78,7 +78,7 @@ fn a_stored_choice_the_selector_would_not_make_is_refused() {
     // The open trial's choice is checked too.
     let next = d.peek();
     assert!(
-        LiveDeployment::restore(Method::ReplaySelection, 3, 5.0, 3, d.history(), Some(next))
+        LiveDeployment::restore(Method::ReplaySelection, 3, 5.0, 3, &d.history(), Some(next))
             .is_ok()
     );
     assert!(
@@ -87,7 +87,7 @@ fn a_stored_choice_the_selector_would_not_make_is_refused() {
             3,
             5.0,
             3,
-            d.history(),
+            &d.history(),
             Some((next + 1) % 3)
         )
         .is_err()
@@ -129,7 +129,7 @@ fn abandoned_trials_keep_their_draw_and_teach_nothing() {
     assert_eq!(d.finished().count(), 5);
     assert_eq!(d.history().len(), 8);
     let r =
-        LiveDeployment::restore(Method::ReplaySelection, 3, 5.0, 11, d.history(), None).unwrap();
+        LiveDeployment::restore(Method::ReplaySelection, 3, 5.0, 11, &d.history(), None).unwrap();
     assert_eq!(r.peek(), d.peek());
     assert_eq!(r.stats(), d.stats());
     assert!(d.abandon().is_err(), "nothing in progress");

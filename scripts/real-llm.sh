@@ -27,10 +27,13 @@ ROOT="$(cd "$(dirname "$0")/.." && pwd)"
 CACHE="${FERRET_LANE_CACHE:-$HOME/.cache/ferret-real-llm}"
 OUT="${FERRET_LANE_OUT:-$ROOT/ferret-lane}"
 DATA="${FERRET_PROCTHOR_DIR:-}"
-if [ -z "$DATA" ]; then
-    echo "set FERRET_PROCTHOR_DIR to the ProcTHOR directory (the houses and the asset database)" >&2
-    exit 2
-fi
+# The runs need the ProcTHOR houses; installing and writing the configuration do not.
+need_data() {
+    if [ -z "$DATA" ]; then
+        echo "set FERRET_PROCTHOR_DIR to the ProcTHOR directory (the houses and the asset database)" >&2
+        exit 2
+    fi
+}
 PORT="${FERRET_LANE_PORT:-18080}"
 # The paper's per-container prompts ask ~58 questions per house: they run on RANGE; the prompts
 # that ask once per house (or per room type) run on ALL_RANGE, and are fused with the prior as
@@ -302,6 +305,7 @@ case "${1:-all}" in
         echo "$OUT/ferret.toml"
         ;;
     all)
+        need_data
         install
         mkdir -p "$OUT"
         OUT="$(cd "$OUT" && pwd)"

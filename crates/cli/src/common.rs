@@ -1,5 +1,5 @@
 //! What several commands share: progress bars and remarks on stderr (the experiment layer's
-//! [`Feedback`]), building maps with them, and logging.
+//! [`Feedback`]), and logging.
 
 use std::io::IsTerminal;
 use std::sync::Mutex;
@@ -7,7 +7,6 @@ use std::time::Duration;
 
 use anyhow::{Result, bail};
 use ferret_lab::Feedback;
-use ferret_world::{GridParams, Scene};
 use indicatif::{ProgressBar, ProgressStyle};
 
 pub use crate::args::{GridArgs, HouseArgs, ProtocolArgs};
@@ -107,9 +106,4 @@ impl Feedback for Bars {
             None => eprintln!("{message}"),
         }
     }
-}
-
-/// Builds grid and distances for every scene, in parallel, with a progress bar.
-pub fn build_maps(scenes: &[Scene], params: &GridParams) -> Vec<Mapped> {
-    ferret_lab::build_maps(scenes, params, &Bars::default())
 }

@@ -6,12 +6,14 @@ use ferret_plan::{
     Protocol, SearchProblem, Strategy, TrialOutcome, TrialSpec, TrialsPerHouse, draw_trials_with,
     run_trial,
 };
-use ferret_world::{House, ObjectType, Scene};
+use ferret_world::{GridParams, House, ObjectType, Scene};
 use rayon::prelude::*;
 
+use crate::error::Result;
 use crate::feedback::Feedback;
-use crate::houses::Mapped;
+use crate::houses::{Mapped, build_maps};
 use crate::runs::TrialRow;
+use crate::strategies::{LlmSettings, Strategies, prefetch};
 
 /// How trials are drawn on each house: the same for every strategy.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -102,6 +104,51 @@ pub fn evaluate(
         ev.trials_run += trials;
     }
     ev
+}
+
+/// An evaluation of strategy specs, with what it was run on.
+pub struct SpecEvaluation {
+    /// Every house's map (or why it has none), in the houses' order.
+    pub maps: Vec<Mapped>,
+    /// The strategies that ran, in the order of the specs: those of an LLM that failed are left
+    /// out under `keep_going`.
+    pub strategies: Vec<Arc<dyn Strategy>>,
+    /// The rows and errors.
+    pub evaluation: Evaluation,
+}
+
+/// Evaluates the strategies `specs` of `setup` on `scenes` mapped on `grid`, as `ferret eval`
+/// does: the strategies built, the maps built, every LLM question of the drawn trials asked
+/// before the trials run (through the response cache), then [`evaluate`].
+///
+/// Errors: a spec the registry cannot build, and the errors of prefetching LLM answers.
+pub fn evaluate_specs(
+    scenes: &[Scene],
+    setup: &Strategies,
+    specs: &[String],
+    draw: &TrialDraw<'_>,
+    grid: &GridParams,
+    llm: &LlmSettings,
+    feedback: &dyn Feedback,
+) -> Result<SpecEvaluation> {
+    let built: Vec<Arc<dyn Strategy>> = specs
+        .iter()
+        .map(|s| setup.registry.build(s))
+        .collect::<std::result::Result<_, _>>()?;
+    let maps = build_maps(scenes, grid, feedback);
+    let targets = draw.targets(scenes, &maps);
+    let pairs: Vec<(&House, &ObjectType)> = targets.iter().map(|(h, t)| (*h, t)).collect();
+    let dropped = prefetch(&setup.service, llm, specs, &pairs, feedback)?;
+    let strategies: Vec<Arc<dyn Strategy>> = built
+        .into_iter()
+        .filter(|s| !dropped.iter().any(|d| d == s.name()))
+        .collect();
+    let evaluation = evaluate(scenes, &maps, &strategies, draw, feedback);
+    Ok(SpecEvaluation {
+        maps,
+        strategies,
+        evaluation,
+    })
 }
 
 fn evaluate_house(

@@ -26,7 +26,7 @@ pub mod summary;
 
 pub use deploy::{DeploySettings, DeployedTrial, Deployment, DeploymentStep, deploy, house_order};
 pub use error::{LabError, Result};
-pub use evaluate::{Evaluation, TrialDraw, evaluate, trial_row};
+pub use evaluate::{Evaluation, SpecEvaluation, TrialDraw, evaluate, evaluate_specs, trial_row};
 pub use feedback::{Feedback, Silent};
 pub use ferret_select::HouseOrder;
 pub use houses::{HouseSource, LoadedHouses, Mapped, build_maps};

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use ferret_lab::runs::{CELL_M, EvalRun, RunInfo, TrialRow};
 use ferret_lab::{DEFAULT_STRATEGIES, TrialDraw};
 use ferret_llm::FailurePolicy;
-use ferret_plan::{Strategy, TrialsPerHouse};
+use ferret_plan::TrialsPerHouse;
 use ferret_world::Scene;
 use pyo3::prelude::*;
 use pyo3::types::PyList;
@@ -221,39 +221,22 @@ pub fn evaluate(
         errors::guarded("evaluate", || {
             let setup = settings::registry(&planning, &llm, &specs, FailurePolicy::StopForRun)
                 .map_err(errors::lab)?;
-            let built: Vec<Arc<dyn Strategy>> = specs
-                .iter()
-                .map(|s| setup.registry.build(s))
-                .collect::<Result<_, _>>()
-                .map_err(errors::plan)?;
-            let maps = ferret_lab::build_maps(&scenes, &params, feedback.as_ref());
-            let draw = TrialDraw {
-                seed,
-                reveal_fraction,
-                per_house,
-                protocol: &protocol,
-            };
-            let targets = draw.targets(&scenes, &maps);
-            let pairs: Vec<_> = targets.iter().map(|(h, t)| (*h, t)).collect();
-            let dropped = ferret_lab::strategies::prefetch(
-                &setup.service,
-                &llm,
+            let run = ferret_lab::evaluate_specs(
+                &scenes,
+                &setup,
                 &specs,
-                &pairs,
+                &TrialDraw {
+                    seed,
+                    reveal_fraction,
+                    per_house,
+                    protocol: &protocol,
+                },
+                &params,
+                &llm,
                 feedback.as_ref(),
             )
             .map_err(errors::lab)?;
-            let kept: Vec<Arc<dyn Strategy>> = built
-                .into_iter()
-                .filter(|s| !dropped.iter().any(|d| d == s.name()))
-                .collect();
-            Ok(ferret_lab::evaluate(
-                &scenes,
-                &maps,
-                &kept,
-                &draw,
-                feedback.as_ref(),
-            ))
+            Ok(run.evaluation)
         })
     })?;
     if outcome.rows.is_empty() {

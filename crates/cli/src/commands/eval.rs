@@ -11,7 +11,7 @@ use ferret_lab::summary::{
     SummaryRow, cells_markdown, paired_comparisons, paired_markdown, reference_means,
     reference_means_markdown, summarize, summary_markdown,
 };
-use ferret_lab::{TrialDraw, evaluate};
+use ferret_lab::{SpecEvaluation, TrialDraw, evaluate_specs};
 use ferret_plan::{Protocol, Strategy, TrialOutcome, TrialSpec, TrialsPerHouse};
 use ferret_report::{
     TrajectoryOptions, TrajectoryPanel, ViolinOptions, draw_trajectories, draw_violins,
@@ -19,7 +19,7 @@ use ferret_report::{
 use ferret_world::{Distances, Scene};
 
 pub use crate::args::PlanningArgs;
-use crate::common::{Bars, GridArgs, HouseArgs, Mapped, ProtocolArgs, build_maps};
+use crate::common::{Bars, GridArgs, HouseArgs, Mapped, ProtocolArgs};
 use crate::output::write_csv;
 pub use ferret_lab::DEFAULT_STRATEGIES;
 
@@ -112,27 +112,25 @@ pub fn run(args: Args) -> Result<ExitCode> {
         );
     }
     let setup = super::llm_setup::full_registry(&args.planning, &args.llm, &args.strategies)?;
-    let strategies: Vec<Arc<dyn Strategy>> = args
-        .strategies
-        .iter()
-        .map(|s| setup.registry.build(s))
-        .collect::<Result<_, _>>()?;
-    let maps = build_maps(&loaded.scenes, &args.grid.params_for(protocol.access));
     let draw = TrialDraw {
         seed: args.seed,
         reveal_fraction: args.reveal_fraction,
         per_house: args.trials_per_house,
         protocol: &protocol,
     };
-    let targets = draw.targets(&loaded.scenes, &maps);
-    let pairs: Vec<(&ferret_world::House, &ferret_world::ObjectType)> =
-        targets.iter().map(|(h, t)| (*h, t)).collect();
-    let dropped = super::llm_setup::prefetch(&setup.service, &args.llm, &args.strategies, &pairs)?;
-    let strategies: Vec<Arc<dyn Strategy>> = strategies
-        .into_iter()
-        .filter(|s| !dropped.iter().any(|d| d == s.name()))
-        .collect();
-    let outcome = evaluate(&loaded.scenes, &maps, &strategies, &draw, &Bars::default());
+    let SpecEvaluation {
+        maps,
+        strategies,
+        evaluation: outcome,
+    } = evaluate_specs(
+        &loaded.scenes,
+        &setup,
+        &args.strategies,
+        &draw,
+        &args.grid.params_for(protocol.access),
+        &args.llm.settings(),
+        &Bars::default(),
+    )?;
     for e in &outcome.errors {
         eprintln!("error: {e}");
     }

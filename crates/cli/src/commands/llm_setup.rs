@@ -2,16 +2,13 @@
 //! the command line's options, with progress and reports on the terminal.
 
 use std::path::Path;
-use std::sync::Arc;
 
 use anyhow::Result;
 use ferret_lab::strategies::{self, Strategies};
 use ferret_llm::{FailurePolicy, LlmService};
-use ferret_world::{House, ObjectType};
 
 pub use crate::args::LlmArgs;
 use crate::args::PlanningArgs;
-use crate::common::Bars;
 
 /// Built-in strategies plus the LLM kinds, for the strategies `specs` will build.
 pub fn full_registry(
@@ -38,23 +35,6 @@ pub fn full_registry_with(
         &llm.settings(),
         specs,
         on_failure,
-    )?)
-}
-
-/// Asks every probability question before trials run, with a progress bar; returns the
-/// strategies to drop under `--keep-going` (see [`ferret_lab::strategies::prefetch`]).
-pub fn prefetch(
-    service: &Arc<LlmService>,
-    llm: &LlmArgs,
-    specs: &[String],
-    trials: &[(&House, &ObjectType)],
-) -> Result<Vec<String>> {
-    Ok(strategies::prefetch(
-        service,
-        &llm.settings(),
-        specs,
-        trials,
-        &Bars::default(),
     )?)
 }
 

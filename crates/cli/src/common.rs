@@ -5,12 +5,12 @@ use std::io::IsTerminal;
 use std::sync::Mutex;
 use std::time::Duration;
 
-use anyhow::{Result, bail};
 use ferret_lab::Feedback;
 use indicatif::{ProgressBar, ProgressStyle};
 
 pub use crate::args::{GridArgs, HouseArgs, ProtocolArgs};
 pub use ferret_lab::Mapped;
+pub use ferret_lab::strategies::check_distinct;
 
 /// Sends `tracing` output to stderr; `-v` raises the level, `RUST_LOG` overrides.
 pub fn init_tracing(verbose: u8) {
@@ -27,18 +27,6 @@ pub fn init_tracing(verbose: u8) {
         .with_writer(std::io::stderr)
         .with_ansi(std::io::stderr().is_terminal())
         .try_init();
-}
-
-/// Refuses a list option naming the same value twice (`--strategies a,b,a`): its results would
-/// be counted twice or overwrite each other.
-pub fn check_distinct(option: &str, values: &[String]) -> Result<()> {
-    let mut seen = std::collections::HashSet::new();
-    for v in values {
-        if !seen.insert(v.as_str()) {
-            bail!("{option}: `{v}` is given twice");
-        }
-    }
-    Ok(())
 }
 
 /// A progress bar in ferret's style (hidden when stderr is not a terminal).

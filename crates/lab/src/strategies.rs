@@ -41,6 +41,16 @@ pub fn needs_prior(specs: &[String]) -> bool {
         .any(|s| s.starts_with("model/prior") || s.starts_with("fused/"))
 }
 
+/// Refuses a list option naming the same value twice (`--strategies a,b,a`): its results would
+/// be counted twice or overwrite each other. `option` is the option as the caller names it.
+pub fn check_distinct(option: &str, values: &[String]) -> Result<()> {
+    let mut seen = std::collections::HashSet::new();
+    match values.iter().find(|v| !seen.insert(v.as_str())) {
+        Some(v) => Err(LabError::invalid(format!("{option}: `{v}` is given twice"))),
+        None => Ok(()),
+    }
+}
+
 /// Planner and prior settings shared by evaluations, selections and deployments. Field names
 /// are those of `run.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -464,6 +474,13 @@ mod tests {
 
     fn specs(s: &[&str]) -> Vec<String> {
         s.iter().map(|s| s.to_string()).collect()
+    }
+
+    #[test]
+    fn a_value_given_twice_is_named_with_its_option() {
+        let err = check_distinct("--strategies", &specs(&["a", "b", "a"])).unwrap_err();
+        assert_eq!(err.to_string(), "--strategies: `a` is given twice");
+        assert!(check_distinct("--strategies", &specs(&["a", "b"])).is_ok());
     }
 
     #[test]

@@ -162,14 +162,16 @@ impl Planning {
             exact_max,
             search_cost,
         };
+        // The command line names its options; here they are keywords.
         settings.validate().map_err(|e| {
-            // The command line names its options; here they are keywords.
-            let m = e
-                .to_string()
-                .replace("--search-cost ", "search_cost=")
-                .replace("--max-containers ", "max_containers=")
-                .replace("--exact-max ", "exact_max=");
-            errors::config(m)
+            errors::lab_as_keywords(
+                e,
+                &[
+                    ("--search-cost ", "search_cost="),
+                    ("--max-containers ", "max_containers="),
+                    ("--exact-max ", "exact_max="),
+                ],
+            )
         })?;
         Ok(Self { settings, prior })
     }
@@ -197,13 +199,7 @@ pub fn llm(
 
 /// Refuses a spec given twice, as `--strategies a,b,a` is refused.
 pub fn check_distinct(name: &str, specs: &[String]) -> PyResult<()> {
-    let mut seen = std::collections::HashSet::new();
-    for s in specs {
-        if !seen.insert(s.as_str()) {
-            return Err(errors::config(format!("{name}: `{s}` is given twice")));
-        }
-    }
-    Ok(())
+    ferret_lab::strategies::check_distinct(name, specs).map_err(errors::lab)
 }
 
 /// The full registry (built-in and LLM kinds) for `specs`, over the prior only when one of them

@@ -14,6 +14,7 @@
 #   scripts/real-llm.sh            # install (cached), serve, run, stop the server
 #   scripts/real-llm.sh install    # only build/fetch into the cache
 #   scripts/real-llm.sh config     # only write $FERRET_LANE_OUT/ferret.toml (tested in CI)
+#   scripts/real-llm.sh unseen     # install, serve, and run the unseen-types benchmark only
 #
 # FERRET_LANE_BIN runs a given ferret binary instead of building this checkout's.
 # Everything downloaded or built lives in $FERRET_LANE_CACHE (default ~/.cache/ferret-real-llm):
@@ -297,6 +298,69 @@ run() {
     log "done in $((SECONDS - t0)) s ($online s with the server); outputs in $OUT"
 }
 
+# Where the model earns its requests: target types the prior never saw. Every val150 trial is
+# planned over a prior that forgot its target's fold of FOLDS (`--holdout-types`), fused with
+# evidence-aware weights fitted on training houses FIT_RANGE with the same folds held out; each
+# fused row has its control beside it (fused/noise: the same fit with a source that knows
+# nothing). Then the same trials with the prior that saw every type, and the selection
+# experiment between the calibrated prior and the fused source on both.
+UNSEEN_PROMPTS="${FERRET_LANE_UNSEEN_PROMPTS:-p-yesno p-choice}"
+FOLDS="${FERRET_LANE_FOLDS:-5}"
+run_unseen() {
+    local ferret="${FERRET_LANE_BIN:-}"
+    if [ -z "$ferret" ]; then
+        (cd "$ROOT" && cargo build --release -q -p ferret-cli)
+        ferret="$ROOT/target/release/ferret"
+    fi
+    local asset=(--asset-db "$DATA/databases/asset-database.json")
+    local val=(--houses "$DATA/multiroom-val150.jsonl.gz" "${asset[@]}" --range "$ALL_RANGE")
+    local common=(--config "$OUT/ferret.toml" --llm-cache "$OUT/llm-cache.sqlite" --prior "$OUT/prior.json")
+    cd "$OUT"
+    local t0=$SECONDS
+    "$ferret" prior train --houses "$DATA/smallhouse-train1000.jsonl.gz" --range "$PRIOR_RANGE" \
+        --also "$DATA/oneroom-train500.jsonl.gz" "${asset[@]}" --out prior.json
+    "$ferret" llm ping qwen --config ferret.toml
+    local sources=(model/noise) fused=(fused/noise fused/noise/exact) llm=()
+    for p in $UNSEEN_PROMPTS; do
+        sources+=("llm+model/$p/qwen")
+        llm+=("llm+model/$p/qwen")
+        fused+=("fused/$p/qwen" "fused/$p/qwen/exact")
+    done
+    log "unseen types: fusion fitted on training houses $FIT_RANGE, every question also without its target's fold of $FOLDS"
+    "$ferret" calibrate --houses "$DATA/smallhouse-train1000.jsonl.gz" --range "$FIT_RANGE" \
+        "${asset[@]}" "${common[@]}" --targets-per-house 1 --max-fallback-share "$MAX_FALLBACK" \
+        --sources "$(IFS=,; echo "${sources[*]}")" --fit-fusion fusion-unseen.json \
+        --fit-unseen-folds "$FOLDS" --out unseen-fit
+    local strategies="optimistic+greedy,model/prior-raw,model/prior,model/prior/exact"
+    strategies+=",$(IFS=,; echo "${llm[*]}"),$(IFS=,; echo "${fused[*]}"),oracle"
+    log "unseen types: eval on val150 $ALL_RANGE, each trial's target held out of the prior ($FOLDS folds)"
+    "$ferret" eval "${val[@]}" "${common[@]}" --fusion fusion-unseen.json --holdout-types "$FOLDS" \
+        --strategies "$strategies" --paired-against model/prior,fused/noise \
+        --max-fallback-share "$MAX_FALLBACK" --out unseen-eval
+    log "seen types: the same trials, the prior saw every type"
+    "$ferret" eval "${val[@]}" "${common[@]}" --fusion fusion-unseen.json \
+        --strategies "$strategies" --paired-against model/prior,fused/noise \
+        --max-fallback-share "$MAX_FALLBACK" --out seen-eval
+    local first="${UNSEEN_PROMPTS%% *}"
+    for kind in unseen seen; do
+        local hold=()
+        [ "$kind" = unseen ] && hold=(--holdout-types "$FOLDS")
+        log "selection between the calibrated prior and fused/$first/qwen ($kind types)"
+        "$ferret" eval "${val[@]}" "${common[@]}" --fusion fusion-unseen.json "${hold[@]}" \
+            --strategies "model/prior,fused/$first/qwen" --out "$kind-select-run" >/dev/null
+        "$ferret" select --trials "$kind-select-run" "${common[@]}" --fusion fusion-unseen.json \
+            --deployments 500 --trials-per-deployment 100 --out "$kind-select-run/select"
+    done
+    local online=$((SECONDS - t0))
+    stop_server
+    log "unseen types: eval again --offline with the server stopped: it must be identical"
+    "$ferret" eval "${val[@]}" "${common[@]}" --fusion fusion-unseen.json --holdout-types "$FOLDS" \
+        --strategies "$strategies" --paired-against model/prior,fused/noise --offline \
+        --out unseen-eval-offline >/dev/null
+    cmp unseen-eval/trials.csv unseen-eval-offline/trials.csv
+    log "done in $((SECONDS - t0)) s ($online s with the server); outputs in $OUT"
+}
+
 case "${1:-all}" in
     install) install ;;
     config)
@@ -313,5 +377,14 @@ case "${1:-all}" in
         serve
         run
         ;;
-    *) echo "usage: $0 [install|config|all]" >&2; exit 2 ;;
+    unseen)
+        need_data
+        install
+        mkdir -p "$OUT"
+        OUT="$(cd "$OUT" && pwd)"
+        write_config
+        serve
+        run_unseen
+        ;;
+    *) echo "usage: $0 [install|config|all|unseen]" >&2; exit 2 ;;
 esac

@@ -148,6 +148,13 @@ pub struct PlanningArgs {
     /// Search cost R per container, metres (0 in the paper).
     #[arg(long, value_name = "M", default_value_t = 0.0)]
     pub search_cost: f64,
+    /// Target types the prior must not have seen, to measure what a source knows where the
+    /// prior has no evidence. Types fall into N folds by a fixed hash of their name. `K/N`: the
+    /// prior forgets fold K's types and only trials with a target of that fold run; `N`: every
+    /// trial runs, each planned over a prior that forgot its target's fold. Recorded in
+    /// run.json.
+    #[arg(long, value_name = "K/N|N")]
+    pub holdout_types: Option<ferret_plan::HoldOut>,
 }
 
 impl PlanningArgs {
@@ -158,6 +165,7 @@ impl PlanningArgs {
             max_containers: self.max_containers,
             exact_max: self.exact_max,
             search_cost: self.search_cost,
+            holdout: self.holdout_types,
         }
     }
 

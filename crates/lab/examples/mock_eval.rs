@@ -107,6 +107,7 @@ fn main() {
         reveal_fraction: 0.0,
         per_house: TrialsPerHouse::One,
         protocol: &Protocol::FERRET,
+        holdout: None,
     };
     let targets = draw.targets(&scenes, &maps);
     let pairs: Vec<(&House, &ObjectType)> = targets.iter().map(|(h, t)| (*h, t)).collect();

@@ -6,8 +6,8 @@
 use std::sync::Arc;
 
 use ferret_plan::{
-    Calibration, FusionFile, FusionFit, FusionWeights, LikelihoodSource, Prior, TrainingScore,
-    draw_trial, prior_fingerprint,
+    Calibration, FusionFile, FusionFit, FusionSample, FusionWeights, HoldOut, LikelihoodSource,
+    Prior, TrainingScore, draw_trial, prior_fingerprint,
 };
 use ferret_world::{House, ObjectType, Scene};
 use rand::SeedableRng;
@@ -87,19 +87,46 @@ pub struct CalibrationSettings {
     pub seed: u64,
     /// Bins of the reliability diagram.
     pub bins: usize,
-    /// Also fit the fusion of the prior with each LLM source among `sources`.
+    /// Also fit the fusion of the prior with each LLM source (and control) among `sources`.
     pub fit_fusion: bool,
+    /// Folds of target types the fusion fit also sees the prior without (each question asked
+    /// again of a prior that never saw its target's fold), so that the fit learns how much the
+    /// other source is worth where the prior has no evidence; 0 or 1 fits on the prior as it is.
+    pub fit_unseen_folds: usize,
+    /// With one held-out fold, only targets of its types are scored.
+    pub holdout: Option<HoldOut>,
+}
+
+/// Folds of the fusion fit's unseen-type questions when none are given.
+pub const FIT_UNSEEN_FOLDS: usize = 5;
+
+/// The name a fitted source is stored under in a fusion file, for a source spec: `<prompt>/<llm>`
+/// for `llm+model/<prompt>/<llm>`, the control's name for `model/noise` and `model/uniform`;
+/// `None` for sources that are not fused.
+pub fn fusion_name(spec: &str) -> Option<String> {
+    let parsed = ferret_plan::StrategySpec::parse(spec).ok()?;
+    if parsed.kind == "model" {
+        let first = parsed.args.first()?;
+        return ferret_plan::strategy::CONTROL_SOURCES
+            .contains(&first.as_str())
+            .then(|| first.clone());
+    }
+    if parsed.kind != ferret_llm::LLM_MODEL {
+        return None;
+    }
+    let llm = ferret_llm::LlmSpec::parse(&parsed)?.ok()?;
+    Some(format!("{}/{}", llm.prompt, llm.llm))
 }
 
 impl CalibrationSettings {
-    /// The LLM sources whose fusion with the prior is fitted.
+    /// The sources whose fusion with the prior is fitted: LLM sources and controls.
     fn fitted(&self) -> Vec<String> {
         if !self.fit_fusion {
             return Vec::new();
         }
         self.sources
             .iter()
-            .filter(|s| s.starts_with(&format!("{}/", ferret_llm::LLM_MODEL)))
+            .filter(|s| fusion_name(s).is_some())
             .cloned()
             .collect()
     }
@@ -121,7 +148,7 @@ impl CalibrationSettings {
         if self.fit_fusion {
             if self.fitted().is_empty() {
                 return Err(LabError::invalid(
-                    "--fit-fusion: --sources names no llm+model/<prompt>/<llm> source to fuse with the prior",
+                    "--fit-fusion: --sources names no llm+model/<prompt>/<llm> source (nor a control, model/noise or model/uniform) to fuse with the prior",
                 ));
             }
             needed.push("model/prior".into());
@@ -138,6 +165,8 @@ impl Default for CalibrationSettings {
             seed: 0,
             bins: 10,
             fit_fusion: false,
+            fit_unseen_folds: FIT_UNSEEN_FOLDS,
+            holdout: None,
         }
     }
 }
@@ -214,12 +243,14 @@ pub fn calibrate(
         })?;
         sources.push((spec.clone(), source));
     }
+    let holdout = settings.holdout;
     let trials: Vec<(&House, ObjectType, &Scene)> = loaded
         .scenes
         .iter()
         .flat_map(|s| {
             targets_for(s, settings.targets_per_house, settings.seed)
                 .into_iter()
+                .filter(move |t| holdout.is_none_or(|h| h.includes_target(t)))
                 .map(move |t| (&s.house, t, s))
         })
         .collect();
@@ -277,15 +308,38 @@ pub fn calibrate(
             .prior
             .clone()
             .ok_or_else(|| LabError::invalid("--fit-fusion needs the prior"))?;
-        let prior_p = source_probabilities(
-            "model/prior",
-            prior.as_ref(),
-            &trials,
-            &mut errors,
-            feedback,
-        );
+        // The prior as it is, and (for the evidence-aware weights) the prior that never saw
+        // each target's fold: the same questions, once with evidence and once without.
+        let mut priors = vec![prior.clone()];
+        if let Some(h) = HoldOut::every_fold(settings.fit_unseen_folds) {
+            priors.push(Arc::new(prior.holding_out(h)));
+        }
+        let prior_views: Vec<PriorView> = priors
+            .iter()
+            .map(|p| PriorView {
+                probabilities: source_probabilities(
+                    "model/prior",
+                    p.as_ref(),
+                    &trials,
+                    &mut errors,
+                    feedback,
+                ),
+                gaps: trials
+                    .iter()
+                    .map(|(house, target, _)| p.evidence_gaps(house, target))
+                    .collect(),
+            })
+            .collect();
+        let unseen = if priors.len() > 1 {
+            format!(
+                "; every question also asked of the prior without its target's fold of {}",
+                settings.fit_unseen_folds
+            )
+        } else {
+            String::new()
+        };
         let trained_on = format!(
-            "{} houses from {}, {} ({} house–target pairs)",
+            "{} houses from {}, {} ({} house–target pairs){unseen}",
             loaded.scenes.len(),
             loaded.source,
             settings
@@ -295,7 +349,14 @@ pub fn calibrate(
         );
         let mut fits = Vec::new();
         for (spec, probabilities) in per_source.iter().filter(|(s, _)| fitted.contains(s)) {
-            match fit_fusion(spec, &prior, &prior_p, probabilities, &holds, &trained_on) {
+            match fit_fusion(
+                spec,
+                &prior,
+                &prior_views,
+                probabilities,
+                &holds,
+                &trained_on,
+            ) {
                 Ok(f) => fits.push(f),
                 Err(e) => errors.push(format!("--fit-fusion: {spec}: {e}")),
             }
@@ -349,62 +410,89 @@ fn source_probabilities(
         .collect()
 }
 
-/// The fusion of the prior with the LLM source `spec`, fitted on every trial both answered.
+/// A prior's probabilities and evidence gaps on every trial of a calibration.
+struct PriorView {
+    probabilities: Vec<Option<Vec<f64>>>,
+    gaps: Vec<Vec<f64>>,
+}
+
+/// The fusion of the prior with the source `spec`, fitted on every trial both answered, under
+/// every view of the prior.
 fn fit_fusion(
     spec: &str,
     prior: &Prior,
-    prior_p: &[Option<Vec<f64>>],
-    llm_p: &[Option<Vec<f64>>],
+    views: &[PriorView],
+    other_p: &[Option<Vec<f64>>],
     holds: &[Vec<bool>],
     trained_on: &str,
 ) -> Result<FusionFit> {
-    let samples: Vec<(f64, f64, bool)> = prior_p
-        .iter()
-        .zip(llm_p)
-        .zip(holds)
-        .filter_map(|((p, l), h)| Some((p.as_ref()?, l.as_ref()?, h)))
-        .flat_map(|(p, l, h)| p.iter().zip(l).zip(h).map(|((&p, &l), &h)| (p, l, h)))
-        .collect();
+    let mut samples: Vec<FusionSample> = Vec::new();
+    // Scored on the prior as it is (the first view): the fit's in-sample scores.
+    let mut first_view = 0;
+    for (v, view) in views.iter().enumerate() {
+        for (((p, o), g), h) in view
+            .probabilities
+            .iter()
+            .zip(other_p)
+            .zip(&view.gaps)
+            .zip(holds)
+        {
+            let (Some(p), Some(o)) = (p, o) else { continue };
+            for (((&prior, &other), &gap), &holds) in p.iter().zip(o).zip(g).zip(h) {
+                samples.push(FusionSample {
+                    prior,
+                    other,
+                    gap,
+                    holds,
+                });
+            }
+        }
+        if v == 0 {
+            first_view = samples.len();
+        }
+    }
     let weights = FusionWeights::fit(&samples).ok_or_else(|| {
         LabError::invalid("the fit needs containers that hold the target and ones that do not")
     })?;
-    let score = |f: &dyn Fn(&(f64, f64, bool)) -> f64| -> Result<TrainingScore> {
-        let pairs: Vec<(f64, bool)> = samples.iter().map(|s| (f(s), s.2)).collect();
+    let as_is = &samples[..first_view];
+    let score = |f: &dyn Fn(&FusionSample) -> f64| -> Result<TrainingScore> {
+        let pairs: Vec<(f64, bool)> = as_is.iter().map(|s| (f(s), s.holds)).collect();
         let c = Calibration::score(&pairs, 10).ok_or_else(|| LabError::invalid("no pairs"))?;
         Ok(TrainingScore {
             brier: c.brier,
             auroc: c.auroc,
         })
     };
-    let parsed = ferret_plan::StrategySpec::parse(spec)?;
-    let llm = ferret_llm::LlmSpec::parse(&parsed)
-        .ok_or_else(|| LabError::invalid("not an LLM source"))??;
+    let source =
+        fusion_name(spec).ok_or_else(|| LabError::invalid("not an LLM source nor a control"))?;
     Ok(FusionFit {
-        source: format!("{}/{}", llm.prompt, llm.llm),
+        source,
         weights,
         prior: prior_fingerprint(prior),
         trained_on: trained_on.to_string(),
-        pairs: samples.len() as u64,
-        positives: samples.iter().filter(|s| s.2).count() as u64,
-        prior_score: score(&|s| s.0)?,
-        source_score: score(&|s| s.1)?,
-        fused_score: score(&|s| weights.fuse(s.0, s.1))?,
+        pairs: as_is.len() as u64,
+        positives: as_is.iter().filter(|s| s.holds).count() as u64,
+        prior_score: score(&|s| s.prior)?,
+        source_score: score(&|s| s.other)?,
+        fused_score: score(&|s| weights.fuse(s.prior, s.other, s.gap))?,
     })
 }
 
 /// The fitted fusions as Markdown.
 pub fn fusion_markdown(file: &FusionFile) -> String {
     let mut md = String::from(
-        "## Fusion with the prior (logit P = a·logit P_prior + b·logit P_llm + c)\n\n| source | a | b | c | pairs | Brier prior / LLM / fused | AUROC prior / LLM / fused |\n|---|---:|---:|---:|---:|---|---|\n",
+        "## Fusion with the prior (logit P = a·logit P_prior + b·logit P_llm + c + g·(d·logit P_llm + e), g the prior's evidence gap)\n\n| source | a | b | c | d | e | pairs | Brier prior / LLM / fused | AUROC prior / LLM / fused |\n|---|---:|---:|---:|---:|---:|---:|---|---|\n",
     );
     let auroc = |a: Option<f64>| a.map_or_else(|| "–".into(), |a| format!("{a:.3}"));
     for f in &file.fits {
         md.push_str(&format!(
-            "| {} | {:.3} | {:.3} | {:.3} | {} | {:.4} / {:.4} / {:.4} | {} / {} / {} |\n",
+            "| {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {} | {:.4} / {:.4} / {:.4} | {} / {} / {} |\n",
             f.source,
             f.weights.a,
             f.weights.b,
             f.weights.c,
+            f.weights.d,
+            f.weights.e,
             f.pairs,
             f.prior_score.brier,
             f.source_score.brier,

@@ -229,6 +229,7 @@ pub fn deploy(
         reveal_fraction: 0.0,
         per_house: settings.per_house,
         protocol: settings.protocol,
+        holdout: None,
     };
     let mut done = Vec::new();
     let houses = order.houses().to_vec();

@@ -3,8 +3,8 @@
 use std::sync::Arc;
 
 use ferret_plan::{
-    Protocol, SearchProblem, Strategy, TrialOutcome, TrialSpec, TrialsPerHouse, draw_trials_with,
-    run_trial,
+    HoldOut, Protocol, SearchProblem, Strategy, TrialOutcome, TrialSpec, TrialsPerHouse,
+    draw_trials_with, run_trial,
 };
 use ferret_world::{GridParams, House, ObjectType, Scene};
 use rayon::prelude::*;
@@ -26,19 +26,26 @@ pub struct TrialDraw<'a> {
     pub per_house: TrialsPerHouse,
     /// The protocol the trials follow.
     pub protocol: &'a Protocol,
+    /// With one held-out fold, only the trials whose target is of that fold's types are run
+    /// (drawn as without hold-out, then kept or not, so they are a subset of the run without).
+    pub holdout: Option<HoldOut>,
 }
 
 impl TrialDraw<'_> {
     /// The trials of one house.
     pub fn trials(&self, scene: &Scene) -> Result<Vec<TrialSpec>, ferret_plan::PlanError> {
-        draw_trials_with(
+        let mut trials = draw_trials_with(
             &scene.house,
             &scene.truth,
             self.seed,
             self.reveal_fraction,
             self.per_house,
             self.protocol,
-        )
+        )?;
+        if let Some(h) = self.holdout {
+            trials.retain(|t| h.includes_target(&t.target));
+        }
+        Ok(trials)
     }
 
     /// Every house's targets, for the houses that have a map: what LLM strategies will be asked

@@ -251,6 +251,7 @@ fn run_draw(info: &RunInfo) -> TrialDraw<'_> {
         reveal_fraction: info.reveal_fraction,
         per_house: info.trials_per_house,
         protocol: &info.protocol,
+        holdout: info.planning.holdout,
     }
 }
 

@@ -9,7 +9,7 @@ use ferret_llm::{
     FailurePolicy, LlmConfig, LlmOptions, LlmService, TokenReport, prefetch_probabilities,
     register_fused, register_strategies,
 };
-use ferret_plan::{CandidateLimit, FusionFile, PlannerConfig, Prior, StrategyRegistry};
+use ferret_plan::{CandidateLimit, FusionFile, HoldOut, PlannerConfig, Prior, StrategyRegistry};
 use ferret_world::{House, ObjectType};
 use serde::{Deserialize, Serialize};
 
@@ -33,8 +33,9 @@ pub fn default_prior(count: usize, seed: u64) -> Result<Prior> {
     Ok(Prior::train(&scenes, DEFAULT_SMOOTHING))
 }
 
-/// True when one of `specs` plans over the prior (`model/prior...`, `fused/...`), so that a
-/// face can supply a prior it already holds instead of loading or training one per call.
+/// True when one of `specs` plans over the prior (`model/prior...`, `model/prior-raw...`,
+/// `fused/...`), so that a face can supply a prior it already holds instead of loading or
+/// training one per call.
 pub fn needs_prior(specs: &[String]) -> bool {
     specs
         .iter()
@@ -63,6 +64,10 @@ pub struct PlanningSettings {
     pub exact_max: usize,
     /// Search cost R per container, metres.
     pub search_cost: f64,
+    /// Target types the prior must not have seen (`--holdout-types`): the prior asked about a
+    /// target is one without the types of its fold.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub holdout: Option<HoldOut>,
 }
 
 impl Default for PlanningSettings {
@@ -72,6 +77,7 @@ impl Default for PlanningSettings {
             max_containers: 8,
             exact_max: 16,
             search_cost: 0.0,
+            holdout: None,
         }
     }
 }
@@ -207,6 +213,11 @@ pub fn full_registry_over(
     prior: Option<Arc<Prior>>,
     on_failure: FailurePolicy,
 ) -> Result<Strategies> {
+    // The hold-out applies to whichever prior the caller holds, once.
+    let prior = match (prior, planning.holdout) {
+        (Some(p), Some(h)) if p.holdout() != Some(h) => Some(Arc::new(p.holding_out(h))),
+        (p, _) => p,
+    };
     let mut registry = planning.registry_with(prior.clone());
     let fusion = match &llm.fusion {
         Some(path) => Some((

@@ -124,6 +124,7 @@ fn eval_run(dir: &std::path::Path, count: usize) -> EvalRun {
         reveal_fraction: 0.0,
         per_house: TrialsPerHouse::One,
         protocol: &Protocol::FERRET,
+        holdout: None,
     };
     let ev = evaluate(&loaded.scenes, &maps, &strategies, &draw, &Silent);
     assert!(ev.errors.is_empty(), "{:?}", ev.errors);

@@ -55,6 +55,7 @@ fn evaluate_runs_every_strategy_on_the_same_trials_and_ticks_once_per_house() {
         reveal_fraction: 0.0,
         per_house: TrialsPerHouse::One,
         protocol: &Protocol::FERRET,
+        holdout: None,
     };
     let count = Count::default();
     let ev = evaluate(&scenes, &maps, &s, &draw, &count);
@@ -94,6 +95,7 @@ fn a_deployment_step_learns_what_run_trial_and_replay_costs_say() {
         reveal_fraction: 0.0,
         per_house: TrialsPerHouse::One,
         protocol: &protocol,
+        holdout: None,
     };
     for scene in &scenes {
         let (_, distances) =

@@ -1,6 +1,6 @@
 //! LLMs in the plan crate's terms: the planner over an LLM's likelihoods
 //! (`llm+model/<prompt>/<llm>[/k<N>|/exact]`, see [`LlmLikelihood`]), the same fused with the
-//! prior (`fused/<prompt>/<llm>`, see [`ferret_plan::Fused`]), a policy ([`LlmDirectPolicy`],
+//! prior (`fused/<prompt>/<llm>`, see [`ferret_plan::Fused`]; `fused/noise` is its control), a policy ([`LlmDirectPolicy`],
 //! behind `llm-direct/<prompt>/<llm>`), their registration in a [`StrategyRegistry`], and
 //! [`prefetch_probabilities`], which asks every probability question of a set of trials
 //! concurrently before the trials run so that they find every answer in the cache.
@@ -12,7 +12,7 @@ use std::collections::HashSet;
 use std::sync::Arc;
 
 use ferret_plan::policy::nearest;
-use ferret_plan::strategy::parse_limit;
+use ferret_plan::strategy::{CONTROL_SOURCES, builtin_source, parse_limit, planner_config_from};
 use ferret_plan::{
     Belief, Fused, FusionFile, LikelihoodSource, ModelStrategy, PlanError, PlannerConfig, Policy,
     Prior, Strategy, StrategyRegistry, StrategySpec, TrialContext, prior_fingerprint,
@@ -63,7 +63,9 @@ impl LlmSpec {
     /// slashes: the LLM is the last part (before an optional limit), the prompt everything
     /// between.
     pub fn parse(spec: &StrategySpec) -> Option<std::result::Result<Self, PlanError>> {
-        if !asks_probabilities(&spec.kind) && spec.kind != LLM_DIRECT {
+        if (!asks_probabilities(&spec.kind) && spec.kind != LLM_DIRECT)
+            || control_source(spec).is_some()
+        {
             return None;
         }
         let bad = |reason: String| PlanError::UnknownStrategy {
@@ -294,9 +296,11 @@ fn limit_config(
 }
 
 /// Registers `fused/<prompt>/<llm>[/<limit>]`: the planner over `prior` fused with the LLM's
-/// likelihoods by the weights `fusion` holds for `<prompt>/<llm>` (see [`ferret_plan::fusion`]).
-/// Without a fusion file, or without a fit for the source, or with a fit made against another
-/// prior, building the strategy fails and says which.
+/// likelihoods by the weights `fusion` holds for `<prompt>/<llm>` (see [`ferret_plan::fusion`]),
+/// and `fused/<control>[/<limit>]`, the same with a control that knows nothing
+/// ([`CONTROL_SOURCES`]: `noise`, `uniform`) in the LLM's place, fitted the same way. Without a
+/// fusion file, or without a fit for the source, or with a fit made against another prior,
+/// building the strategy fails and says which.
 pub fn register_fused(
     registry: &mut StrategyRegistry,
     service: Arc<LlmService>,
@@ -306,51 +310,77 @@ pub fn register_fused(
     exact_max: usize,
 ) {
     let fingerprint = prior.as_deref().map(prior_fingerprint);
-    registry.register(FUSED, "fused/<prompt>/<llm>[/k<N>|/exact]", move |spec| {
-        let parsed = LlmSpec::parse(spec).unwrap_or_else(|| Err(not_llm(spec)))?;
-        let bad = |reason: String| PlanError::UnknownStrategy {
-            spec: spec.raw.clone(),
-            reason,
-        };
-        let (Some(prior), Some(fingerprint)) = (&prior, &fingerprint) else {
-            return Err(bad("fused sources need the prior (pass --prior)".into()));
-        };
-        let Some((path, file)) = &fusion else {
-            return Err(bad(
-                "no fusion weights: fit them with `ferret calibrate --fit-fusion FILE` on training houses and pass --fusion FILE".into(),
-            ));
-        };
-        let source = LlmLikelihood::new(service.clone(), &parsed.prompt, &parsed.llm, &spec.raw)
-            .map_err(|e| build_error(spec, e, false))?;
-        let name = source.name().to_string();
-        let fit = file.fit(&name).ok_or_else(|| {
-            bad(format!(
-                "{path} holds no fit for {name} (it has: {})",
-                file.fits
-                    .iter()
-                    .map(|f| f.source.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ))
-        })?;
-        if fit.prior != *fingerprint {
-            return Err(bad(format!(
-                "{path}: the fit for {name} was made with another prior; fit it again with this one"
-            )));
-        }
-        let fused = Fused::new(
-            &format!("fused/{name}"),
-            prior.clone(),
-            Arc::new(source),
-            fit.weights,
-        );
-        let config = limit_config(spec, &parsed, planner, exact_max)?;
-        Ok(Arc::new(ModelStrategy::new(
-            &spec.raw,
-            Arc::new(fused),
-            config,
-        )))
-    });
+    registry.register(
+        FUSED,
+        "fused/<prompt>/<llm>[/k<N>|/exact], fused/<noise|uniform>[/k<N>|/exact]",
+        move |spec| {
+            let bad = |reason: String| PlanError::UnknownStrategy {
+                spec: spec.raw.clone(),
+                reason,
+            };
+            let (source, config): (Arc<dyn LikelihoodSource>, PlannerConfig) =
+                match control_source(spec) {
+                    Some(name) => (
+                        builtin_source(name, None).map_err(bad)?,
+                        planner_config_from(spec, 1, planner, exact_max)?,
+                    ),
+                    None => {
+                        let parsed = LlmSpec::parse(spec).unwrap_or_else(|| Err(not_llm(spec)))?;
+                        let source = LlmLikelihood::new(
+                            service.clone(),
+                            &parsed.prompt,
+                            &parsed.llm,
+                            &spec.raw,
+                        )
+                        .map_err(|e| build_error(spec, e, false))?;
+                        (
+                            Arc::new(source),
+                            limit_config(spec, &parsed, planner, exact_max)?,
+                        )
+                    }
+                };
+            let (Some(prior), Some(fingerprint)) = (&prior, &fingerprint) else {
+                return Err(bad("fused sources need the prior (pass --prior)".into()));
+            };
+            let Some((path, file)) = &fusion else {
+                return Err(bad(
+                    "no fusion weights: fit them with `ferret calibrate --fit-fusion FILE` on training houses and pass --fusion FILE".into(),
+                ));
+            };
+            let name = source.name().to_string();
+            let fit = file.fit(&name).ok_or_else(|| {
+                bad(format!(
+                    "{path} holds no fit for {name} (it has: {})",
+                    file.fits
+                        .iter()
+                        .map(|f| f.source.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ))
+            })?;
+            if fit.prior != *fingerprint {
+                return Err(bad(format!(
+                    "{path}: the fit for {name} was made with another prior; fit it again with this one"
+                )));
+            }
+            let fused = Fused::new(&format!("fused/{name}"), prior.clone(), source, fit.weights);
+            Ok(Arc::new(ModelStrategy::new(
+                &spec.raw,
+                Arc::new(fused),
+                config,
+            )))
+        },
+    );
+}
+
+/// The control a `fused/...` spec fuses with the prior instead of an LLM (`fused/noise`), if it
+/// names one.
+pub fn control_source(spec: &StrategySpec) -> Option<&'static str> {
+    if spec.kind != FUSED {
+        return None;
+    }
+    let first = spec.args.first()?;
+    CONTROL_SOURCES.iter().copied().find(|c| c == first)
 }
 
 /// Why an LLM strategy could not be built. Only a spec naming no known endpoint or prompt is an

@@ -386,6 +386,8 @@ fn fused_sources_combine_the_prior_and_the_llm_by_the_fitted_weights() {
         a: 0.7,
         b: 1.3,
         c: -0.4,
+        d: 0.9,
+        e: 0.5,
     };
     let r = registry(
         &service,
@@ -406,10 +408,12 @@ fn fused_sources_combine_the_prior_and_the_llm_by_the_fitted_weights() {
         .likelihoods(&house, &remote())
         .unwrap());
     let pr = p(&prior.likelihoods(&house, &remote()).unwrap());
+    let gaps = prior.evidence_gaps(&house, &remote());
     let want: Vec<f64> = pr
         .iter()
         .zip(&l)
-        .map(|(a, b)| weights.fuse(*a, *b))
+        .zip(&gaps)
+        .map(|((a, b), g)| weights.fuse(*a, *b, *g))
         .collect();
     assert!(close(&f, &want), "{f:?} vs {want:?}");
     assert!(
@@ -452,6 +456,53 @@ fn fused_sources_combine_the_prior_and_the_llm_by_the_fitted_weights() {
         .map(|e| e.to_string())
         .unwrap_or_default();
     assert!(e.contains("another prior"), "{e}");
+}
+
+#[test]
+fn the_noise_control_is_fused_like_an_llm_without_asking_one() {
+    let server = yes_no_server();
+    let service = server.service(|c| c.top_logprobs = Some(5));
+    let prior = prior();
+    let weights = FusionWeights {
+        a: 1.1,
+        b: 0.4,
+        c: 0.2,
+        d: 0.0,
+        e: 0.0,
+    };
+    let r = registry(
+        &service,
+        prior.clone(),
+        Some(fusion_for(&prior, "noise", weights)),
+    );
+    let fused = r.build("fused/noise/exact").unwrap();
+    let (house, _) = small_scene("h#0");
+    let f = p(&fused
+        .likelihood_source()
+        .unwrap()
+        .likelihoods(&house, &remote())
+        .unwrap());
+    let noise = p(&ferret_plan::Noise::default()
+        .likelihoods(&house, &remote())
+        .unwrap());
+    let pr = p(&prior.likelihoods(&house, &remote()).unwrap());
+    let gaps = prior.evidence_gaps(&house, &remote());
+    let want: Vec<f64> = (0..pr.len())
+        .map(|i| weights.fuse(pr[i], noise[i], gaps[i]))
+        .collect();
+    assert!(close(&f, &want), "{f:?} vs {want:?}");
+    assert!(server.bodies().is_empty(), "the control asks no LLM");
+    // Without a fit for it, the control is refused like an LLM source.
+    let e = registry(
+        &service,
+        prior.clone(),
+        Some(fusion_for(&prior, "p-yesno/mock", weights)),
+    )
+    .build("fused/noise")
+    .err()
+    .map(|e| e.to_string())
+    .unwrap_or_default();
+    assert!(e.contains("no fit for noise"), "{e}");
 }
 
 #[test]

@@ -1,8 +1,10 @@
 //! Fusion of the prior with another likelihood source (an LLM's), so that the other source can
-//! only help: `logit P = a·logit P_prior + b·logit P_other + c`, with (a, b, c) fitted by
-//! logistic regression on training houses ([`FusionWeights::fit`]). A source that says nothing
-//! about where things are gets b ≈ 0, and the fused source plans like the prior; one that knows
-//! more gets weight where it helps.
+//! only help: `logit P = a·logit P_prior + b·logit P_other + c + g·(d·logit P_other + e)`, with
+//! the weights fitted by logistic regression on training houses ([`FusionWeights::fit`]) and `g`
+//! the prior's evidence gap for each question (how little its training houses said about it). A
+//! source that says nothing about where things are gets b ≈ d ≈ 0, and the fused source plans like
+//! the prior; one that knows more gets weight where it helps, above all where the prior never
+//! saw the target.
 //!
 //! Fits are stored in a fusion file ([`FusionFile`], JSON), one per source, each with the
 //! fingerprint of the prior it was fitted with: weights fitted with another prior are refused,
@@ -17,35 +19,17 @@ use sha2::{Digest, Sha256};
 
 use crate::error::PlanError;
 use crate::likelihood::{LikelihoodSource, Prior};
+use crate::logistic::{logit, sigmoid};
 use crate::probability::Probability;
-
-/// Probabilities are kept this far from 0 and 1 before their logit is taken (a source that says
-/// 0.01 and one that says 1e-9 mean the same to a planner; the logit of the second would swamp
-/// the fit).
-const LOGIT_EPS: f64 = 1e-4;
 
 /// Fused probabilities are kept in [FUSED_MIN, 1 − FUSED_MIN].
 pub const FUSED_MIN: f64 = 1e-3;
 
-/// The ridge penalty on a and b: enough to keep Newton's method finite on data the two inputs
-/// separate perfectly (tiny test sets), far too small to matter on real training sets.
-const RIDGE: f64 = 1e-3;
-
-fn logit(p: f64) -> f64 {
-    let p = p.clamp(LOGIT_EPS, 1.0 - LOGIT_EPS);
-    (p / (1.0 - p)).ln()
-}
-
-fn sigmoid(z: f64) -> f64 {
-    if z >= 0.0 {
-        1.0 / (1.0 + (-z).exp())
-    } else {
-        let e = z.exp();
-        e / (1.0 + e)
-    }
-}
-
-/// The weights of `logit P = a·logit P_prior + b·logit P_other + c`.
+/// The weights of `logit P = a·logit P_prior + b·logit P_other + c + g·(d·logit P_other + e)`,
+/// where `g` in [0, 1] is the prior's evidence gap for the question
+/// ([`Prior::evidence_gap`]: 1 where its training houses never showed the target with a
+/// container of that type, near 0 where they often did). `d` and `e` let the other source carry
+/// the weight where the prior has no evidence; a fit without such questions leaves them near 0.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FusionWeights {
     /// Weight of the prior's logit.
@@ -54,99 +38,73 @@ pub struct FusionWeights {
     pub b: f64,
     /// Intercept.
     pub c: f64,
+    /// Extra weight of the other source's logit, times the evidence gap (0 in files written
+    /// before fusions knew the prior's evidence).
+    #[serde(default)]
+    pub d: f64,
+    /// Extra intercept, times the evidence gap.
+    #[serde(default)]
+    pub e: f64,
+}
+
+/// One (house, target, container) question of a fusion fit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FusionSample {
+    /// The prior's probability.
+    pub prior: f64,
+    /// The other source's probability.
+    pub other: f64,
+    /// The prior's evidence gap ([`Prior::evidence_gap`]).
+    pub gap: f64,
+    /// Whether the container holds the target.
+    pub holds: bool,
 }
 
 impl FusionWeights {
-    /// The prior alone: a = 1, b = c = 0.
+    /// The prior alone: a = 1, everything else 0.
     pub const PRIOR: Self = Self {
         a: 1.0,
         b: 0.0,
         c: 0.0,
+        d: 0.0,
+        e: 0.0,
     };
 
-    /// The fused probability of a container the prior gives `prior` and the other source
-    /// `other`, in [[`FUSED_MIN`], 1 − [`FUSED_MIN`]].
-    pub fn fuse(&self, prior: f64, other: f64) -> f64 {
-        sigmoid(self.a * logit(prior) + self.b * logit(other) + self.c)
+    /// The fused probability of a container the prior gives `prior` (with evidence gap `gap`)
+    /// and the other source `other`, in [[`FUSED_MIN`], 1 − [`FUSED_MIN`]].
+    pub fn fuse(&self, prior: f64, other: f64, gap: f64) -> f64 {
+        let o = logit(other);
+        let g = gap.clamp(0.0, 1.0);
+        sigmoid(self.a * logit(prior) + self.b * o + self.c + g * (self.d * o + self.e))
             .clamp(FUSED_MIN, 1.0 - FUSED_MIN)
     }
 
-    /// Fits the weights to `(P_prior, P_other, holds)` triples by maximum likelihood (Newton's
-    /// method on the logistic log-likelihood with a tiny ridge penalty on a and b). `None`
-    /// without both holders and non-holders, or when the fit does not settle.
-    ///
-    /// Written out rather than taken from a crate: three parameters need a 3×3 solve, and the
-    /// crates that fit logistic regressions bring a linear-algebra stack for it.
-    #[allow(clippy::needless_range_loop)] // gradient and Hessian by index, as written on paper
-    pub fn fit(samples: &[(f64, f64, bool)]) -> Option<Self> {
-        let positives = samples.iter().filter(|s| s.2).count();
-        if positives == 0 || positives == samples.len() {
-            return None;
-        }
-        let rows: Vec<([f64; 3], f64)> = samples
+    /// Fits the weights to `samples` by maximum likelihood (Newton's method on the logistic
+    /// log-likelihood with a tiny ridge penalty toward the prior alone on every weight but the
+    /// intercept). `None` without both holders and non-holders, or when the fit does not
+    /// settle.
+    pub fn fit(samples: &[FusionSample]) -> Option<Self> {
+        let rows: Vec<([f64; 5], bool)> = samples
             .iter()
-            .map(|&(p, o, y)| ([logit(p), logit(o), 1.0], f64::from(u8::from(y))))
+            .map(|s| {
+                let o = logit(s.other);
+                let g = s.gap.clamp(0.0, 1.0);
+                ([logit(s.prior), o, 1.0, g * o, g], s.holds)
+            })
             .collect();
-        let mut w = [1.0, 0.0, 0.0];
-        for _ in 0..100 {
-            let mut grad = [-RIDGE * w[0], -RIDGE * w[1], 0.0];
-            let mut hess = [[0.0; 3]; 3];
-            hess[0][0] = RIDGE;
-            hess[1][1] = RIDGE;
-            for (x, y) in &rows {
-                let p = sigmoid(x[0] * w[0] + x[1] * w[1] + x[2] * w[2]);
-                let weight = p * (1.0 - p);
-                for i in 0..3 {
-                    grad[i] += (y - p) * x[i];
-                    for j in 0..3 {
-                        hess[i][j] += weight * x[i] * x[j];
-                    }
-                }
-            }
-            let step = solve3(hess, grad)?;
-            for i in 0..3 {
-                w[i] += step[i];
-            }
-            if !w.iter().all(|v| v.is_finite()) {
-                return None;
-            }
-            if step.iter().map(|s| s.abs()).fold(0.0, f64::max) < 1e-10 {
-                break;
-            }
-        }
+        let w = crate::logistic::fit(
+            &rows,
+            [1.0, 0.0, 0.0, 0.0, 0.0],
+            [true, true, false, true, true],
+        )?;
         Some(Self {
             a: w[0],
             b: w[1],
             c: w[2],
+            d: w[3],
+            e: w[4],
         })
     }
-}
-
-/// Solves `m · x = v` by Gaussian elimination with partial pivoting; `None` when singular.
-// Indices read as the textbook algorithm does; iterators over rows and columns would not.
-#[allow(clippy::needless_range_loop)]
-fn solve3(mut m: [[f64; 3]; 3], mut v: [f64; 3]) -> Option<[f64; 3]> {
-    for col in 0..3 {
-        let pivot = (col..3).max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))?;
-        if m[pivot][col].abs() < 1e-12 {
-            return None;
-        }
-        m.swap(col, pivot);
-        v.swap(col, pivot);
-        for row in col + 1..3 {
-            let f = m[row][col] / m[col][col];
-            for k in col..3 {
-                m[row][k] -= f * m[col][k];
-            }
-            v[row] -= f * v[col];
-        }
-    }
-    let mut x = [0.0; 3];
-    for row in (0..3).rev() {
-        let rest: f64 = (row + 1..3).map(|k| m[row][k] * x[k]).sum();
-        x[row] = (v[row] - rest) / m[row][row];
-    }
-    Some(x)
 }
 
 /// A fingerprint of a prior (SHA-256 of its JSON), which a fit records.
@@ -232,7 +190,7 @@ impl FusionFile {
         }
         for f in &file.fits {
             let w = f.weights;
-            if ![w.a, w.b, w.c].iter().all(|v| v.is_finite()) {
+            if ![w.a, w.b, w.c, w.d, w.e].iter().all(|v| v.is_finite()) {
                 return Err(err(format!("{}: weights are not finite numbers", f.source)));
             }
         }
@@ -248,7 +206,7 @@ impl FusionFile {
 /// The fused likelihood source: the prior and another source combined by [`FusionWeights`].
 pub struct Fused {
     name: String,
-    prior: Arc<dyn LikelihoodSource>,
+    prior: Arc<Prior>,
     other: Arc<dyn LikelihoodSource>,
     weights: FusionWeights,
 }
@@ -266,7 +224,7 @@ impl Fused {
     /// `prior` and `other` fused with `weights`, named `name`.
     pub fn new(
         name: &str,
-        prior: Arc<dyn LikelihoodSource>,
+        prior: Arc<Prior>,
         other: Arc<dyn LikelihoodSource>,
         weights: FusionWeights,
     ) -> Self {
@@ -300,6 +258,7 @@ impl LikelihoodSource for Fused {
         target: &ObjectType,
     ) -> Result<Vec<Probability>, PlanError> {
         let prior = self.prior.likelihoods(house, target)?;
+        let gaps = self.prior.evidence_gaps(house, target);
         let other = self.other.likelihoods(house, target)?;
         if prior.len() != other.len() {
             return Err(PlanError::LikelihoodCount {
@@ -311,9 +270,10 @@ impl LikelihoodSource for Fused {
         Ok(prior
             .iter()
             .zip(&other)
-            .map(|(p, o)| {
+            .zip(&gaps)
+            .map(|((p, o), &g)| {
                 Probability::clamped(
-                    self.weights.fuse(p.get(), o.get()),
+                    self.weights.fuse(p.get(), o.get(), g),
                     FUSED_MIN,
                     1.0 - FUSED_MIN,
                 )
@@ -327,18 +287,34 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
 
-    /// Samples drawn from a known model: the fit must come back near it.
-    fn synthetic(w: FusionWeights, n: usize, seed: u64) -> Vec<(f64, f64, bool)> {
+    /// Samples drawn from a known model: the fit must come back near it. A quarter of the
+    /// questions have no evidence in the prior (gap 1), the rest plenty (gap 0).
+    fn synthetic(w: FusionWeights, n: usize, seed: u64) -> Vec<FusionSample> {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         (0..n)
-            .map(|_| {
+            .map(|i| {
                 let p: f64 = rng.random_range(0.01..0.99);
                 let o: f64 = rng.random_range(0.01..0.99);
-                let y = rng.random::<f64>() < sigmoid(w.a * logit(p) + w.b * logit(o) + w.c);
-                (p, o, y)
+                let gap = if i % 4 == 0 { 1.0 } else { 0.0 };
+                let holds = rng.random::<f64>() < w.fuse(p, o, gap);
+                FusionSample {
+                    prior: p,
+                    other: o,
+                    gap,
+                    holds,
+                }
             })
             .collect()
+    }
+
+    fn sample(prior: f64, other: f64, holds: bool) -> FusionSample {
+        FusionSample {
+            prior,
+            other,
+            gap: 0.0,
+            holds,
+        }
     }
 
     #[test]
@@ -347,29 +323,28 @@ mod tests {
             a: 0.9,
             b: 0.6,
             c: -1.2,
+            d: 0.8,
+            e: 0.5,
         };
-        let w = FusionWeights::fit(&synthetic(truth, 20_000, 7)).unwrap();
+        let w = FusionWeights::fit(&synthetic(truth, 40_000, 7)).unwrap();
         assert!((w.a - truth.a).abs() < 0.08, "{w:?}");
         assert!((w.b - truth.b).abs() < 0.08, "{w:?}");
         assert!((w.c - truth.c).abs() < 0.12, "{w:?}");
+        assert!((w.d - truth.d).abs() < 0.15, "{w:?}");
+        assert!((w.e - truth.e).abs() < 0.2, "{w:?}");
     }
 
     #[test]
     fn a_source_of_noise_gets_almost_no_weight() {
-        let truth = FusionWeights {
-            a: 1.0,
-            b: 0.0,
-            c: 0.0,
-        };
-        let w = FusionWeights::fit(&synthetic(truth, 20_000, 3)).unwrap();
-        assert!(w.b.abs() < 0.06, "{w:?}");
+        let w = FusionWeights::fit(&synthetic(FusionWeights::PRIOR, 20_000, 3)).unwrap();
+        assert!(w.b.abs() < 0.06 && w.d.abs() < 0.1, "{w:?}");
         assert!((w.a - 1.0).abs() < 0.08, "{w:?}");
     }
 
     #[test]
     fn one_class_only_has_no_fit() {
         assert_eq!(
-            FusionWeights::fit(&[(0.2, 0.3, true), (0.5, 0.5, true)]),
+            FusionWeights::fit(&[sample(0.2, 0.3, true), sample(0.5, 0.5, true)]),
             None
         );
         assert_eq!(FusionWeights::fit(&[]), None);
@@ -377,10 +352,10 @@ mod tests {
 
     #[test]
     fn separable_data_still_gives_finite_weights() {
-        let samples: Vec<(f64, f64, bool)> = (1..50)
+        let samples: Vec<FusionSample> = (1..50)
             .map(|i| {
                 let p = f64::from(i) / 50.0;
-                (p, 0.5, p > 0.5)
+                sample(p, 0.5, p > 0.5)
             })
             .collect();
         let w = FusionWeights::fit(&samples).unwrap();
@@ -391,7 +366,9 @@ mod tests {
     #[test]
     fn the_prior_weights_give_the_prior_back() {
         for p in [0.01, 0.1, 0.5, 0.9] {
-            assert!((FusionWeights::PRIOR.fuse(p, 0.77) - p).abs() < 1e-9);
+            for gap in [0.0, 1.0] {
+                assert!((FusionWeights::PRIOR.fuse(p, 0.77, gap) - p).abs() < 1e-9);
+            }
         }
     }
 
@@ -408,6 +385,8 @@ mod tests {
                 a: 0.8,
                 b: 0.4,
                 c: 0.1,
+                d: 0.3,
+                e: -0.2,
             },
             prior: "abc".into(),
             trained_on: "houses".into(),
@@ -420,6 +399,14 @@ mod tests {
         let path = dir.path().join("fusion.json");
         std::fs::write(&path, file.to_json()).unwrap();
         assert_eq!(FusionFile::load(&path).unwrap(), file);
+        // A file written before the evidence weights existed: d = e = 0, the fusion it was.
+        let old = file
+            .to_json()
+            .replace(",\n        \"d\": 0.3,\n        \"e\": -0.2", "");
+        assert!(!old.contains("\"d\""), "{old}");
+        std::fs::write(&path, &old).unwrap();
+        let read = FusionFile::load(&path).unwrap();
+        assert_eq!((read.fits[0].weights.d, read.fits[0].weights.e), (0.0, 0.0));
         std::fs::write(&path, "{\"ferret_fusion\": 9, \"fits\": []}").unwrap();
         let e = FusionFile::load(&path).unwrap_err().to_string();
         assert!(e.contains("fusion.json") && e.contains("version 9"), "{e}");
@@ -434,13 +421,14 @@ mod tests {
         #[test]
         fn fused_probabilities_are_bounded_and_monotone(
             a in 0.0f64..3.0, b in 0.0f64..3.0, c in -5.0f64..5.0,
+            d in 0.0f64..3.0, e in -5.0f64..5.0, gap in 0.0f64..=1.0,
             p in 0.0f64..=1.0, o in 0.0f64..=1.0, dp in 0.0f64..0.5,
         ) {
-            let w = FusionWeights { a, b, c };
-            let f = w.fuse(p, o);
+            let w = FusionWeights { a, b, c, d, e };
+            let f = w.fuse(p, o, gap);
             prop_assert!((FUSED_MIN..=1.0 - FUSED_MIN).contains(&f));
-            prop_assert!(w.fuse((p + dp).min(1.0), o) >= f - 1e-12);
-            prop_assert!(w.fuse(p, (o + dp).min(1.0)) >= f - 1e-12);
+            prop_assert!(w.fuse((p + dp).min(1.0), o, gap) >= f - 1e-12);
+            prop_assert!(w.fuse(p, (o + dp).min(1.0), gap) >= f - 1e-12);
         }
     }
 }

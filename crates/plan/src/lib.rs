@@ -1,8 +1,9 @@
 //! # ferret-plan
 //!
 //! Object search as planning (paper section IV): the robot's [`Belief`], likelihood sources that
-//! give `P_S(target, container)` ([`LikelihoodSource`]: a learned [`Prior`], [`Uniform`], the
-//! oracle), policies that map a belief to the next container ([`Policy`]: the exact expected-cost
+//! give `P_S(target, container)` ([`LikelihoodSource`]: a learned and calibrated [`Prior`],
+//! [`Uniform`], the [`Noise`] control, the oracle; target types a prior must not have seen,
+//! [`HoldOut`]), policies that map a belief to the next container ([`Policy`]: the exact expected-cost
 //! [`Planner`], the optimistic greedy baseline, the oracle), named [`Strategy`]s built from spec
 //! strings through a [`StrategyRegistry`], a trial step by step ([`Search`], what a robot loop
 //! drives), the trial simulator built on it ([`run_trial`]) and offline replay
@@ -15,7 +16,9 @@ pub mod belief;
 pub mod calibration;
 pub mod error;
 pub mod fusion;
+pub mod holdout;
 pub mod likelihood;
+pub mod logistic;
 pub mod planner;
 pub mod policy;
 pub mod probability;
@@ -28,8 +31,14 @@ pub mod trial;
 pub use belief::Belief;
 pub use calibration::{Calibration, ReliabilityBin};
 pub use error::{BoxError, PlanError};
-pub use fusion::{Fused, FusionFile, FusionFit, FusionWeights, TrainingScore, prior_fingerprint};
-pub use likelihood::{LikelihoodSource, OracleLikelihood, Prior, Uniform};
+pub use fusion::{
+    Fused, FusionFile, FusionFit, FusionSample, FusionWeights, TrainingScore, prior_fingerprint,
+};
+pub use holdout::HoldOut;
+pub use likelihood::{
+    CALIBRATION_FOLDS, LikelihoodSource, Noise, OracleLikelihood, Prior, PriorCalibration,
+    RawPrior, Uniform,
+};
 pub use planner::{Plan, TourProblem, solve_brute_force, solve_exact};
 pub use policy::{CandidateLimit, CostModel, Greedy, Oracle, Planner, PlannerConfig, Policy};
 pub use probability::Probability;

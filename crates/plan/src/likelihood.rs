@@ -1,12 +1,15 @@
 //! Likelihood sources: anything that gives `P_S(target, container)`.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
+use std::sync::Arc;
 
 use ferret_world::{GroundTruth, House, ObjectType, Scene};
 use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
 
 use crate::error::PlanError;
+use crate::holdout::HoldOut;
 use crate::probability::Probability;
 
 /// Gives, for a house and a target, the marginal probability that each container holds the target
@@ -92,6 +95,64 @@ impl LikelihoodSource for OracleLikelihood<'_> {
     }
 }
 
+/// The seed of [`Noise`] when none is given.
+pub const NOISE_SEED: u64 = 0x5eed;
+
+/// A control that knows nothing: for each (target, container type, room type) question a fixed
+/// pseudo-random probability in [0.01, 0.99], as an LLM that answered every distinct question
+/// with noise would. Fused with the prior, it shows what a fusion fit alone gives.
+#[derive(Clone, Copy, Debug)]
+pub struct Noise {
+    /// The seed of the answers.
+    pub seed: u64,
+}
+
+impl Default for Noise {
+    fn default() -> Self {
+        Self { seed: NOISE_SEED }
+    }
+}
+
+impl Noise {
+    /// The probability it gives `target` in a `container` in a `room`.
+    pub fn probability(&self, target: &ObjectType, container: &ObjectType, room: &str) -> f64 {
+        let mut h = Sha256::new();
+        h.update(self.seed.to_le_bytes());
+        for part in [target.as_str(), container.as_str(), room] {
+            h.update((part.len() as u64).to_le_bytes());
+            h.update(part.as_bytes());
+        }
+        let digest = h.finalize();
+        let mut first = [0u8; 8];
+        first.copy_from_slice(&digest[..8]);
+        let u = (u64::from_le_bytes(first) >> 11) as f64 / (1u64 << 53) as f64;
+        0.01 + 0.98 * u
+    }
+}
+
+impl LikelihoodSource for Noise {
+    fn name(&self) -> &str {
+        "noise"
+    }
+
+    fn likelihoods(
+        &self,
+        house: &House,
+        target: &ObjectType,
+    ) -> Result<Vec<Probability>, PlanError> {
+        Ok((0..house.containers.len())
+            .map(|c| {
+                let room = house.container_room(c).map_or("", |r| r.room_type.as_str());
+                Probability::clamped(
+                    self.probability(target, &house.containers[c].object_type, room),
+                    0.0,
+                    1.0,
+                )
+            })
+            .collect())
+    }
+}
+
 /// How often containers of one kind held each object type in the training houses.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 struct Counts {
@@ -99,28 +160,109 @@ struct Counts {
     containers: u32,
     /// For each object type, how many of those containers held at least one.
     holding: BTreeMap<ObjectType, u32>,
+    /// For each object type, how many of those containers stood in a house where the type was
+    /// present: the denominator of P(holds | the target is in the house).
+    #[serde(default)]
+    present: BTreeMap<ObjectType, u32>,
 }
 
 impl Counts {
-    fn add(&mut self, held: &std::collections::BTreeSet<ObjectType>) {
+    fn add(&mut self, held: &BTreeSet<ObjectType>, in_house: &BTreeSet<ObjectType>) {
         self.containers += 1;
         for t in held {
             *self.holding.entry(t.clone()).or_default() += 1;
         }
+        for t in in_house {
+            *self.present.entry(t.clone()).or_default() += 1;
+        }
     }
 
-    /// Additive smoothing toward `back_off` with weight `alpha` pseudo-containers.
+    /// Additive smoothing toward `back_off` with weight `alpha` pseudo-containers, over every
+    /// container seen (whether or not the target was in its house).
     fn smoothed(&self, target: &ObjectType, alpha: f64, back_off: f64) -> f64 {
         let k = f64::from(self.holding.get(target).copied().unwrap_or(0));
         (k + alpha * back_off) / (f64::from(self.containers) + alpha)
     }
+
+    /// Containers of this kind that stood in a house holding `target`.
+    fn present(&self, target: &ObjectType) -> u32 {
+        self.present.get(target).copied().unwrap_or(0)
+    }
+
+    /// P(holds `target` | `target` is in the house), smoothed toward `back_off`.
+    fn conditioned(&self, target: &ObjectType, alpha: f64, back_off: f64) -> f64 {
+        let k = f64::from(self.holding.get(target).copied().unwrap_or(0));
+        let n = f64::from(self.present(target));
+        if n + alpha <= 0.0 {
+            return back_off;
+        }
+        (k + alpha * back_off) / (n + alpha)
+    }
+
+    /// The same for an object type of any kind: how much a container of this kind holds of
+    /// whatever is in its house (a counter holds more than a toilet), smoothed toward
+    /// `back_off`. What the prior says about a type it never saw.
+    fn any_type(&self, alpha: f64, back_off: f64) -> f64 {
+        let k: f64 = self.holding.values().map(|&v| f64::from(v)).sum();
+        let n: f64 = self.present.values().map(|&v| f64::from(v)).sum();
+        if n + alpha <= 0.0 {
+            return back_off;
+        }
+        (k + alpha * back_off) / (n + alpha)
+    }
+
+    fn forget(&mut self, hidden: &dyn Fn(&ObjectType) -> bool) {
+        self.holding.retain(|t, _| !hidden(t));
+        self.present.retain(|t, _| !hidden(t));
+    }
 }
 
-/// A prior learned from training houses: P(a container holds the target | container type, room
-/// type), smoothed toward P(· | container type) and that toward the overall rate, so unseen
-/// (container, room) pairs and unseen containers still get sensible values.
+/// The Platt scaling of the prior's estimates: `logit P = a·logit P_counts + c`, fitted by
+/// cross-fitting on the training houses (each fold's houses scored by a prior counted on the
+/// others), so that its probabilities mean what they say on houses it never saw.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PriorCalibration {
+    /// Slope on the logit of the counted estimate.
+    pub a: f64,
+    /// Intercept.
+    pub c: f64,
+    /// Folds of the cross-fitting.
+    pub folds: usize,
+    /// (house, target, container) questions fitted.
+    pub pairs: u64,
+    /// Of them, containers holding the target.
+    pub positives: u64,
+}
+
+impl PriorCalibration {
+    /// The calibrated probability of a counted estimate `p`.
+    pub fn apply(&self, p: f64) -> f64 {
+        crate::logistic::sigmoid(self.a * crate::logistic::logit(p) + self.c)
+    }
+}
+
+/// Folds of the calibration's cross-fitting when a prior is trained.
+pub const CALIBRATION_FOLDS: usize = 5;
+
+/// The format of prior files this version writes: 2 adds the presence counts and the calibration.
+pub const PRIOR_FORMAT: u32 = 2;
+
+/// A prior learned from training houses. Its probability is
+/// P(a container holds the target | container type, room type, the target is in the house),
+/// counted over the training houses that held the target, smoothed toward P(· | container type)
+/// and that toward the target's overall rate (unseen pairs and containers still get sensible
+/// values), then Platt-scaled ([`PriorCalibration`]). A target type no training house held gets
+/// the rate of objects of any type in containers of that kind.
+///
+/// Every trial has its target in the house, so counting over all training houses (what
+/// [`raw_probability`](Self::raw_probability) does, the estimate of earlier versions) understates
+/// every probability by how often the type is absent, and a planner trading probability against
+/// distance then walks too far for too little.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Prior {
+    /// The file format ([`PRIOR_FORMAT`]; 0 for files of versions before it was recorded).
+    #[serde(default)]
+    pub ferret_prior: u32,
     /// Pseudo-count weight of the back-off in each smoothing step.
     pub smoothing: f64,
     /// Number of training houses.
@@ -129,19 +271,56 @@ pub struct Prior {
     by_pair: BTreeMap<String, Counts>,
     by_container: BTreeMap<ObjectType, Counts>,
     overall: Counts,
+    /// The Platt scaling, when it could be fitted (enough training houses with both classes).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<PriorCalibration>,
+    /// Held-out target types: priors that never saw them, asked in their stead.
+    #[serde(skip)]
+    hidden: Option<Arc<Hidden>>,
+}
+
+/// The priors of a [`HoldOut`]: one per fold, each without that fold's types.
+#[derive(Clone, Debug, PartialEq)]
+struct Hidden {
+    holdout: HoldOut,
+    priors: Vec<Prior>,
 }
 
 impl Prior {
-    /// Learns a prior from scenes (training houses; ground truth is what training is for).
+    /// Learns a prior from scenes (training houses; ground truth is what training is for) and
+    /// fits its calibration by [`CALIBRATION_FOLDS`]-fold cross-fitting.
     pub fn train<'a>(scenes: impl IntoIterator<Item = &'a Scene>, smoothing: f64) -> Self {
+        Self::train_with(scenes, smoothing, CALIBRATION_FOLDS)
+    }
+
+    /// [`train`](Self::train) with `folds` folds of cross-fitting for the calibration; 0 or 1
+    /// leaves the prior uncalibrated (the counted estimate), as does a set of houses too small
+    /// to fit on (fewer than two per fold, or no fold with both holders and others).
+    pub fn train_with<'a>(
+        scenes: impl IntoIterator<Item = &'a Scene>,
+        smoothing: f64,
+        folds: usize,
+    ) -> Self {
+        let scenes: Vec<&Scene> = scenes.into_iter().collect();
+        let mut prior = Self::count(scenes.iter().copied(), smoothing);
+        if folds >= 2 && scenes.len() >= 2 * folds {
+            prior.calibration = Self::cross_fit(&scenes, smoothing, folds);
+        }
+        prior
+    }
+
+    /// The counts alone, without a calibration.
+    pub fn count<'a>(scenes: impl IntoIterator<Item = &'a Scene>, smoothing: f64) -> Self {
         let mut prior = Prior {
+            ferret_prior: PRIOR_FORMAT,
             smoothing,
             ..Prior::default()
         };
         for scene in scenes {
             prior.houses += 1;
+            let in_house = scene.truth.target_types();
             for (c, container) in scene.house.containers.iter().enumerate() {
-                let held: std::collections::BTreeSet<ObjectType> = scene
+                let held: BTreeSet<ObjectType> = scene
                     .truth
                     .contents(c)
                     .iter()
@@ -156,44 +335,222 @@ impl Prior {
                     .by_pair
                     .entry(format!("{}@{}", container.object_type, room))
                     .or_default()
-                    .add(&held);
+                    .add(&held, &in_house);
                 prior
                     .by_container
                     .entry(container.object_type.clone())
                     .or_default()
-                    .add(&held);
-                prior.overall.add(&held);
+                    .add(&held, &in_house);
+                prior.overall.add(&held, &in_house);
             }
         }
         prior
     }
 
-    /// P(a container of `container` type in a room of `room` type holds `target`).
+    /// Fits the Platt scaling: each fold's houses (every target present, every container) are
+    /// scored by a prior counted on the other folds.
+    fn cross_fit(scenes: &[&Scene], smoothing: f64, folds: usize) -> Option<PriorCalibration> {
+        let mut rows: Vec<([f64; 2], bool)> = Vec::new();
+        for f in 0..folds {
+            let counted = Self::count(
+                scenes
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, _)| i % folds != f)
+                    .map(|(_, s)| *s),
+                smoothing,
+            );
+            for scene in scenes.iter().skip(f).step_by(folds) {
+                for target in scene.truth.target_types() {
+                    for (c, container) in scene.house.containers.iter().enumerate() {
+                        let room = scene.house.container_room(c).map(|r| r.room_type.as_str());
+                        let p = counted.counted_probability(&target, &container.object_type, room);
+                        rows.push((
+                            [crate::logistic::logit(p), 1.0],
+                            scene.truth.holds(c, &target),
+                        ));
+                    }
+                }
+            }
+        }
+        let w = crate::logistic::fit(&rows, [1.0, 0.0], [true, false])?;
+        Some(PriorCalibration {
+            a: w[0],
+            c: w[1],
+            folds,
+            pairs: rows.len() as u64,
+            positives: rows.iter().filter(|r| r.1).count() as u64,
+        })
+    }
+
+    /// The prior that asks about each target one that never saw the target types `holdout`
+    /// holds out for it (its calibration is kept: two numbers fitted over all types, which
+    /// carry no one type's counts).
+    pub fn holding_out(&self, holdout: HoldOut) -> Prior {
+        let priors = (0..holdout.folds())
+            .map(|f| {
+                self.without_types(&|t: &ObjectType| HoldOut::fold_of(t, holdout.folds()) == f)
+            })
+            .collect();
+        Prior {
+            hidden: Some(Arc::new(Hidden { holdout, priors })),
+            ..self.without_hidden()
+        }
+    }
+
+    /// The hold-out this prior applies, if any.
+    pub fn holdout(&self) -> Option<HoldOut> {
+        self.hidden.as_ref().map(|h| h.holdout)
+    }
+
+    /// The prior as if no training house had held an object of a type `hidden` accepts:
+    /// exactly what training without those objects gives.
+    pub fn without_types(&self, hidden: &dyn Fn(&ObjectType) -> bool) -> Prior {
+        let mut p = self.without_hidden();
+        for counts in p
+            .by_pair
+            .values_mut()
+            .chain(p.by_container.values_mut())
+            .chain(std::iter::once(&mut p.overall))
+        {
+            counts.forget(hidden);
+        }
+        p
+    }
+
+    fn without_hidden(&self) -> Prior {
+        Prior {
+            ferret_prior: self.ferret_prior,
+            smoothing: self.smoothing,
+            houses: self.houses,
+            by_pair: self.by_pair.clone(),
+            by_container: self.by_container.clone(),
+            overall: self.overall.clone(),
+            calibration: self.calibration.clone(),
+            hidden: None,
+        }
+    }
+
+    /// The prior whose counts answer questions about `target`.
+    fn counts_for(&self, target: &ObjectType) -> &Prior {
+        match &self.hidden {
+            Some(h) => h.priors.get(h.holdout.prior_fold(target)).unwrap_or(self),
+            None => self,
+        }
+    }
+
+    /// Whether the training houses ever held an object of type `t` (after any hold-out).
+    pub fn has_seen(&self, t: &ObjectType) -> bool {
+        self.counts_for(t).overall.present(t) > 0
+    }
+
+    /// P(a container of `container` type in a room of `room` type holds `target` | the target
+    /// is in the house), calibrated: what `model/prior` plans with.
     pub fn probability(
         &self,
         target: &ObjectType,
         container: &ObjectType,
         room: Option<&str>,
     ) -> Probability {
+        let p = self
+            .counts_for(target)
+            .counted_probability(target, container, room);
+        let p = match &self.calibration {
+            Some(c) => c.apply(p),
+            None => p,
+        };
+        Probability::clamped(p, 0.0, 1.0)
+    }
+
+    /// The counted estimate of [`probability`](Self::probability), before calibration.
+    fn counted_probability(
+        &self,
+        target: &ObjectType,
+        container: &ObjectType,
+        room: Option<&str>,
+    ) -> f64 {
         let a = self.smoothing.max(0.0);
+        // The fallback of a prior that has seen nothing at all: the uniform source's value.
+        let any = self.overall.any_type(0.0, Uniform::default().p.get());
+        let ratio = |x: f64, y: f64| if y > 0.0 { x / y } else { 1.0 };
+        let any_c = self
+            .by_container
+            .get(container)
+            .map_or(any, |c| c.any_type(a, any));
+        let pair = room.and_then(|r| self.by_pair.get(&format!("{container}@{r}")));
+        let any_p = pair.map_or(any_c, |c| c.any_type(a, any_c));
+        // Back-offs multiply relative rates: the target's rate over all containers scaled by how
+        // much this kind of container holds, and that by how much more it holds in this room.
+        let rate = self.overall.conditioned(target, a, any);
+        let by_type = {
+            let back_off = (any_c * ratio(rate, any)).clamp(0.0, 1.0);
+            self.by_container
+                .get(container)
+                .map_or(back_off, |c| c.conditioned(target, a, back_off))
+        };
+        let back_off = (by_type * ratio(any_p, any_c)).clamp(0.0, 1.0);
+        pair.map_or(back_off, |c| c.conditioned(target, a, back_off))
+            .clamp(0.0, 1.0)
+    }
+
+    /// The estimate of earlier versions, kept for the paper's comparison (`model/prior-raw`):
+    /// P(holds | container type, room type) counted over every training house, whether or not
+    /// it held the target, and not calibrated.
+    pub fn raw_probability(
+        &self,
+        target: &ObjectType,
+        container: &ObjectType,
+        room: Option<&str>,
+    ) -> Probability {
+        let prior = self.counts_for(target);
+        let a = prior.smoothing.max(0.0);
         // Laplace-style base rate so an object never seen in training is unlikely but possible.
-        let base = self
+        let base = prior
             .overall
             .smoothed(target, 1.0, 0.0)
-            .max(1.0 / (f64::from(self.overall.containers) + 2.0));
-        let by_type = self
+            .max(1.0 / (f64::from(prior.overall.containers) + 2.0));
+        let by_type = prior
             .by_container
             .get(container)
             .map_or(base, |c| c.smoothed(target, a, base));
         let by_pair = room
-            .and_then(|r| self.by_pair.get(&format!("{container}@{r}")))
+            .and_then(|r| prior.by_pair.get(&format!("{container}@{r}")))
             .map_or(by_type, |c| c.smoothed(target, a, by_type));
         Probability::clamped(by_pair, 0.0, 1.0)
+    }
+
+    /// How little evidence the training houses give about `target` in a container of type
+    /// `container`: `s / (n + s)` with `n` the training containers of that type that stood in a
+    /// house holding the target and `s` the smoothing weight (at least 1). 1 for a target or a
+    /// container type never seen together, near 0 for a pair seen often. A fusion lets the other
+    /// source carry the weight where this is high.
+    pub fn evidence_gap(&self, target: &ObjectType, container: &ObjectType) -> f64 {
+        let n = self
+            .counts_for(target)
+            .by_container
+            .get(container)
+            .map_or(0, |c| c.present(target));
+        let s = self.smoothing.max(1.0);
+        s / (f64::from(n) + s)
+    }
+
+    /// [`evidence_gap`](Self::evidence_gap) of every container of `house`.
+    pub fn evidence_gaps(&self, house: &House, target: &ObjectType) -> Vec<f64> {
+        house
+            .containers
+            .iter()
+            .map(|c| self.evidence_gap(target, &c.object_type))
+            .collect()
     }
 
     /// Number of training containers.
     pub fn container_count(&self) -> u32 {
         self.overall.containers
+    }
+
+    /// The object types the training houses held (before any hold-out).
+    pub fn seen_types(&self) -> impl Iterator<Item = &ObjectType> {
+        self.overall.present.keys()
     }
 
     /// Writes the prior as JSON.
@@ -206,7 +563,8 @@ impl Prior {
         std::fs::write(path, json).map_err(|e| err(e.to_string()))
     }
 
-    /// Reads a prior written by [`save`](Self::save).
+    /// Reads a prior written by [`save`](Self::save). A file of a format before
+    /// [`PRIOR_FORMAT`] is refused: it lacks the presence counts the estimate needs.
     pub fn load(path: &Path) -> Result<Self, PlanError> {
         let err = |message: String| PlanError::Prior {
             path: path.display().to_string(),
@@ -214,7 +572,20 @@ impl Prior {
         };
         let text = ferret_world::input::read_text(path, ferret_world::input::MAX_INPUT_BYTES)
             .map_err(|e| err(e.to_string()))?;
-        serde_json::from_str(&text).map_err(|e| err(format!("not a ferret prior: {e}")))
+        let prior: Prior =
+            serde_json::from_str(&text).map_err(|e| err(format!("not a ferret prior: {e}")))?;
+        if prior.ferret_prior != PRIOR_FORMAT {
+            return Err(err(format!(
+                "format {} (this ferret reads {PRIOR_FORMAT}; a file without presence counts was written by an older ferret): train it again with `ferret prior train`",
+                prior.ferret_prior
+            )));
+        }
+        if let Some(c) = &prior.calibration
+            && !(c.a.is_finite() && c.c.is_finite())
+        {
+            return Err(err("calibration weights are not finite numbers".into()));
+        }
+        Ok(prior)
     }
 }
 
@@ -232,6 +603,31 @@ impl LikelihoodSource for Prior {
             .map(|c| {
                 let room = house.container_room(c).map(|r| r.room_type.as_str());
                 self.probability(target, &house.containers[c].object_type, room)
+            })
+            .collect())
+    }
+}
+
+/// The prior's estimate of earlier versions ([`Prior::raw_probability`]), as a source:
+/// `model/prior-raw`.
+#[derive(Clone, Debug)]
+pub struct RawPrior(pub Arc<Prior>);
+
+impl LikelihoodSource for RawPrior {
+    fn name(&self) -> &str {
+        "prior-raw"
+    }
+
+    fn likelihoods(
+        &self,
+        house: &House,
+        target: &ObjectType,
+    ) -> Result<Vec<Probability>, PlanError> {
+        Ok((0..house.containers.len())
+            .map(|c| {
+                let room = house.container_room(c).map(|r| r.room_type.as_str());
+                self.0
+                    .raw_probability(target, &house.containers[c].object_type, room)
             })
             .collect())
     }

@@ -8,7 +8,7 @@ use std::sync::Arc;
 use ferret_world::GroundTruth;
 
 use crate::error::PlanError;
-use crate::likelihood::{LikelihoodSource, Prior, Uniform};
+use crate::likelihood::{LikelihoodSource, Noise, Prior, RawPrior, Uniform};
 use crate::policy::{CandidateLimit, CostModel, Greedy, Oracle, Planner, PlannerConfig, Policy};
 use crate::trial::SearchProblem;
 
@@ -146,30 +146,47 @@ impl StrategyRegistry {
             no_args(spec)?;
             Ok(Arc::new(OracleStrategy))
         });
-        r.register("model", "model/<uniform|prior>[/k<N>|/exact][/authors]", move |spec| {
-            let source: Arc<dyn LikelihoodSource> = match spec.args.first().map(String::as_str) {
-                Some("uniform") => Arc::new(Uniform::default()),
-                Some("prior") => match &prior {
-                    Some(p) => p.clone(),
-                    None => {
-                        return Err(PlanError::UnknownStrategy {
-                            spec: spec.raw.clone(),
-                            reason: "no prior loaded (train one with `ferret prior train` and pass --prior)"
-                                .into(),
-                        });
-                    }
-                },
-                _ => {
-                    return Err(PlanError::UnknownStrategy {
+        r.register(
+            "model",
+            "model/<prior|prior-raw|uniform|noise>[/k<N>|/exact][/authors]",
+            move |spec| {
+                let name = spec.args.first().map(String::as_str).unwrap_or("");
+                let source = builtin_source(name, prior.as_ref()).map_err(|reason| {
+                    PlanError::UnknownStrategy {
                         spec: spec.raw.clone(),
-                        reason: "expected model/uniform or model/prior".into(),
-                    });
-                }
-            };
-            let config = planner_config_from(spec, 1, planner, exact_max)?;
-            Ok(Arc::new(ModelStrategy::new(&spec.raw, source, config)))
-        });
+                        reason,
+                    }
+                })?;
+                let config = planner_config_from(spec, 1, planner, exact_max)?;
+                Ok(Arc::new(ModelStrategy::new(&spec.raw, source, config)))
+            },
+        );
         r
+    }
+}
+
+/// The built-in sources that know nothing of where things are, which a fusion can take in an
+/// LLM's place to show what the fit alone gives (`fused/noise`).
+pub const CONTROL_SOURCES: [&str; 2] = ["noise", "uniform"];
+
+/// The built-in likelihood source `name` names (`prior`, `prior-raw`, `uniform`, `noise`): what
+/// `model/<name>` plans over, and what `fused/<name>` fuses with the prior. The error says why
+/// not.
+pub fn builtin_source(
+    name: &str,
+    prior: Option<&Arc<Prior>>,
+) -> Result<Arc<dyn LikelihoodSource>, String> {
+    let prior = || {
+        prior.cloned().ok_or_else(|| {
+            "no prior loaded (train one with `ferret prior train` and pass --prior)".to_string()
+        })
+    };
+    match name {
+        "uniform" => Ok(Arc::new(Uniform::default())),
+        "noise" => Ok(Arc::new(Noise::default())),
+        "prior" => Ok(prior()?),
+        "prior-raw" => Ok(Arc::new(RawPrior(prior()?))),
+        _ => Err("expected model/prior, model/prior-raw, model/uniform or model/noise".to_string()),
     }
 }
 

@@ -161,6 +161,7 @@ pub fn calibrate(
         seed,
         bins,
         fit_fusion,
+        ..CalibrationSettings::default()
     };
     let needed = settings.specs_to_build().map_err(|e| {
         errors::lab_as_keywords(

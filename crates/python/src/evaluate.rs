@@ -230,6 +230,7 @@ pub fn evaluate(
                     reveal_fraction,
                     per_house,
                     protocol: &protocol,
+                    holdout: None,
                 },
                 &params,
                 &llm,

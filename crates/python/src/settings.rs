@@ -161,6 +161,7 @@ impl Planning {
             max_containers,
             exact_max,
             search_cost,
+            holdout: None,
         };
         // The command line names its options; here they are keywords.
         settings.validate().map_err(|e| {

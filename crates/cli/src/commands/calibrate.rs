@@ -28,8 +28,9 @@ pub struct Args {
     #[command(flatten)]
     pub llm: super::llm_setup::LlmArgs,
     /// Likelihood sources as strategy specs, comma separated: model/uniform, model/prior,
-    /// llm+model/<prompt>/<llm> and fused/<prompt>/<llm> (with --fusion); any planner suffix is
-    /// ignored: only the probabilities count.
+    /// model/prior-raw (the uncalibrated estimate of earlier versions), model/noise (a control
+    /// that knows nothing), llm+model/<prompt>/<llm> and fused/<prompt>/<llm> or fused/noise
+    /// (with --fusion); any planner suffix is ignored: only the probabilities count.
     #[arg(long, value_delimiter = ',', default_value = DEFAULT_SOURCES)]
     pub sources: Vec<String>,
     /// Targets per house: `all` (every small-object type present) or a number N. With N, the
@@ -40,11 +41,18 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Fit the fusion of the prior with each LLM source among `--sources` (logit P = a·logit
-    /// P_prior + b·logit P_llm + c, by logistic regression on these houses, which should be
-    /// training houses) and write the weights to FILE; `--fusion FILE` then makes
-    /// `fused/<prompt>/<llm>` available to eval, calibrate, select, deploy and serve.
+    /// P_prior + b·logit P_llm + c + g·(d·logit P_llm + e), g the prior's evidence gap, by
+    /// logistic regression on these houses, which should be training houses) and write the
+    /// weights to FILE; `--fusion FILE` then makes `fused/<prompt>/<llm>` available to eval,
+    /// calibrate, select, deploy and serve. model/noise among the sources fits the control
+    /// `fused/noise` the same way: what the fit gives with a source that knows nothing.
     #[arg(long, value_name = "FILE")]
     pub fit_fusion: Option<PathBuf>,
+    /// With --fit-fusion: every question is also scored by a prior that never saw its target's
+    /// fold of N target types, so the fit sees questions the prior has no evidence for and the
+    /// weights d and e learn how much the LLM is worth there. 0 fits on the prior as it is.
+    #[arg(long, value_name = "N", default_value_t = ferret_lab::calibrate::FIT_UNSEEN_FOLDS)]
+    pub fit_unseen_folds: usize,
     /// Bins of the reliability diagram.
     #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u16).range(1..=100))]
     pub bins: u16,
@@ -70,6 +78,8 @@ pub fn run(args: Args) -> Result<ExitCode> {
         seed: args.seed,
         bins: usize::from(args.bins),
         fit_fusion: args.fit_fusion.is_some(),
+        fit_unseen_folds: args.fit_unseen_folds,
+        holdout: args.planning.holdout_types,
     };
     if loaded.scenes.is_empty() {
         anyhow::bail!("no houses to score in {}", loaded.source);

@@ -117,6 +117,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         reveal_fraction: args.reveal_fraction,
         per_house: args.trials_per_house,
         protocol: &protocol,
+        holdout: args.planning.holdout_types,
     };
     let SpecEvaluation {
         maps,

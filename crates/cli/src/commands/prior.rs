@@ -31,6 +31,11 @@ pub struct TrainArgs {
     /// Smoothing weight toward the back-off estimate (pseudo-containers).
     #[arg(long, default_value_t = 2.0)]
     smoothing: f64,
+    /// Folds of the cross-fitting that calibrates the prior's probabilities on its own training
+    /// houses (Platt scaling, recorded in the file); 0 leaves them as counted. Fewer than two
+    /// houses per fold also leaves them as counted.
+    #[arg(long, value_name = "N", default_value_t = ferret_plan::CALIBRATION_FOLDS)]
+    calibration_folds: usize,
     /// Output JSON file.
     #[arg(long, value_name = "FILE")]
     out: PathBuf,
@@ -58,10 +63,23 @@ fn train(args: TrainArgs) -> Result<ExitCode> {
     for s in &loaded.skipped {
         eprintln!("skipped: {s}");
     }
-    let prior = Prior::train(&loaded.scenes, args.smoothing);
+    if !(args.smoothing.is_finite() && args.smoothing >= 0.0) {
+        anyhow::bail!(
+            "--smoothing {}: must be a finite number ≥ 0",
+            args.smoothing
+        );
+    }
+    let prior = Prior::train_with(&loaded.scenes, args.smoothing, args.calibration_folds);
     crate::output::write_with_path(&args.out, |p| Ok(prior.save(p)?))?;
+    let calibration = match &prior.calibration {
+        Some(c) => format!(
+            "calibrated by {}-fold cross-fitting on {} questions: logit P = {:.3}·logit P_counts {:+.3}",
+            c.folds, c.pairs, c.a, c.c
+        ),
+        None => "not calibrated (too few houses, or --calibration-folds 0)".to_string(),
+    };
     println!(
-        "trained a prior on {} houses ({} containers) and wrote {}",
+        "trained a prior on {} houses ({} containers), {calibration}, and wrote {}",
         prior.houses,
         prior.container_count(),
         args.out.display()

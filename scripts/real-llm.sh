@@ -303,7 +303,8 @@ run() {
 # evidence-aware weights fitted on training houses FIT_RANGE with the same folds held out; each
 # fused row has its control beside it (fused/noise: the same fit with a source that knows
 # nothing). Then the same trials with the prior that saw every type, and the selection
-# experiment between the calibrated prior and the fused source on both.
+# experiment between the calibrated prior and the fused source on both; priors from few training
+# houses; and a scene whose furniture and rooms ProcTHOR never had.
 UNSEEN_PROMPTS="${FERRET_LANE_UNSEEN_PROMPTS:-p-yesno p-choice}"
 FOLDS="${FERRET_LANE_FOLDS:-5}"
 run_unseen() {
@@ -320,11 +321,12 @@ run_unseen() {
     "$ferret" prior train --houses "$DATA/smallhouse-train1000.jsonl.gz" --range "$PRIOR_RANGE" \
         --also "$DATA/oneroom-train500.jsonl.gz" "${asset[@]}" --out prior.json
     "$ferret" llm ping qwen --config ferret.toml
-    local sources=(model/noise) fused=(fused/noise fused/noise/exact) llm=()
+    local sources=(model/noise) fused=(fused/noise fused/noise/exact) scored=(fused/noise) llm=()
     for p in $UNSEEN_PROMPTS; do
         sources+=("llm+model/$p/qwen")
         llm+=("llm+model/$p/qwen")
         fused+=("fused/$p/qwen" "fused/$p/qwen/exact")
+        scored+=("fused/$p/qwen")
     done
     log "unseen types: fusion fitted on training houses $FIT_RANGE, every question also without its target's fold of $FOLDS"
     "$ferret" calibrate --houses "$DATA/smallhouse-train1000.jsonl.gz" --range "$FIT_RANGE" \
@@ -351,6 +353,32 @@ run_unseen() {
         "$ferret" select --trials "$kind-select-run" "${common[@]}" --fusion fusion-unseen.json \
             --deployments 500 --trials-per-deployment 100 --out "$kind-select-run/select"
     done
+    # Few training houses: a prior from 5, 20 and 100 houses (the same questions, from the
+    # cache), its fusion fitted again, the same val150 trials.
+    for n in 5 20 100; do
+        log "few houses: a prior from $n training houses"
+        "$ferret" prior train --houses "$DATA/smallhouse-train1000.jsonl.gz" \
+            --range "100..$((100 + n))" "${asset[@]}" --out "prior-$n.json"
+        local few=(--config "$OUT/ferret.toml" --llm-cache "$OUT/llm-cache.sqlite" --prior "prior-$n.json")
+        "$ferret" calibrate --houses "$DATA/smallhouse-train1000.jsonl.gz" --range "$FIT_RANGE" \
+            "${asset[@]}" "${few[@]}" --targets-per-house 1 --max-fallback-share "$MAX_FALLBACK" \
+            --sources "$(IFS=,; echo "${sources[*]}")" --fit-fusion "fusion-$n.json" \
+            --fit-unseen-folds "$FOLDS" --out "few-$n-fit" >/dev/null
+        "$ferret" eval "${val[@]}" "${few[@]}" --fusion "fusion-$n.json" \
+            --strategies "$strategies" --paired-against model/prior,fused/noise \
+            --max-fallback-share "$MAX_FALLBACK" --out "few-$n-eval" >/dev/null
+    done
+    # Furniture and rooms ProcTHOR never had (a garage, a workshop, a greenhouse): what the prior
+    # falls back to, and what the model says, with the lane's prior and fusion.
+    local scene=(--houses "$ROOT/examples/workshop/scene.yaml")
+    log "unseen containers and rooms: examples/workshop"
+    "$ferret" calibrate "${scene[@]}" "${common[@]}" --fusion fusion-unseen.json \
+        --max-fallback-share "$MAX_FALLBACK" \
+        --sources "model/uniform,model/prior-raw,model/prior,$(IFS=,; echo "${sources[*]}"),$(IFS=,; echo "${scored[*]}")" \
+        --out workshop-calibration
+    "$ferret" eval "${scene[@]}" "${common[@]}" --fusion fusion-unseen.json --trials-per-house all \
+        --strategies "$strategies" --paired-against model/prior,fused/noise \
+        --max-fallback-share "$MAX_FALLBACK" --out workshop-eval
     local online=$((SECONDS - t0))
     stop_server
     log "unseen types: eval again --offline with the server stopped: it must be identical"

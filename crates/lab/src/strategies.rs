@@ -268,10 +268,12 @@ pub fn prefetch(
     trials: &[(&House, &ObjectType)],
     feedback: &dyn Feedback,
 ) -> Result<Vec<String>> {
+    // `fused/noise` is fused like an LLM source but asks nothing.
     let asks = |s: &String| {
-        s.split('/')
-            .next()
-            .is_some_and(ferret_llm::asks_probabilities)
+        ferret_plan::StrategySpec::parse(s).is_ok_and(|spec| {
+            ferret_llm::asks_probabilities(&spec.kind)
+                && ferret_llm::control_source(&spec).is_none()
+        })
     };
     if !specs.iter().any(asks) {
         return Ok(Vec::new());

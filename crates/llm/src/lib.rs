@@ -79,6 +79,6 @@ pub use prompts::{
 pub use question::{Expect, Question, Request};
 pub use strategy::{
     FUSED, LLM_DIRECT, LLM_MODEL, LlmDirectPolicy, LlmDirectStrategy, LlmSpec, PrefetchProgress,
-    PrefetchSummary, asks_probabilities, prefetch_probabilities, register_fused,
+    PrefetchSummary, asks_probabilities, control_source, prefetch_probabilities, register_fused,
     register_strategies,
 };

@@ -72,7 +72,8 @@ impl PyPrior {
     }
 
     /// The probability that a container of type `container` (in a room of type `room`, when
-    /// known) holds an object of type `target`.
+    /// known) holds an object of type `target`, given that the house holds one, calibrated: what
+    /// `model/prior` plans with.
     #[pyo3(signature = (target, container, room = None))]
     fn probability(&self, target: &str, container: &str, room: Option<&str>) -> f64 {
         self.inner

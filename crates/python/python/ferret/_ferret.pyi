@@ -143,7 +143,8 @@ class Prior:
     def save(self, path: _Path) -> None:
         """Writes the prior as JSON."""
     def probability(self, target: str, container: str, room: Optional[str] = None) -> float:
-        """P(a container of type ``container`` in a room of type ``room`` holds ``target``)."""
+        """P(a container of type ``container`` in a room of type ``room`` holds ``target`` | the
+        target is in the house), calibrated: what ``model/prior`` plans with."""
     @property
     def houses(self) -> int:
         """Number of training houses."""

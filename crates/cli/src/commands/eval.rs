@@ -38,9 +38,11 @@ pub struct Args {
     pub llm: super::llm_setup::LlmArgs,
     #[command(flatten)]
     pub protocol: ProtocolArgs,
-    /// Strategies, comma separated: optimistic+greedy, model/uniform, model/prior,
-    /// model/prior/exact, model/prior/k<N>, oracle (a model spec ending in /authors plans with the
-    /// paper reference code's cost), and with an LLM configuration
+    /// Strategies, comma separated: optimistic+greedy, model/uniform, model/prior (calibrated),
+    /// model/prior-raw (the uncalibrated estimate of earlier versions), model/noise (a control
+    /// that knows nothing), each with /exact, /exact<N> or /k<N>, oracle (a model spec ending in
+    /// /authors plans with the paper reference code's cost), fused/noise[/exact] (with
+    /// --fusion: the control of every fused row), and with an LLM configuration
     /// llm+model/<prompt>/<llm>[/exact], fused/<prompt>/<llm>[/exact] (with --fusion) and
     /// llm-direct/p-direct/<llm> (prompts: p-yesno, p-choice, p-batch, p-context-a,
     /// p-context-b, p-minimal, p-direct, or a template path).

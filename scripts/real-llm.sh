@@ -227,12 +227,19 @@ serve() {
     exit 1
 }
 
-run() {
-    local ferret="${FERRET_LANE_BIN:-}"
-    if [ -z "$ferret" ]; then
-        (cd "$ROOT" && cargo build --release -q -p ferret-cli)
-        ferret="$ROOT/target/release/ferret"
+# The ferret binary the runs use: FERRET_LANE_BIN, or this checkout's, built.
+ferret_bin() {
+    if [ -n "${FERRET_LANE_BIN:-}" ]; then
+        echo "$FERRET_LANE_BIN"
+    else
+        (cd "$ROOT" && cargo build --release -q -p ferret-cli) >&2
+        echo "$ROOT/target/release/ferret"
     fi
+}
+
+run() {
+    local ferret
+    ferret="$(ferret_bin)"
     local asset=(--asset-db "$DATA/databases/asset-database.json")
     local val=(--houses "$DATA/multiroom-val150.jsonl.gz" "${asset[@]}")
     local common=(--config "$OUT/ferret.toml" --llm-cache "$OUT/llm-cache.sqlite" --prior "$OUT/prior.json")
@@ -308,11 +315,8 @@ run() {
 UNSEEN_PROMPTS="${FERRET_LANE_UNSEEN_PROMPTS:-p-yesno p-choice}"
 FOLDS="${FERRET_LANE_FOLDS:-5}"
 run_unseen() {
-    local ferret="${FERRET_LANE_BIN:-}"
-    if [ -z "$ferret" ]; then
-        (cd "$ROOT" && cargo build --release -q -p ferret-cli)
-        ferret="$ROOT/target/release/ferret"
-    fi
+    local ferret
+    ferret="$(ferret_bin)"
     local asset=(--asset-db "$DATA/databases/asset-database.json")
     local val=(--houses "$DATA/multiroom-val150.jsonl.gz" "${asset[@]}" --range "$ALL_RANGE")
     local common=(--config "$OUT/ferret.toml" --llm-cache "$OUT/llm-cache.sqlite" --prior "$OUT/prior.json")
@@ -350,7 +354,8 @@ run_unseen() {
         log "selection between the calibrated prior and fused/$first/qwen ($kind types)"
         "$ferret" eval "${val[@]}" "${common[@]}" --fusion fusion-unseen.json "${hold[@]}" \
             --strategies "model/prior,fused/$first/qwen" --out "$kind-select-run" >/dev/null
-        "$ferret" select --trials "$kind-select-run" "${common[@]}" --fusion fusion-unseen.json \
+        "$ferret" select --trials "$kind-select-run" --config "$OUT/ferret.toml" \
+            --llm-cache "$OUT/llm-cache.sqlite" --fusion fusion-unseen.json \
             --deployments 500 --trials-per-deployment 100 --out "$kind-select-run/select"
     done
     # Few training houses: a prior from 5, 20 and 100 houses (the same questions, from the

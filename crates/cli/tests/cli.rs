@@ -2,25 +2,10 @@
 
 mod common;
 
-use common::{ferret, s, text};
+use common::{data_dir, ferret, read_csv, s, text};
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
-
-fn read_csv(path: &Path) -> Vec<std::collections::HashMap<String, String>> {
-    let mut r = csv::Reader::from_path(path).expect("csv exists");
-    let headers = r.headers().expect("headers").clone();
-    r.records()
-        .map(|rec| {
-            let rec = rec.expect("row");
-            headers
-                .iter()
-                .map(String::from)
-                .zip(rec.iter().map(String::from))
-                .collect()
-        })
-        .collect()
-}
 
 #[test]
 fn generated_houses_check_clean_and_bad_houses_are_named() {
@@ -297,18 +282,6 @@ fn prior_train_feeds_eval_and_bench_prints_json() {
     let lines: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(lines[1]["containers"], 8);
     assert!(lines[1]["median_us"].as_f64().unwrap() > 0.0);
-}
-
-fn data_dir() -> Option<PathBuf> {
-    match std::env::var_os("FERRET_PROCTHOR_DIR") {
-        Some(d) => Some(PathBuf::from(d)),
-        None => {
-            eprintln!(
-                "skipped: set FERRET_PROCTHOR_DIR to the directory of ProcTHOR house files to run"
-            );
-            None
-        }
-    }
 }
 
 #[test]

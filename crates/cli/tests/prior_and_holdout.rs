@@ -3,31 +3,36 @@
 
 mod common;
 
-use common::{ferret, s, text};
+use common::{data_dir, ferret, read_csv, read_json, s, text};
 
-use std::collections::{BTreeMap, BTreeSet};
-use std::path::{Path, PathBuf};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::path::Path;
 
-type Row = BTreeMap<String, String>;
-
-fn read_csv(path: &Path) -> Vec<Row> {
-    let mut r = csv::Reader::from_path(path).expect("csv exists");
-    let headers = r.headers().expect("headers").clone();
-    r.records()
-        .map(|rec| {
-            let rec = rec.expect("row");
-            headers
-                .iter()
-                .map(String::from)
-                .zip(rec.iter().map(String::from))
-                .collect()
-        })
-        .collect()
-}
+type Row = HashMap<String, String>;
 
 fn ok(args: &[&str]) {
     let o = ferret(args);
     assert!(o.status.success(), "ferret {args:?}: {}", text(&o));
+}
+
+/// Fits the fusion of `prior` with the noise control on `houses` (calibrate's house options) into
+/// `dir/fusion.json`, and returns the file.
+fn fit_noise_control(houses: &[&str], prior: &Path, dir: &Path) -> serde_json::Value {
+    let (fusion, out) = (dir.join("fusion.json"), dir.join("fit"));
+    let mut args = vec!["calibrate"];
+    args.extend_from_slice(houses);
+    args.extend([
+        "--prior",
+        s(prior),
+        "--sources",
+        "model/noise",
+        "--fit-fusion",
+        s(&fusion),
+        "--out",
+        s(&out),
+    ]);
+    ok(&args);
+    read_json(&fusion)
 }
 
 /// (house, target) of every trial of one strategy.
@@ -64,27 +69,14 @@ fn held_out_folds_partition_the_trials_and_only_the_prior_forgets() {
         "--out",
         s(&p("prior.json")),
     ]);
-    let prior: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(p("prior.json")).unwrap()).unwrap();
+    let prior = read_json(&p("prior.json"));
     assert_eq!(prior["calibration"]["folds"], 5, "{}", prior["calibration"]);
     // The control fitted like an LLM source, on other generated houses.
-    ok(&[
-        "calibrate",
-        "--generate",
-        "30",
-        "--house-seed",
-        "4",
-        "--prior",
-        s(&p("prior.json")),
-        "--sources",
-        "model/noise",
-        "--fit-fusion",
-        s(&p("fusion.json")),
-        "--out",
-        s(&p("fit")),
-    ]);
-    let fusion: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(p("fusion.json")).unwrap()).unwrap();
+    let fusion = fit_noise_control(
+        &["--generate", "30", "--house-seed", "4"],
+        &p("prior.json"),
+        dir.path(),
+    );
     assert_eq!(fusion["fits"][0]["source"], "noise");
     assert!(
         fusion["fits"][0]["trained_on"]
@@ -116,8 +108,7 @@ fn held_out_folds_partition_the_trials_and_only_the_prior_forgets() {
             args.extend(["--holdout-types", h]);
         }
         ok(&args);
-        let run: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).unwrap()).unwrap();
+        let run = read_json(&out.join("run.json"));
         (read_csv(&out.join("trials.csv")), run)
     };
     let (all, run) = eval("all", None);
@@ -227,18 +218,6 @@ fn bad_holdouts_and_old_priors_are_refused_with_what_to_do() {
     assert!(text(&o).contains("--fit-fusion"), "{}", text(&o));
 }
 
-fn data_dir() -> Option<PathBuf> {
-    match std::env::var_os("FERRET_PROCTHOR_DIR") {
-        Some(d) => Some(PathBuf::from(d)),
-        None => {
-            eprintln!(
-                "skipped: set FERRET_PROCTHOR_DIR to the directory of ProcTHOR house files to run"
-            );
-            None
-        }
-    }
-}
-
 #[test]
 fn on_real_houses_the_calibrated_prior_beats_the_raw_one_and_a_fused_control() {
     let Some(data) = data_dir() else { return };
@@ -260,27 +239,20 @@ fn on_real_houses_the_calibrated_prior_beats_the_raw_one_and_a_fused_control() {
         "--out",
         s(&p("prior.json")),
     ]);
-    ok(&[
-        "calibrate",
-        "--houses",
-        &train,
-        "--range",
-        "0..60",
-        "--asset-db",
-        s(&db),
-        "--prior",
-        s(&p("prior.json")),
-        "--targets-per-house",
-        "1",
-        "--sources",
-        "model/noise",
-        "--fit-fusion",
-        s(&p("fusion.json")),
-        "--out",
-        s(&p("fit")),
-    ]);
-    let fusion: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(p("fusion.json")).unwrap()).unwrap();
+    let fusion = fit_noise_control(
+        &[
+            "--houses",
+            &train,
+            "--range",
+            "0..60",
+            "--asset-db",
+            s(&db),
+            "--targets-per-house",
+            "1",
+        ],
+        &p("prior.json"),
+        dir.path(),
+    );
     let b = fusion["fits"][0]["weights"]["b"].as_f64().unwrap();
     assert!(b.abs() < 0.1, "the noise control got weight b = {b}");
     ok(&[

@@ -599,13 +599,23 @@ impl LikelihoodSource for Prior {
         house: &House,
         target: &ObjectType,
     ) -> Result<Vec<Probability>, PlanError> {
-        Ok((0..house.containers.len())
-            .map(|c| {
-                let room = house.container_room(c).map(|r| r.room_type.as_str());
-                self.probability(target, &house.containers[c].object_type, room)
-            })
-            .collect())
+        Ok(per_container(house, |container, room| {
+            self.probability(target, container, room)
+        }))
     }
+}
+
+/// `estimate(container type, room type)` for every container of `house`, in order.
+fn per_container(
+    house: &House,
+    estimate: impl Fn(&ObjectType, Option<&str>) -> Probability,
+) -> Vec<Probability> {
+    (0..house.containers.len())
+        .map(|c| {
+            let room = house.container_room(c).map(|r| r.room_type.as_str());
+            estimate(&house.containers[c].object_type, room)
+        })
+        .collect()
 }
 
 /// The prior's estimate of earlier versions ([`Prior::raw_probability`]), as a source:
@@ -623,12 +633,8 @@ impl LikelihoodSource for RawPrior {
         house: &House,
         target: &ObjectType,
     ) -> Result<Vec<Probability>, PlanError> {
-        Ok((0..house.containers.len())
-            .map(|c| {
-                let room = house.container_room(c).map(|r| r.room_type.as_str());
-                self.0
-                    .raw_probability(target, &house.containers[c].object_type, room)
-            })
-            .collect())
+        Ok(per_container(house, |container, room| {
+            self.0.raw_probability(target, container, room)
+        }))
     }
 }

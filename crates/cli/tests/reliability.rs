@@ -392,3 +392,54 @@ fn a_corrupt_llm_cache_is_named_as_such() {
         assert!(err.contains(spec), "{err}");
     }
 }
+
+/// `--generate 18446744073709551615` panicked (capacity overflow), 4294967296 aborted in the
+/// allocator and 100000000 grew to 700 MB: every count of generated houses has one limit, named
+/// with the option before anything is generated.
+#[test]
+fn counts_of_generated_houses_are_bounded() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("e");
+    let houses = dir.path().join("h.jsonl");
+    for (args, option) in [
+        (
+            vec!["eval", "--generate", "18446744073709551615"],
+            "--generate",
+        ),
+        (vec!["eval", "--generate", "4294967296"], "--generate"),
+        (vec!["eval", "--generate", "100000000"], "--generate"),
+        (
+            vec!["generate", "--count", "18446744073709551615"],
+            "--count",
+        ),
+        (vec!["generate", "--count", "100000000"], "--count"),
+        (
+            vec![
+                "prompts",
+                "show",
+                "p-minimal",
+                "--target",
+                "Book",
+                "--index",
+                "1000000000",
+            ],
+            "--index",
+        ),
+    ] {
+        let mut args = args;
+        if args[0] == "eval" {
+            args.extend(["--strategies", "optimistic+greedy", "--out", s(&out)]);
+        } else if args[0] == "generate" {
+            args.extend(["--out", s(&houses)]);
+        }
+        let o = ferret(&args);
+        assert!(!o.status.success(), "{args:?} was accepted");
+        assert_ne!(o.status.code(), Some(101), "{args:?}: {}", stderr(&o));
+        let err = stderr(&o);
+        assert!(
+            err.contains(option) && err.contains("10000"),
+            "{args:?}: {err}"
+        );
+        assert!(!out.exists() && !houses.exists(), "{args:?}");
+    }
+}

@@ -538,7 +538,21 @@ impl Service {
             ));
         }
         let gate = self.gate(name);
-        let _turn = gate.lock().unwrap_or_else(PoisonError::into_inner);
+        let placed = {
+            let _turn = gate.lock().unwrap_or_else(PoisonError::into_inner);
+            self.place(name, key, pose)
+        };
+        self.release_gate(name, &gate);
+        placed
+    }
+
+    /// [`placed`](Self::placed) for a caller holding the scene's gate.
+    fn place(
+        &self,
+        name: &str,
+        key: PlaceKey,
+        pose: Option<[f64; 3]>,
+    ) -> Result<Arc<Placed>, ApiError> {
         // Whoever held the gate before may have placed it already.
         if let Some(p) = self.lock_cache().get(&key) {
             return Ok(p);
@@ -565,12 +579,24 @@ impl Service {
 
     /// The gate of scene `name`.
     fn gate(&self, name: &str) -> Arc<Mutex<()>> {
-        self.gates
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
+        self.lock_gates()
             .entry(name.to_string())
             .or_default()
             .clone()
+    }
+
+    /// Drops the gate of `name` when no one else holds or waits for it, so that the map holds
+    /// only scenes being worked on, whatever names clients send.
+    fn release_gate(&self, name: &str, gate: &Arc<Mutex<()>>) {
+        let mut gates = self.lock_gates();
+        // Ours and the map's: every clone is taken under this lock, so none can appear now.
+        if Arc::strong_count(gate) == 2 {
+            gates.remove(name);
+        }
+    }
+
+    fn lock_gates(&self) -> MutexGuard<'_, HashMap<String, Arc<Mutex<()>>>> {
+        self.gates.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
     /// `base` with the robot at `pose`: one search from the pose on its grid when the pose is on

@@ -50,12 +50,16 @@ pub fn check_yaml_nodes(text: &str, max: usize) -> Result<(), String> {
         max,
     };
     for document in serde_yaml_ng::Deserializer::from_str(text) {
-        // Errors other than the budget's are left to the real parse, which names the field.
-        let _ = (&counter).deserialize(document);
+        let counted = (&counter).deserialize(document);
         if counter.seen.get() > max {
             return Err(format!(
                 "more than {max} values once YAML aliases (`*name`) are expanded; write the values out or use fewer aliases"
             ));
+        }
+        // Other errors are left to the real parse, which names the field. The iterator keeps
+        // yielding the same error after a syntax error, so counting stops at the first.
+        if counted.is_err() {
+            break;
         }
     }
     Ok(())

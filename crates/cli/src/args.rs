@@ -28,12 +28,26 @@ pub struct HouseArgs {
     /// Report invalid houses and go on with the rest instead of stopping at the first.
     #[arg(long)]
     pub skip_invalid: bool,
-    /// Houses to generate when --houses is not given.
-    #[arg(long, value_name = "N", default_value_t = 100)]
+    /// Houses to generate when --houses is not given (at most 10000).
+    #[arg(long, value_name = "N", default_value_t = 100, value_parser = house_count)]
     pub generate: usize,
     /// Seed of the generated houses.
     #[arg(long, value_name = "S", default_value_t = 0)]
     pub house_seed: u64,
+}
+
+/// A count of houses to generate, at most [`ferret_world::generate::MAX_HOUSES`].
+pub fn house_count(s: &str) -> std::result::Result<usize, String> {
+    let max = ferret_world::generate::MAX_HOUSES;
+    let n: usize = s
+        .parse()
+        .map_err(|_| format!("{s:?} is not a count of houses (0 to {max})"))?;
+    if n > max {
+        return Err(format!(
+            "{n} is more than the {max} houses generated at once"
+        ));
+    }
+    Ok(n)
 }
 
 impl HouseArgs {

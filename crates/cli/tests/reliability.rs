@@ -110,6 +110,9 @@ fn rerunning_eval_replaces_output_files_instead_of_rewriting_them() {
         .collect();
     listed.sort();
     let mut expected: Vec<String> = names.iter().map(|n| n.to_string()).collect();
+    // The run's claim on the directory: an empty file, kept (removing a locked file would let
+    // two later runs hold two different files).
+    expected.push(".ferret-lock".into());
     expected.sort();
     assert_eq!(listed, expected);
 }
@@ -391,4 +394,83 @@ fn a_corrupt_llm_cache_is_named_as_such() {
         assert!(err.contains("response cache"), "{err}");
         assert!(err.contains(spec), "{err}");
     }
+}
+
+/// `--generate 18446744073709551615` panicked (capacity overflow), 4294967296 aborted in the
+/// allocator and 100000000 grew to 700 MB: every count of generated houses has one limit, named
+/// with the option before anything is generated.
+#[test]
+fn counts_of_generated_houses_are_bounded() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("e");
+    let houses = dir.path().join("h.jsonl");
+    for (args, option) in [
+        (
+            vec!["eval", "--generate", "18446744073709551615"],
+            "--generate",
+        ),
+        (vec!["eval", "--generate", "4294967296"], "--generate"),
+        (vec!["eval", "--generate", "100000000"], "--generate"),
+        (
+            vec!["generate", "--count", "18446744073709551615"],
+            "--count",
+        ),
+        (vec!["generate", "--count", "100000000"], "--count"),
+        (
+            vec![
+                "prompts",
+                "show",
+                "p-minimal",
+                "--target",
+                "Book",
+                "--index",
+                "1000000000",
+            ],
+            "--index",
+        ),
+    ] {
+        let mut args = args;
+        if args[0] == "eval" {
+            args.extend(["--strategies", "optimistic+greedy", "--out", s(&out)]);
+        } else if args[0] == "generate" {
+            args.extend(["--out", s(&houses)]);
+        }
+        let o = ferret(&args);
+        assert!(!o.status.success(), "{args:?} was accepted");
+        assert_ne!(o.status.code(), Some(101), "{args:?}: {}", stderr(&o));
+        let err = stderr(&o);
+        assert!(
+            err.contains(option) && err.contains("10000"),
+            "{args:?}: {err}"
+        );
+        assert!(!out.exists() && !houses.exists(), "{args:?}");
+    }
+}
+
+/// Two evals into one directory both reported success while only the later one's files
+/// remained: a run claims its output directory, and a second one is refused while it runs.
+#[test]
+fn a_second_run_into_a_busy_output_directory_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("e");
+    std::fs::create_dir_all(&out).unwrap();
+    // As a running eval holds it.
+    let lock = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(out.join(".ferret-lock"))
+        .unwrap();
+    {
+        use std::os::fd::AsRawFd;
+        // SAFETY: flock on a descriptor this test owns.
+        assert_eq!(unsafe { libc::flock(lock.as_raw_fd(), libc::LOCK_EX) }, 0);
+    }
+    let o = eval(&out, "0", "2");
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("another ferret run"), "{}", stderr(&o));
+    assert!(!out.join("trials.csv").exists());
+    drop(lock);
+    let o = eval(&out, "0", "2");
+    assert!(o.status.success(), "{}", stderr(&o));
 }

@@ -33,6 +33,94 @@ pub fn write_atomic<E: From<std::io::Error>>(
     Ok(persist(tmp, path)?)
 }
 
+/// Name of the lock file a run keeps in its output directory (see [`DirLock`]).
+pub const LOCK_FILE: &str = ".ferret-lock";
+
+/// One run's claim on an output directory: a second run that asks for the same directory while
+/// this one holds it is refused, instead of both computing and the later one's files replacing
+/// the earlier one's. An advisory lock on an open file (`flock`), so it ends with the process
+/// however that ends and a killed run leaves nothing to clean up; the empty file stays.
+#[derive(Debug)]
+pub struct DirLock {
+    file: Option<File>,
+    dir: std::path::PathBuf,
+    /// The directory did not exist before: dropped unused, it is removed again.
+    created: bool,
+    used: bool,
+}
+
+impl DirLock {
+    /// Creates `dir` if needed and claims it.
+    ///
+    /// # Errors
+    /// [`LabError::Invalid`] when another process holds it; I/O errors creating the directory
+    /// or the lock file.
+    pub fn acquire(dir: &Path) -> Result<DirLock> {
+        let io = |e| LabError::io(format!("locking {}", dir.display()), e);
+        let created = !dir.exists();
+        std::fs::create_dir_all(dir).map_err(io)?;
+        let mut lock = DirLock {
+            file: None,
+            dir: dir.to_path_buf(),
+            created,
+            used: false,
+        };
+        let file = std::fs::OpenOptions::new()
+            .create(true)
+            .truncate(false)
+            .write(true)
+            .open(dir.join(LOCK_FILE))
+            .map_err(io)?;
+        if !try_lock(&file).map_err(io)? {
+            // Another run's directory: nothing of it is removed.
+            lock.created = false;
+            return Err(LabError::invalid(format!(
+                "{} is being written by another ferret run; wait for it to finish or choose another output directory",
+                dir.display()
+            )));
+        }
+        lock.file = Some(file);
+        Ok(lock)
+    }
+
+    /// Marks the directory as written to: it stays when the lock is dropped.
+    pub fn used(&mut self) {
+        self.used = true;
+    }
+}
+
+impl Drop for DirLock {
+    /// A run that failed before writing leaves no directory it created itself.
+    fn drop(&mut self) {
+        if self.created && !self.used {
+            let _ = std::fs::remove_file(self.dir.join(LOCK_FILE));
+            // Fails, and leaves it, when anything else is in it.
+            let _ = std::fs::remove_dir(&self.dir);
+        }
+    }
+}
+
+/// Takes an exclusive lock on `file` without waiting: `false` when another holds it.
+#[cfg(unix)]
+fn try_lock(file: &File) -> std::io::Result<bool> {
+    use std::os::fd::AsRawFd;
+    // SAFETY: flock on a descriptor `file` owns, with no pointers involved.
+    if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0 {
+        return Ok(true);
+    }
+    let e = std::io::Error::last_os_error();
+    if e.kind() == std::io::ErrorKind::WouldBlock {
+        Ok(false)
+    } else {
+        Err(e)
+    }
+}
+
+#[cfg(not(unix))]
+fn try_lock(_: &File) -> std::io::Result<bool> {
+    Ok(true)
+}
+
 /// Writes `bytes` to `path` atomically.
 pub fn write_bytes(path: &Path, bytes: impl AsRef<[u8]>) -> Result<()> {
     write_atomic(path, |w| w.write_all(bytes.as_ref()))
@@ -163,6 +251,28 @@ fn persist(tmp: tempfile::NamedTempFile, path: &Path) -> std::io::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_output_directory_is_one_runs_at_a_time() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let mut first = DirLock::acquire(&out).unwrap();
+        let e = DirLock::acquire(&out).unwrap_err();
+        assert!(e.to_string().contains("another ferret run"), "{e}");
+        assert!(
+            out.is_dir(),
+            "a refused claim removed the holder's directory"
+        );
+        first.used();
+        drop(first);
+        let again = DirLock::acquire(&out).unwrap();
+        drop(again);
+        assert!(out.is_dir(), "a used directory is kept");
+        // Claimed and dropped unused: the directory it created is gone again.
+        let unused = dir.path().join("unused");
+        drop(DirLock::acquire(&unused).unwrap());
+        assert!(!unused.exists());
+    }
 
     #[test]
     fn a_failed_write_keeps_the_previous_file_and_leaves_no_temporary() {

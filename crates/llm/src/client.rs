@@ -182,6 +182,18 @@ impl EndpointClient {
     /// `max_attempts` times with exponential backoff and jitter (or as long as `Retry-After`
     /// says, up to `retry_max_secs`). Waits for a concurrency permit first.
     pub async fn complete(&self, request: &Request) -> Result<Reply> {
+        self.complete_admitted(request, || Ok(())).await
+    }
+
+    /// [`complete`](Self::complete), asking `admit` whether the request may still go once it
+    /// has its concurrency permit and before every retry: requests queued behind others for a
+    /// permit are not sent (each for its own timeouts) after the endpoint was found down
+    /// meanwhile. An error from `admit` is returned as it is.
+    pub async fn complete_admitted(
+        &self,
+        request: &Request,
+        admit: impl Fn() -> Result<()>,
+    ) -> Result<Reply> {
         let name = &self.endpoint.name;
         let url = self.endpoint.config.normalized_base_url();
         let key = self.api_key()?;
@@ -202,6 +214,7 @@ impl EndpointClient {
         let mut attempt = 1;
         let mut timeouts = 0;
         loop {
+            admit()?;
             let (failure, retry_after) = match self.attempt(&body, key, attempt).await {
                 Attempt::Done(reply) => return Ok(reply),
                 Attempt::Fatal(e) => return Err(e),

@@ -147,30 +147,10 @@ impl Llm {
     async fn admit(&self) -> Result<Option<tokio::sync::MutexGuard<'_, ()>>> {
         let mut probe = None;
         loop {
-            let paused = {
-                let down = self.lock_down();
-                let Some(d) = down.as_ref() else {
-                    return Ok(None);
-                };
-                let endpoint = self.name().to_string();
-                match self.policy {
-                    FailurePolicy::StopForRun => {
-                        return Err(LlmError::EndpointDown {
-                            endpoint,
-                            reason: d.reason.clone(),
-                        });
-                    }
-                    FailurePolicy::Breaker { pause } => {
-                        let waited = d.since.elapsed();
-                        (waited < pause).then(|| LlmError::EndpointPaused {
-                            endpoint,
-                            reason: d.reason.clone(),
-                            retry_in_secs: pause.saturating_sub(waited).as_secs_f64().ceil(),
-                        })
-                    }
-                }
-            };
-            if let Some(e) = paused {
+            if self.lock_down().is_none() {
+                return Ok(None);
+            }
+            if let Some(e) = self.refusal() {
                 return Err(e);
             }
             if probe.is_some() {
@@ -178,6 +158,28 @@ impl Llm {
             }
             // Half open: whoever gets the gate first probes; the state is read again after it.
             probe = Some(self.probe.lock().await);
+        }
+    }
+
+    /// Why a question may not go to the server now: the endpoint is down for the run, or the
+    /// breaker is open and its pause not over. `None` when the circuit is closed or half open.
+    fn refusal(&self) -> Option<LlmError> {
+        let down = self.lock_down();
+        let d = down.as_ref()?;
+        let endpoint = self.name().to_string();
+        match self.policy {
+            FailurePolicy::StopForRun => Some(LlmError::EndpointDown {
+                endpoint,
+                reason: d.reason.clone(),
+            }),
+            FailurePolicy::Breaker { pause } => {
+                let waited = d.since.elapsed();
+                (waited < pause).then(|| LlmError::EndpointPaused {
+                    endpoint,
+                    reason: d.reason.clone(),
+                    retry_in_secs: pause.saturating_sub(waited).as_secs_f64().ceil(),
+                })
+            }
         }
     }
 
@@ -269,7 +271,21 @@ impl Llm {
 
     async fn ask_server(&self, request: &Request, key: &str, strategy: &str) -> Result<Answer> {
         let probe = self.admit().await?;
-        let result = self.client.complete(request).await;
+        // Questions asked together wait for the client's concurrency permits; once one of them
+        // finds the endpoint down, the others waiting are refused instead of each spending its
+        // own timeouts on it. The probe of a half-open breaker goes whatever the state says.
+        let probing = probe.is_some();
+        let result = self
+            .client
+            .complete_admitted(request, || match self.refusal() {
+                Some(e) if !probing => Err(e),
+                _ => Ok(()),
+            })
+            .await;
+        if let Err(e @ (LlmError::EndpointDown { .. } | LlmError::EndpointPaused { .. })) = result {
+            // Refused before it was sent: says nothing new about the endpoint.
+            return Err(e);
+        }
         let endpoint_down = match &result {
             Err(LlmError::Timeout { .. } | LlmError::Connection { .. }) => true,
             Err(LlmError::Status { status, .. }) => {

@@ -179,3 +179,79 @@ fn a_key_in_api_key_env_is_refused_without_being_repeated() {
         LlmConfig::parse(&text, Path::new("ferret.toml")).unwrap();
     }
 }
+
+/// Questions asked together queue for the endpoint's concurrency permits; once the first found
+/// the endpoint down, the others were still sent, each for its own timeouts (a silent endpoint
+/// with a 5 s timeout and two attempts held a trial start for 30 s instead of 10).
+#[test]
+fn questions_queued_behind_a_failure_are_not_sent() {
+    let mut sent = Vec::new();
+    for policy in [
+        FailurePolicy::Breaker {
+            pause: Duration::from_secs(600),
+        },
+        FailurePolicy::StopForRun,
+    ] {
+        let server = flaky(Arc::new(AtomicBool::new(false)));
+        let service = server.service_with(
+            |c| {
+                c.max_attempts = 1;
+                c.concurrency = 1;
+            },
+            LlmOptions {
+                on_failure: policy,
+                ..LlmOptions::default()
+            },
+        );
+        let e = ask(&service).unwrap_err();
+        assert!(e.to_string().contains("503"), "{policy:?}: {e}");
+        sent.push(server.bodies().len());
+    }
+    assert_eq!(sent, [1, 1]);
+}
+
+/// The same with a server that accepts connections and never answers, as a serve trial met it:
+/// only the first question's attempts reach it.
+#[test]
+fn questions_queued_behind_a_silent_endpoint_are_not_sent() {
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let listener = rt
+        .block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))
+        .unwrap();
+    let url = format!("http://{}/v1", listener.local_addr().unwrap());
+    let connections = Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let counted = connections.clone();
+    rt.spawn(async move {
+        let mut held = Vec::new();
+        while let Ok((s, _)) = listener.accept().await {
+            counted.fetch_add(1, Ordering::SeqCst);
+            held.push(s);
+        }
+    });
+    let mut c = EndpointConfig::new(url, "m");
+    c.timeout_secs = 0.3;
+    c.max_attempts = 2;
+    c.retry_base_ms = 10;
+    c.concurrency = 1;
+    let config = LlmConfig {
+        file: "test.toml".into(),
+        endpoints: std::collections::BTreeMap::from([("mock".to_string(), c)]),
+        prompts: std::collections::BTreeMap::new(),
+    };
+    let service = Arc::new(
+        LlmService::new(
+            config,
+            LlmOptions {
+                on_failure: FailurePolicy::Breaker {
+                    pause: Duration::from_secs(600),
+                },
+                ..LlmOptions::default()
+            },
+        )
+        .unwrap(),
+    );
+    let e = ask(&service).unwrap_err();
+    assert!(matches!(e, LlmError::Timeout { .. }), "{e}");
+    // Two attempts of the first question, each on a connection of its own.
+    assert!(connections.load(Ordering::SeqCst) <= 2, "{connections:?}");
+}

@@ -85,7 +85,16 @@ impl House {
     pub fn container_index(&self, arg: &Bound<'_, PyAny>) -> PyResult<usize> {
         let house = &self.scene.house;
         let id = if let Ok(c) = arg.downcast::<PyContainer>() {
-            c.get().id.clone()
+            let c = c.get();
+            // Ids repeat across houses (generated houses number their containers alike): a
+            // container from another house would otherwise pass for this house's namesake.
+            if !Arc::ptr_eq(&c.scene, &self.scene) {
+                return Err(errors::search(format!(
+                    "{:?} is a container of another house ({}), not of house {}",
+                    c.id, c.scene.house.name, house.name
+                )));
+            }
+            c.id.clone()
         } else if let Ok(s) = arg.extract::<String>() {
             s
         } else {
@@ -105,6 +114,7 @@ impl House {
         let room = house.container_room(c);
         let xy = |p: Point| (p.x, p.z);
         PyContainer {
+            scene: self.scene.clone(),
             index: c,
             id: container.id.clone(),
             object_type: container.object_type.to_string(),
@@ -256,8 +266,10 @@ impl House {
 
 /// A container: a piece of furniture the robot can search.
 #[pyclass(name = "Container", module = "ferret", frozen, eq)]
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct PyContainer {
+    /// The house it belongs to (the very one: equal ids in two houses are two containers).
+    pub scene: Arc<Scene>,
     /// Its position in `House.containers`.
     #[pyo3(get)]
     pub index: usize,
@@ -281,8 +293,37 @@ pub struct PyContainer {
     pub access: Option<(f64, f64)>,
 }
 
+impl PartialEq for PyContainer {
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.scene, &other.scene)
+            && (
+                self.index,
+                &self.id,
+                &self.object_type,
+                &self.room,
+                &self.room_type,
+                self.position,
+                self.access,
+            ) == (
+                other.index,
+                &other.id,
+                &other.object_type,
+                &other.room,
+                &other.room_type,
+                other.position,
+                other.access,
+            )
+    }
+}
+
 #[pymethods]
 impl PyContainer {
+    /// The name of the house it belongs to.
+    #[getter]
+    fn house(&self) -> String {
+        self.scene.house.name.clone()
+    }
+
     fn __repr__(&self) -> String {
         format!(
             "Container(id={}, type={}, room={})",

@@ -128,3 +128,24 @@ def test_the_robot_loop_example_runs():
     target = house.target_types()[0]
     s = simulate(house, target, "model/prior")
     assert last.endswith(f"after {len(s.searched)} searches, {s.cost:.2f} m")
+
+
+def test_a_container_of_another_house_is_refused(houses):
+    # Generated houses number their containers alike, so ids coincide across houses.
+    home = houses[0]
+    ids = {c.id for c in home.containers}
+    other = next(h for h in houses[1:] if any(c.id in ids for c in h.containers))
+    foreign = next(c for c in other.containers if c.id in ids)
+    s = ferret.Search(home, home.target_types()[0], "optimistic+greedy")
+    for call in (lambda: s.record(foreign, False, []), lambda: s.distance_to(foreign),
+                 lambda: s.path_to(foreign)):
+        with pytest.raises(ferret.SearchError, match="another house"):
+            call()
+    assert s.searched == [] and s.cost == 0.0
+    assert foreign.house == other.name
+    # The house's own container with that id, and the id itself, are its own.
+    own = next(c for c in home.containers if c.id == foreign.id)
+    assert own.house == home.name and own != foreign
+    assert s.distance_to(own) == s.distance_to(own.id)
+    s.record(own, False, [])
+    assert s.searched == [own.id]

@@ -24,6 +24,8 @@ pub enum ErrorKind {
     TooLarge,
     /// The body is not JSON.
     UnsupportedMedia,
+    /// The request's body did not arrive in time.
+    Timeout,
     /// A value the service cannot use.
     Invalid,
     /// The server failed where it should not have.

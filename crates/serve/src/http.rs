@@ -122,6 +122,7 @@ fn status_of(kind: ErrorKind) -> StatusCode {
         ErrorKind::Conflict => StatusCode::CONFLICT,
         ErrorKind::TooLarge => StatusCode::PAYLOAD_TOO_LARGE,
         ErrorKind::UnsupportedMedia => StatusCode::UNSUPPORTED_MEDIA_TYPE,
+        ErrorKind::Timeout => StatusCode::REQUEST_TIMEOUT,
         ErrorKind::Invalid => StatusCode::UNPROCESSABLE_ENTITY,
         ErrorKind::Internal => StatusCode::INTERNAL_SERVER_ERROR,
         ErrorKind::Unavailable => StatusCode::SERVICE_UNAVAILABLE,
@@ -207,6 +208,9 @@ fn body(headers: &HeaderMap, b: Result<Bytes, BytesRejection>) -> Result<Bytes, 
         ));
     }
     b.map_err(|e| {
+        if let Some(timeout) = timed_out(&e) {
+            return ApiError::new(ErrorKind::Timeout, "", timeout.to_string());
+        }
         let kind = if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
             ErrorKind::TooLarge
         } else {
@@ -214,6 +218,18 @@ fn body(headers: &HeaderMap, b: Result<Bytes, BytesRejection>) -> Result<Bytes, 
         };
         ApiError::new(kind, "", e.body_text())
     })
+}
+
+/// The body deadline of the connection loop, when that is why the body could not be read.
+fn timed_out(e: &BytesRejection) -> Option<&crate::server::BodyTimeout> {
+    let mut cause: Option<&(dyn std::error::Error + 'static)> = Some(e);
+    while let Some(c) = cause {
+        if let Some(t) = c.downcast_ref::<crate::server::BodyTimeout>() {
+            return Some(t);
+        }
+        cause = c.source();
+    }
+    None
 }
 
 /// A path segment, or 404 for one that is not valid UTF-8 once decoded.
@@ -376,7 +392,7 @@ const COMMON_STATUSES: [(u16, &str); 2] = [
 ];
 
 /// Statuses of every route that takes a body.
-const BODY_STATUSES: [(u16, &str); 5] = [
+const BODY_STATUSES: [(u16, &str); 6] = [
     (
         400,
         "Malformed JSON, not an object, a missing or mistyped field",
@@ -384,6 +400,10 @@ const BODY_STATUSES: [(u16, &str); 5] = [
     (
         409,
         "A request id reused with another body, or a conflicting state",
+    ),
+    (
+        408,
+        "The body did not arrive within the server's body timeout",
     ),
     (413, "The body is larger than the server's limit"),
     (415, "The body is not application/json"),
@@ -437,7 +457,7 @@ pub fn document(options: &HttpOptions, strategies: &[String], limits: &SceneLimi
             "items": {"type": "number"},
             "minItems": 3,
             "maxItems": 3,
-            "description": "The robot's pose `[x, y, yaw°]` in the map frame; default: the scene's start."
+            "description": "The robot's pose `[x, y, yaw°]` in the map frame, yaw within ±360°; default: the scene's start."
         });
     }
     let paths: Vec<(String, String)> = doc
@@ -602,7 +622,10 @@ impl Hosts {
                 self.any_ip_on == Some(port) || self.ips.iter().any(|&(i, p)| i == ip && p == port)
             }
             Err(_) => self.names.iter().any(|(n, p)| {
-                n.eq_ignore_ascii_case(host.trim_end_matches('.')) && p.is_none_or(|p| p == port)
+                // One trailing dot is the same name written fully qualified (`localhost.`);
+                // more are no name at all.
+                n.eq_ignore_ascii_case(host.strip_suffix('.').unwrap_or(&host))
+                    && p.is_none_or(|p| p == port)
             }),
         }
     }

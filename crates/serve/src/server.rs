@@ -1,6 +1,6 @@
 //! Serving the router on a TCP listener with the guards a robot's network needs: a deadline for
-//! a request's headers, an idle timeout for kept-alive connections, and a cap on open
-//! connections. At the cap the connection idle the longest is closed to make room, so a client
+//! a request's headers and one for its body, an idle timeout for kept-alive connections, and a
+//! cap on open connections. At the cap the connection idle the longest is closed to make room, so a client
 //! that opens and holds many connections cannot lock a normal one out.
 //!
 //! Hand-written over hyper because `axum::serve` has no header timeout, idle timeout or cap,
@@ -9,12 +9,14 @@
 use std::collections::HashMap;
 use std::future::Future;
 use std::io;
+use std::pin::Pin;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
+use std::task::{Context, Poll};
 use std::time::{Duration, Instant};
 
 use axum::Router;
-use hyper::body::Incoming;
+use hyper::body::{Body, Bytes, Frame, Incoming, SizeHint};
 use hyper_util::rt::{TokioIo, TokioTimer};
 use tokio::net::TcpListener;
 use tokio::sync::{Notify, watch};
@@ -24,8 +26,12 @@ use tower::ServiceExt;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ServeOptions {
     /// Time a client has to send a request's headers once it has connected or its previous
-    /// reply was sent, and to send a request's body.
+    /// reply was sent.
     pub header_timeout: Duration,
+    /// Time a client has to send a request's whole body once its headers are in; past it the
+    /// request is answered 408 and the connection closed. Without it, a client that sends part
+    /// of a body and stops holds its connection (and, past the cap, everyone's) for good.
+    pub body_timeout: Duration,
     /// A kept-alive connection with no request in flight is closed after this long.
     pub idle_timeout: Duration,
     /// Most connections open at once.
@@ -36,6 +42,7 @@ impl Default for ServeOptions {
     fn default() -> Self {
         Self {
             header_timeout: Duration::from_secs(10),
+            body_timeout: Duration::from_secs(10),
             idle_timeout: Duration::from_secs(60),
             max_connections: 256,
         }
@@ -213,8 +220,10 @@ async fn connection(
                 registry: registry.clone(),
             };
             let app = app.clone();
+            let body_timeout = options.body_timeout;
             async move {
-                let reply = app.oneshot(req.map(axum::body::Body::new)).await;
+                let req = req.map(|b| axum::body::Body::new(Deadline::new(b, body_timeout)));
+                let reply = app.oneshot(req).await;
                 drop(guard);
                 reply
             }
@@ -259,4 +268,55 @@ async fn connection(
         }
     }
     registry.lock().remove(&id);
+}
+
+/// The error a request body gives when it has not arrived by its deadline.
+#[derive(Debug, thiserror::Error)]
+#[error("the request body did not arrive within {0:?}")]
+pub struct BodyTimeout(pub Duration);
+
+/// A request body that fails with [`BodyTimeout`] when it has not ended by a deadline, however
+/// slowly its bytes trickle in.
+struct Deadline {
+    inner: Incoming,
+    limit: Duration,
+    /// Boxed: `Sleep` is not `Unpin`, and a body is polled through `Pin<&mut Self>`.
+    deadline: Pin<Box<tokio::time::Sleep>>,
+}
+
+impl Deadline {
+    fn new(inner: Incoming, limit: Duration) -> Self {
+        Self {
+            inner,
+            limit,
+            deadline: Box::pin(tokio::time::sleep(limit)),
+        }
+    }
+}
+
+impl Body for Deadline {
+    type Data = Bytes;
+    type Error = Box<dyn std::error::Error + Send + Sync>;
+
+    fn poll_frame(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+    ) -> Poll<Option<Result<Frame<Bytes>, Self::Error>>> {
+        let this = self.get_mut();
+        match Pin::new(&mut this.inner).poll_frame(cx) {
+            Poll::Ready(frame) => Poll::Ready(frame.map(|f| f.map_err(Into::into))),
+            Poll::Pending => match this.deadline.as_mut().poll(cx) {
+                Poll::Ready(()) => Poll::Ready(Some(Err(Box::new(BodyTimeout(this.limit))))),
+                Poll::Pending => Poll::Pending,
+            },
+        }
+    }
+
+    fn is_end_stream(&self) -> bool {
+        self.inner.is_end_stream()
+    }
+
+    fn size_hint(&self) -> SizeHint {
+        self.inner.size_hint()
+    }
 }

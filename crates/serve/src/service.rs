@@ -7,6 +7,7 @@
 //! demand into a cache of bounded size, a few at a time.
 
 use std::collections::{BTreeMap, HashMap};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError, RwLock};
 
 use ferret_lab::Deployment;
@@ -52,6 +53,10 @@ pub struct Reply {
 /// metres.
 pub const MAX_POSE_SHIFT_M: f64 = 0.5;
 
+/// Largest yaw of a pose, degrees either way: a heading needs no more than a turn, and a yaw
+/// like 1e308 has lost every digit of its direction.
+pub const MAX_YAW_DEG: f64 = 360.0;
+
 /// What one uploaded scene and the store may hold. Planning a scene costs memory in proportion
 /// to its grid cells and time in proportion to cells × containers, so both are bounded before a
 /// grid is built.
@@ -86,7 +91,9 @@ pub struct ServiceOptions {
     /// Memory the built grids and distances may hold, bytes; the least recently used are
     /// dropped past it (and built again when asked for).
     pub grid_cache_bytes: usize,
-    /// Grids built at once; more requests that need one wait.
+    /// Grids built (or searched from a new pose) at once; more requests that need one wait.
+    /// One scene's work takes one at a time, so with two or more a heavy scene never holds up
+    /// the others.
     pub concurrent_builds: usize,
 }
 
@@ -95,7 +102,9 @@ impl Default for ServiceOptions {
         Self {
             limits: SceneLimits::default(),
             grid_cache_bytes: 256 << 20,
-            concurrent_builds: std::thread::available_parallelism().map_or(2, |n| n.get()),
+            // At least two, so that one scene's work (which holds one at a time) never holds
+            // every other scene's up.
+            concurrent_builds: std::thread::available_parallelism().map_or(2, |n| n.get().max(2)),
         }
     }
 }
@@ -223,6 +232,12 @@ pub struct Service {
     scenes: RwLock<Scenes>,
     cache: Mutex<GridCache>,
     builds: Permits,
+    /// Whole grids built so far (each costs a search per container).
+    grids_built: AtomicU64,
+    /// One gate per scene: its grid and new poses are worked out one at a time, so requests
+    /// waiting for the same work get its result instead of repeating it, and a scene holds at
+    /// most one of the `builds` permits.
+    gates: Mutex<HashMap<String, Arc<Mutex<()>>>>,
 }
 
 impl std::fmt::Debug for Service {
@@ -260,6 +275,29 @@ fn summary(name: &str, scene: &Scene) -> SceneSummary {
         containers: scene.house.containers.len(),
         has_map: scene.house.map.is_some(),
     }
+}
+
+/// Refuses a pose farther than [`MAX_POSE_SHIFT_M`] from the free floor the grid starts it on.
+fn check_shift(
+    grid: &OccupancyGrid,
+    house: &House,
+    pose: [f64; 3],
+    field: &str,
+) -> Result<(), ApiError> {
+    let shift = grid
+        .center(grid.start_cell())
+        .distance(house.start.position);
+    if shift > MAX_POSE_SHIFT_M {
+        return Err(ApiError::new(
+            ErrorKind::Invalid,
+            field,
+            format!(
+                "({}, {}) is {shift:.2} m from the nearest free floor (at most {MAX_POSE_SHIFT_M} m)",
+                pose[0], pose[1]
+            ),
+        ));
+    }
+    Ok(())
 }
 
 fn start_pose(house: &House) -> [f64; 3] {
@@ -343,6 +381,8 @@ impl Service {
                 free: Mutex::new(options.concurrent_builds),
                 returned: Condvar::new(),
             },
+            grids_built: AtomicU64::new(0),
+            gates: Mutex::new(HashMap::new()),
         })
     }
 
@@ -355,6 +395,12 @@ impl Service {
     /// [`ServiceOptions::grid_cache_bytes`]).
     pub fn grid_cache_bytes(&self) -> usize {
         self.lock_cache().used
+    }
+
+    /// Whole grids with their distance matrices built so far: what a scene costs the first time
+    /// it is used (or again after the cache dropped it), for monitoring.
+    pub fn grids_built(&self) -> u64 {
+        self.grids_built.load(Ordering::Relaxed)
     }
 
     /// The scenes with a grid in the cache, each once, sorted.
@@ -458,6 +504,7 @@ impl Service {
             };
         }
         let _permit = self.builds.acquire();
+        self.grids_built.fetch_add(1, Ordering::Relaxed);
         let (grid, distances) = distance::build(&house, &self.grid).map_err(|e| match pose {
             Some(p) => ApiError::new(
                 ErrorKind::Invalid,
@@ -467,42 +514,121 @@ impl Service {
             None => ApiError::new(ErrorKind::Invalid, field, e.to_string()),
         })?;
         if let Some(pose) = pose {
-            let shift = grid
-                .center(grid.start_cell())
-                .distance(house.start.position);
-            if shift > MAX_POSE_SHIFT_M {
-                return Err(ApiError::new(
-                    ErrorKind::Invalid,
-                    field,
-                    format!(
-                        "({}, {}) is {shift:.2} m from the nearest free floor (at most {MAX_POSE_SHIFT_M} m)",
-                        pose[0], pose[1]
-                    ),
-                ));
-            }
+            check_shift(&grid, &house, pose, field)?;
         }
         Ok(Arc::new(Placed { house, distances }))
     }
 
-    /// The scene `name` with the robot at `pose` (cached per pose).
+    /// The scene `name` with the robot at `pose` (cached per pose). A new pose is one search
+    /// from it on the grid of the scene's own start, not a new grid.
     fn placed(&self, name: &str, pose: Option<[f64; 3]>) -> Result<Arc<Placed>, ApiError> {
         let key = (name.to_string(), pose.map(|p| p.map(f64::to_bits)));
         if let Some(p) = self.lock_cache().get(&key) {
             return Ok(p);
         }
         if let Some(p) = pose
-            && !p.iter().all(|v| v.is_finite())
+            && !(p.iter().all(|v| v.is_finite()) && p[2].abs() <= MAX_YAW_DEG)
         {
             return Err(ApiError::new(
                 ErrorKind::Invalid,
                 "pose",
-                "must be three finite numbers [x, y, yaw]",
+                format!(
+                    "must be [x, y, yaw]: finite metres, and a yaw in degrees from -{MAX_YAW_DEG} to {MAX_YAW_DEG}"
+                ),
             ));
         }
-        let scene = self.scene(name)?;
-        let placed = self.build(&scene.house, pose, "pose")?;
+        let gate = self.gate(name);
+        let placed = {
+            let _turn = gate.lock().unwrap_or_else(PoisonError::into_inner);
+            self.place(name, key, pose)
+        };
+        self.release_gate(name, &gate);
+        placed
+    }
+
+    /// [`placed`](Self::placed) for a caller holding the scene's gate.
+    fn place(
+        &self,
+        name: &str,
+        key: PlaceKey,
+        pose: Option<[f64; 3]>,
+    ) -> Result<Arc<Placed>, ApiError> {
+        // Whoever held the gate before may have placed it already.
+        if let Some(p) = self.lock_cache().get(&key) {
+            return Ok(p);
+        }
+        let base_key = (name.to_string(), None);
+        let cached = self.lock_cache().get(&base_key);
+        let base = match cached {
+            Some(b) => b,
+            None => {
+                let scene = self.scene(name)?;
+                let field = if pose.is_some() { "pose" } else { "scene" };
+                let b = self.build(&scene.house, None, field)?;
+                self.lock_cache().insert(base_key, b.clone());
+                b
+            }
+        };
+        let Some(pose) = pose else {
+            return Ok(base);
+        };
+        let placed = self.moved(&base, pose)?;
         self.lock_cache().insert(key, placed.clone());
         Ok(placed)
+    }
+
+    /// The gate of scene `name`.
+    fn gate(&self, name: &str) -> Arc<Mutex<()>> {
+        self.lock_gates()
+            .entry(name.to_string())
+            .or_default()
+            .clone()
+    }
+
+    /// Drops the gate of `name` when no one else holds or waits for it, so that the map holds
+    /// only scenes being worked on, whatever names clients send.
+    fn release_gate(&self, name: &str, gate: &Arc<Mutex<()>>) {
+        let mut gates = self.lock_gates();
+        // Ours and the map's: every clone is taken under this lock, so none can appear now.
+        if Arc::strong_count(gate) == 2 {
+            gates.remove(name);
+        }
+    }
+
+    fn lock_gates(&self) -> MutexGuard<'_, HashMap<String, Arc<Mutex<()>>>> {
+        self.gates.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// `base` with the robot at `pose`: one search from the pose on its grid when the pose is on
+    /// floor the scene's start reaches; a new build when it is not (only that says which
+    /// containers can be reached from there).
+    fn moved(&self, base: &Placed, pose: [f64; 3]) -> Result<Arc<Placed>, ApiError> {
+        let Some(grid) = base.distances.grid() else {
+            return self.build(&base.house, Some(pose), "pose");
+        };
+        let mut house = base.house.clone();
+        house.start = Pose {
+            position: Point::new(pose[0], pose[1]),
+            yaw_deg: ferret_world::scene::heading_from_ros(pose[2]),
+        };
+        let invalid = |e: ferret_world::WorldError| {
+            ApiError::new(
+                ErrorKind::Invalid,
+                "pose",
+                format!("({}, {}): {e}", pose[0], pose[1]),
+            )
+        };
+        let permit = self.builds.acquire();
+        let Some(grid) = grid
+            .with_start(&house.name, house.start.position)
+            .map_err(invalid)?
+        else {
+            drop(permit);
+            return self.build(&base.house, Some(pose), "pose");
+        };
+        check_shift(&grid, &house, pose, "pose")?;
+        let distances = base.distances.with_start(&house, &grid).map_err(invalid)?;
+        Ok(Arc::new(Placed { house, distances }))
     }
 
     /// The candidates' names, in order.
@@ -513,9 +639,13 @@ impl Service {
             .collect()
     }
 
-    /// `GET /health`: done when the store answers, else unavailable.
+    /// `GET /health`: done when the store answers and its file reads whole, else unavailable.
     pub fn health(&self) -> Result<Reply, ApiError> {
-        match self.store.read(|r| r.check()) {
+        match self
+            .store
+            .read(|r| r.check())
+            .and_then(|()| self.store.check_file())
+        {
             Ok(()) => Ok(Reply {
                 outcome: Outcome::Done,
                 body: r#"{"status":"ok"}"#.to_string(),
@@ -827,7 +957,8 @@ impl Service {
                 ));
             }
         }
-        let c = req.c.unwrap_or(DEFAULT_C);
+        // `+ 0.0` makes -0.0 the 0 it means, so it is stored and echoed as 0.
+        let c = req.c.unwrap_or(DEFAULT_C) + 0.0;
         if !(c.is_finite() && (0.0..=MAX_C).contains(&c)) {
             return Err(ApiError::new(
                 ErrorKind::Invalid,

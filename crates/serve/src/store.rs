@@ -5,7 +5,7 @@
 
 use std::path::Path;
 use std::sync::{Mutex, MutexGuard};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use crate::service::Outcome;
 use ferret_select::Method;
@@ -159,6 +159,11 @@ fn outcome_of(code: u16) -> Outcome {
 pub struct Store {
     conn: Mutex<Connection>,
     file: String,
+    /// The file, for checks on a connection of their own; `None` in memory.
+    path: Option<std::path::PathBuf>,
+    /// The last whole-file check: when it started and what it found. Held while a check runs,
+    /// so checks asked for meanwhile wait and take its answer instead of reading the file again.
+    last_check: Mutex<Option<(Instant, Result<(), String>)>>,
 }
 
 const SCHEMA: &str = "
@@ -192,7 +197,9 @@ impl Store {
             file: file.clone(),
             source,
         })?;
-        Self::init(conn, file)
+        let mut store = Self::init(conn, file)?;
+        store.path = Some(path.to_path_buf());
+        Ok(store)
     }
 
     /// A database in memory (tests, benchmarks).
@@ -233,7 +240,59 @@ impl Store {
         Ok(Store {
             conn: Mutex::new(conn),
             file,
+            path: None,
+            last_check: Mutex::new(None),
         })
+    }
+
+    /// Reads every page of the file from disk on a connection of its own (`PRAGMA quick_check`:
+    /// b-tree structure, cell layout, free list, not index contents), so that damage is seen
+    /// wherever it is: the service's connection keeps the pages it has read in its cache, and
+    /// reading a row or two sees only those. Takes time linear in the file's size; does not hold
+    /// up the service's connection. A database in memory has no file and always passes.
+    ///
+    /// # Errors
+    /// [`StoreError::Corrupt`] with SQLite's first finding, or [`StoreError::Sql`] when the file
+    /// cannot be opened or read.
+    pub fn check_file(&self) -> Result<(), StoreError> {
+        let Some(path) = &self.path else {
+            return Ok(());
+        };
+        let asked = Instant::now();
+        let mut last = self
+            .last_check
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        // A check that started after this one was asked for read the file as it is now.
+        let result = match &*last {
+            Some((started, result)) if *started >= asked => result.clone(),
+            _ => {
+                let started = Instant::now();
+                let result = self.quick_check(path);
+                *last = Some((started, result.clone()));
+                result
+            }
+        };
+        result.map_err(|what| self.corrupt(what))
+    }
+
+    fn quick_check(&self, path: &Path) -> Result<(), String> {
+        use rusqlite::OpenFlags;
+        let conn = Connection::open_with_flags(
+            path,
+            OpenFlags::SQLITE_OPEN_READ_ONLY | OpenFlags::SQLITE_OPEN_NO_MUTEX,
+        )
+        .map_err(|e| format!("cannot open for checking: {e}"))?;
+        conn.busy_timeout(Duration::from_secs(10))
+            .map_err(|e| e.to_string())?;
+        let finding: String = conn
+            .query_row("PRAGMA quick_check(1)", [], |r| r.get(0))
+            .map_err(|e| format!("reading the file: {e}"))?;
+        if finding == "ok" {
+            Ok(())
+        } else {
+            Err(format!("the file is damaged: {finding}"))
+        }
     }
 
     fn lock(&self) -> MutexGuard<'_, Connection> {

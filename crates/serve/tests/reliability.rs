@@ -648,6 +648,7 @@ fn idle_connections_are_closed_and_cannot_lock_a_client_out() {
             header_timeout: Duration::from_millis(600),
             idle_timeout: Duration::from_millis(900),
             max_connections: 32,
+            ..ServeOptions::default()
         },
         ..Setup::default()
     });
@@ -788,4 +789,151 @@ fn the_openapi_document_says_what_the_server_enforces() {
     }
     assert!(doc["paths"]["/health"]["get"]["security"].is_null());
     assert!(doc["paths"]["/scenes"]["get"]["security"].is_array());
+}
+
+/// Sockets that sent a request's headers and one byte of its body, then nothing, held their
+/// connections (and, past the cap, every other client's) for as long as they stayed open.
+#[test]
+fn a_body_that_stops_arriving_is_timed_out() {
+    let s = start(Setup {
+        serve: ServeOptions {
+            header_timeout: Duration::from_millis(600),
+            body_timeout: Duration::from_millis(600),
+            max_connections: 8,
+            ..ServeOptions::default()
+        },
+        ..Setup::default()
+    });
+    // Twelve for a cap of eight: the last ones find every connection busy and are refused.
+    let stalled: Vec<_> = (0..12)
+        .map(|_| {
+            let mut c = std::net::TcpStream::connect(s.addr).unwrap();
+            c.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+            let _ = write!(
+                c,
+                "POST /deployments HTTP/1.1\r\nHost: {}\r\nContent-Type: application/json\r\nContent-Length: 100\r\n\r\n{{",
+                s.addr
+            );
+            c
+        })
+        .collect();
+    // Every stalled request is answered 408 and closed (or was refused at the cap) instead of
+    // holding its connection.
+    let mut timed_out = 0;
+    for mut c in stalled {
+        let mut reply = Vec::new();
+        let read = c.read_to_end(&mut reply);
+        assert!(
+            !matches!(&read, Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut)),
+            "a stalled body kept its connection open: {read:?}"
+        );
+        let text = String::from_utf8_lossy(&reply);
+        if text.starts_with("HTTP/1.1 408") {
+            timed_out += 1;
+        } else {
+            assert!(text.is_empty(), "{text}");
+        }
+    }
+    assert!(timed_out >= 8, "{timed_out}");
+    assert_eq!(get(&s, "/health", &[]).0, 200);
+}
+
+/// `/health` read one row of each table, from pages the connection had cached: damage to the
+/// rest of the file went unseen while the routes reading it failed.
+#[test]
+fn health_reads_the_pages_on_disk() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("s.sqlite");
+    let s = start(Setup {
+        db: Some(db.clone()),
+        ..Setup::default()
+    });
+    for _ in 0..300 {
+        assert_eq!(post_json(&s, "/deployments", &json!({})).0, 201);
+    }
+    // Every committed page in the main file, so that overwriting the file's tail damages rows.
+    let conn = rusqlite::Connection::open(&db).unwrap();
+    conn.execute_batch("PRAGMA wal_checkpoint(TRUNCATE)")
+        .unwrap();
+    let page: i64 = conn
+        .query_row("PRAGMA page_size", [], |r| r.get(0))
+        .unwrap();
+    let page = page as u64;
+    drop(conn);
+    assert_eq!(get(&s, "/health", &[]).0, 200);
+    let len = std::fs::metadata(&db).unwrap().len();
+    assert!(len >= 6 * page, "{len}");
+    let mut f = std::fs::OpenOptions::new().write(true).open(&db).unwrap();
+    use std::io::{Seek, SeekFrom};
+    f.seek(SeekFrom::Start(len - 3 * page)).unwrap();
+    f.write_all(&vec![0xA5; 3 * page as usize]).unwrap();
+    f.sync_all().unwrap();
+    drop(f);
+    let (st, body) = get(&s, "/health", &[]);
+    assert_eq!(st, 503, "{}", String::from_utf8_lossy(&body));
+}
+
+/// A new pose rebuilt the scene's whole grid and distance matrix (24 s on a 99 m × 99 m room
+/// with 200 containers) where one search from the pose gives the same distances.
+#[test]
+fn a_new_pose_is_one_search_on_the_scenes_grid() {
+    let s = start(Setup::default());
+    assert_eq!(s.service.grids_built(), 1);
+    let pose = [6.0, 3.0, 90.0];
+    let spec = json!({"strategies": ["optimistic+greedy"]});
+    let trial = |scene: &str, pose: Value| {
+        let (st, dep) = post_json(&s, "/deployments", &spec);
+        assert_eq!(st, 201, "{dep}");
+        let (st, trial) = post_json(
+            &s,
+            &format!("/deployments/{}/trials", dep["id"]),
+            &json!({"scene": scene, "target": "Pillow", "pose": pose}),
+        );
+        assert_eq!(st, 201, "{trial}");
+        trial["next"].clone()
+    };
+    let from_pose = trial("flat", json!(pose));
+    assert_eq!(s.service.grids_built(), 1, "a new pose built a whole grid");
+    // The same scene uploaded with the pose as its start: the same next step and distance.
+    let mut moved = scene("moved");
+    moved["start"] = json!(pose);
+    assert_eq!(post_json(&s, "/scenes", &json!({"scene": moved})).0, 201);
+    let from_start = trial("moved", Value::Null);
+    assert_eq!(from_pose, from_start);
+    assert!(
+        from_pose["distance_m"].as_f64().unwrap() > 0.0,
+        "{from_pose}"
+    );
+}
+
+/// A yaw of 1e308 was taken (it names no direction); `c: -0.0` was stored and echoed as `-0.0`;
+/// `Host: localhost..` passed as `localhost`.
+#[test]
+fn a_yaw_is_within_a_turn_and_c_and_host_are_read_as_they_mean() {
+    let s = start(Setup::default());
+    let (st, dep) = post_json(&s, "/deployments", &json!({"c": -0.0}));
+    assert_eq!(st, 201, "{dep}");
+    let (_, text) = get(&s, &format!("/deployments/{}", dep["id"]), &[]);
+    let text = String::from_utf8_lossy(&text);
+    assert!(text.contains(r#""c":0.0"#), "{text}");
+    for (yaw, status) in [(1e308, 422), (-360.5, 422), (359.0, 201), (-180.0, 409)] {
+        let (st, reply) = post_json(
+            &s,
+            &format!("/deployments/{}/trials", dep["id"]),
+            &json!({"scene": "flat", "target": "Egg", "pose": [1.0, 1.0, yaw]}),
+        );
+        assert_eq!(st, status, "{yaw}: {reply}");
+        if st == 422 {
+            assert_eq!(reply["error"]["field"], "pose", "{reply}");
+        }
+    }
+    let port = s.addr.port();
+    for (host, status) in [
+        (format!("localhost.:{port}"), 200),
+        (format!("localhost..:{port}"), 403),
+        (format!("localhost:0{port}"), 200),
+    ] {
+        let req = format!("GET /scenes HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n");
+        assert_eq!(raw(s.addr, &req).0, status, "{host}");
+    }
 }

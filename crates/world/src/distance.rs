@@ -187,6 +187,62 @@ impl Distances {
         })
     }
 
+    /// The distances on `grid`, which is the grid of these distances with the robot's start
+    /// moved ([`OccupancyGrid::with_start`]): the distances between containers are kept, those
+    /// from the start are one search from the new start cell. Entry for entry what
+    /// [`Distances::compute`] gives on `grid`, for the cost of one of its searches rather than
+    /// one per container.
+    ///
+    /// # Errors
+    /// [`WorldError::Grid`] when these distances have no grid, or `grid` is not their grid with
+    /// another start (another size, other access cells); [`WorldError::Unreachable`] when a
+    /// container cannot be reached from the new start.
+    pub fn with_start(&self, house: &House, grid: &OccupancyGrid) -> Result<Distances> {
+        let err = |message: &str| WorldError::Grid {
+            house: house.name.clone(),
+            message: message.to_string(),
+        };
+        let routes = self
+            .routes
+            .as_ref()
+            .ok_or_else(|| err("distances without a grid cannot move their start"))?;
+        let same_access = grid.container_count() == self.containers
+            && (0..self.containers).all(|i| grid.access_index(i) == Some(routes.cells[i + 1]));
+        if grid.width() != routes.grid.width()
+            || grid.height() != routes.grid.height()
+            || !same_access
+        {
+            return Err(err(
+                "the grid is not the one these distances were measured on",
+            ));
+        }
+        let mut cells = routes.cells.clone();
+        cells[0] = grid.start_index();
+        let n = cells.len();
+        let mut metres = self.metres.clone();
+        let mut search = Search::new(grid);
+        search.run::<false>(cells[0], &cells[1..]);
+        metres[0] = 0.0;
+        for t in 1..n {
+            let length = search
+                .length(cells[t])
+                .ok_or_else(|| WorldError::Unreachable {
+                    house: house.name.clone(),
+                    names: vec![house.container_label(t - 1)],
+                })?;
+            metres[t] = length * grid.resolution();
+            metres[t * n] = length * grid.resolution();
+        }
+        Ok(Distances {
+            containers: self.containers,
+            metres,
+            routes: Some(Routes {
+                grid: grid.clone(),
+                cells,
+            }),
+        })
+    }
+
     /// Number of containers.
     pub fn container_count(&self) -> usize {
         self.containers

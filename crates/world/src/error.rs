@@ -88,7 +88,7 @@ pub enum WorldError {
         names: Vec<String>,
     },
     /// A ROS map (YAML + image) cannot be used.
-    #[error("{}: {field}: {message}", file.display())]
+    #[error("{}: {}{message}", file.display(), field_prefix(field))]
     Map {
         /// The YAML or image file.
         file: PathBuf,
@@ -98,7 +98,7 @@ pub enum WorldError {
         message: String,
     },
     /// A scene file is malformed or inconsistent.
-    #[error("{}: {field}: {message}", file.display())]
+    #[error("{}: {}{message}", file.display(), field_prefix(field))]
     Scene {
         /// The scene file.
         file: PathBuf,
@@ -115,6 +115,15 @@ pub enum WorldError {
         /// What is wrong.
         message: String,
     },
+}
+
+/// `field: `, or nothing for an error about the whole file.
+fn field_prefix(field: &str) -> String {
+    if field.is_empty() {
+        String::new()
+    } else {
+        format!("{field}: ")
+    }
 }
 
 /// Result alias for this crate.

@@ -170,7 +170,7 @@ pub struct OccupancyGrid {
     inner: Arc<Inner>,
 }
 
-#[derive(Debug)]
+#[derive(Clone, Debug)]
 struct Inner {
     params: GridParams,
     origin: Point,
@@ -430,6 +430,28 @@ impl OccupancyGrid {
     /// is not free (see [`start_moved`](Self::start_moved)).
     pub fn start_cell(&self) -> Cell {
         self.inner.cell(self.inner.start)
+    }
+
+    /// This grid with the robot starting at `position` instead (its cell chosen as
+    /// [`build`](Self::build) would choose it), when that changes nothing else: the new start
+    /// cell is reachable from the old one, so the same cells are reachable and every container
+    /// keeps its access cell. `Ok(None)` when the new start is on a part of the floor the old
+    /// one cannot reach: only a new build says what is reachable from there.
+    ///
+    /// # Errors
+    /// [`WorldError::Grid`] as [`build`](Self::build) for a start outside the grid or a grid
+    /// without free cells; `house` names the house in it.
+    pub fn with_start(&self, house: &str, position: Point) -> Result<Option<OccupancyGrid>> {
+        let (start, moved) = self.inner.start_for(position, house)?;
+        if !Self::raw_reachable(self.inner.cells[start as usize]) {
+            return Ok(None);
+        }
+        let mut inner = (*self.inner).clone();
+        inner.start = start;
+        inner.start_moved = moved;
+        Ok(Some(OccupancyGrid {
+            inner: Arc::new(inner),
+        }))
     }
 
     /// True when the start pose's own cell was not free and the start cell is the nearest free one.
@@ -896,11 +918,19 @@ impl Inner {
     }
 
     fn place_start(&mut self, house: &House) -> Result<()> {
+        let (start, moved) = self.start_for(house.start.position, &house.name)?;
+        self.start = start;
+        self.start_moved = moved;
+        Ok(())
+    }
+
+    /// The start cell for a robot at `p`: its own cell when that is free, else the nearest free
+    /// cell by centre distance (ties to the lowest index); and whether it was moved.
+    fn start_for(&self, p: Point, house: &str) -> Result<(u32, bool)> {
         let err = |message: String| WorldError::Grid {
-            house: house.name.clone(),
+            house: house.to_string(),
             message,
         };
-        let p = house.start.position;
         let res = self.params.resolution;
         let x = ((p.x - self.origin.x) / res).floor();
         let z = ((p.z - self.origin.z) / res).floor();
@@ -910,19 +940,19 @@ impl Inner {
                 p.x, p.z
             )));
         }
+        // The kind alone: once the grid is finished, free cells also carry REACHABLE.
+        let free = |c: u8| c & KIND_MASK == CellKind::Free as u8;
         let own = z as usize * self.width as usize + x as usize;
-        if self.cells[own] == CellKind::Free as u8 {
-            self.start = own as u32;
-            return Ok(());
+        if free(self.cells[own]) {
+            return Ok((own as u32, false));
         }
-        // The nearest free cell by centre distance; ties go to the lowest index.
         let (x, z) = (x as i64, z as i64);
         let w = self.width as usize;
         let nearest = self
             .cells
             .iter()
             .enumerate()
-            .filter(|&(_, &c)| c == CellKind::Free as u8)
+            .filter(|&(_, &c)| free(c))
             .map(|(i, _)| {
                 let (cx, cz) = ((i % w) as i64, (i / w) as i64);
                 ((cx - x).pow(2) + (cz - z).pow(2), i)
@@ -934,14 +964,12 @@ impl Inner {
             ));
         };
         debug!(
-            house = %house.name,
+            house = %house,
             kind = ?CellKind::from_u8(self.cells[own]),
             moved_m = (d_sq as f64).sqrt() * res,
             "start cell is not free; starting from the nearest free cell"
         );
-        self.start = i as u32;
-        self.start_moved = true;
-        Ok(())
+        Ok((i as u32, true))
     }
 
     /// Marks the free cells connected to the start (8-connected, no corner cutting: the moves of

@@ -5,7 +5,9 @@
 //! to it named `z.json`) never ends, so both are refused before a byte is read, naming the path.
 //! A regular file is read up to a limit and refused past it, so a wrong path cannot exhaust
 //! memory. Text formats that nest (YAML, JSON) are refused past [`MAX_NESTING`] levels of
-//! brackets before they reach a parser, because libyaml takes time quadratic in flow nesting.
+//! brackets before they reach a parser, because libyaml takes time quadratic in flow nesting,
+//! and YAML is refused past [`MAX_YAML_NODES`] values once its aliases are expanded, because an
+//! alias repeats everything its anchor holds (a 110 KB file can stand for millions of values).
 
 use std::fs::File;
 use std::io::{self, Read};
@@ -18,6 +20,137 @@ pub const MAX_INPUT_BYTES: u64 = 64 << 20;
 /// Deepest bracket nesting (`[` and `{`) accepted in YAML or JSON text. Scene files nest five
 /// deep; serde_json stops at 128 on its own, libyaml has no limit.
 pub const MAX_NESTING: usize = 64;
+
+/// Most values (scalars, lists, maps) a YAML text may hold once its aliases are expanded. A
+/// scene file with 2 000 containers holding 50 objects each has about 150 000.
+pub const MAX_YAML_NODES: usize = 1_000_000;
+
+/// Checks YAML text before it is deserialized: bracket nesting ([`check_nesting`] with
+/// [`MAX_NESTING`]) and values after alias expansion ([`check_yaml_nodes`] with
+/// [`MAX_YAML_NODES`]).
+///
+/// # Errors
+/// A message saying which limit was passed.
+pub fn check_yaml(text: &str) -> Result<(), String> {
+    check_nesting(text, MAX_NESTING)?;
+    check_yaml_nodes(text, MAX_YAML_NODES)
+}
+
+/// Counts the values of YAML text as a deserializer sees them, every alias expanded to what its
+/// anchor holds, and refuses the text past `max`. Nothing is kept while counting, and counting
+/// stops at the limit, so memory stays constant and time bounded by `max` whatever the aliases
+/// multiply. Text that is not valid YAML passes: the real parse reports it with its field.
+///
+/// # Errors
+/// A message naming the limit.
+pub fn check_yaml_nodes(text: &str, max: usize) -> Result<(), String> {
+    use serde::de::DeserializeSeed;
+    let counter = NodeCounter {
+        seen: std::cell::Cell::new(0),
+        max,
+    };
+    for document in serde_yaml_ng::Deserializer::from_str(text) {
+        let counted = (&counter).deserialize(document);
+        if counter.seen.get() > max {
+            return Err(format!(
+                "more than {max} values once YAML aliases (`*name`) are expanded; write the values out or use fewer aliases"
+            ));
+        }
+        // Other errors are left to the real parse, which names the field. The iterator keeps
+        // yielding the same error after a syntax error, so counting stops at the first.
+        if counted.is_err() {
+            break;
+        }
+    }
+    Ok(())
+}
+
+/// Counts every value it is given and stops the deserializer past `max`.
+struct NodeCounter {
+    seen: std::cell::Cell<usize>,
+    max: usize,
+}
+
+impl NodeCounter {
+    fn count<E: serde::de::Error>(&self) -> Result<(), E> {
+        self.seen.set(self.seen.get().saturating_add(1));
+        if self.seen.get() > self.max {
+            return Err(E::custom("too many values"));
+        }
+        Ok(())
+    }
+}
+
+impl<'de> serde::de::DeserializeSeed<'de> for &NodeCounter {
+    type Value = ();
+
+    fn deserialize<D: serde::Deserializer<'de>>(self, d: D) -> Result<(), D::Error> {
+        d.deserialize_any(self)
+    }
+}
+
+impl<'de> serde::de::Visitor<'de> for &NodeCounter {
+    type Value = ();
+
+    fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("any YAML value")
+    }
+
+    fn visit_bool<E: serde::de::Error>(self, _: bool) -> Result<(), E> {
+        self.count()
+    }
+    fn visit_i64<E: serde::de::Error>(self, _: i64) -> Result<(), E> {
+        self.count()
+    }
+    fn visit_i128<E: serde::de::Error>(self, _: i128) -> Result<(), E> {
+        self.count()
+    }
+    fn visit_u64<E: serde::de::Error>(self, _: u64) -> Result<(), E> {
+        self.count()
+    }
+    fn visit_u128<E: serde::de::Error>(self, _: u128) -> Result<(), E> {
+        self.count()
+    }
+    fn visit_f64<E: serde::de::Error>(self, _: f64) -> Result<(), E> {
+        self.count()
+    }
+    fn visit_str<E: serde::de::Error>(self, _: &str) -> Result<(), E> {
+        self.count()
+    }
+    fn visit_bytes<E: serde::de::Error>(self, _: &[u8]) -> Result<(), E> {
+        self.count()
+    }
+    fn visit_unit<E: serde::de::Error>(self) -> Result<(), E> {
+        self.count()
+    }
+    fn visit_none<E: serde::de::Error>(self) -> Result<(), E> {
+        self.count()
+    }
+    fn visit_some<D: serde::Deserializer<'de>>(self, d: D) -> Result<(), D::Error> {
+        serde::de::DeserializeSeed::deserialize(self, d)
+    }
+    fn visit_newtype_struct<D: serde::Deserializer<'de>>(self, d: D) -> Result<(), D::Error> {
+        serde::de::DeserializeSeed::deserialize(self, d)
+    }
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<(), A::Error> {
+        self.count()?;
+        while seq.next_element_seed(self)?.is_some() {}
+        Ok(())
+    }
+    fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<(), A::Error> {
+        self.count()?;
+        while map.next_key_seed(self)?.is_some() {
+            map.next_value_seed(self)?;
+        }
+        Ok(())
+    }
+    fn visit_enum<A: serde::de::EnumAccess<'de>>(self, data: A) -> Result<(), A::Error> {
+        use serde::de::VariantAccess;
+        self.count()?;
+        let ((), variant) = data.variant_seed(self)?;
+        variant.newtype_variant_seed(self)
+    }
+}
 
 /// Opens `path` for reading if it is a regular file (symlinks followed); anything else is an
 /// [`io::ErrorKind::InvalidInput`] error.
@@ -246,6 +379,20 @@ mod tests {
         let deep = format!("{}{}", "[".repeat(100_000), "]".repeat(100_000));
         let e = check_nesting(&deep, MAX_NESTING).unwrap_err();
         assert!(e.contains("64"), "{e}");
+    }
+
+    #[test]
+    fn yaml_values_are_counted_with_aliases_expanded() {
+        // The map, its key, the list and its three items.
+        assert!(check_yaml_nodes("a: [1, 2, 3]", 6).is_ok());
+        assert!(check_yaml_nodes("a: [1, 2, 3]", 5).is_err());
+        let aliased = "a: &x [1, 2, 3, 4]\nb: *x\nc: *x\n";
+        // The map, three keys, three lists of four.
+        assert!(check_yaml_nodes(aliased, 19).is_ok());
+        let e = check_yaml_nodes(aliased, 18).unwrap_err();
+        assert!(e.contains("aliases"), "{e}");
+        // Not YAML at all: left to the parser.
+        assert!(check_yaml_nodes("a: [1, 2", 100).is_ok());
     }
 
     #[test]

@@ -98,7 +98,7 @@ impl OccupancyMap {
             field: field.to_string(),
             message,
         };
-        crate::input::check_nesting(&text, crate::input::MAX_NESTING).map_err(|m| err("", m))?;
+        crate::input::check_yaml(&text).map_err(|m| err("", m))?;
         let de = serde_yaml_ng::Deserializer::from_str(&text);
         // The file is named by a scene, not by the user: it may be anything (a `.env`, a key), so
         // no value read from it is repeated in the error.

@@ -172,12 +172,10 @@ impl SceneFile {
                 message: format!("larger than {} bytes", crate::procthor::MAX_LINE_BYTES),
             });
         }
-        crate::input::check_nesting(text, crate::input::MAX_NESTING).map_err(|message| {
-            WorldError::Scene {
-                file: file.to_path_buf(),
-                field: String::new(),
-                message,
-            }
+        crate::input::check_yaml(text).map_err(|message| WorldError::Scene {
+            file: file.to_path_buf(),
+            field: String::new(),
+            message,
         })?;
         let de = serde_yaml_ng::Deserializer::from_str(text);
         let scene: SceneFile = serde_path_to_error::deserialize(de).map_err(|e| {

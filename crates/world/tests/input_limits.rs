@@ -264,3 +264,36 @@ fn deeply_nested_scenes_are_refused_before_parsing() {
     );
     assert!(e.to_string().contains("nest more than 64"), "{e}");
 }
+
+/// A 110 KB scene whose containers all alias one long contents list expanded to millions of
+/// values (500 MB at its peak); the values after alias expansion are counted and refused past
+/// the limit, naming the file.
+#[test]
+fn aliases_are_refused_past_the_node_budget() {
+    use ferret_world::SceneFile;
+    let mut text = String::from(
+        "ferret_scene: 1\nname: aliases\nrooms:\n  - {name: hall, type: LivingRoom, polygon: [[0, 0], [40, 0], [40, 40], [0, 40]]}\nstart: [0.5, 0.5, 0]\ncontainers:\n",
+    );
+    let books = vec!["Book"; 10_000].join(", ");
+    text.push_str(&format!(
+        "  - {{id: c0, type: Shelf, pose: [1, 1, 0], contents: &books [{books}]}}\n"
+    ));
+    for i in 1..150 {
+        text.push_str(&format!(
+            "  - {{id: c{i}, type: Shelf, pose: [{}, {}, 0], contents: *books}}\n",
+            1 + i % 30,
+            2 + i / 30
+        ));
+    }
+    assert!(text.len() < 100_000, "{}", text.len());
+    let Err(e) = SceneFile::parse(&text, Path::new("aliases.yaml")) else {
+        panic!("a scene of 1.5 million values after alias expansion was read");
+    };
+    let message = e.to_string();
+    assert!(message.contains("aliases.yaml"), "{message}");
+    assert!(message.contains("aliases"), "{message}");
+    // A few aliases within the budget still read.
+    let small = "ferret_scene: 1\nname: ok\nrooms:\n  - {name: hall, type: LivingRoom, polygon: [[0, 0], [4, 0], [4, 4], [0, 4]]}\nstart: [0.5, 0.5, 0]\ncontainers:\n  - {id: a, type: Shelf, pose: [1, 1, 0], contents: &c [Book, Pen]}\n  - {id: b, type: Shelf, pose: [3, 3, 0], contents: *c}\n";
+    let scene = SceneFile::parse(small, Path::new("ok.yaml")).unwrap();
+    assert_eq!(scene.containers.len(), 2);
+}

@@ -488,3 +488,43 @@ fn overlapping_rooms_are_refused_and_rooms_sharing_a_wall_are_not() {
         parse(text).unwrap_or_else(|e| panic!("{e}\n{text}"));
     }
 }
+
+/// A moved start is one search on the grid of the first: the same distances, entry for entry,
+/// as a grid built afresh with that start, wherever on the reachable floor it is.
+#[test]
+fn a_moved_start_gives_the_distances_of_a_new_build() {
+    let scene = parse(TWO_ROOMS).unwrap();
+    let (grid, distances) = distance::build(&scene.house, &params()).unwrap();
+    let mut moved_to = 0;
+    for x in 0..16 {
+        for z in 0..6 {
+            let mut house = scene.house.clone();
+            house.start.position =
+                ferret_world::Point::new(0.25 + 0.5 * f64::from(x), 0.25 + 0.5 * f64::from(z));
+            let fresh = distance::build(&house, &params());
+            match grid.with_start(&house.name, house.start.position).unwrap() {
+                Some(g) => {
+                    let (fresh_grid, fresh) = fresh.unwrap();
+                    assert_eq!(g.start_cell(), fresh_grid.start_cell());
+                    assert_eq!(g.start_moved(), fresh_grid.start_moved());
+                    let moved = distances.with_start(&house, &g).unwrap();
+                    assert_eq!(moved.matrix(), fresh.matrix(), "{:?}", house.start.position);
+                    assert_eq!(
+                        moved.path(Place::Start, Place::Container(1)),
+                        fresh.path(Place::Start, Place::Container(1))
+                    );
+                    moved_to += 1;
+                }
+                // Off the floor the first start reaches: a new build finds the containers
+                // unreachable (or the start off the floor), never other distances.
+                None => assert!(fresh.is_err(), "{:?}", house.start.position),
+            }
+        }
+    }
+    assert!(moved_to > 40, "{moved_to}");
+    // Outside the grid: the error a build gives.
+    assert!(
+        grid.with_start("x", ferret_world::Point::new(-50.0, 0.0))
+            .is_err()
+    );
+}

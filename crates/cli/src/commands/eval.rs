@@ -5,7 +5,7 @@ use std::process::ExitCode;
 use std::sync::Arc;
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use ferret_lab::runs::{CELL_M, EvalRun, RunInfo, TrialRow};
 use ferret_lab::summary::{
     SummaryRow, cells_markdown, paired_comparisons, paired_markdown, reference_means,
@@ -121,6 +121,9 @@ pub fn run(args: Args) -> Result<ExitCode> {
         protocol: &protocol,
         holdout: args.planning.holdout_types,
     };
+    // Claimed before the evaluation, so that a second run into the same directory stops at
+    // once rather than after its work, its files then replacing this one's.
+    let mut out_lock = ferret_lab::files::DirLock::acquire(&args.out)?;
     let SpecEvaluation {
         maps,
         strategies,
@@ -143,8 +146,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
             args.out.display()
         );
     }
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
+    out_lock.used();
     let mut rows = outcome.rows.clone();
     if args.cells {
         for r in &mut rows {

@@ -10,8 +10,8 @@ use ferret_world::generate::{GeneratorOptions, generate_houses, write_houses};
 /// write them as ProcTHOR JSON: `.jsonl.gz`, `.jsonl` or (one house) `.json`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Number of houses.
-    #[arg(long, default_value_t = 100)]
+    /// Number of houses (at most 10000).
+    #[arg(long, default_value_t = 100, value_parser = crate::args::house_count)]
     count: usize,
     /// Seed; the same seed always gives the same houses.
     #[arg(long, default_value_t = 0)]

@@ -45,7 +45,7 @@ pub struct ShowArgs {
     /// ProcTHOR houses (.json, .jsonl, .jsonl.gz); generated houses when not given.
     #[arg(long, value_name = "PATH")]
     pub houses: Option<PathBuf>,
-    /// The house's 0-based index in the file (or among the generated houses).
+    /// The house's 0-based index in the file (or among the generated houses, below 10000).
     #[arg(long, value_name = "I", default_value_t = 0)]
     pub index: usize,
     /// The generator's asset-database.json (see `ferret eval --help`).
@@ -110,11 +110,13 @@ fn list(args: &ListArgs) -> Result<ExitCode> {
 
 fn load_scene(args: &ShowArgs) -> Result<Scene> {
     match &args.houses {
-        None => ferret_world::generate::default_scenes(args.index + 1, args.house_seed)
-            .context("generating houses")?
-            .into_iter()
-            .nth(args.index)
-            .ok_or_else(|| anyhow!("no generated house {}", args.index)),
+        None => {
+            ferret_world::generate::default_scenes(args.index.saturating_add(1), args.house_seed)
+                .with_context(|| format!("--index {}: generating houses", args.index))?
+                .into_iter()
+                .nth(args.index)
+                .ok_or_else(|| anyhow!("no generated house {}", args.index))
+        }
         Some(path) => {
             let db = args
                 .asset_db

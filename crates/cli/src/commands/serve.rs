@@ -89,9 +89,13 @@ pub struct Args {
     #[arg(long, value_name = "KIB", default_value_t = 1024)]
     max_body_kib: usize,
     /// Seconds a client has to send a request's headers (after connecting, or after its last
-    /// reply) and its body.
+    /// reply).
     #[arg(long, value_name = "SECS", default_value_t = 10.0)]
     header_timeout: f64,
+    /// Seconds a client has to send a request's whole body once its headers are in (408 and the
+    /// connection closed past it, however slowly bytes still arrive).
+    #[arg(long, value_name = "SECS", default_value_t = 10.0)]
+    body_timeout: f64,
     /// Seconds after which a kept-alive connection without a request is closed.
     #[arg(long, value_name = "SECS", default_value_t = 60.0)]
     idle_timeout: f64,
@@ -184,6 +188,7 @@ fn check(args: &Args) -> Result<Checked> {
         },
         serve: ServeOptions {
             header_timeout: seconds("--header-timeout", args.header_timeout)?,
+            body_timeout: seconds("--body-timeout", args.body_timeout)?,
             idle_timeout: seconds("--idle-timeout", args.idle_timeout)?,
             max_connections: fit_open_files(args.max_connections),
         },

@@ -62,6 +62,11 @@ class Container:
     @property
     def access(self) -> Optional[Tuple[float, float]]:
         """Where the robot stands to search it (x, y), metres."""
+    @property
+    def house(self) -> str:
+        """The name of the house it belongs to. A container is one house's: passing it to a
+        ``Search`` or ``House`` method of another house raises ``SearchError``, even where the
+        other house has a container with the same id."""
 
 class Room:
     """A room."""

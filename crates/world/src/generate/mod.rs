@@ -48,6 +48,12 @@ use layout::{Edge, Floorplan, IPoint, metres};
 /// The most rooms a generated house has.
 pub const MAX_ROOMS: usize = 10;
 
+/// Most houses generated at once, as many as ProcTHOR-10k holds: every count of generated
+/// houses (`--generate`, `ferret generate --count`, `generate_houses` in Python) is bounded by
+/// it, so that a mistyped count is an error rather than an allocation that fails or takes all
+/// memory.
+pub const MAX_HOUSES: usize = 10_000;
+
 /// The file name generated scenes carry in their [`HouseLocation`].
 pub const GENERATED_FILE: &str = "<generated>";
 
@@ -114,7 +120,22 @@ pub fn generate_house(seed: u64, index: usize, opts: &GeneratorOptions) -> RawHo
     assemble(&plan, &furnished, opts.scale(), &mut rng)
 }
 
-/// Houses `0..count` of the sequence `seed`, generated in parallel.
+/// Refuses a count of houses to generate past [`MAX_HOUSES`].
+///
+/// # Errors
+/// [`WorldError::Range`](crate::WorldError::Range) naming the limit.
+pub fn check_count(count: usize) -> Result<()> {
+    if count > MAX_HOUSES {
+        return Err(crate::WorldError::Range {
+            file: GENERATED_FILE.into(),
+            message: format!("{count} houses: at most {MAX_HOUSES} are generated at once"),
+        });
+    }
+    Ok(())
+}
+
+/// Houses `0..count` of the sequence `seed`, generated in parallel (callers bound `count` with
+/// [`check_count`]).
 pub fn generate_houses(count: usize, seed: u64, opts: &GeneratorOptions) -> Vec<RawHouse> {
     (0..count)
         .into_par_iter()
@@ -124,7 +145,12 @@ pub fn generate_houses(count: usize, seed: u64, opts: &GeneratorOptions) -> Vec<
 
 /// The embedded default: `count` generated houses (default options) read through the ProcTHOR
 /// reader, located in the file [`GENERATED_FILE`].
+///
+/// # Errors
+/// [`WorldError::Range`](crate::WorldError::Range) for more than [`MAX_HOUSES`]; those of the
+/// reader.
 pub fn default_scenes(count: usize, seed: u64) -> Result<Vec<Scene>> {
+    check_count(count)?;
     generate_houses(count, seed, &GeneratorOptions::default())
         .into_iter()
         .enumerate()

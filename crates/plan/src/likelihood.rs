@@ -140,16 +140,13 @@ impl LikelihoodSource for Noise {
         house: &House,
         target: &ObjectType,
     ) -> Result<Vec<Probability>, PlanError> {
-        Ok((0..house.containers.len())
-            .map(|c| {
-                let room = house.container_room(c).map_or("", |r| r.room_type.as_str());
-                Probability::clamped(
-                    self.probability(target, &house.containers[c].object_type, room),
-                    0.0,
-                    1.0,
-                )
-            })
-            .collect())
+        Ok(per_container(house, |container, room| {
+            Probability::clamped(
+                self.probability(target, container, room.unwrap_or("")),
+                0.0,
+                1.0,
+            )
+        }))
     }
 }
 

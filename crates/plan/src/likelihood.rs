@@ -417,14 +417,8 @@ impl Prior {
 
     fn without_hidden(&self) -> Prior {
         Prior {
-            ferret_prior: self.ferret_prior,
-            smoothing: self.smoothing,
-            houses: self.houses,
-            by_pair: self.by_pair.clone(),
-            by_container: self.by_container.clone(),
-            overall: self.overall.clone(),
-            calibration: self.calibration.clone(),
             hidden: None,
+            ..self.clone()
         }
     }
 

@@ -165,17 +165,7 @@ impl Distances {
         // multiroom-val150.)
         let mut search = Search::new(grid);
         for s in 0..n.saturating_sub(1) {
-            search.run::<false>(cells[s], &cells[s + 1..]);
-            for t in s + 1..n {
-                let length = search
-                    .length(cells[t])
-                    .ok_or_else(|| WorldError::Unreachable {
-                        house: house.name.clone(),
-                        names: vec![house.container_label(t - 1)],
-                    })?;
-                metres[s * n + t] = length * res;
-                metres[t * n + s] = length * res;
-            }
+            fill_row(&mut search, house, &cells, s, res, &mut metres)?;
         }
         Ok(Distances {
             containers: n - 1,
@@ -218,21 +208,17 @@ impl Distances {
         }
         let mut cells = routes.cells.clone();
         cells[0] = grid.start_index();
-        let n = cells.len();
         let mut metres = self.metres.clone();
         let mut search = Search::new(grid);
-        search.run::<false>(cells[0], &cells[1..]);
         metres[0] = 0.0;
-        for t in 1..n {
-            let length = search
-                .length(cells[t])
-                .ok_or_else(|| WorldError::Unreachable {
-                    house: house.name.clone(),
-                    names: vec![house.container_label(t - 1)],
-                })?;
-            metres[t] = length * grid.resolution();
-            metres[t * n] = length * grid.resolution();
-        }
+        fill_row(
+            &mut search,
+            house,
+            &cells,
+            0,
+            grid.resolution(),
+            &mut metres,
+        )?;
         Ok(Distances {
             containers: self.containers,
             metres,
@@ -367,6 +353,31 @@ const SETTLED: u64 = 1 << 63;
 const UNSEEN: u64 = SETTLED - 1;
 const STRAIGHT: u64 = 1 << 32;
 const DIAGONAL: u64 = 1;
+
+/// Searches from place `s` of `cells` (0 the start, then the containers' access cells) and
+/// writes its distances to every later place into both halves of the symmetric `metres`.
+fn fill_row(
+    search: &mut Search,
+    house: &House,
+    cells: &[u32],
+    s: usize,
+    resolution: f64,
+    metres: &mut [f64],
+) -> Result<()> {
+    let n = cells.len();
+    search.run::<false>(cells[s], &cells[s + 1..]);
+    for t in s + 1..n {
+        let length = search
+            .length(cells[t])
+            .ok_or_else(|| WorldError::Unreachable {
+                house: house.name.clone(),
+                names: vec![house.container_label(t - 1)],
+            })?;
+        metres[s * n + t] = length * resolution;
+        metres[t * n + s] = length * resolution;
+    }
+    Ok(())
+}
 
 /// The length in cells of a path with packed step counts `steps`: `a + b·√2`, one rounding each.
 fn cells_of(steps: u64) -> f64 {

@@ -1,144 +1,16 @@
-//! The deployment loop: before each trial a selector chooses a strategy, the trial runs, every
-//! other candidate is replayed on what the trial revealed, and the selector learns from the
-//! costs. [`Deployment`] is the loop's state, shared by batch deployments ([`deploy`]) and by
-//! a service that runs one step per request; [`house_order`] is the order of houses a batch
-//! deployment visits. The selection experiment drives the same selector loop
-//! ([`LiveDeployment`]) over a table of costs instead of trials.
+//! Batch deployments in simulation: [`deploy`] visits houses in [`house_order`] and runs one
+//! step of the deployment loop ([`DeploymentLoop`], owned by the select crate and shared with
+//! the HTTP service) in each.
 
-use std::sync::Arc;
-
-use ferret_plan::{
-    DrawMode, Protocol, ReplayMode, SearchProblem, Strategy, TrialSpec, TrialsPerHouse,
-    replay_costs, run_trial,
-};
-use ferret_select::{HouseOrder, LiveDeployment, Method, TrialEnd};
-use ferret_world::{GridParams, GroundTruth, ObjectType, Scene, TravelCost};
+use ferret_plan::{DrawMode, Protocol, SearchProblem, TrialSpec, TrialsPerHouse};
+use ferret_select::{DeploymentLoop, DeploymentStep, HouseOrder};
+use ferret_world::{GridParams, ObjectType, Scene};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use crate::error::{LabError, Result};
 use crate::evaluate::TrialDraw;
 use crate::feedback::Feedback;
-
-/// A deployment's selector, its candidates and what replays assume.
-pub struct Deployment {
-    candidates: Vec<Arc<dyn Strategy>>,
-    live: LiveDeployment,
-    settings: (ReplayMode, TravelCost),
-}
-
-/// One finished trial of a deployment.
-#[derive(Clone, Debug, PartialEq)]
-pub struct DeploymentStep {
-    /// Index of the candidate deployed.
-    pub chosen: usize,
-    /// Its cost, metres, as the protocol reports it.
-    pub cost: f64,
-    /// The container where the target was found.
-    pub found: usize,
-    /// Every candidate's replay cost on this trial (entry `chosen` is `cost`).
-    pub replays: Vec<f64>,
-}
-
-impl Deployment {
-    /// A new deployment of `candidates` chosen by `method` with exploration constant `c` and
-    /// tie-break `seed`; replays as `settings` say (mode, reported travel cost).
-    pub fn new(
-        method: Method,
-        candidates: Vec<Arc<dyn Strategy>>,
-        c: f64,
-        seed: u64,
-        settings: (ReplayMode, TravelCost),
-    ) -> Result<Self> {
-        let live = LiveDeployment::new(method, candidates.len(), c, seed)?;
-        Ok(Self {
-            candidates,
-            live,
-            settings,
-        })
-    }
-
-    /// A deployment rebuilt from how its trials ended and, if one is open, its choice.
-    pub fn restore(
-        (method, c, seed): (Method, f64, u64),
-        candidates: Vec<Arc<dyn Strategy>>,
-        settings: (ReplayMode, TravelCost),
-        history: &[TrialEnd],
-        pending: Option<usize>,
-    ) -> Result<Self> {
-        let live = LiveDeployment::restore(method, candidates.len(), c, seed, history, pending)?;
-        Ok(Self {
-            candidates,
-            live,
-            settings,
-        })
-    }
-
-    /// The candidates, in order.
-    pub fn candidates(&self) -> &[Arc<dyn Strategy>] {
-        &self.candidates
-    }
-
-    /// The selector's state (statistics, the next choice and why).
-    pub fn live(&self) -> &LiveDeployment {
-        &self.live
-    }
-
-    /// Chooses the candidate of the next trial.
-    pub fn choose(&mut self) -> usize {
-        self.live.choose()
-    }
-
-    /// Every candidate's replay cost on a trial where `chosen` was deployed, cost `cost` and
-    /// found the target in `found`; nothing is learned yet.
-    pub fn replays(
-        &self,
-        problem: &SearchProblem<'_>,
-        truth: &GroundTruth,
-        found: usize,
-        (chosen, cost): (usize, f64),
-    ) -> Result<Vec<f64>> {
-        Ok(replay_costs(
-            self.settings,
-            &self.candidates,
-            problem,
-            truth,
-            found,
-            (chosen, cost),
-        )?)
-    }
-
-    /// The selector learns a finished trial's cost and replays.
-    pub fn learn(&mut self, cost: f64, replays: &[f64]) -> Result<()> {
-        Ok(self.live.finish(cost, replays)?)
-    }
-
-    /// One whole step: choose, run the trial in simulation, replay the others, learn. The cost is
-    /// the one `travel` reports (planners decide on plain distances either way).
-    pub fn step(
-        &mut self,
-        problem: &SearchProblem<'_>,
-        truth: &GroundTruth,
-    ) -> Result<DeploymentStep> {
-        let chosen = self.choose();
-        let outcome = run_trial(self.candidates[chosen].as_ref(), problem, truth)?;
-        let cost = outcome.reported_cost(problem.house, problem.distances, self.settings.1)?;
-        let Some(found) = outcome.found else {
-            return Err(LabError::invalid(format!(
-                "{}: the target {} was not found",
-                problem.house.name, problem.trial.target
-            )));
-        };
-        let replays = self.replays(problem, truth, found, (chosen, cost))?;
-        self.learn(cost, &replays)?;
-        Ok(DeploymentStep {
-            chosen,
-            cost,
-            found,
-            replays,
-        })
-    }
-}
 
 /// The houses a batch deployment visits: `trials` visits of `count` houses, cycling through
 /// them in file order when the targets are given (a robot in one home), else shuffled distinct
@@ -200,11 +72,11 @@ pub struct DeployedTrial {
 }
 
 /// Runs a batch deployment over `scenes`: houses in [`HouseOrder`], one trial each, every trial
-/// a [`Deployment::step`]. A house without a map is skipped with a note; `on_trial` sees each
+/// a [`DeploymentLoop::step`]. A house without a map is skipped with a note; `on_trial` sees each
 /// finished trial as it happens.
 pub fn deploy(
     scenes: &[Scene],
-    deployment: &mut Deployment,
+    deployment: &mut DeploymentLoop,
     settings: &DeploySettings<'_>,
     feedback: &dyn Feedback,
     on_trial: &mut dyn FnMut(&DeployedTrial),

@@ -2,7 +2,6 @@
 
 use ferret_llm::LlmError;
 use ferret_plan::PlanError;
-use ferret_report::ReportError;
 use ferret_select::SelectError;
 use ferret_world::WorldError;
 
@@ -32,9 +31,9 @@ pub enum LabError {
     /// A selector or a selection experiment failed.
     #[error(transparent)]
     Select(#[from] SelectError),
-    /// A picture could not be drawn.
+    /// A step of the deployment loop failed.
     #[error(transparent)]
-    Report(#[from] ReportError),
+    Deployment(#[from] ferret_select::DeploymentError),
     /// A selection needs at least two candidates besides the oracle.
     #[error("selection needs at least two non-oracle strategies")]
     TooFewCandidates,

@@ -1,13 +1,13 @@
 //! # ferret-lab
 //!
-//! The experiment layer between the libraries ({world, plan, llm, select, report}) and ferret's
+//! The experiment layer between the libraries ({world, plan, llm, select}) and ferret's
 //! faces (the command line, the HTTP service, Python). It owns what an experiment is made of:
 //! where houses come from and their maps ([`houses`]), strategy setup without a command line
 //! ([`strategies`]), evaluation of strategies on the same trials ([`evaluate`]), the run files
-//! `trials.csv` and `run.json` ([`runs`]), summaries and paired statistics ([`summary`]),
+//! `trials.csv` and `run.json` ([`runs`]), summaries ([`summary`]) and the paired statistics behind them ([`paired`]),
 //! calibration of likelihood sources ([`calibrate`]), the replay table behind selection with its
-//! resumable cache ([`replay`]), selection over an evaluation run ([`selection`]), the one
-//! deployment loop — choose, run, replay, learn — with its house order ([`deploy`]), atomic
+//! resumable cache ([`replay`]), selection over an evaluation run ([`selection`]), batch
+//! deployments in simulation with their house order ([`deploy`]), atomic
 //! output files ([`files`]), and how long work reports progress without printing
 //! ([`feedback`]). Faces parse their input, call these functions and print what they return.
 
@@ -18,13 +18,14 @@ pub mod evaluate;
 pub mod feedback;
 pub mod files;
 pub mod houses;
+pub mod paired;
 pub mod replay;
 pub mod runs;
 pub mod selection;
 pub mod strategies;
 pub mod summary;
 
-pub use deploy::{DeploySettings, DeployedTrial, Deployment, DeploymentStep, deploy, house_order};
+pub use deploy::{DeploySettings, DeployedTrial, deploy, house_order};
 pub use error::{LabError, Result};
 pub use evaluate::{Evaluation, SpecEvaluation, TrialDraw, evaluate, evaluate_specs, trial_row};
 pub use feedback::{Feedback, Silent};

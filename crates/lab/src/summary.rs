@@ -273,8 +273,7 @@ pub fn paired_comparisons(
                 .collect();
             let a: Vec<f64> = keys.iter().map(|k| by[s][*k]).collect();
             let b: Vec<f64> = keys.iter().map(|k| by[reference][*k]).collect();
-            let Some(c) = ferret_report::paired::compare_paired(&a, &b, PAIRED_RESAMPLES, seed)
-            else {
+            let Some(c) = crate::paired::compare_paired(&a, &b, PAIRED_RESAMPLES, seed) else {
                 continue;
             };
             out.push(PairedRow {

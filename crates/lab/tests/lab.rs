@@ -5,14 +5,14 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use ferret_lab::{
-    DeploySettings, Deployment, Feedback, PlanningSettings, Silent, TrialDraw, build_maps, deploy,
-    evaluate, house_order, summarize,
+    DeploySettings, Feedback, PlanningSettings, Silent, TrialDraw, build_maps, deploy, evaluate,
+    house_order, summarize,
 };
 use ferret_plan::{
     DrawMode, Protocol, ReplayMode, SearchProblem, Strategy, TrialsPerHouse, replay_costs,
     run_trial,
 };
-use ferret_select::Method;
+use ferret_select::{DeploymentLoop, Method};
 use ferret_world::{GridParams, TravelCost};
 use proptest::prelude::*;
 
@@ -81,7 +81,7 @@ fn a_deployment_step_learns_what_run_trial_and_replay_costs_say() {
     let scenes = ferret_world::generate::default_scenes(4, 5).unwrap();
     let candidates = strategies(&["optimistic+greedy", "model/uniform"]);
     let settings = (ReplayMode::Pessimistic, TravelCost::Plain);
-    let mut d = Deployment::new(
+    let mut d = DeploymentLoop::new(
         Method::ReplaySelection,
         candidates.clone(),
         5.0,
@@ -127,7 +127,7 @@ fn a_deployment_step_learns_what_run_trial_and_replay_costs_say() {
 fn a_batch_deployment_names_a_type_no_container_holds() {
     let scenes = ferret_world::generate::default_scenes(2, 1).unwrap();
     let candidates = strategies(&["optimistic+greedy", "model/uniform"]);
-    let mut d = Deployment::new(
+    let mut d = DeploymentLoop::new(
         Method::Ucb,
         candidates,
         5.0,

@@ -12,9 +12,6 @@
 //! - [`draw_curves`], [`draw_curve_panels`]: lines against trials k (the paper's figure 4), and
 //!   [`draw_choice_shares`]: how often each strategy is chosen as k grows.
 //!
-//! [`paired`] holds the paired statistics of `ferret eval`'s summary (bootstrap interval of the
-//! mean difference, Wilcoxon signed-rank test).
-//!
 //! Text uses DejaVu Sans embedded in the binary (the `dejavu` crate) through plotters'
 //! `ab_glyph` feature; no system font library is involved. In SVG files text stays text and is
 //! shown in the viewer's sans-serif font.
@@ -33,7 +30,6 @@ mod error;
 mod floor_plan;
 mod glyphs;
 mod labels;
-pub mod paired;
 mod stats;
 mod violin;
 

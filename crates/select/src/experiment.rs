@@ -9,7 +9,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::numpy::LegacyRandomState;
-use crate::selector::check_c;
+use crate::selector::{SelectorVariant, check_c};
 use crate::{CostTable, DEFAULT_C, HouseOrder, LiveDeployment, Method, SelectError};
 
 /// Most deployment trials (`deployments × trials_per_deployment`) one experiment keeps: every
@@ -51,6 +51,16 @@ pub struct ExperimentOptions {
     pub reference_draws: bool,
 }
 
+impl ExperimentOptions {
+    /// The selectors' variant these options ask for.
+    pub fn variant(&self) -> SelectorVariant {
+        SelectorVariant {
+            replay_untried_first: self.replay_untried_first,
+            ucb_untried_zero: self.ucb_untried_zero,
+        }
+    }
+}
+
 impl Default for ExperimentOptions {
     fn default() -> Self {
         Self {
@@ -83,7 +93,7 @@ pub struct MethodRun {
 
 /// One deployment: its house order, shared by every method, and what each method did.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Deployment {
+pub struct DeploymentRecord {
     /// Row of the cost table used by trial `k` (index `k − 1`): distinct rows from distinct
     /// houses (when the table is [grouped](CostTable::grouped)), unless drawn with replacement.
     pub houses: Vec<usize>,
@@ -91,7 +101,7 @@ pub struct Deployment {
     pub runs: Vec<MethodRun>,
 }
 
-impl Deployment {
+impl DeploymentRecord {
     /// The rows method `method`'s trials used.
     pub fn houses_of(&self, method: Method) -> &[usize] {
         self.run(method)
@@ -141,7 +151,7 @@ pub struct ExperimentResult {
     /// The curves of each method, in the order of [`Method::ALL`].
     pub summaries: Vec<MethodSummary>,
     /// Every deployment, in index order.
-    pub deployments: Vec<Deployment>,
+    pub deployments: Vec<DeploymentRecord>,
 }
 
 impl ExperimentResult {
@@ -309,7 +319,7 @@ fn run_deployment(
     opts: &ExperimentOptions,
     base: &ChaCha8Rng,
     d: usize,
-) -> Result<Deployment, SelectError> {
+) -> Result<DeploymentRecord, SelectError> {
     if opts.reference_draws {
         return run_reference_deployment(table, opts, base, d);
     }
@@ -336,14 +346,14 @@ fn run_deployment(
         .enumerate()
         .map(|(m, method)| {
             let mut live = LiveDeployment::with_selector(
-                method.configured(table.n_strategies(), opts)?,
+                method.configured(table.n_strategies(), opts.c, opts.variant())?,
                 opts.c,
                 method_stream(base, d, m),
             );
             run_on_table(&mut live, table, &houses)
         })
         .collect::<Result<_, _>>()?;
-    Ok(Deployment { houses, runs })
+    Ok(DeploymentRecord { houses, runs })
 }
 
 /// A deployment drawn as the reference code draws it (see
@@ -354,7 +364,7 @@ fn run_reference_deployment(
     opts: &ExperimentOptions,
     base: &ChaCha8Rng,
     d: usize,
-) -> Result<Deployment, SelectError> {
+) -> Result<DeploymentRecord, SelectError> {
     let groups = table.groups();
     let seed = opts.seed.wrapping_add(d as u64) as u32;
     let shuffled = || {
@@ -399,7 +409,7 @@ fn run_reference_deployment(
     let runs = Method::ALL
         .into_iter()
         .map(|method| {
-            let selector = method.configured(table.n_strategies(), opts)?;
+            let selector = method.configured(table.n_strategies(), opts.c, opts.variant())?;
             // Ties come from numpy's stream; ferret's is never drawn from.
             run(LiveDeployment::with_selector(
                 selector,
@@ -408,12 +418,12 @@ fn run_reference_deployment(
             ))
         })
         .collect::<Result<_, _>>()?;
-    Ok(Deployment { houses, runs })
+    Ok(DeploymentRecord { houses, runs })
 }
 
 /// The strategy with the lowest mean, over deployments, of its average cost on each
 /// deployment's tie-free houses: the reference's table average.
-fn reference_best(table: &CostTable, deployments: &[Deployment], trials: usize) -> usize {
+fn reference_best(table: &CostTable, deployments: &[DeploymentRecord], trials: usize) -> usize {
     (0..table.n_strategies())
         .map(|s| {
             let avg = best_avg_cost(table, deployments, s, trials);
@@ -475,7 +485,7 @@ fn trial_costs(table: &CostTable, h: usize, i: usize) -> Result<(f64, &[f64]), S
 
 fn best_avg_cost(
     table: &CostTable,
-    deployments: &[Deployment],
+    deployments: &[DeploymentRecord],
     best: usize,
     trials: usize,
 ) -> Vec<f64> {
@@ -494,7 +504,7 @@ fn best_avg_cost(
 
 fn summarise(
     table: &CostTable,
-    deployments: &[Deployment],
+    deployments: &[DeploymentRecord],
     (best, best_mean): (usize, f64),
     trials: usize,
     method: Method,

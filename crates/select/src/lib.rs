@@ -10,13 +10,15 @@
 //!   experiment, so they cannot drift apart.
 //! * [`LiveDeployment`]: the selector between a robot's trials, rebuilt exactly from its stored
 //!   finished trials after a restart; `ferret deploy`, `ferret serve` and the experiment all
-//!   drive it. [`HouseOrder`]: the houses a deployment visits.
+//!   drive it. [`DeploymentLoop`]: choose → run → replay → learn with real strategies on real
+//!   trials, the loop `ferret deploy` runs in simulation and `ferret serve` one step per request. [`HouseOrder`]: the houses a deployment visits.
 //! * [`CostTable`]: real and replay costs of every candidate on one trial per house.
 //! * [`run_experiment`]: the paper's deployment experiment (section VI-C) on a table: average cost
 //!   and cumulative regret against the best single strategy, per trial count `k`.
 //! * [`selection_rows`], [`choice_rows`], [`selection_table_markdown`],
 //!   [`strategy_table_markdown`]: report rows and tables.
 
+mod deployment;
 mod error;
 mod experiment;
 mod live;
@@ -26,9 +28,10 @@ mod results;
 mod selector;
 mod table;
 
+pub use deployment::{DeploymentError, DeploymentLoop, DeploymentStep, ReplaySettings};
 pub use error::SelectError;
 pub use experiment::{
-    Deployment, ExperimentOptions, ExperimentResult, MAX_EXPERIMENT_TRIALS, MethodRun,
+    DeploymentRecord, ExperimentOptions, ExperimentResult, MAX_EXPERIMENT_TRIALS, MethodRun,
     MethodSummary, run_experiment, run_on_table,
 };
 pub use live::{FinishedTrial, LiveDeployment, StrategyStats, TrialEnd};
@@ -37,5 +40,5 @@ pub use results::{
     ChoiceRow, PAPER_KS, SelectionRow, choice_rows, selection_rows, selection_table_markdown,
     strategy_table_markdown,
 };
-pub use selector::{DEFAULT_C, Method, ReplaySelection, Selector, Ucb};
+pub use selector::{DEFAULT_C, Method, ReplaySelection, Selector, SelectorVariant, Ucb};
 pub use table::{CostTable, ORACLE, REPLAY_TOLERANCE};

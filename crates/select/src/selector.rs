@@ -20,7 +20,6 @@ use rand::{Rng, RngCore};
 use serde::{Deserialize, Serialize};
 
 use crate::SelectError;
-use crate::experiment::ExperimentOptions;
 use crate::live::StrategyStats;
 
 /// Default exploration constant `c` in metres: the paper's 100 grid cells of 0.05 m.
@@ -161,36 +160,42 @@ impl Method {
         strategies: usize,
         c: f64,
     ) -> Result<Box<dyn Selector + Send>, SelectError> {
-        self.configured(
-            strategies,
-            &ExperimentOptions {
-                c,
-                ..ExperimentOptions::default()
-            },
-        )
+        self.configured(strategies, c, SelectorVariant::default())
     }
 
-    /// A fresh selector of this method over `strategies` candidates in the variant `options`
-    /// ask for (its `c` and the reference code's switches).
+    /// A fresh selector of this method over `strategies` candidates with exploration constant
+    /// `c` (metres) in `variant` (the reference code's switches).
     pub fn configured(
         self,
         strategies: usize,
-        options: &ExperimentOptions,
+        c: f64,
+        variant: SelectorVariant,
     ) -> Result<Box<dyn Selector + Send>, SelectError> {
-        let c = options.c;
         Ok(match self {
             Method::Ucb => Box::new(Ucb::new(strategies, c)?.untried_score(
-                if options.ucb_untried_zero {
+                if variant.ucb_untried_zero {
                     0.0
                 } else {
                     f64::NEG_INFINITY
                 },
             )),
             Method::ReplaySelection => Box::new(
-                ReplaySelection::new(strategies, c)?.untried_first(options.replay_untried_first),
+                ReplaySelection::new(strategies, c)?.untried_first(variant.replay_untried_first),
             ),
         })
     }
+}
+
+/// How a selector treats strategies it has not deployed yet. The default is the paper's: UCB
+/// deploys each once first, replay selection trusts replay costs from the start.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SelectorVariant {
+    /// Replay selection deploys every strategy once first, as UCB does (see
+    /// [`ReplaySelection::untried_first`]).
+    pub replay_untried_first: bool,
+    /// UCB scores untried strategies 0, as the reference code does (see
+    /// [`Ucb::untried_score`]).
+    pub ucb_untried_zero: bool,
 }
 
 impl fmt::Display for Method {

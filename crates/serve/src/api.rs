@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use crate::store::TrialStatus;
+use crate::model::TrialStatus;
 
 /// Longest accepted request id, characters.
 pub const MAX_REQUEST_ID: usize = 200;

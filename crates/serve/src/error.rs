@@ -97,3 +97,10 @@ impl From<StoreError> for ApiError {
         Self::internal(e.to_string())
     }
 }
+
+/// A planning failure as the service reports it.
+pub(crate) fn plan_error(e: ferret_plan::PlanError) -> ApiError {
+    // Planning errors come from strategies (an LLM endpoint down, a policy failing), not from
+    // the request: the request was valid and may be retried.
+    ApiError::new(ErrorKind::Unavailable, "", e.to_string())
+}

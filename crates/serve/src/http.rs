@@ -13,9 +13,12 @@
 use std::net::{IpAddr, SocketAddr};
 use std::sync::Arc;
 
+use std::marker::PhantomData;
+
 use axum::body::Bytes;
-use axum::extract::rejection::{BytesRejection, PathRejection};
-use axum::extract::{DefaultBodyLimit, Path, Request, State};
+use axum::extract::rejection::BytesRejection;
+use axum::extract::{DefaultBodyLimit, FromRequest, FromRequestParts, Path, Request, State};
+use axum::http::request::Parts;
 use axum::http::{HeaderMap, HeaderValue, Method, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
@@ -33,7 +36,8 @@ use crate::api::{
     StartTrial, TrialState, UploadScene,
 };
 use crate::error::{ApiError, ErrorKind};
-use crate::service::{Outcome, Reply, SceneLimits, Service};
+use crate::model::{ApiReply, Outcome};
+use crate::service::{SceneLimits, Service};
 
 /// Default largest request body, bytes (a scene with hundreds of containers is tens of KB).
 pub const DEFAULT_MAX_BODY_BYTES: usize = 1 << 20;
@@ -158,7 +162,7 @@ fn json_response(status: StatusCode, body: String) -> Response {
     (status, [(header::CONTENT_TYPE, "application/json")], body).into_response()
 }
 
-fn reply(r: Result<Reply, ApiError>) -> Response {
+fn reply(r: Result<ApiReply, ApiError>) -> Response {
     match r {
         Ok(r) => json_response(status_of_outcome(r.outcome), r.body),
         Err(e) => e.into_response(),
@@ -232,24 +236,82 @@ fn timed_out(e: &BytesRejection) -> Option<&crate::server::BodyTimeout> {
     None
 }
 
-/// A path segment, or 404 for one that is not valid UTF-8 once decoded.
-fn segment(p: Result<Path<String>, PathRejection>, what: &str) -> Result<String, ApiError> {
-    p.map(|Path(s)| s)
-        .map_err(|e| ApiError::new(ErrorKind::NotFound, what, e.body_text()))
+/// A JSON object body with its raw bytes (a request id's fingerprint is taken over the bytes the
+/// robot sent). Refused in this order: not `application/json` (415), unreadable or over the
+/// limit (400, 413, 408), not a JSON object of the route's fields (400, naming the field).
+struct JsonBody<T> {
+    value: T,
+    raw: Bytes,
 }
 
-fn id(raw: &str, what: &str) -> Result<i64, ApiError> {
-    raw.parse::<i64>().ok().filter(|v| *v > 0).ok_or_else(|| {
-        ApiError::new(
-            ErrorKind::NotFound,
-            what,
-            format!("{raw:?} is not a {what} id"),
-        )
-    })
+impl<S: Send + Sync, T: DeserializeOwned> FromRequest<S> for JsonBody<T> {
+    type Rejection = ApiError;
+
+    async fn from_request(req: Request, state: &S) -> Result<Self, ApiError> {
+        let headers = req.headers().clone();
+        let raw = body(&headers, Bytes::from_request(req, state).await)?;
+        let value = parse(&raw)?;
+        Ok(Self { value, raw })
+    }
+}
+
+/// A path segment, or 404 for one that is not valid UTF-8 once decoded.
+struct Segment<K>(String, PhantomData<K>);
+
+/// A resource id in a path: a positive integer, else 404.
+struct Id<K>(i64, PhantomData<K>);
+
+/// What a path segment names, for the field of its errors.
+trait Resource {
+    const NAME: &'static str;
+}
+
+struct SceneName;
+struct DeploymentId;
+struct TrialId;
+
+impl Resource for SceneName {
+    const NAME: &'static str = "scene";
+}
+impl Resource for DeploymentId {
+    const NAME: &'static str = "deployment";
+}
+impl Resource for TrialId {
+    const NAME: &'static str = "trial";
+}
+
+impl<S: Send + Sync, K: Resource> FromRequestParts<S> for Segment<K> {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, ApiError> {
+        Path::<String>::from_request_parts(parts, state)
+            .await
+            .map(|Path(s)| Segment(s, PhantomData))
+            .map_err(|e| ApiError::new(ErrorKind::NotFound, K::NAME, e.body_text()))
+    }
+}
+
+impl<S: Send + Sync, K: Resource> FromRequestParts<S> for Id<K> {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, ApiError> {
+        let Segment(raw, _) = Segment::<K>::from_request_parts(parts, state).await?;
+        raw.parse::<i64>()
+            .ok()
+            .filter(|v| *v > 0)
+            .map(|id| Id(id, PhantomData))
+            .ok_or_else(|| {
+                ApiError::new(
+                    ErrorKind::NotFound,
+                    K::NAME,
+                    format!("{raw:?} is not a {} id", K::NAME),
+                )
+            })
+    }
 }
 
 /// Runs a service call on the blocking pool.
-async fn blocking(f: impl FnOnce() -> Result<Reply, ApiError> + Send + 'static) -> Response {
+async fn blocking(f: impl FnOnce() -> Result<ApiReply, ApiError> + Send + 'static) -> Response {
     match tokio::task::spawn_blocking(f).await {
         Ok(r) => reply(r),
         Err(e) => ApiError::internal(format!("the request's worker failed: {e}")).into_response(),
@@ -273,51 +335,33 @@ async fn list_scenes(State(s): State<Arc<Service>>) -> Response {
         (status = 404, description = "No scene of that name", body = ErrorBody)))]
 async fn get_scene(
     State(s): State<Arc<Service>>,
-    name: Result<Path<String>, PathRejection>,
+    Segment(name, _): Segment<SceneName>,
 ) -> Response {
-    blocking(move || s.get_scene(&segment(name, "scene")?)).await
+    blocking(move || s.get_scene(&name)).await
 }
 
 #[utoipa::path(post, path = "/scenes", request_body = UploadScene, responses(
     (status = 200, description = "The same scene was uploaded before", body = SceneDetail),
     (status = 201, body = SceneDetail),
     (status = 413, description = "The body, or the store of uploaded scenes, is over its limit", body = ErrorBody)))]
-async fn upload_scene(
-    State(s): State<Arc<Service>>,
-    headers: HeaderMap,
-    b: Result<Bytes, BytesRejection>,
-) -> Response {
-    blocking(move || {
-        let b = body(&headers, b)?;
-        let req: UploadScene = parse(&b)?;
-        s.upload_scene(req, &b)
-    })
-    .await
+async fn upload_scene(State(s): State<Arc<Service>>, b: JsonBody<UploadScene>) -> Response {
+    blocking(move || s.upload_scene(b.value, &b.raw)).await
 }
 
 #[utoipa::path(post, path = "/deployments", request_body = CreateDeployment,
     responses((status = 201, body = DeploymentState)))]
 async fn create_deployment(
     State(s): State<Arc<Service>>,
-    headers: HeaderMap,
-    b: Result<Bytes, BytesRejection>,
+    b: JsonBody<CreateDeployment>,
 ) -> Response {
-    blocking(move || {
-        let b = body(&headers, b)?;
-        let req: CreateDeployment = parse(&b)?;
-        s.create_deployment(req, &b)
-    })
-    .await
+    blocking(move || s.create_deployment(b.value, &b.raw)).await
 }
 
 #[utoipa::path(get, path = "/deployments/{id}", params(("id" = i64, Path, description = "Deployment id", minimum = 1)),
     responses((status = 200, body = DeploymentState),
         (status = 404, description = "No deployment of that id", body = ErrorBody)))]
-async fn get_deployment(
-    State(s): State<Arc<Service>>,
-    raw: Result<Path<String>, PathRejection>,
-) -> Response {
-    blocking(move || s.get_deployment(id(&segment(raw, "deployment")?, "deployment")?)).await
+async fn get_deployment(State(s): State<Arc<Service>>, Id(id, _): Id<DeploymentId>) -> Response {
+    blocking(move || s.get_deployment(id)).await
 }
 
 #[utoipa::path(post, path = "/deployments/{id}/trials", request_body = StartTrial,
@@ -327,48 +371,32 @@ async fn get_deployment(
         (status = 503, description = "A strategy could not plan (an LLM endpoint is down); retry later", body = ErrorBody)))]
 async fn start_trial(
     State(s): State<Arc<Service>>,
-    raw: Result<Path<String>, PathRejection>,
-    headers: HeaderMap,
-    b: Result<Bytes, BytesRejection>,
+    Id(deployment, _): Id<DeploymentId>,
+    b: JsonBody<StartTrial>,
 ) -> Response {
-    blocking(move || {
-        let d = id(&segment(raw, "deployment")?, "deployment")?;
-        let b = body(&headers, b)?;
-        let req: StartTrial = parse(&b)?;
-        s.start_trial(d, req, &b)
-    })
-    .await
+    blocking(move || s.start_trial(deployment, b.value, &b.raw)).await
 }
 
 #[utoipa::path(get, path = "/trials/{id}", params(("id" = i64, Path, description = "Trial id", minimum = 1)),
     responses((status = 200, body = TrialState),
         (status = 404, description = "No trial of that id", body = ErrorBody),
         (status = 503, description = "A strategy could not plan (an LLM endpoint is down); retry later", body = ErrorBody)))]
-async fn get_trial(
-    State(s): State<Arc<Service>>,
-    raw: Result<Path<String>, PathRejection>,
-) -> Response {
-    blocking(move || s.get_trial(id(&segment(raw, "trial")?, "trial")?)).await
+async fn get_trial(State(s): State<Arc<Service>>, Id(trial, _): Id<TrialId>) -> Response {
+    blocking(move || s.get_trial(trial)).await
 }
 
 #[utoipa::path(post, path = "/trials/{id}/observations", request_body = Observe,
+    operation_id = "observe",
     params(("id" = i64, Path, description = "Trial id", minimum = 1)),
     responses((status = 200, body = TrialState),
         (status = 404, description = "No such trial, or no such container in its scene", body = ErrorBody),
         (status = 503, description = "A strategy could not plan (an LLM endpoint is down); retry later", body = ErrorBody)))]
-async fn observe(
+async fn post_observation(
     State(s): State<Arc<Service>>,
-    raw: Result<Path<String>, PathRejection>,
-    headers: HeaderMap,
-    b: Result<Bytes, BytesRejection>,
+    Id(trial, _): Id<TrialId>,
+    b: JsonBody<Observe>,
 ) -> Response {
-    blocking(move || {
-        let t = id(&segment(raw, "trial")?, "trial")?;
-        let b = body(&headers, b)?;
-        let req: Observe = parse(&b)?;
-        s.observe(t, req, &b)
-    })
-    .await
+    blocking(move || s.record_observation(trial, b.value, &b.raw)).await
 }
 
 /// The OpenAPI document as derived from the types; [`document`] adds what the derive cannot say.
@@ -421,7 +449,7 @@ fn routes() -> (Router<Arc<Service>>, utoipa::openapi::OpenApi) {
         .routes(routes!(get_deployment))
         .routes(routes!(start_trial))
         .routes(routes!(get_trial))
-        .routes(routes!(observe))
+        .routes(routes!(post_observation))
         .split_for_parts()
 }
 

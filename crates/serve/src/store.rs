@@ -7,10 +7,11 @@ use std::path::Path;
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use crate::service::Outcome;
-use ferret_select::Method;
+use crate::model::{
+    DeploymentSpec, Outcome, StoredDeployment, StoredObservation, StoredReply, StoredTrial,
+    TrialStatus,
+};
 use rusqlite::{Connection, OptionalExtension, Transaction, TransactionBehavior, params};
-use serde::{Deserialize, Serialize};
 
 /// Storage failures (the disk, not the request).
 #[derive(Debug, thiserror::Error)]
@@ -32,110 +33,6 @@ pub enum StoreError {
         /// What is wrong.
         what: String,
     },
-}
-
-/// How a deployment was created.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct DeploymentSpec {
-    /// Candidate strategies, by name.
-    pub strategies: Vec<String>,
-    /// Selection method.
-    pub selector: Method,
-    /// Exploration constant, metres.
-    pub c: f64,
-    /// Seed of the selector's tie breaks.
-    pub seed: u64,
-}
-
-/// A stored deployment.
-#[derive(Clone, Debug, PartialEq)]
-pub struct DeploymentRow {
-    /// Its id.
-    pub id: i64,
-    /// How it was created.
-    pub spec: DeploymentSpec,
-}
-
-/// Where a trial stands.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
-#[serde(rename_all = "lowercase")]
-pub enum TrialStatus {
-    /// The robot is searching.
-    Searching,
-    /// The target was found; the trial counts for selection.
-    Done,
-    /// Every container was searched without finding the target; the trial does not count.
-    Exhausted,
-}
-
-impl TrialStatus {
-    fn as_str(self) -> &'static str {
-        match self {
-            TrialStatus::Searching => "searching",
-            TrialStatus::Done => "done",
-            TrialStatus::Exhausted => "exhausted",
-        }
-    }
-
-    fn parse(s: &str) -> Option<Self> {
-        match s {
-            "searching" => Some(TrialStatus::Searching),
-            "done" => Some(TrialStatus::Done),
-            "exhausted" => Some(TrialStatus::Exhausted),
-            _ => None,
-        }
-    }
-}
-
-/// A stored trial.
-#[derive(Clone, Debug, PartialEq)]
-pub struct TrialRow {
-    /// Its id.
-    pub id: i64,
-    /// Its deployment.
-    pub deployment: i64,
-    /// 1-based position in the deployment.
-    pub k: i64,
-    /// The scene's name.
-    pub scene: String,
-    /// The target type.
-    pub target: String,
-    /// The robot's pose at the start, when given (else the scene's start).
-    pub pose: Option<[f64; 3]>,
-    /// Index of the chosen strategy in the deployment's list.
-    pub chosen: usize,
-    /// Where it stands.
-    pub status: TrialStatus,
-    /// Map-distance cost, metres, once ended.
-    pub cost: Option<f64>,
-    /// Every candidate's replay cost (entry `chosen` = `cost`), once done.
-    pub replays: Option<Vec<f64>>,
-}
-
-/// One search reported by the robot.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ObservationRow {
-    /// The container's id.
-    pub container: String,
-    /// Whether the target was there.
-    pub found: bool,
-    /// Other object types seen in it.
-    pub objects: Vec<String>,
-    /// The robot's own odometry for the leg, when reported.
-    pub travelled: Option<f64>,
-    /// The leg's map distance, metres.
-    pub leg: f64,
-}
-
-/// A stored reply to a request with a `request_id`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct StoredReply {
-    /// SHA-256 of route and body, to tell a retry from a reuse of the id.
-    pub fingerprint: String,
-    /// What the request did.
-    pub outcome: Outcome,
-    /// JSON body.
-    pub body: String,
 }
 
 /// How a reply's outcome is stored: as the numbers databases have always held (200, 201), so
@@ -416,7 +313,7 @@ impl Writer<'_> {
         &self,
         trial: i64,
         seq: usize,
-        o: &ObservationRow,
+        o: &StoredObservation,
     ) -> Result<(), StoreError> {
         let objects = serde_json::json!(o.objects).to_string();
         self.tx
@@ -554,7 +451,7 @@ impl Reader<'_> {
     }
 
     /// A deployment by id.
-    pub fn deployment(&self, id: i64) -> Result<Option<DeploymentRow>, StoreError> {
+    pub fn deployment(&self, id: i64) -> Result<Option<StoredDeployment>, StoreError> {
         let spec: Option<String> = self
             .conn
             .query_row("SELECT spec FROM deployments WHERE id = ?1", [id], |r| {
@@ -564,7 +461,7 @@ impl Reader<'_> {
             .map_err(|e| self.store.sql(e))?;
         spec.map(|s| {
             serde_json::from_str(&s)
-                .map(|spec| DeploymentRow { id, spec })
+                .map(|spec| StoredDeployment { id, spec })
                 .map_err(|e| self.store.corrupt(format!("deployment {id}: {e}")))
         })
         .transpose()
@@ -583,7 +480,7 @@ impl Reader<'_> {
             .map_err(|e| self.store.sql(e))
     }
 
-    fn trials_where(&self, clause: &str, key: i64) -> Result<Vec<TrialRow>, StoreError> {
+    fn trials_where(&self, clause: &str, key: i64) -> Result<Vec<StoredTrial>, StoreError> {
         let mut stmt = self
             .conn
             .prepare(&format!(
@@ -612,7 +509,7 @@ impl Reader<'_> {
             let (id, deployment, k, scene, target, pose, chosen, status, cost, replays) =
                 row.map_err(|e| self.store.sql(e))?;
             let bad = |what: &str| self.store.corrupt(format!("trial {id}: {what}"));
-            out.push(TrialRow {
+            out.push(StoredTrial {
                 id,
                 deployment,
                 k,
@@ -635,17 +532,17 @@ impl Reader<'_> {
     }
 
     /// A deployment's trials, in order.
-    pub fn trials_of(&self, deployment: i64) -> Result<Vec<TrialRow>, StoreError> {
+    pub fn trials_of(&self, deployment: i64) -> Result<Vec<StoredTrial>, StoreError> {
         self.trials_where("deployment = ?1", deployment)
     }
 
     /// A trial by id.
-    pub fn trial(&self, id: i64) -> Result<Option<TrialRow>, StoreError> {
+    pub fn trial(&self, id: i64) -> Result<Option<StoredTrial>, StoreError> {
         Ok(self.trials_where("id = ?1", id)?.into_iter().next())
     }
 
     /// A trial's observations, in order.
-    pub fn observations(&self, trial: i64) -> Result<Vec<ObservationRow>, StoreError> {
+    pub fn observations(&self, trial: i64) -> Result<Vec<StoredObservation>, StoreError> {
         let mut stmt = self
             .conn
             .prepare(
@@ -667,7 +564,7 @@ impl Reader<'_> {
         let mut out = Vec::new();
         for row in rows {
             let (container, found, objects, travelled, leg) = row.map_err(|e| self.store.sql(e))?;
-            out.push(ObservationRow {
+            out.push(StoredObservation {
                 container,
                 found,
                 objects: serde_json::from_str(&objects)

@@ -6,9 +6,9 @@ use std::process::ExitCode;
 use std::sync::Arc;
 
 use anyhow::{Result, bail};
-use ferret_lab::{DEFAULT_STRATEGIES, DeploySettings, Deployment, deploy};
+use ferret_lab::{DEFAULT_STRATEGIES, DeploySettings, deploy};
 use ferret_plan::{DrawMode, Protocol, Strategy, TrialsPerHouse};
-use ferret_select::{Method, ORACLE};
+use ferret_select::{DeploymentLoop, Method, ORACLE};
 use ferret_world::ObjectType;
 use serde::Serialize;
 
@@ -123,7 +123,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         );
     }
     let names: Vec<String> = candidates.iter().map(|s| s.name().to_string()).collect();
-    let mut deployment = Deployment::new(
+    let mut deployment = DeploymentLoop::new(
         args.method,
         candidates,
         args.c,

@@ -1,0 +1,131 @@
+//! What the service's parts share: the reply of a request, where a trial stands, and the rows
+//! the store keeps. The wire types of the HTTP API live in [`api`](crate::api), the storage in
+//! [`store`](crate::store); both, and the service's resources, read their data from here, so no
+//! two of them import each other.
+
+use ferret_select::Method;
+use serde::{Deserialize, Serialize};
+
+/// What a request did: read or changed something, or created it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Outcome {
+    /// Read, or done to something that exists (also: the same upload again).
+    Done,
+    /// Created a scene, a deployment or a trial.
+    Created,
+}
+
+/// A reply: what the request did and the JSON text of its result. Kept as text so that a
+/// retried request gets the very bytes of the first reply (a float parsed back from JSON may
+/// differ in its last digit).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ApiReply {
+    /// What the request did.
+    pub outcome: Outcome,
+    /// The result as JSON.
+    pub body: String,
+}
+
+/// How a deployment was created.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DeploymentSpec {
+    /// Candidate strategies, by name.
+    pub strategies: Vec<String>,
+    /// Selection method.
+    pub selector: Method,
+    /// Exploration constant, metres.
+    pub c: f64,
+    /// Seed of the selector's tie breaks.
+    pub seed: u64,
+}
+
+/// A stored deployment.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StoredDeployment {
+    /// Its id.
+    pub id: i64,
+    /// How it was created.
+    pub spec: DeploymentSpec,
+}
+
+/// Where a trial stands.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum TrialStatus {
+    /// The robot is searching.
+    Searching,
+    /// The target was found; the trial counts for selection.
+    Done,
+    /// Every container was searched without finding the target; the trial does not count.
+    Exhausted,
+}
+
+impl TrialStatus {
+    pub(crate) fn as_str(self) -> &'static str {
+        match self {
+            TrialStatus::Searching => "searching",
+            TrialStatus::Done => "done",
+            TrialStatus::Exhausted => "exhausted",
+        }
+    }
+
+    pub(crate) fn parse(s: &str) -> Option<Self> {
+        match s {
+            "searching" => Some(TrialStatus::Searching),
+            "done" => Some(TrialStatus::Done),
+            "exhausted" => Some(TrialStatus::Exhausted),
+            _ => None,
+        }
+    }
+}
+
+/// A stored trial.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StoredTrial {
+    /// Its id.
+    pub id: i64,
+    /// Its deployment.
+    pub deployment: i64,
+    /// 1-based position in the deployment.
+    pub k: i64,
+    /// The scene's name.
+    pub scene: String,
+    /// The target type.
+    pub target: String,
+    /// The robot's pose at the start, when given (else the scene's start).
+    pub pose: Option<[f64; 3]>,
+    /// Index of the chosen strategy in the deployment's list.
+    pub chosen: usize,
+    /// Where it stands.
+    pub status: TrialStatus,
+    /// Map-distance cost, metres, once ended.
+    pub cost: Option<f64>,
+    /// Every candidate's replay cost (entry `chosen` = `cost`), once done.
+    pub replays: Option<Vec<f64>>,
+}
+
+/// One search reported by the robot.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StoredObservation {
+    /// The container's id.
+    pub container: String,
+    /// Whether the target was there.
+    pub found: bool,
+    /// Other object types seen in it.
+    pub objects: Vec<String>,
+    /// The robot's own odometry for the leg, when reported.
+    pub travelled: Option<f64>,
+    /// The leg's map distance, metres.
+    pub leg: f64,
+}
+
+/// A stored reply to a request with a `request_id`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StoredReply {
+    /// SHA-256 of route and body, to tell a retry from a reuse of the id.
+    pub fingerprint: String,
+    /// What the request did.
+    pub outcome: Outcome,
+    /// JSON body.
+    pub body: String,
+}

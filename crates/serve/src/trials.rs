@@ -1,0 +1,394 @@
+//! Trials: started in a deployment with the strategy its selector chooses, then one observation
+//! per searched container until the target is found (the other candidates replayed and the
+//! selector credited) or every container was searched. A trial's search is rebuilt from its
+//! stored observations on every request.
+
+use std::sync::Arc;
+
+use ferret_plan::{Search, SearchProblem, Strategy, TrialSpec, hindsight_truth};
+use ferret_world::ObjectType;
+use ferret_world::distance::Place;
+
+use crate::api::{
+    MAX_OBJECTS, MAX_TRAVELLED_M, MAX_TYPE_NAME, NextContainer, Observe, StartTrial, TrialState,
+};
+use crate::error::{ApiError, ErrorKind, plan_error};
+use crate::grids::Placed;
+use crate::model::{
+    ApiReply, DeploymentSpec, Outcome, StoredObservation, StoredTrial, TrialStatus,
+};
+use crate::service::{Service, json};
+
+/// An object type as the API takes it: ASCII letters and digits, as in `CellPhone`.
+pub(crate) fn is_type_name(s: &str) -> bool {
+    !s.is_empty() && s.len() <= MAX_TYPE_NAME && s.chars().all(|c| c.is_ascii_alphanumeric())
+}
+
+impl Service {
+    /// `POST /deployments/{id}/trials`.
+    pub fn start_trial(
+        &self,
+        deployment: i64,
+        req: StartTrial,
+        body: &[u8],
+    ) -> Result<ApiReply, ApiError> {
+        let route = format!("POST /deployments/{deployment}/trials");
+        if let Some(reply) = self.earlier_reply(req.request_id.as_deref(), &route, body)? {
+            return Ok(reply);
+        }
+        let spec = self.spec(deployment)?;
+        if !is_type_name(&req.target) {
+            return Err(ApiError::new(
+                ErrorKind::Invalid,
+                "target",
+                format!(
+                    "{:?} is not a CamelCase object type of ASCII letters and digits such as CellPhone",
+                    req.target
+                ),
+            ));
+        }
+        let placed = self.placed(&req.scene, req.pose)?;
+        let trials = self.store.read(|r| r.trials_of(deployment))?;
+        if let Some(open) = trials.iter().find(|t| t.status == TrialStatus::Searching) {
+            return Err(ApiError::new(
+                ErrorKind::Conflict,
+                "deployment",
+                format!(
+                    "trial {} of deployment {deployment} is still searching; finish it first",
+                    open.id
+                ),
+            ));
+        }
+        let candidates = self.candidates_of(&spec)?;
+        let mut state = self.deployment(&spec, &trials, candidates.clone())?;
+        let chosen = state.choose();
+        let trial = TrialSpec {
+            target: ObjectType::new(req.target.clone()),
+            revealed: Vec::new(),
+        };
+        let next = {
+            let problem = SearchProblem::new(&placed.house, &placed.distances, &trial);
+            let mut search =
+                Search::start(candidates[chosen].as_ref(), &problem, None).map_err(plan_error)?;
+            let c = search.next_container().map_err(plan_error)?;
+            c.map(|c| next_container(&placed, Place::Start, c))
+        };
+        let k = trials.len() as i64 + 1;
+        self.idempotent(req.request_id.as_deref(), &route, body, |w| {
+            // Another request may have started a trial since the read above.
+            if w.reader().trials_of(deployment)?.len() != trials.len() {
+                return Err(ApiError::new(
+                    ErrorKind::Conflict,
+                    "deployment",
+                    "another trial was started at the same time; read the deployment and retry",
+                ));
+            }
+            let id = w.insert_trial(deployment, k, &req.scene, &req.target, req.pose, chosen)?;
+            json(
+                Outcome::Created,
+                &TrialState {
+                    trial: id,
+                    deployment,
+                    k,
+                    scene: req.scene.clone(),
+                    target: req.target.clone(),
+                    strategy: spec.strategies[chosen].clone(),
+                    status: TrialStatus::Searching,
+                    searched: Vec::new(),
+                    cost_m: 0.0,
+                    travelled_m: None,
+                    next: next.clone(),
+                    replays_m: None,
+                },
+            )
+        })
+    }
+
+    fn trial_row(&self, id: i64) -> Result<StoredTrial, ApiError> {
+        self.store
+            .read(|r| r.trial(id))?
+            .ok_or_else(|| ApiError::new(ErrorKind::NotFound, "trial", format!("no trial {id}")))
+    }
+
+    /// What a stored trial's next step needs, read from the store.
+    fn stored_trial(&self, row: &StoredTrial) -> Result<LoadedTrial, ApiError> {
+        let observations = self.store.read(|r| r.observations(row.id))?;
+        let spec = self.spec(row.deployment)?;
+        let candidates = self.candidates_of(&spec)?;
+        let strategy = candidates.get(row.chosen).cloned().ok_or_else(|| {
+            ApiError::internal(format!("trial {}: no strategy {}", row.id, row.chosen))
+        })?;
+        Ok(LoadedTrial {
+            observations,
+            placed: self.placed(&row.scene, row.pose)?,
+            trial: TrialSpec {
+                target: ObjectType::new(row.target.clone()),
+                revealed: Vec::new(),
+            },
+            strategy,
+            candidates,
+            spec,
+        })
+    }
+
+    /// `GET /trials/{id}`.
+    pub fn get_trial(&self, id: i64) -> Result<ApiReply, ApiError> {
+        let row = self.trial_row(id)?;
+        let t = self.stored_trial(&row)?;
+        let (observations, spec) = (&t.observations, &t.spec);
+        let mut search = t.search()?;
+        let next = match row.status {
+            TrialStatus::Searching => {
+                let from = search.belief().position();
+                search
+                    .next_container()
+                    .map_err(plan_error)?
+                    .map(|c| next_container(&t.placed, from, c))
+            }
+            _ => None,
+        };
+        json(
+            Outcome::Done,
+            &trial_state(&row, spec, observations, search.belief().travelled(), next),
+        )
+    }
+
+    /// `POST /trials/{id}/observations`.
+    pub fn record_observation(
+        &self,
+        id: i64,
+        req: Observe,
+        body: &[u8],
+    ) -> Result<ApiReply, ApiError> {
+        let route = format!("POST /trials/{id}/observations");
+        if let Some(reply) = self.earlier_reply(req.request_id.as_deref(), &route, body)? {
+            return Ok(reply);
+        }
+        let row = self.trial_row(id)?;
+        if row.status != TrialStatus::Searching {
+            return Err(ApiError::new(
+                ErrorKind::Conflict,
+                "trial",
+                format!("trial {id} has ended ({:?})", row.status).to_lowercase(),
+            ));
+        }
+        if req.objects.len() > MAX_OBJECTS {
+            return Err(ApiError::new(
+                ErrorKind::Invalid,
+                "objects",
+                format!("{} object types; at most {MAX_OBJECTS}", req.objects.len()),
+            ));
+        }
+        for (i, o) in req.objects.iter().enumerate() {
+            if !is_type_name(o) {
+                return Err(ApiError::new(
+                    ErrorKind::Invalid,
+                    format!("objects[{i}]"),
+                    format!("{o:?} is not a CamelCase object type"),
+                ));
+            }
+        }
+        if let Some(t) = req.travelled_m
+            && !(t.is_finite() && (0.0..=MAX_TRAVELLED_M).contains(&t))
+        {
+            return Err(ApiError::new(
+                ErrorKind::Invalid,
+                "travelled_m",
+                format!("{t}: must be a distance from 0 to {MAX_TRAVELLED_M} m"),
+            ));
+        }
+        let t = self.stored_trial(&row)?;
+        let (observations, spec, candidates, placed) =
+            (&t.observations, &t.spec, &t.candidates, &t.placed);
+        let house = &placed.house;
+        let c = house.container_index(&req.container).ok_or_else(|| {
+            ApiError::new(
+                ErrorKind::NotFound,
+                "container",
+                format!(
+                    "{:?} is not a container of scene {:?}",
+                    req.container, row.scene
+                ),
+            )
+        })?;
+        let target = &t.trial.target;
+        let mut search = t.search()?;
+        if search.belief().is_searched(c) {
+            return Err(ApiError::new(
+                ErrorKind::Conflict,
+                "container",
+                format!("{:?} was already searched in trial {id}", req.container),
+            ));
+        }
+        let mut seen: Vec<ObjectType> = req
+            .objects
+            .iter()
+            .map(|o| ObjectType::new(o.clone()))
+            .collect();
+        if req.found && !seen.contains(target) {
+            seen.push(target.clone());
+        }
+        let leg = search.record(c, seen).map_err(plan_error)?;
+        let observation = StoredObservation {
+            container: req.container.clone(),
+            found: req.found,
+            objects: req.objects.clone(),
+            travelled: req.travelled_m,
+            leg,
+        };
+        let cost = search.belief().travelled();
+        let (status, next, replays) = if req.found {
+            let truth = hindsight_truth(house, target, c).map_err(plan_error)?;
+            let trials = self.store.read(|r| r.trials_of(row.deployment))?;
+            let replays = self
+                .deployment(spec, &trials, candidates.clone())?
+                .replays(
+                    &SearchProblem::new(house, &placed.distances, &t.trial),
+                    &truth,
+                    c,
+                    (row.chosen, cost),
+                )
+                .map_err(plan_error)?;
+            (TrialStatus::Done, None, Some(replays))
+        } else {
+            let from = search.belief().position();
+            match search.next_container().map_err(plan_error)? {
+                Some(n) => (
+                    TrialStatus::Searching,
+                    Some(next_container(placed, from, n)),
+                    None,
+                ),
+                None => (TrialStatus::Exhausted, None, None),
+            }
+        };
+        self.idempotent(req.request_id.as_deref(), &route, body, |w| {
+            let r = w.reader();
+            let now = r.observations(id)?;
+            let still = r
+                .trial(id)?
+                .is_some_and(|t| t.status == TrialStatus::Searching);
+            if now.len() != observations.len() || !still {
+                return Err(ApiError::new(
+                    ErrorKind::Conflict,
+                    "trial",
+                    "the trial changed while this observation was planned; read it and retry",
+                ));
+            }
+            w.insert_observation(id, observations.len(), &observation)?;
+            if status != TrialStatus::Searching {
+                w.end_trial(id, status, cost, replays.as_deref())?;
+            }
+            let mut all = observations.clone();
+            all.push(observation.clone());
+            let mut updated = row.clone();
+            updated.status = status;
+            updated.cost = (status != TrialStatus::Searching).then_some(cost);
+            updated.replays = replays.clone();
+            json(
+                Outcome::Done,
+                &trial_state(&updated, spec, &all, cost, next.clone()),
+            )
+        })
+    }
+}
+/// A stored trial with what it needs to plan its next step.
+struct LoadedTrial {
+    observations: Vec<StoredObservation>,
+    spec: DeploymentSpec,
+    candidates: Vec<Arc<dyn Strategy>>,
+    strategy: Arc<dyn Strategy>,
+    placed: Arc<Placed>,
+    trial: TrialSpec,
+}
+
+impl LoadedTrial {
+    /// The trial's search, replayed up to its last observation.
+    fn search(&self) -> Result<Search<'_>, ApiError> {
+        rebuild(
+            self.strategy.as_ref(),
+            &self.placed,
+            &self.trial,
+            &self.observations,
+        )
+    }
+}
+
+/// The trial's search rebuilt from its stored observations.
+fn rebuild<'a>(
+    strategy: &'a dyn Strategy,
+    placed: &'a Placed,
+    trial: &'a TrialSpec,
+    observations: &[StoredObservation],
+) -> Result<Search<'a>, ApiError> {
+    let problem = SearchProblem::new(&placed.house, &placed.distances, trial);
+    let mut search = Search::start(strategy, &problem, None).map_err(plan_error)?;
+    for o in observations {
+        let c = placed.house.container_index(&o.container).ok_or_else(|| {
+            ApiError::internal(format!(
+                "stored container {:?} is not in the scene",
+                o.container
+            ))
+        })?;
+        let mut seen: Vec<ObjectType> = o
+            .objects
+            .iter()
+            .map(|t| ObjectType::new(t.clone()))
+            .collect();
+        if o.found && !seen.contains(&trial.target) {
+            seen.push(trial.target.clone());
+        }
+        search.record(c, seen).map_err(plan_error)?;
+    }
+    Ok(search)
+}
+
+fn trial_state(
+    row: &StoredTrial,
+    spec: &DeploymentSpec,
+    observations: &[StoredObservation],
+    cost: f64,
+    next: Option<NextContainer>,
+) -> TrialState {
+    let reported: Vec<f64> = observations.iter().filter_map(|o| o.travelled).collect();
+    TrialState {
+        trial: row.id,
+        deployment: row.deployment,
+        k: row.k,
+        scene: row.scene.clone(),
+        target: row.target.clone(),
+        strategy: spec.strategies.get(row.chosen).cloned().unwrap_or_default(),
+        status: row.status,
+        searched: observations.iter().map(|o| o.container.clone()).collect(),
+        cost_m: row.cost.unwrap_or(cost),
+        travelled_m: (!reported.is_empty()).then(|| reported.iter().sum()),
+        next,
+        replays_m: row.replays.as_ref().map(|r| {
+            spec.strategies
+                .iter()
+                .cloned()
+                .zip(r.iter().copied())
+                .collect()
+        }),
+    }
+}
+
+fn next_container(placed: &Placed, from: Place, c: usize) -> NextContainer {
+    let house = &placed.house;
+    let container = &house.containers[c];
+    let to = Place::Container(c);
+    NextContainer {
+        container: container.id.clone(),
+        object_type: container.object_type.to_string(),
+        room: house.container_room(c).map(|r| r.id.clone()),
+        x: container.position.x,
+        y: container.position.z,
+        distance_m: placed.distances.between(from, to),
+        path: placed
+            .distances
+            .path(from, to)
+            .unwrap_or_default()
+            .iter()
+            .map(|p| [p.x, p.z])
+            .collect(),
+    }
+}

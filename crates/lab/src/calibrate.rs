@@ -55,25 +55,43 @@ impl TargetCount {
     }
 }
 
-/// One row of `calibration.csv`.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct CalibrationRow {
+/// One row of `calibration.csv`: a source's name and its scores, flat, without the reliability
+/// bins (they go to the diagram). Serialized by hand because serde's `flatten` goes through a
+/// map, which the CSV writer refuses.
+#[derive(Clone, Copy, Debug)]
+pub struct CalibrationRow<'a> {
     /// The source's spec.
-    pub source: String,
-    /// (house, target, container) pairs.
-    pub pairs: u64,
-    /// Pairs whose container holds the target.
-    pub positives: u64,
-    /// Brier score.
-    pub brier: f64,
-    /// Log loss.
-    pub log_loss: f64,
-    /// AUROC (empty without both classes).
-    pub auroc: Option<f64>,
-    /// Mean P_S of holders.
-    pub mean_p_pos: Option<f64>,
-    /// Mean P_S of non-holders.
-    pub mean_p_neg: Option<f64>,
+    pub source: &'a str,
+    /// Its scores.
+    pub calibration: &'a Calibration,
+}
+
+impl Serialize for CalibrationRow<'_> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        use serde::ser::SerializeStruct;
+        let c = self.calibration;
+        let mut row = s.serialize_struct("CalibrationRow", 8)?;
+        row.serialize_field("source", self.source)?;
+        row.serialize_field("pairs", &c.pairs)?;
+        row.serialize_field("positives", &c.positives)?;
+        row.serialize_field("brier", &c.brier)?;
+        row.serialize_field("log_loss", &c.log_loss)?;
+        row.serialize_field("auroc", &c.auroc)?;
+        row.serialize_field("mean_p_pos", &c.mean_p_pos)?;
+        row.serialize_field("mean_p_neg", &c.mean_p_neg)?;
+        row.end()
+    }
+}
+
+/// The rows of `calibration.csv` for every scored source, in order.
+pub fn calibration_rows(scored: &[(String, Calibration)]) -> Vec<CalibrationRow<'_>> {
+    scored
+        .iter()
+        .map(|(source, calibration)| CalibrationRow {
+            source,
+            calibration,
+        })
+        .collect()
 }
 
 /// What a calibration scores.
@@ -174,9 +192,8 @@ impl Default for CalibrationSettings {
 /// What a calibration found. Failures of single sources or trials are in `errors`; everything
 /// else was scored.
 pub struct Calibrated {
-    /// One row per scored source, in the order asked.
-    pub rows: Vec<CalibrationRow>,
-    /// Each scored source's full calibration (with its reliability bins).
+    /// Each scored source's calibration (with its reliability bins), in the order asked; its
+    /// rows of `calibration.csv` are [`calibration_rows`].
     pub scored: Vec<(String, Calibration)>,
     /// The fitted fusions, when asked for.
     pub fusion: Option<FusionFile>,
@@ -264,7 +281,6 @@ pub fn calibrate(
     let dropped = prefetch(&setup.service, llm, &settings.sources, &pairs, feedback)?;
     sources.retain(|(spec, _)| !dropped.contains(spec));
 
-    let mut rows = Vec::new();
     let mut scored = Vec::new();
     let mut errors = Vec::new();
     let holds: Vec<Vec<bool>> = trials
@@ -291,16 +307,6 @@ pub fn calibrate(
             errors.push(format!("{spec}: no pairs scored"));
             continue;
         };
-        rows.push(CalibrationRow {
-            source: spec.clone(),
-            pairs: c.pairs,
-            positives: c.positives,
-            brier: c.brier,
-            log_loss: c.log_loss,
-            auroc: c.auroc,
-            mean_p_pos: c.mean_p_pos,
-            mean_p_neg: c.mean_p_neg,
-        });
         scored.push((spec.clone(), c));
     }
     let fusion = if settings.fit_fusion {
@@ -373,7 +379,6 @@ pub fn calibrate(
         settings.targets_per_house,
     );
     Ok(Calibrated {
-        rows,
         scored,
         fusion,
         trials: trials.len(),

@@ -55,10 +55,7 @@ impl HouseSource {
             return Ok(LoadedHouses {
                 scenes,
                 skipped: vec![],
-                source: format!(
-                    "{} generated houses (seed {})",
-                    self.generate, self.house_seed
-                ),
+                source: self.describe(),
             });
         };
         if ferret_world::scene::is_scene_file(path) {
@@ -66,7 +63,7 @@ impl HouseSource {
             return Ok(LoadedHouses {
                 scenes: vec![scene],
                 skipped: vec![],
-                source: path.display().to_string(),
+                source: self.describe(),
             });
         }
         let db = match &self.asset_db {
@@ -83,11 +80,24 @@ impl HouseSource {
         Ok(LoadedHouses {
             scenes: report.scenes,
             skipped: report.skipped.iter().map(ToString::to_string).collect(),
-            source: match &self.range {
+            source: self.describe(),
+        })
+    }
+
+    /// Where the houses come from, as reports name it: the file (with its range), the scene
+    /// file, or the generated houses and their seed.
+    pub fn describe(&self) -> String {
+        match &self.houses {
+            None => format!(
+                "{} generated houses (seed {})",
+                self.generate, self.house_seed
+            ),
+            Some(path) if ferret_world::scene::is_scene_file(path) => path.display().to_string(),
+            Some(path) => match &self.range {
                 Some(r) => format!("{} [{r}]", path.display()),
                 None => path.display().to_string(),
             },
-        })
+        }
     }
 }
 

@@ -11,6 +11,10 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Context, LabError, Result};
 use crate::houses::HouseSource;
 use crate::strategies::PlanningSettings;
+use crate::summary::{
+    PairedRow, SummaryRow, cells_markdown, paired_comparisons, paired_markdown, reference_means,
+    reference_means_markdown, summarize, summary_markdown,
+};
 
 /// One row of `trials.csv`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -179,6 +183,54 @@ impl EvalRun {
         crate::files::write_bytes(&dir.join("run.json"), &self.run_json)
     }
 
+    /// The summary (the paper's table I), the paired comparisons and `summary.md` of this run,
+    /// as `ferret eval` writes them; `view` says what the run's files cannot.
+    pub fn report(&self, view: &ReportView<'_>) -> RunReport {
+        let info = &self.info;
+        let mut summary = summarize(&self.rows, &info.strategies);
+        if view.cells {
+            summary = summary.into_iter().map(SummaryRow::with_cells).collect();
+        }
+        let paired =
+            paired_comparisons(&self.rows, &info.strategies, view.paired_against, info.seed);
+        let mut markdown = summary_markdown(
+            &summary,
+            view.source,
+            view.houses_run,
+            info.trials_per_house,
+            view.trials_run,
+        );
+        if view.cells {
+            markdown += &cells_markdown(&summary);
+        }
+        if info.protocol.rng == ferret_plan::TrialRng::Python
+            && info.trials_per_house == TrialsPerHouse::One
+        {
+            markdown += &reference_means_markdown(&reference_means(
+                &self.rows,
+                &info.strategies,
+                view.houses,
+            ));
+        }
+        markdown += &paired_markdown(&paired);
+        RunReport {
+            summary,
+            paired,
+            markdown,
+        }
+    }
+
+    /// Writes every file of an evaluation into `dir`: `summary.csv`, `paired.csv`, `summary.md`
+    /// of `report`, then the run itself ([`EvalRun::write`]). `ferret eval` and the Python
+    /// package's `Evaluation.save` both write through here, so their directories hold the same
+    /// files.
+    pub fn write_all(&self, dir: &Path, report: &RunReport) -> Result<()> {
+        crate::files::write_csv(&dir.join("summary.csv"), &report.summary)?;
+        crate::files::write_csv(&dir.join("paired.csv"), &report.paired)?;
+        crate::files::write_bytes(&dir.join("summary.md"), &report.markdown)?;
+        self.write(dir)
+    }
+
     /// Reads `dir/run.json` and `dir/trials.csv` and checks that they belong together.
     pub fn read(dir: &Path) -> Result<Self> {
         let run_json = read_run_file(&dir.join("run.json"))
@@ -219,4 +271,32 @@ impl LabError {
             source: e,
         }
     }
+}
+
+/// What a run's report needs that its files do not say.
+#[derive(Clone, Copy, Debug)]
+pub struct ReportView<'a> {
+    /// Where the houses came from, as the report names it ([`HouseSource::describe`]).
+    pub source: &'a str,
+    /// Indices of the houses evaluated (the reference code's means average over them).
+    pub houses: &'a [usize],
+    /// Houses with at least one finished trial.
+    pub houses_run: usize,
+    /// Trials (house and target) drawn on those houses.
+    pub trials_run: usize,
+    /// Strategies to compare every other one against, besides the best.
+    pub paired_against: &'a [String],
+    /// Costs in grid cells too (the paper's unit).
+    pub cells: bool,
+}
+
+/// A run's summary, paired comparisons and `summary.md`.
+#[derive(Clone, Debug)]
+pub struct RunReport {
+    /// The paper's table I, one row per strategy.
+    pub summary: Vec<SummaryRow>,
+    /// Paired comparisons.
+    pub paired: Vec<PairedRow>,
+    /// `summary.md`.
+    pub markdown: String,
 }

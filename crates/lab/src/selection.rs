@@ -6,7 +6,7 @@ use std::path::Path;
 
 use ferret_plan::{DrawMode, Protocol, TrialRng, UntriedScore};
 use ferret_select::{
-    DEFAULT_C, ExperimentOptions, ExperimentResult, MAX_EXPERIMENT_TRIALS, PAPER_KS,
+    ExperimentOptions, ExperimentResult, MAX_EXPERIMENT_TRIALS, PAPER_KS,
     run_experiment, selection_table_markdown, strategy_table_markdown,
 };
 
@@ -19,79 +19,49 @@ use crate::strategies::LlmSettings;
 /// The name of the replay cache in an evaluation run's directory.
 pub const REPLAY_CACHE: &str = "replay.csv";
 
-/// How many deployments, how long, and how selectors explore.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SelectionSettings {
-    /// Number of deployments.
-    pub deployments: usize,
-    /// Trials per deployment, each in a distinct house unless the protocol draws with
-    /// replacement.
-    pub trials_per_deployment: usize,
-    /// Exploration constant c, metres.
-    pub c: f64,
-    /// Seed of the deployment orders and tie breaks.
-    pub seed: u64,
-    /// Make replay selection deploy every strategy once before trusting replay costs.
-    pub replay_untried_first: bool,
+/// Refuses unusable experiment options, naming the command-line option, before any replay runs.
+///
+/// # Errors
+/// No deployments or trials, more deployment trials than an experiment keeps, or a `c` that is
+/// not a finite number ≥ 0.
+pub fn validate(options: &ExperimentOptions) -> Result<()> {
+    if options.deployments == 0 {
+        return Err(LabError::invalid("--deployments 0: must be at least 1"));
+    }
+    if options.trials_per_deployment == 0 {
+        return Err(LabError::invalid(
+            "--trials-per-deployment 0: must be at least 1",
+        ));
+    }
+    if options
+        .deployments
+        .checked_mul(options.trials_per_deployment)
+        .is_none_or(|n| n > MAX_EXPERIMENT_TRIALS)
+    {
+        return Err(LabError::invalid(format!(
+            "--deployments {} × --trials-per-deployment {}: at most {MAX_EXPERIMENT_TRIALS} deployment trials in all",
+            options.deployments, options.trials_per_deployment
+        )));
+    }
+    if !(options.c.is_finite() && options.c >= 0.0) {
+        return Err(LabError::invalid(format!(
+            "--c {}: must be a finite number ≥ 0 m",
+            options.c
+        )));
+    }
+    Ok(())
 }
 
-impl Default for SelectionSettings {
-    fn default() -> Self {
-        Self {
-            deployments: 500,
-            trials_per_deployment: 100,
-            c: DEFAULT_C,
-            seed: 0,
-            replay_untried_first: false,
-        }
-    }
-}
-
-impl SelectionSettings {
-    /// Refuses unusable settings, naming the option, before any replay runs.
-    pub fn validate(&self) -> Result<()> {
-        if self.deployments == 0 {
-            return Err(LabError::invalid("--deployments 0: must be at least 1"));
-        }
-        if self.trials_per_deployment == 0 {
-            return Err(LabError::invalid(
-                "--trials-per-deployment 0: must be at least 1",
-            ));
-        }
-        if self
-            .deployments
-            .checked_mul(self.trials_per_deployment)
-            .is_none_or(|n| n > MAX_EXPERIMENT_TRIALS)
-        {
-            return Err(LabError::invalid(format!(
-                "--deployments {} × --trials-per-deployment {}: at most {MAX_EXPERIMENT_TRIALS} deployment trials in all",
-                self.deployments, self.trials_per_deployment
-            )));
-        }
-        if !(self.c.is_finite() && self.c >= 0.0) {
-            return Err(LabError::invalid(format!(
-                "--c {}: must be a finite number ≥ 0 m",
-                self.c
-            )));
-        }
-        Ok(())
-    }
-
-    /// The experiment's options under `protocol`.
-    pub fn options(&self, protocol: &Protocol) -> ExperimentOptions {
-        ExperimentOptions {
-            deployments: self.deployments,
-            trials_per_deployment: self.trials_per_deployment,
-            c: self.c,
-            seed: self.seed,
-            replay_untried_first: self.replay_untried_first,
-            with_replacement: protocol.draw == DrawMode::Replacement,
-            ucb_untried_zero: protocol.untried == UntriedScore::Zero,
-            // The reference's numpy draws are draws with replacement; with distinct houses the
-            // deployments keep ferret's own streams.
-            reference_draws: protocol.rng == TrialRng::Python
-                && protocol.draw == DrawMode::Replacement,
-        }
+/// `options` with the switches `protocol` decides: drawing houses with replacement, UCB's score
+/// of untried strategies, the reference code's numpy draws.
+pub fn under_protocol(options: &ExperimentOptions, protocol: &Protocol) -> ExperimentOptions {
+    ExperimentOptions {
+        with_replacement: protocol.draw == DrawMode::Replacement,
+        ucb_untried_zero: protocol.untried == UntriedScore::Zero,
+        // The reference's numpy draws are draws with replacement; with distinct houses the
+        // deployments keep ferret's own streams.
+        reference_draws: protocol.rng == TrialRng::Python && protocol.draw == DrawMode::Replacement,
+        ..*options
     }
 }
 
@@ -107,7 +77,8 @@ pub struct Selection {
 
 /// Selects over the evaluation run `run`, read from `dir`, under `protocol`: its trial
 /// settings must be the run's (a run is never mixed with another protocol's trials); its replay
-/// mode and house draw act here. Replays are read from and appended to `dir/replay.csv`.
+/// mode and house draw act here, and decide the options' protocol switches
+/// ([`under_protocol`]). Replays are read from and appended to `dir/replay.csv`.
 ///
 /// Errors: unusable settings, another protocol's trials, fewer than two candidates, too few
 /// houses for deployments of distinct houses, and the errors of replaying.
@@ -116,10 +87,10 @@ pub fn select(
     dir: &Path,
     protocol: &Protocol,
     llm: &LlmSettings,
-    settings: &SelectionSettings,
+    options: &ExperimentOptions,
     feedback: &dyn Feedback,
 ) -> Result<Selection> {
-    settings.validate()?;
+    validate(options)?;
     let info = &run.info;
     if protocol.trial_settings() != info.protocol.trial_settings() {
         return Err(LabError::invalid(format!(
@@ -131,7 +102,7 @@ pub fn select(
         )));
     }
     let min_houses = match protocol.draw {
-        DrawMode::Distinct => settings.trials_per_deployment,
+        DrawMode::Distinct => options.trials_per_deployment,
         DrawMode::Replacement => 0,
     };
     let replay = match replay_table(
@@ -157,7 +128,7 @@ pub fn select(
         }
         Err(e) => return Err(e),
     };
-    let opts = settings.options(protocol);
+    let opts = under_protocol(options, protocol);
     let result = run_experiment(&replay.table, &opts)?;
     let markdown = selection_markdown(&replay, &result);
     Ok(Selection {

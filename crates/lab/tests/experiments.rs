@@ -3,13 +3,13 @@
 use std::sync::Arc;
 
 use ferret_lab::calibrate::{CalibrationSettings, TargetCount, calibrate, targets_for};
-use ferret_lab::selection::{SelectionSettings, select};
+use ferret_lab::selection::select;
 use ferret_lab::{
     EvalRun, HouseSource, LlmSettings, PlanningSettings, RunInfo, Silent, TrialDraw, build_maps,
     evaluate, full_registry,
 };
 use ferret_plan::{Protocol, Strategy, TrialsPerHouse};
-use ferret_select::Method;
+use ferret_select::{ExperimentOptions, Method};
 use ferret_world::GridParams;
 
 fn generated(count: usize, seed: u64) -> HouseSource {
@@ -57,18 +57,25 @@ fn calibration_scores_every_container_of_every_target_and_the_prior_beats_unifor
         }
     }
     assert_eq!(done.trials, trials);
-    let names: Vec<&str> = done.rows.iter().map(|r| r.source.as_str()).collect();
+    let names: Vec<&str> = done.scored.iter().map(|(s, _)| s.as_str()).collect();
     assert_eq!(names, ["model/uniform", "model/prior"]);
-    for r in &done.rows {
-        assert_eq!((r.pairs, r.positives), (pairs, holders), "{}", r.source);
+    for (source, c) in &done.scored {
+        assert_eq!((c.pairs, c.positives), (pairs, holders), "{source}");
     }
+    let (uniform, prior) = (&done.scored[0].1, &done.scored[1].1);
     assert!(
-        done.rows[1].brier < done.rows[0].brier,
+        prior.brier < uniform.brier,
         "prior {} vs uniform {}",
-        done.rows[1].brier,
-        done.rows[0].brier
+        prior.brier,
+        uniform.brier
     );
-    assert!(done.rows[1].auroc.unwrap() > 0.6);
+    assert!(prior.auroc.unwrap() > 0.6);
+    // The CSV rows are the scores, flat, in the same order.
+    let rows = ferret_lab::calibrate::calibration_rows(&done.scored);
+    let json = serde_json::to_value(&rows).unwrap();
+    assert_eq!(json[1]["source"], "model/prior");
+    assert_eq!(json[1]["brier"], prior.brier);
+    assert!(json[1].get("bins").is_none());
     assert!(done.markdown.contains("| model/prior |"));
     assert!(done.fusion.is_none());
 }
@@ -156,10 +163,10 @@ fn a_written_run_reads_back_and_selection_over_it_replays_and_deploys() {
     assert_eq!(back.trials_csv, run.trials_csv);
     assert_eq!(back.run_json, run.run_json);
     assert_eq!(back.rows.len(), 18);
-    let settings = SelectionSettings {
+    let settings = ExperimentOptions {
         deployments: 12,
         trials_per_deployment: 5,
-        ..SelectionSettings::default()
+        ..ExperimentOptions::default()
     };
     let llm = offline_llm(dir.path());
     let done = select(
@@ -204,7 +211,7 @@ fn selection_names_the_option_it_cannot_use() {
     let dir = tempfile::tempdir().unwrap();
     let run = eval_run(dir.path(), 3);
     let llm = offline_llm(dir.path());
-    let err = |settings: SelectionSettings| {
+    let err = |settings: ExperimentOptions| {
         select(
             &run,
             dir.path(),
@@ -217,21 +224,21 @@ fn selection_names_the_option_it_cannot_use() {
         .map(|e| e.to_string())
         .unwrap_or_default()
     };
-    let base = SelectionSettings {
+    let base = ExperimentOptions {
         deployments: 2,
         trials_per_deployment: 2,
-        ..SelectionSettings::default()
+        ..ExperimentOptions::default()
     };
     assert!(
-        err(SelectionSettings {
+        err(ExperimentOptions {
             trials_per_deployment: 4,
             ..base
         })
         .starts_with("--trials-per-deployment 4: only 3 houses of")
     );
-    assert!(err(SelectionSettings { c: -1.0, ..base }).starts_with("--c -1"));
+    assert!(err(ExperimentOptions { c: -1.0, ..base }).starts_with("--c -1"));
     assert!(
-        err(SelectionSettings {
+        err(ExperimentOptions {
             deployments: 0,
             ..base
         })

@@ -21,7 +21,6 @@ use crate::settings::{self, Planning};
 /// `calibration.csv`), each source's reliability bins, and the fitted fusions when asked for.
 #[pyclass(name = "CalibrationResult", module = "ferret", frozen)]
 pub struct PyCalibration {
-    rows: Vec<ferret_lab::calibrate::CalibrationRow>,
     scored: Vec<(String, Calibration)>,
     fusion: Option<FusionFile>,
     trials: usize,
@@ -35,7 +34,7 @@ impl PyCalibration {
     /// `brier`, `log_loss`, `auroc`, `mean_p_pos`, `mean_p_neg`). Each access builds a new list.
     #[getter]
     fn rows(&self, py: Python<'_>) -> PyResult<Py<PyList>> {
-        convert::rows_to_py(py, &self.rows)
+        convert::rows_to_py(py, &ferret_lab::calibrate::calibration_rows(&self.scored))
     }
 
     /// Per source, its reliability bins: dicts with `lo`, `hi`, `count`, `mean_p` and
@@ -86,15 +85,15 @@ impl PyCalibration {
     }
 
     fn __len__(&self) -> usize {
-        self.rows.len()
+        self.scored.len()
     }
 
     fn __repr__(&self) -> String {
         format!(
             "CalibrationResult(sources=[{}], trials={}, errors={}, fusion={})",
-            self.rows
+            self.scored
                 .iter()
-                .map(|r| convert::quote(&r.source))
+                .map(|(source, _)| convert::quote(source))
                 .collect::<Vec<_>>()
                 .join(", "),
             self.trials,
@@ -204,7 +203,6 @@ pub fn calibrate(
         )?;
     }
     Ok(PyCalibration {
-        rows: done.rows,
         scored: done.scored,
         fusion: done.fusion,
         trials: done.trials,

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use ferret_lab::runs::{CELL_M, EvalRun, RunInfo, TrialRow};
+use ferret_lab::runs::{CELL_M, EvalRun, ReportView, RunInfo, TrialRow};
 use ferret_lab::{DEFAULT_STRATEGIES, TrialDraw};
 use ferret_llm::FailurePolicy;
 use ferret_plan::TrialsPerHouse;
@@ -29,6 +29,12 @@ pub struct PyEvaluation {
     strategies: Vec<String>,
     /// What `run.json` says of this evaluation, or why it cannot say it.
     run_info: Result<RunInfo, String>,
+    /// Where the houses came from, as `summary.md` names it.
+    source: String,
+    /// Indices of the houses evaluated.
+    houses: Vec<usize>,
+    /// Whether rows carry costs in grid cells.
+    cells: bool,
 }
 
 #[pymethods]
@@ -89,22 +95,45 @@ impl PyEvaluation {
         convert::data_frame(py, "Evaluation", self.rows(py)?, Some(self.columns(py)?))
     }
 
-    /// Writes the run files of `ferret eval` into `dir` (created if missing): `trials.csv`
-    /// with these rows and `run.json`, which names the houses' source, the prior, the planner,
-    /// grid and protocol settings, so that `ferret.select(dir)` and `ferret select --trials dir`
-    /// can replay the run. Possible when the houses come from one `load_houses` or
-    /// `generate_houses` call and the prior is the default or a file; raises `ConfigError`
-    /// saying why otherwise.
-    fn save(&self, py: Python<'_>, dir: PathBuf) -> PyResult<()> {
+    /// Writes the files `ferret eval` writes into `dir` (created if missing): `trials.csv`
+    /// with these rows, `summary.csv`, `paired.csv` (each strategy against the best, and against
+    /// each of `paired_against`), `summary.md`, and `run.json`, which names the houses' source,
+    /// the prior, the planner, grid and protocol settings, so that `ferret.select(dir)` and
+    /// `ferret select --trials dir` can replay the run. Possible when the houses come from one
+    /// `load_houses` or `generate_houses` call and the prior is the default or a file; raises
+    /// `ConfigError` saying why otherwise.
+    #[pyo3(signature = (dir, *, paired_against = None))]
+    fn save(
+        &self,
+        py: Python<'_>,
+        dir: PathBuf,
+        paired_against: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
         let info = self.run_info.clone().map_err(errors::config)?;
+        let against = match paired_against.filter(|s| !s.is_none()) {
+            Some(s) => convert::spec_list(s, "paired_against")?,
+            None => Vec::new(),
+        };
+        if let Some(s) = against.iter().find(|s| !self.strategies.contains(s)) {
+            return Err(errors::config(format!(
+                "paired_against: {s:?} is not one of the evaluation's strategies"
+            )));
+        }
         let rows = self.rows.clone();
         py.allow_threads(|| {
             std::fs::create_dir_all(&dir).map_err(|e| {
                 errors::FerretError::new_err(format!("creating {}: {e}", dir.display()))
             })?;
-            EvalRun::new(info, rows)
-                .and_then(|run| run.write(&dir))
-                .map_err(errors::lab)
+            let run = EvalRun::new(info, rows).map_err(errors::lab)?;
+            let report = run.report(&ReportView {
+                source: &self.source,
+                houses: &self.houses,
+                houses_run: self.houses_run,
+                trials_run: self.trials_run,
+                paired_against: &against,
+                cells: self.cells,
+            });
+            run.write_all(&dir, &report).map_err(errors::lab)
         })
     }
 
@@ -213,8 +242,13 @@ pub fn evaluate(
         protocol,
         &specs,
     );
+    let source = houses
+        .first()
+        .map(|h| h.get().origin.describe())
+        .unwrap_or_default();
     let llm = settings::llm(config, llm_cache, offline, keep_going, fusion);
     let scenes: Vec<Scene> = scenes_of(&houses).iter().map(|s| Scene::clone(s)).collect();
+    let house_indices: Vec<usize> = scenes.iter().map(|s| s.house.index).collect();
     let params = grid.params(&protocol);
     let feedback = progress::feedback(progress);
     let outcome = py.allow_threads(|| {
@@ -274,6 +308,9 @@ pub fn evaluate(
         trials_run: outcome.trials_run,
         strategies: specs,
         run_info,
+        source,
+        houses: house_indices,
+        cells,
     })
 }
 

@@ -4,9 +4,9 @@
 use std::path::PathBuf;
 
 use ferret_lab::EvalRun;
-use ferret_lab::selection::SelectionSettings;
+use ferret_lab::selection::validate;
 use ferret_plan::{DrawMode, ReplayMode};
-use ferret_select::{ExperimentResult, choice_rows, selection_rows};
+use ferret_select::{ExperimentOptions, ExperimentResult, choice_rows, selection_rows};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
@@ -172,15 +172,15 @@ pub fn select(
     fusion: Option<PathBuf>,
     progress: bool,
 ) -> PyResult<PySelection> {
-    let settings = SelectionSettings {
+    let options = ExperimentOptions {
         deployments,
         trials_per_deployment,
         c,
         seed,
         replay_untried_first,
+        ..ExperimentOptions::default()
     };
-    settings
-        .validate()
+    validate(&options)
         .map_err(|e| errors::lab_as_keywords(e, KEYWORDS))?;
     let replay = replay
         .map(|r| {
@@ -211,7 +211,7 @@ pub fn select(
                 &trials,
                 &protocol,
                 &llm,
-                &settings,
+                &options,
                 feedback.as_ref(),
             )
             .map_err(|e| errors::lab_as_keywords(e, KEYWORDS))

@@ -80,8 +80,25 @@ def cli_run(ferret_bin, tmp_path_factory):
 
 def test_a_saved_evaluation_is_the_run_ferret_eval_writes(houses, cli_run, tmp_path):
     ferret.evaluate(houses, STRATEGIES, seed=1).save(tmp_path / "run")
-    for name in ["trials.csv", "run.json"]:
+    for name in ["trials.csv", "run.json", "summary.csv", "paired.csv", "summary.md"]:
         assert (tmp_path / "run" / name).read_bytes() == (cli_run / name).read_bytes(), name
+
+
+def test_a_saved_evaluation_compares_what_paired_against_names(ferret_bin, houses, tmp_path):
+    cli = tmp_path / "cli"
+    run_cli(
+        ferret_bin, "eval", "--generate", str(HOUSES), "--house-seed", str(HOUSE_SEED),
+        "--strategies", STRATEGIES, "--seed", "1", "--cells",
+        "--paired-against", "model/uniform", "--out", str(cli),
+    )
+    evaluation = ferret.evaluate(houses, STRATEGIES, seed=1, cells=True)
+    evaluation.save(tmp_path / "py", paired_against="model/uniform")
+    for name in ["trials.csv", "summary.csv", "paired.csv", "summary.md"]:
+        assert (tmp_path / "py" / name).read_bytes() == (cli / name).read_bytes(), name
+    against = {r["reference"] for r in read_csv(tmp_path / "py" / "paired.csv")}
+    assert "model/uniform" in against, against
+    with pytest.raises(ferret.ConfigError, match="paired_against"):
+        evaluation.save(tmp_path / "bad", paired_against="no/such")
 
 
 def test_select_over_a_saved_evaluation_matches_ferret_select(houses, ferret_bin, cli_run, tmp_path):

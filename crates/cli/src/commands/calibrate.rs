@@ -98,7 +98,10 @@ pub fn run(args: Args) -> Result<ExitCode> {
     for e in &done.errors {
         eprintln!("error: {e}");
     }
-    crate::output::write_csv(&args.out.join("calibration.csv"), &done.rows)?;
+    crate::output::write_csv(
+        &args.out.join("calibration.csv"),
+        &ferret_lab::calibrate::calibration_rows(&done.scored),
+    )?;
     crate::output::write_bytes(&args.out.join("calibration.md"), &done.markdown)?;
     if !done.scored.is_empty() {
         for ext in ["png", "svg"] {

@@ -6,11 +6,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::Result;
-use ferret_lab::runs::{CELL_M, EvalRun, RunInfo, TrialRow};
-use ferret_lab::summary::{
-    SummaryRow, cells_markdown, paired_comparisons, paired_markdown, reference_means,
-    reference_means_markdown, summarize, summary_markdown,
-};
+use ferret_lab::runs::{CELL_M, EvalRun, ReportView, RunInfo, TrialRow};
 use ferret_lab::{SpecEvaluation, TrialDraw, evaluate_specs};
 use ferret_plan::{Protocol, Strategy, TrialOutcome, TrialSpec, TrialsPerHouse};
 use ferret_report::{
@@ -20,7 +16,6 @@ use ferret_world::{Distances, Scene};
 
 pub use crate::args::PlanningArgs;
 use crate::common::{Bars, GridArgs, HouseArgs, Mapped, ProtocolArgs};
-use crate::output::write_csv;
 pub use ferret_lab::DEFAULT_STRATEGIES;
 
 /// Run every strategy on one trial per house (same target and start for all strategies) and
@@ -153,37 +148,6 @@ pub fn run(args: Args) -> Result<ExitCode> {
             r.cost_cells = Some(r.cost_m / CELL_M);
         }
     }
-    let mut summary = summarize(&outcome.rows, &args.strategies);
-    if args.cells {
-        summary = summary.into_iter().map(SummaryRow::with_cells).collect();
-    }
-    write_csv(&args.out.join("summary.csv"), &summary)?;
-    let paired = paired_comparisons(
-        &outcome.rows,
-        &args.strategies,
-        &args.paired_against,
-        args.seed,
-    );
-    write_csv(&args.out.join("paired.csv"), &paired)?;
-    let md = summary_markdown(
-        &summary,
-        &loaded.source,
-        outcome.houses_run,
-        args.trials_per_house,
-        outcome.trials_run,
-    ) + &if args.cells {
-        cells_markdown(&summary)
-    } else {
-        String::new()
-    } + &if protocol.rng == ferret_plan::TrialRng::Python
-        && args.trials_per_house == TrialsPerHouse::One
-    {
-        let houses: Vec<usize> = loaded.scenes.iter().map(|s| s.house.index).collect();
-        reference_means_markdown(&reference_means(&outcome.rows, &args.strategies, &houses))
-    } else {
-        String::new()
-    } + &paired_markdown(&paired);
-    crate::output::write_bytes(&args.out.join("summary.md"), &md)?;
     let info = RunInfo {
         houses: args.houses.houses.clone(),
         range: args.houses.range.as_ref().map(ToString::to_string),
@@ -203,7 +167,18 @@ pub fn run(args: Args) -> Result<ExitCode> {
         strategies: args.strategies.clone(),
         trials_sha256: None,
     };
-    EvalRun::new(info, rows)?.write(&args.out)?;
+    let run = EvalRun::new(info, rows)?;
+    let houses: Vec<usize> = loaded.scenes.iter().map(|s| s.house.index).collect();
+    let report = run.report(&ReportView {
+        source: &loaded.source,
+        houses: &houses,
+        houses_run: outcome.houses_run,
+        trials_run: outcome.trials_run,
+        paired_against: &args.paired_against,
+        cells: args.cells,
+    });
+    run.write_all(&args.out, &report)?;
+    let md = report.markdown;
     let pictures = draw_pictures(&args, &loaded.scenes, &maps, &strategies, &outcome.rows)?;
     println!("{md}");
     super::llm_setup::write_token_report(&setup.service, &args.out)?;

@@ -5,7 +5,8 @@ use std::process::ExitCode;
 
 use anyhow::Result;
 use ferret_lab::EvalRun;
-use ferret_lab::selection::{SelectionSettings, select};
+use ferret_lab::selection::{select, validate};
+use ferret_select::ExperimentOptions;
 use ferret_report::{CurvePanel, draw_choice_shares, draw_curve_panels};
 use ferret_select::{Method, PAPER_KS, choice_rows, selection_rows};
 
@@ -56,15 +57,16 @@ pub struct Args {
 
 /// Runs `ferret select`.
 pub fn run(args: Args) -> Result<ExitCode> {
-    let settings = SelectionSettings {
+    let options = ExperimentOptions {
         deployments: args.deployments,
         trials_per_deployment: args.trials_per_deployment,
         c: args.c,
         seed: args.seed,
         replay_untried_first: args.replay_untried_first,
+        ..ExperimentOptions::default()
     };
     // Options are checked before the run is read, so a typo is reported first.
-    settings.validate()?;
+    validate(&options)?;
     let run = EvalRun::read(&args.trials)?;
     let protocol = args.protocol.resolve(run.info.protocol)?;
     let done = select(
@@ -72,7 +74,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         &args.trials,
         &protocol,
         &args.llm.settings(),
-        &settings,
+        &options,
         &Bars::default(),
     )?;
     if let Some(service) = &done.replay.service {

@@ -6,8 +6,8 @@ use std::path::Path;
 
 use ferret_plan::{DrawMode, Protocol, TrialRng, UntriedScore};
 use ferret_select::{
-    ExperimentOptions, ExperimentResult, MAX_EXPERIMENT_TRIALS, PAPER_KS,
-    run_experiment, selection_table_markdown, strategy_table_markdown,
+    ExperimentOptions, ExperimentResult, MAX_EXPERIMENT_TRIALS, PAPER_KS, run_experiment,
+    selection_table_markdown, strategy_table_markdown,
 };
 
 use crate::error::{LabError, Result};

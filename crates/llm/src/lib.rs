@@ -39,11 +39,11 @@ pub mod context;
 pub mod error;
 pub mod ledger;
 pub mod likelihood;
-pub mod llms;
 pub mod logprobs;
 pub mod message;
 pub mod prompts;
 pub mod question;
+pub mod service;
 pub mod strategy;
 
 pub use answer::{
@@ -67,7 +67,6 @@ pub use ledger::{
     AnswerCounts, AnswerOutcome, Ledger, LogprobUse, TokenCounts, TokenReport, UsageRow,
 };
 pub use likelihood::{Asked, LlmLikelihood, QuestionSet, Resolved, Shape, question_set};
-pub use llms::{Answer, FailurePolicy, Llm, LlmOptions, LlmService};
 pub use logprobs::{
     TokenLogprob, TopLogprob, expected_percentage, label_distribution, yes_probability,
 };
@@ -77,6 +76,7 @@ pub use prompts::{
     PromptLibrary,
 };
 pub use question::{Expect, Question, Request};
+pub use service::{Answer, FailurePolicy, Llm, LlmOptions, LlmService};
 pub use strategy::{
     FUSED, LLM_DIRECT, LLM_MODEL, LlmDirectPolicy, LlmDirectStrategy, LlmSpec, PrefetchProgress,
     PrefetchSummary, asks_probabilities, control_source, prefetch_probabilities, register_fused,

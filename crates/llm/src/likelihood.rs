@@ -36,13 +36,13 @@ use crate::config::ProbabilityFrom;
 use crate::context::{HouseContext, Listing, ListingContext, ProbabilityQuery, QueryPlan};
 use crate::error::{LlmError, Result};
 use crate::ledger::{AnswerOutcome, LogprobUse};
-use crate::llms::{Answer, Llm, LlmService};
 use crate::logprobs::{expected_percentage, label_distribution, yes_probability};
 use crate::message::ChatMessage;
 use crate::prompts::{PromptKind, PromptLibrary};
 use crate::question::{
     CHOICE_REMINDER, Expect, PROBABILITY_REMINDER, Question, YES_NO_REMINDER, batch_reminder,
 };
+use crate::service::{Answer, Llm, LlmService};
 
 /// The largest probability a P-CHOICE place gets: one letter's near certainty says which place
 /// is likeliest, not that the target cannot be anywhere else.

@@ -27,9 +27,9 @@ use crate::context::{DirectContext, HouseContext};
 use crate::error::{LlmError, Result};
 use crate::ledger::AnswerOutcome;
 use crate::likelihood::{Asked, LlmLikelihood};
-use crate::llms::{Llm, LlmService};
 use crate::message::ChatMessage;
 use crate::question::{Expect, LOCATION_REMINDER, Question};
+use crate::service::{Llm, LlmService};
 
 /// The strategy kind of the LLM-informed planner.
 pub const LLM_MODEL: &str = "llm+model";

@@ -180,8 +180,7 @@ pub fn select(
         replay_untried_first,
         ..ExperimentOptions::default()
     };
-    validate(&options)
-        .map_err(|e| errors::lab_as_keywords(e, KEYWORDS))?;
+    validate(&options).map_err(|e| errors::lab_as_keywords(e, KEYWORDS))?;
     let replay = replay
         .map(|r| {
             r.parse::<ReplayMode>()

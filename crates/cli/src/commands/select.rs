@@ -6,8 +6,8 @@ use std::process::ExitCode;
 use anyhow::Result;
 use ferret_lab::EvalRun;
 use ferret_lab::selection::{select, validate};
-use ferret_select::ExperimentOptions;
 use ferret_report::{CurvePanel, draw_choice_shares, draw_curve_panels};
+use ferret_select::ExperimentOptions;
 use ferret_select::{Method, PAPER_KS, choice_rows, selection_rows};
 
 use crate::common::Bars;

@@ -49,7 +49,7 @@ impl TrialDraw<'_> {
     }
 
     /// Every house's targets, for the houses that have a map: what LLM strategies will be asked
-    /// about (see [`prefetch`](crate::strategies::prefetch)).
+    /// about (see [`prefetch`]).
     pub fn targets<'s>(
         &self,
         scenes: &'s [Scene],

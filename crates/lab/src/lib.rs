@@ -3,11 +3,11 @@
 //! The experiment layer between the libraries ({world, plan, llm, select}) and ferret's
 //! faces (the command line, the HTTP service, Python). It owns what an experiment is made of:
 //! where houses come from and their maps ([`houses`]), strategy setup without a command line
-//! ([`strategies`]), evaluation of strategies on the same trials ([`evaluate`]), the run files
+//! ([`strategies`]), evaluation of strategies on the same trials ([`evaluate`](mod@evaluate)), the run files
 //! `trials.csv` and `run.json` ([`runs`]), summaries ([`summary`]) and the paired statistics behind them ([`paired`]),
 //! calibration of likelihood sources ([`calibrate`]), the replay table behind selection with its
 //! resumable cache ([`replay`]), selection over an evaluation run ([`selection`]), batch
-//! deployments in simulation with their house order ([`deploy`]), atomic
+//! deployments in simulation with their house order ([`deploy`](mod@deploy)), atomic
 //! output files ([`files`]), and how long work reports progress without printing
 //! ([`feedback`]). Faces parse their input, call these functions and print what they return.
 

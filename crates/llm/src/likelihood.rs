@@ -320,7 +320,7 @@ impl LlmLikelihood {
 
     /// Asks `question` (about `asked`), and asks again with a format reminder while the answer
     /// is unusable, up to the endpoint's `max_reasks`. Every exchange goes through the cache.
-    /// Nothing is counted as used here (see [`Self::record`]).
+    /// Nothing is counted as used here (see `record`).
     pub async fn resolve(&self, question: &Question, asked: &Asked) -> Result<Resolved> {
         let first = self.llm.ask(question, &self.strategy).await?;
         let mut resolved = Resolved {

@@ -24,6 +24,7 @@ type MapKey = [u64; 4];
 /// Immutable; a house in several lists is one object.
 #[pyclass(name = "House", module = "ferret", frozen)]
 pub struct House {
+    /// The house and what its containers hold.
     pub scene: Arc<Scene>,
     /// The container set a ProcTHOR file was read with; `None` for houses that name their
     /// containers themselves (generated houses, scene files).

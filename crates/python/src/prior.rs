@@ -15,6 +15,7 @@ use crate::houses::{House, scenes_of};
 /// an object type, learned from training houses. Immutable; shared without copying.
 #[pyclass(name = "Prior", module = "ferret", frozen)]
 pub struct PyPrior {
+    /// The prior, shared with every strategy built from it.
     pub inner: Arc<Prior>,
 }
 

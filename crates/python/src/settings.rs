@@ -20,8 +20,11 @@ use crate::prior::PyPrior;
 /// `--robot-radius` and `--wall-thickness`.
 #[derive(Clone, Copy, Debug)]
 pub struct Grid {
+    /// Cell size, metres.
     pub resolution: f64,
+    /// Robot radius by which obstacles are inflated, metres.
     pub robot_radius: f64,
+    /// Thickness given to walls, metres.
     pub wall_thickness: f64,
 }
 
@@ -140,7 +143,9 @@ pub fn default() -> Result<Arc<Prior>, ferret_lab::LabError> {
 /// `--prior`, `--max-containers`, `--exact-max` and `--search-cost`.
 #[derive(Clone)]
 pub struct Planning {
+    /// The planner settings, with the prior's file when one is named.
     pub settings: PlanningSettings,
+    /// The prior as given: the default, a file, or a `Prior` object.
     pub prior: PriorArg,
 }
 

@@ -29,7 +29,7 @@ pub struct ExperimentOptions {
     /// Seed; deployment `d` draws from a random stream derived from `(seed, d)` only.
     pub seed: u64,
     /// Make replay selection deploy every strategy once first, as UCB does (see
-    /// [`ReplaySelection::untried_first`]). Default `false`: the paper's replay selection.
+    /// [`ReplaySelection::untried_first`](crate::ReplaySelection::untried_first)). Default `false`: the paper's replay selection.
     #[serde(default)]
     pub replay_untried_first: bool,
     /// Draw each deployment's houses with replacement, as the paper's reference code does, so
@@ -38,7 +38,7 @@ pub struct ExperimentOptions {
     #[serde(default)]
     pub with_replacement: bool,
     /// Score untried strategies 0 in UCB, as the reference code does, instead of deploying
-    /// each once first (see [`Ucb::untried_score`]). Default `false`.
+    /// each once first (see [`Ucb::untried_score`](crate::Ucb::untried_score)). Default `false`.
     #[serde(default)]
     pub ucb_untried_zero: bool,
     /// Draw as the reference code's results script does: deployment `d` seeds numpy's legacy

@@ -4,9 +4,9 @@
 //! robot lives in, live deployments and step-by-step trials, and their storage in SQLite. It
 //! adds no planner, simulator or selector of its own: a trial step is `ferret_plan::Search`, the
 //! replay after a trial and the selector's update are `ferret_select::DeploymentLoop`, the same
-//! loop `ferret deploy` drives. The modules follow the API's resources ([`scenes`],
-//! [`deployments`], [`trials`]) around the data they share ([`model`]); [`store`] keeps it,
-//! [`replies`] makes writes safe to retry, [`grids`] builds and caches what planning needs, and
+//! loop `ferret deploy` drives. The modules follow the API's resources (`scenes`,
+//! `deployments`, `trials`) around the data they share ([`model`]); [`store`] keeps it,
+//! `replies` makes writes safe to retry, `grids` builds and caches what planning needs, and
 //! [`http`] only parses, calls and answers. Everything is
 //! written to the database before a reply leaves, and every in-memory state is rebuilt from the
 //! rows, so a killed server resumes where it stopped; replies to requests carrying a

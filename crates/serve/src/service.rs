@@ -1,8 +1,8 @@
 //! The service: one [`Service`] over a store and the candidate strategies, with the limits it
-//! enforces. What each route does lives with its resource ([`scenes`](crate::scenes),
-//! [`deployments`](crate::deployments), [`trials`](crate::trials)); every write goes through
-//! [`replies`](crate::replies) for request-id idempotency, and planning reads its grids from
-//! [`grids`](crate::grids). Every operation reads what it needs from the store, plans without
+//! enforces. What each route does lives with its resource (`scenes`,
+//! `deployments`, `trials`); every write goes through
+//! `replies` for request-id idempotency, and planning reads its grids from
+//! `grids`. Every operation reads what it needs from the store, plans without
 //! holding the database, then writes its rows and its reply in one transaction (checking nothing
 //! changed in between).
 //!

@@ -57,7 +57,7 @@ impl Place {
 
 /// Shortest travel distances (metres) between the start and every container and between
 /// containers. Every entry is a real distance: a house with an unreachable container never gets a
-/// `Distances` (see [`WorldError::Unreachable`](crate::WorldError::Unreachable)).
+/// `Distances` (see [`WorldError::Unreachable`]).
 #[derive(Clone, Debug)]
 pub struct Distances {
     containers: usize,

@@ -42,7 +42,7 @@ impl SoftGrid {
                 blocked,
             });
         }
-        (blocked.len() % width == 0).then(|| Self {
+        blocked.len().is_multiple_of(width).then(|| Self {
             width,
             height: blocked.len() / width,
             blocked,

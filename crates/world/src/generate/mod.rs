@@ -123,7 +123,7 @@ pub fn generate_house(seed: u64, index: usize, opts: &GeneratorOptions) -> RawHo
 /// Refuses a count of houses to generate past [`MAX_HOUSES`].
 ///
 /// # Errors
-/// [`WorldError::Range`](crate::WorldError::Range) naming the limit.
+/// [`WorldError::Range`] naming the limit.
 pub fn check_count(count: usize) -> Result<()> {
     if count > MAX_HOUSES {
         return Err(crate::WorldError::Range {
@@ -147,7 +147,7 @@ pub fn generate_houses(count: usize, seed: u64, opts: &GeneratorOptions) -> Vec<
 /// reader, located in the file [`GENERATED_FILE`].
 ///
 /// # Errors
-/// [`WorldError::Range`](crate::WorldError::Range) for more than [`MAX_HOUSES`]; those of the
+/// [`WorldError::Range`] for more than [`MAX_HOUSES`]; those of the
 /// reader.
 pub fn default_scenes(count: usize, seed: u64) -> Result<Vec<Scene>> {
     check_count(count)?;

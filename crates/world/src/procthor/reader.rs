@@ -84,7 +84,7 @@ pub struct LoadReport {
 /// [`WorldError::NoHouses`]; a line longer than [`MAX_LINE_BYTES`] is [`WorldError::Limit`]. An
 /// invalid house (including one with more than [`MAX_CONTAINERS`] containers) is returned as the
 /// error (the first in file order) unless `opts.skip_invalid` is set.
-pub fn load_scenes(path: &Path, opts: &LoadOptions) -> Result<LoadReport> {
+pub fn load_scenes(path: &Path, opts: &LoadOptions<'_>) -> Result<LoadReport> {
     let io_err = |source| WorldError::Io {
         file: path.to_path_buf(),
         source,

@@ -98,6 +98,7 @@ class FerretNode(Node):
         p("behavior_tree", "")
         p("goal_pose_topic", "/goal_pose")
         p("robot_pose_topic", "/amcl_pose")
+        p("plan_from_robot_pose", True)
         p("arrival_tolerance_m", 0.3)
         p("detections_topic", "detections")
         p("detection_timeout_s", 5.0)
@@ -148,6 +149,7 @@ class FerretNode(Node):
         self.map_event = threading.Event()
         self.busy = threading.Lock()
         self.robot_pose = None
+        self.robot_yaw_deg = 0.0
         self.pose_lock = threading.Lock()
         self.detections: List[Detection] = []
         self.detection_event = threading.Event()
@@ -216,7 +218,7 @@ class FerretNode(Node):
             )
         else:
             self.get_logger().info(
-                f"map {info.width}×{info.height} at {info.resolution} m matches scene "
+                f"map {info.width}×{info.height} at {info.resolution:.3g} m matches scene "
                 f"{self.planner.scene_name!r}"
             )
         self.map_event.set()
@@ -227,8 +229,11 @@ class FerretNode(Node):
         self.detection_event.set()
 
     def _on_pose(self, msg: PoseWithCovarianceStamped) -> None:
+        q = msg.pose.pose.orientation
+        yaw = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
         with self.pose_lock:
             self.robot_pose = (msg.pose.pose.position.x, msg.pose.pose.position.y)
+            self.robot_yaw_deg = math.degrees(yaw)
 
     # ----- the action -------------------------------------------------------------------------
 
@@ -260,11 +265,17 @@ class FerretNode(Node):
                 why = "; ".join(self.map_problems)
                 return self._end(handle, None, Status.REFUSED, f"map refused: {why}")
         started = time.perf_counter()
+        pose = None
+        if self.get_parameter("plan_from_robot_pose").value:
+            with self.pose_lock:
+                if self.robot_pose is not None:
+                    pose = (*self.robot_pose, self.robot_yaw_deg)
         try:
-            trial = self.planner.start(target, goal.scene, goal.deployment_id)
+            trial = self.planner.start(target, goal.scene, goal.deployment_id, pose)
         except PlannerError as e:
             return self._end(handle, None, Status.REFUSED, str(e))
-        log.info(f"searching for {target} with {trial.strategy}")
+        where = "the scene's start" if pose is None else f"({pose[0]:.2f}, {pose[1]:.2f})"
+        log.info(f"searching for {target} with {trial.strategy} from {where}")
         timing = GoalTiming(target)
         self.timings.append(timing)
         places = {p.id: p for p in self.planner.places(goal.scene)}

@@ -10,6 +10,9 @@ failure (selection learns nothing).
 """
 
 import json
+import math
+import os
+import tempfile
 import urllib.error
 import urllib.parse
 import urllib.request
@@ -18,6 +21,12 @@ from dataclasses import dataclass
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import ferret
+import yaml
+
+# A robot pose this close to the scene's start (metres) plans from the start itself.
+AT_START_M = 0.05
+# Scenes placed at other poses kept at once (each holds its grid and distances).
+PLACED_MAX = 32
 
 
 class PlannerError(Exception):
@@ -59,6 +68,8 @@ class InProcessPlanner:
             raise PlannerError(f"scene {scene}: holds {len(houses)} houses, the node needs one")
         self.house = houses[0]
         self.scene_name = self.house.name
+        self.scene_path = os.path.abspath(scene)
+        self._placed: Dict[Tuple[int, int, int], "ferret.House"] = {}
         strategies = [s.strip() for s in strategies if s.strip()]
         if not strategies:
             raise PlannerError("strategies: name at least one strategy")
@@ -103,16 +114,63 @@ class InProcessPlanner:
                 f"scene {scene!r}: this node plans in {self.scene_name!r} (its `scene` parameter)"
             )
 
-    def start(self, target: str, scene: str = "", deployment: int = 0) -> "InProcessTrial":
+    def house_at(self, pose: Optional[Tuple[float, float, float]]) -> "ferret.House":
+        """The scene with the robot starting at `pose` (x, y metres, yaw degrees), so that a
+        trial plans from where the robot is, as a `ferret serve` trial with a pose does: the
+        scene file with its start moved, loaded again (its grid and distances are built anew,
+        about a second for the example apartment; kept per pose)."""
+        if pose is None or math.dist(pose[:2], self.start_pose()) <= AT_START_M:
+            return self.house
+        key = (round(pose[0] / 0.01), round(pose[1] / 0.01), round(pose[2]))
+        if key in self._placed:
+            return self._placed[key]
+        try:
+            with open(self.scene_path, encoding="utf-8") as f:
+                doc = yaml.safe_load(f)
+        except (OSError, UnicodeDecodeError, yaml.YAMLError) as e:
+            raise PlannerError(f"scene {self.scene_path}: cannot be read again to move its start: {e}") from e
+        if not isinstance(doc, dict) or "ferret_scene" not in doc:
+            raise PlannerError(
+                f"scene {self.scene_path}: only ferret scene files can start from the robot's "
+                "pose (set plan_from_robot_pose to false to plan from the house's start)"
+            )
+        doc["start"] = [pose[0], pose[1], pose[2]]
+        m = doc.get("map")
+        if isinstance(m, dict) and m.get("ros"):
+            # The copy lives elsewhere: its map path must not be relative.
+            m["ros"] = os.path.join(os.path.dirname(self.scene_path), m["ros"])
+        fd, tmp = tempfile.mkstemp(suffix=".json", prefix="ferret-scene-")
+        try:
+            with os.fdopen(fd, "w") as f:
+                json.dump(doc, f)
+            house = ferret.load_houses(tmp)[0]
+            house.distances()  # the grid is built here, not in the first planning step
+        except ferret.FerretError as e:
+            raise PlannerError(f"the robot's pose ({pose[0]:.2f}, {pose[1]:.2f}): {e}") from e
+        finally:
+            os.unlink(tmp)
+        if len(self._placed) >= PLACED_MAX:
+            self._placed.pop(next(iter(self._placed)))
+        self._placed[key] = house
+        return house
+
+    def start(
+        self,
+        target: str,
+        scene: str = "",
+        deployment: int = 0,
+        pose: Optional[Tuple[float, float, float]] = None,
+    ) -> "InProcessTrial":
         self._check_scene(scene)
         if deployment:
             raise PlannerError(
                 f"deployment_id {deployment}: deployments by id are `ferret serve`'s; this node "
                 "runs its own (leave deployment_id 0)"
             )
+        house = self.house_at(pose)
         strategy = self.deployment.choose() if self.deployment else self.strategies[0]
         try:
-            search = ferret.Search(self.house, target, strategy, **self.options)
+            search = ferret.Search(house, target, strategy, **self.options)
         except ferret.FerretError as e:
             if self.deployment:
                 self.deployment.abandon()
@@ -246,7 +304,13 @@ class ServePlanner:
         start = self._scene(scene)["start"]
         return (start[0], start[1])
 
-    def start(self, target: str, scene: str = "", deployment: int = 0) -> "ServeTrial":
+    def start(
+        self,
+        target: str,
+        scene: str = "",
+        deployment: int = 0,
+        pose: Optional[Tuple[float, float, float]] = None,
+    ) -> "ServeTrial":
         scene = scene or self.scene_name
         places = {p.id: p for p in self.places(scene)}
         if deployment == 0:
@@ -268,9 +332,10 @@ class ServePlanner:
                     f"{t['target']} in {t['scene']}); finish that search first"
                 )
             return ServeTrial(self, t, places)
-        t = self.request(
-            "POST", f"/deployments/{deployment}/trials", {"scene": scene, "target": target}
-        )
+        body = {"scene": scene, "target": target}
+        if pose is not None:
+            body["pose"] = [pose[0], pose[1], pose[2]]
+        t = self.request("POST", f"/deployments/{deployment}/trials", body)
         return ServeTrial(self, t, places)
 
 

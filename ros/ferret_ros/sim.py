@@ -5,6 +5,7 @@ They stand in for the robot in the tests and for a first run without one (docs/r
 - `SimNav2` serves `navigate_to_pose`: it drives along ferret's own grid path from where the
   robot is to the goal's container access point at `speed` m/s, reporting feedback, and
   publishes the robot's pose on /amcl_pose. It can be told to abort goals or never finish them.
+  Like Nav2, it also drives to poses published on /goal_pose (without feedback).
 - `SimDetector` reports, on `detections`, what the scene's ground truth holds in the container
   whose access point the robot stands at; it can be muted.
 - `MapServer` latches an occupancy grid on /map (transient local), as Nav2's map_server does.
@@ -22,7 +23,7 @@ from typing import List, Optional
 import ferret
 import rclpy
 from builtin_interfaces.msg import Duration
-from geometry_msgs.msg import PoseWithCovarianceStamped
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from nav2_msgs.action import NavigateToPose
 from nav_msgs.msg import OccupancyGrid
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
@@ -66,6 +67,7 @@ class SimNav2(Node):
         self.lock = threading.Lock()
         self.pose_pub = self.create_publisher(PoseWithCovarianceStamped, "/amcl_pose", LATCHED)
         self.reset()
+        self.create_subscription(PoseStamped, "/goal_pose", self._on_goal_pose, 10)
         self.server = ActionServer(
             self,
             NavigateToPose,
@@ -79,11 +81,22 @@ class SimNav2(Node):
     def reset(self) -> None:
         """Back at the scene's start pose, as each trial of `ferret deploy` starts."""
         with self.lock:
-            # The simulator's own search only moves the robot along ferret's paths; its target
-            # is never looked for.
-            self.search = ferret.Search(self.house, "SimulatorNothing", "optimistic+greedy")
+            self.at = None  # the container whose access point the robot is at; None: the start
             self.position = (self.house.start[0], self.house.start[1])
         self._publish_pose(*self.position, self.house.start[2] if len(self.house.start) > 2 else 0)
+
+    def _route(self, c):
+        """ferret's grid path and its length from where the robot is to `c`'s access point."""
+        with self.lock:
+            at = self.at
+        if at == c.id:
+            return [tuple(c.access)], 0.0
+        # A search that has "searched" the container the robot is at stands where the robot
+        # stands; its target is never looked for.
+        s = ferret.Search(self.house, "SimulatorNothing", "optimistic+greedy")
+        if at is not None:
+            s.record(at, False, [])
+        return s.path_to(c), s.distance_to(c)
 
     def _failing(self) -> bool:
         return self.mode != "ok" and self.goals >= self.fail_from
@@ -103,6 +116,25 @@ class SimNav2(Node):
         m.pose.pose.orientation.w = math.cos(math.radians(yaw_deg) / 2)
         self.pose_pub.publish(m)
 
+    def _on_goal_pose(self, msg: PoseStamped) -> None:
+        self.goals += 1
+        c = container_at(self.house, msg.pose.position.x, msg.pose.position.y)
+        if c is None or self._failing():
+            return  # a goal it cannot or will not reach: the robot stays where it is
+        _, length = self._route(c)
+        if self.speed > 0:
+            time.sleep(length / self.speed)
+        self._arrive(c, length / self.speed if self.speed > 0 else 0.0)
+
+    def _arrive(self, c, drive_s: float) -> None:
+        with self.lock:
+            self.at = c.id
+            self.position = tuple(c.access)
+        self.drive_s.append(drive_s)
+        self.visited.append(c.id)
+        yaw = math.degrees(math.atan2(c.position[1] - c.access[1], c.position[0] - c.access[0]))
+        self._publish_pose(c.access[0], c.access[1], yaw)
+
     def _execute(self, handle):
         goal = handle.request.pose.pose
         result = NavigateToPose.Result()
@@ -113,14 +145,7 @@ class SimNav2(Node):
             handle.abort()
             return result
         failing = self._failing()
-        with self.lock:
-            if c.id in self.search.searched:
-                result.error_code = NavigateToPose.Result.UNKNOWN
-                result.error_msg = f"{c.id} visited twice since the last reset"
-                handle.abort()
-                return result
-            path = self.search.path_to(c)
-            length = self.search.distance_to(c)
+        path, length = self._route(c)
         drive = length / self.speed if self.speed > 0 else 0.0
         started = time.monotonic()
         fb = NavigateToPose.Feedback()
@@ -152,13 +177,7 @@ class SimNav2(Node):
                 time.sleep(0.02)
             handle.canceled()
             return result
-        with self.lock:
-            self.search.record(c, False, [])
-            self.position = tuple(c.access)
-        self.drive_s.append(time.monotonic() - started)
-        self.visited.append(c.id)
-        yaw = math.degrees(math.atan2(c.position[1] - c.access[1], c.position[0] - c.access[0]))
-        self._publish_pose(c.access[0], c.access[1], yaw)
+        self._arrive(c, time.monotonic() - started)
         handle.succeed()
         return result
 

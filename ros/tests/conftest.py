@@ -62,9 +62,9 @@ class Spinner:
 
     def close(self):
         self.executor.shutdown(timeout_sec=5)
+        self.thread.join(5)
         for n in self.nodes:
             n.destroy_node()
-        self.thread.join(5)
 
 
 @pytest.fixture(scope="session")
@@ -122,8 +122,8 @@ class Client:
 
     def close(self):
         self.executor.shutdown(timeout_sec=5)
-        self.node.destroy_node()
         self.thread.join(5)
+        self.node.destroy_node()
 
 
 class FerretProcess:

@@ -2,11 +2,15 @@
 
 import csv
 import dataclasses
+import json
 import math
 import os
+import socket
 import subprocess
 import time
+import urllib.request
 
+import ferret
 import pytest
 
 from conftest import SCENE, STRATEGIES
@@ -50,7 +54,8 @@ def test_finds_every_target_as_ferret_deploy(start_node, robot, house, tmp_path)
         orders = {(r["target"], r["strategy"]): r["searched"].split() for r in csv.DictReader(f)}
     assert [r["target"] for r in deployed] == targets
 
-    _, client = start_node("ferret_deploy", strategies=STRATEGIES, seed=0)
+    # Every trial from the scene's start, as `ferret deploy` runs them.
+    _, client = start_node("ferret_deploy", strategies=STRATEGIES, seed=0, plan_from_robot_pose=False)
     for row in deployed:
         nav.reset()
         before = len(nav.visited)
@@ -213,3 +218,129 @@ def test_unknown_scene_and_empty_target_are_refused(start_node, robot):
         time.sleep(0.01)
     r = res.result().result
     assert r.status == Status.REFUSED and "another-house" in r.message, r.message
+
+
+def deploy_rows(tmp_path, targets):
+    run_ferret(
+        "deploy", "--houses", str(SCENE), "--find", ",".join(targets),
+        "--strategies", ",".join(STRATEGIES), "--seed", "0", "--out", str(tmp_path / "deploy"),
+    )
+    with open(tmp_path / "deploy" / "deploy.csv") as f:
+        return list(csv.DictReader(f))
+
+
+def test_without_nav2_goals_go_to_goal_pose(start_node, robot, house, tmp_path):
+    """No NavigateToPose server: the node publishes /goal_pose and waits for /amcl_pose to get
+    there; the search is the same one."""
+    nav, _, _ = robot
+    targets = house.target_types()[:3]
+    rows = deploy_rows(tmp_path, targets)
+    _, client = start_node(
+        "ferret_goalpose", strategies=STRATEGIES, seed=0,
+        nav_action="no_nav2_here", nav_server_wait_s=0.2, nav_timeout_s=10.0,
+        plan_from_robot_pose=False,
+    )
+    for row in rows:
+        nav.reset()
+        before = len(nav.visited)
+        _, result, _ = client.send(row["target"])
+        assert result.status == Status.FOUND, result.message
+        assert (result.strategy, result.container) == (row["chosen"], row["found_container"])
+        assert math.isclose(result.cost_m, float(row["cost_m"]), abs_tol=1e-9)
+        assert nav.visited[before:] == list(result.searched_containers)
+
+
+def test_goal_pose_fallback_times_out_when_the_robot_never_arrives(start_node, robot):
+    nav, _, _ = robot
+    _, client = start_node(
+        "ferret_goalpose_stuck", strategies=["model/prior"],
+        nav_action="no_nav2_here", nav_server_wait_s=0.2, nav_timeout_s=1.0,
+    )
+    nav.reset()
+    nav.mode, nav.fail_from = "hang", nav.goals + 1  # it ignores /goal_pose too
+    try:
+        _, result, _ = client.send("Wallet")
+    finally:
+        nav.mode = "ok"
+    assert result.status == Status.NAVIGATION_FAILED
+    assert "did not reach" in result.message and "/goal_pose" in result.message, result.message
+
+
+@pytest.fixture
+def ferret_serve(tmp_path):
+    """`ferret serve` on a free loopback port, the apartment as its scene."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    log = open(tmp_path / "serve.log", "w")
+    proc = subprocess.Popen(
+        [ferret_bin(), "serve", "--scene", str(SCENE), "--strategies", ",".join(STRATEGIES),
+         "--listen", f"127.0.0.1:{port}", "--db", str(tmp_path / "serve.sqlite")],
+        stdout=log, stderr=subprocess.STDOUT, cwd=tmp_path,
+    )
+    url = f"http://127.0.0.1:{port}"
+    deadline = time.monotonic() + 30
+    while True:
+        try:
+            with urllib.request.urlopen(url + "/health", timeout=1) as r:
+                if json.loads(r.read()).get("status") == "ok":
+                    break
+        except OSError:
+            pass
+        assert proc.poll() is None and time.monotonic() < deadline, (tmp_path / "serve.log").read_text()
+        time.sleep(0.1)
+    yield url
+    proc.terminate()
+    proc.wait(10)
+    log.close()
+
+
+def test_serve_backend_makes_the_same_searches(start_node, robot, house, ferret_serve, tmp_path):
+    """Planning and selection in `ferret serve` (a fleet's server): the same trials as
+    `ferret deploy`, and the server holds them afterwards."""
+    nav, _, _ = robot
+    targets = house.target_types()[:4]
+    rows = deploy_rows(tmp_path, targets)
+    _, client = start_node(
+        "ferret_serve_backend", backend="serve", serve_url=ferret_serve, serve_scene="apartment",
+        strategies=STRATEGIES, seed=0, plan_from_robot_pose=False,
+    )
+    for row in rows:
+        nav.reset()
+        _, result, _ = client.send(row["target"])
+        assert result.status == Status.FOUND, result.message
+        assert (result.strategy, result.container) == (row["chosen"], row["found_container"])
+        assert math.isclose(result.cost_m, float(row["cost_m"]), abs_tol=1e-9)
+    with urllib.request.urlopen(ferret_serve + "/deployments/1", timeout=5) as r:
+        state = json.loads(r.read())
+    assert [t["target"] for t in state["trials"]] == targets
+    assert [t["strategy"] for t in state["trials"]] == [r["chosen"] for r in rows]
+
+
+def test_trials_start_where_the_robot_is(start_node, robot, house, ferret_serve):
+    """Without going back to the start between searches, each trial plans from the robot's
+    pose (/amcl_pose): the node's own placing of the scene at that pose gives the searches that
+    `ferret serve` gives for trials opened with the same pose."""
+    nav, _, _ = robot
+    targets = ["AlarmClock", "RemoteControl", "Apple", "Wallet"]
+    runs = {}
+    for backend in ("python", "serve"):
+        nav.reset()
+        params = dict(strategies=STRATEGIES, seed=0)
+        if backend == "serve":
+            params.update(backend="serve", serve_url=ferret_serve, serve_scene="apartment")
+        _, client = start_node(f"ferret_pose_{backend}", **params)
+        runs[backend] = []
+        for target in targets:
+            _, r, _ = client.send(target)
+            assert r.status == Status.FOUND, r.message
+            runs[backend].append((r.strategy, list(r.searched_containers), round(r.cost_m, 9)))
+    assert runs["python"] == runs["serve"]
+    # The second search set off from the AlarmClock's dresser, not from the start.
+    strategy, searched, cost = runs["python"][1]
+    from_start = ferret.Search(house, targets[1], strategy)
+    while (c := from_start.next_container()) is not None:
+        seen = house.contents(c)
+        from_start.record(c, targets[1] in seen, seen)
+    assert runs["python"][0][1][-1] == "dresser"
+    assert cost != round(from_start.cost, 9)

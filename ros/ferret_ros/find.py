@@ -37,7 +37,8 @@ def main(argv=None) -> int:
     client = ActionClient(node, SearchObject, f"/{args.node}/search_object")
     ex = SingleThreadedExecutor()
     ex.add_node(node)
-    threading.Thread(target=ex.spin, daemon=True).start()
+    spinner = threading.Thread(target=ex.spin, daemon=True)
+    spinner.start()
     found_all = True
     try:
         if not client.wait_for_server(timeout_sec=10):
@@ -87,7 +88,9 @@ def main(argv=None) -> int:
                 flush=True,
             )
     finally:
+        # The executor's thread ends before the node goes, so no callback meets a destroyed node.
         ex.shutdown(timeout_sec=2)
+        spinner.join(2)
         node.destroy_node()
         rclpy.try_shutdown()
     return 0 if found_all else 1

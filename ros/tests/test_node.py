@@ -344,3 +344,24 @@ def test_trials_start_where_the_robot_is(start_node, robot, house, ferret_serve)
         from_start.record(c, targets[1] in seen, seen)
     assert runs["python"][0][1][-1] == "dresser"
     assert cost != round(from_start.cost, 9)
+
+
+@pytest.mark.parametrize(
+    "params,message",
+    [
+        ({"scene": "no-such-scene.yaml"}, "no-such-scene.yaml: No such file or directory"),
+        ({"strategies": ["model/bogus"]}, "unknown strategy `model/bogus`"),
+        ({"backend": "ros1"}, "parameter `backend`: 'ros1'"),
+        ({"backend": "serve"}, "parameter `serve_url`"),
+    ],
+)
+def test_bad_parameters_stop_the_node_with_a_reason(ros, tmp_path, params, message):
+    from conftest import FerretProcess
+
+    params.setdefault("scene", str(SCENE))
+    p = FerretProcess(tmp_path, "ferret_badparams", params)
+    try:
+        assert p.proc.wait(30) == 1
+    finally:
+        p.stop()
+    assert "[FATAL]" in p.text() and message in p.text(), p.text()

@@ -250,6 +250,9 @@ class FerretNode(Node):
             return self._end(handle, None, Status.REFUSED, "another search is running")
         try:
             return self._search(handle)
+        except Exception as e:  # a bug must end the goal, not leave its client waiting
+            self.get_logger().error(f"search failed: {e!r}")
+            return self._end(handle, None, Status.PLANNER_ERROR, f"internal error: {e!r}")
         finally:
             self.busy.release()
 

@@ -94,7 +94,20 @@ class Client:
         self.thread = threading.Thread(target=self.executor.spin, daemon=True)
         self.thread.start()
 
-    def send(self, target, feedback=None, timeout=GOAL_TIMEOUT_S, cancel_after_feedback=False):
+    def try_goal(self, target, timeout=10.0):
+        """Whether the node accepts a goal (the goal is canceled if it was)."""
+        sent = self.action.send_goal_async(SearchObject.Goal(target_type=target))
+        deadline = time.monotonic() + timeout
+        while not sent.done():
+            assert time.monotonic() < deadline, f"goal for {target} not answered in {timeout} s"
+            time.sleep(0.005)
+        if sent.result().accepted:
+            sent.result().cancel_goal_async()
+        return sent.result().accepted
+
+    def send(
+        self, target, timeout=GOAL_TIMEOUT_S, cancel_after_feedback=False, while_running=None
+    ):
         """Sends a goal and waits (bounded) for its result: (status, result, feedback list)."""
         goal = SearchObject.Goal(target_type=target)
         fbs = []
@@ -111,8 +124,11 @@ class Client:
             time.sleep(0.005)
         handle = sent.result()
         assert handle.accepted, f"goal for {target} rejected"
+        if while_running is not None or cancel_after_feedback:
+            assert first_fb.wait(timeout), "no feedback from the running search"
+        if while_running is not None:
+            while_running()
         if cancel_after_feedback:
-            assert first_fb.wait(timeout), "no feedback before cancel"
             handle.cancel_goal_async()
         res = handle.get_result_async()
         while not res.done():

@@ -142,12 +142,16 @@ def test_cancel_stops_the_search(start_node, robot):
     nav.mode, nav.fail_from = "hang", nav.goals + 1
     try:
         t = time.monotonic()
-        status, result, _ = client.send("Wallet", cancel_after_feedback=True)
+        second = []
+        status, result, _ = client.send(
+            "Wallet", cancel_after_feedback=True, while_running=lambda: second.append(client.try_goal("Apple"))
+        )
         took = time.monotonic() - t
     finally:
         nav.mode = "ok"
     assert result.status == Status.CANCELED and status == 5  # GoalStatus.STATUS_CANCELED
     assert took < 8
+    assert second == [False]  # a second goal while one runs is rejected
     # The simulated Nav2 saw its goal canceled: the next search runs normally.
     nav.reset()
     _, result, _ = client.send("Wallet")

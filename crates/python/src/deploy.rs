@@ -46,11 +46,12 @@ fn select_error(e: impl std::fmt::Display) -> PyErr {
 impl PyDeployment {
     /// A deployment over `strategies` (at least two specs, as `ferret deploy --strategies`),
     /// choosing by `method` (`"replay"` or `"ucb"`) with exploration constant `c` (metres) and
-    /// tie-break `seed`. Planner, prior and LLM keywords are those of `ferret.Search`, and
-    /// searches given to `finish` must have been made with the same ones.
+    /// tie-break `seed` (`c`'s default is `ferret deploy`'s, 5 m). Planner, prior and LLM
+    /// keywords are those of `ferret.Search`, and searches given to `finish` must have been made
+    /// with the same ones.
     #[new]
     #[pyo3(signature = (
-        strategies, *, method = "replay", c = ferret_select::DEFAULT_C, seed = 0, prior = None,
+        strategies, *, method = "replay", c = 5.0, seed = 0, prior = None,
         config = None, llm_cache = None, offline = false, fusion = None, max_containers = 8,
         exact_max = 16, search_cost = 0.0, protocol = "ferret"
     ))]

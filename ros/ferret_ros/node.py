@@ -18,8 +18,9 @@ import os
 import sys
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass, field
-from typing import List, Optional
+from typing import Deque, List, Optional
 
 import rclpy
 from action_msgs.msg import GoalStatus
@@ -36,7 +37,7 @@ from ferret_interfaces.action import SearchObject
 from ferret_interfaces.msg import Belief, Detection
 
 from .maps import Grid, check_map, read_scene_map
-from .planners import InProcessPlanner, Place, PlannerError, ServePlanner
+from .planners import AT_START_M, InProcessPlanner, Place, PlannerError, ServePlanner
 
 Status = SearchObject.Result
 
@@ -154,7 +155,8 @@ class FerretNode(Node):
         self.detections: List[Detection] = []
         self.detection_event = threading.Event()
         self.detection_lock = threading.Lock()
-        self.timings: List[GoalTiming] = []
+        # Where the time of the last searches went (ros/bench_overhead.py reads it).
+        self.timings: Deque[GoalTiming] = deque(maxlen=1000)
 
         io = MutuallyExclusiveCallbackGroup()
         self.reentrant = ReentrantCallbackGroup()
@@ -263,7 +265,10 @@ class FerretNode(Node):
         if not target:
             return self._end(handle, None, Status.REFUSED, "target_type is empty")
         if self.get_parameter("require_map").value:
-            self._wait(handle, self.map_event, self.get_parameter("map_wait_s").value)
+            try:
+                self._wait(handle, self.map_event, self.get_parameter("map_wait_s").value)
+            except StepFailed as e:
+                return self._end(handle, None, e.status, "canceled while waiting for the map")
             if self.map_problems:
                 why = "; ".join(self.map_problems)
                 return self._end(handle, None, Status.REFUSED, f"map refused: {why}")
@@ -277,7 +282,14 @@ class FerretNode(Node):
             trial = self.planner.start(target, goal.scene, goal.deployment_id, pose)
         except PlannerError as e:
             return self._end(handle, None, Status.REFUSED, str(e))
-        where = "the scene's start" if pose is None else f"({pose[0]:.2f}, {pose[1]:.2f})"
+        where = "the scene's start"
+        if pose is not None:
+            try:
+                away = math.dist(pose[:2], self.planner.start_pose()) > AT_START_M
+            except PlannerError:
+                away = True
+            if away:
+                where = f"({pose[0]:.2f}, {pose[1]:.2f})"
         log.info(f"searching for {target} with {trial.strategy} from {where}")
         timing = GoalTiming(target)
         self.timings.append(timing)

@@ -4,7 +4,7 @@
 //! the conversion between Python and ferret's types — houses loaded or generated
 //! ([`houses`]), priors ([`prior`]), a search driven step by step ([`search`]), evaluations
 //! with `trials.csv`'s rows ([`evaluate`]), calibration of likelihood sources ([`calibrate`]),
-//! selection over an evaluation run ([`select`]), the keyword arguments they share
+//! selection over an evaluation run ([`select`]), a live deployment's selector ([`deploy`]), the keyword arguments they share
 //! ([`settings`]), progress on stderr ([`progress`]) and exception classes carrying the command
 //! line's messages ([`errors`]). It plans, simulates and evaluates nothing itself: every call
 //! goes to the crates `ferret eval` and `ferret serve` use.
@@ -13,6 +13,7 @@ use pyo3::prelude::*;
 
 pub mod calibrate;
 pub mod convert;
+pub mod deploy;
 pub mod errors;
 pub mod evaluate;
 pub mod houses;
@@ -35,6 +36,7 @@ fn _ferret(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<evaluate::PyEvaluation>()?;
     m.add_class::<calibrate::PyCalibration>()?;
     m.add_class::<select::PySelection>()?;
+    m.add_class::<deploy::PyDeployment>()?;
     m.add_function(wrap_pyfunction!(houses::load_houses, m)?)?;
     m.add_function(wrap_pyfunction!(houses::generate_houses, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate::evaluate, m)?)?;

@@ -59,6 +59,32 @@ impl PySearch {
         self.house.get().container(c, Some(&self.map.1))
     }
 
+    /// The strategy spec it runs.
+    pub(crate) fn strategy_spec(&self) -> &str {
+        &self.strategy
+    }
+
+    /// The object type searched for.
+    pub(crate) fn target_type(&self) -> &str {
+        &self.target
+    }
+
+    /// The index of the container where the target was found, if it was.
+    pub(crate) fn found_index(&self) -> Option<usize> {
+        self.found
+    }
+
+    /// Metres travelled so far.
+    pub(crate) fn travelled(&mut self) -> f64 {
+        self.live()
+            .with_dependent_mut(|_, s| s.belief().travelled())
+    }
+
+    /// The scene and the map the search plans on.
+    pub(crate) fn scene_and_map(&mut self) -> (Arc<Scene>, Map) {
+        (self.live().borrow_owner().scene.clone(), self.map.clone())
+    }
+
     fn ids(&self, cs: &[usize]) -> Vec<String> {
         let h = &self.house.get().scene.house;
         cs.iter()
@@ -238,8 +264,27 @@ impl PySearch {
     /// Metres travelled so far (the trial's cost once it ends).
     #[getter]
     fn cost(&mut self) -> f64 {
-        self.live()
-            .with_dependent_mut(|_, s| s.belief().travelled())
+        self.travelled()
+    }
+
+    /// The probability the strategy's likelihood source gives each container of the house (in
+    /// `house.containers` order) before any search, or `None` for strategies that plan without
+    /// one (`optimistic+greedy`). Releases the GIL (an LLM source may ask its endpoint).
+    fn likelihoods(&mut self, py: Python<'_>) -> PyResult<Option<Vec<f64>>> {
+        let live = self.live();
+        let owner = live.borrow_owner();
+        let Some(source) = owner.strategy.likelihood_source().cloned() else {
+            return Ok(None);
+        };
+        let (scene, target) = (owner.scene.clone(), owner.trial.target.clone());
+        py.allow_threads(|| {
+            errors::guarded("Search.likelihoods", || {
+                source
+                    .likelihoods(&scene.house, &target)
+                    .map(|ps| Some(ps.iter().map(|p| p.get()).collect()))
+                    .map_err(errors::plan)
+            })
+        })
     }
 
     /// Ids of the containers searched, in order.

@@ -3,7 +3,8 @@
 Load or generate houses, train or load a likelihood prior, evaluate search strategies on the
 same trials as ``ferret eval`` (identical costs for the same houses, strategies and seed), score
 likelihood sources with :func:`calibrate`, select among strategies over an evaluation run with
-:func:`select`, and drive a search step by step from a robot loop with :class:`Search`.
+:func:`select`, drive a search step by step from a robot loop with :class:`Search`, and choose
+among strategies between a robot's trials with :class:`Deployment`.
 
 The work is done by ferret's Rust crates; this package only converts arguments and results.
 Long calls (``evaluate``, ``load_houses``, ``Prior.train``, building maps) release the GIL.
@@ -14,6 +15,7 @@ from ._ferret import (
     CalibrationResult,
     ConfigError,
     Container,
+    Deployment,
     Evaluation,
     FerretError,
     House,
@@ -40,6 +42,7 @@ __all__ = [
     "CalibrationResult",
     "ConfigError",
     "Container",
+    "Deployment",
     "Evaluation",
     "FerretError",
     "House",

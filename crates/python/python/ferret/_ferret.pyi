@@ -214,6 +214,44 @@ class Search:
     @property
     def house(self) -> House:
         """The house searched."""
+    def likelihoods(self) -> Optional[List[float]]:
+        """The strategy's probability for each container (house order), or None without a source."""
+
+class Deployment:
+    """A live deployment: chooses each trial's strategy and learns from the robot's searches."""
+
+    def __init__(
+        self,
+        strategies: Sequence[str],
+        *,
+        method: str = "replay",
+        c: float = 5.0,
+        seed: int = 0,
+        prior: Union[Prior, _Path, None] = None,
+        config: Optional[_Path] = None,
+        llm_cache: Optional[_Path] = None,
+        offline: bool = False,
+        fusion: Optional[_Path] = None,
+        max_containers: int = 8,
+        exact_max: int = 16,
+        search_cost: float = 0.0,
+        protocol: _Protocol = "ferret",
+    ) -> None:
+        """A deployment over ``strategies`` (at least two), as ``ferret deploy`` runs it."""
+    def choose(self) -> str:
+        """The strategy spec of the trial in progress (chosen now if none is)."""
+    def finish(self, search: Search) -> Dict[str, float]:
+        """Ends the trial with a search that found its target; every candidate's cost on it."""
+    def abandon(self) -> None:
+        """Ends the trial in progress without a cost (the target was nowhere)."""
+    @property
+    def strategies(self) -> List[str]:
+        """The candidate strategies, in order."""
+    @property
+    def trials(self) -> int:
+        """Trials ended so far."""
+    def stats(self) -> List[Dict[str, Any]]:
+        """Per candidate: deployed, mean_cost_m, replay_mean_m, score."""
 
 class Evaluation:
     """The result of ``evaluate``: rows with the columns of ``trials.csv``."""

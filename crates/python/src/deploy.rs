@@ -1,0 +1,238 @@
+//! `ferret.Deployment`: the selector between a robot's trials, as `ferret deploy` and `ferret
+//! serve` run it — `ferret_select::LiveDeployment` (the selector with its seeded tie-breaks) and
+//! `ferret_plan::replay_costs` (every candidate replayed after a trial), fed by the
+//! `ferret.Search`es the robot drove.
+
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use ferret_llm::FailurePolicy;
+use ferret_plan::{Protocol, SearchProblem, Strategy, TrialSpec, hindsight_truth, replay_costs};
+use ferret_select::{LiveDeployment, Method};
+use ferret_world::ObjectType;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::errors;
+use crate::search::PySearch;
+use crate::settings;
+
+/// A deployment: `choose()` names the strategy of the next trial, the robot runs a
+/// `ferret.Search` with it, and `finish(search)` replays every candidate on that trial (the
+/// target only where it was found) and lets the selector learn; `abandon()` ends a trial that
+/// found nothing, which teaches nothing. The same strategies, method, `c` and `seed` on the same
+/// trials make `ferret deploy`'s choices and costs.
+#[pyclass(name = "Deployment", module = "ferret")]
+pub struct PyDeployment {
+    /// Behind a mutex because the selector is not `Sync`; every method holds it briefly.
+    live: Mutex<LiveDeployment>,
+    candidates: Vec<Arc<dyn Strategy>>,
+    names: Vec<String>,
+    protocol: Protocol,
+    trials: usize,
+}
+
+impl PyDeployment {
+    fn live(&self) -> MutexGuard<'_, LiveDeployment> {
+        self.live.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+fn select_error(e: impl std::fmt::Display) -> PyErr {
+    errors::config(e.to_string())
+}
+
+#[pymethods]
+impl PyDeployment {
+    /// A deployment over `strategies` (at least two specs, as `ferret deploy --strategies`),
+    /// choosing by `method` (`"replay"` or `"ucb"`) with exploration constant `c` (metres) and
+    /// tie-break `seed` (`c`'s default is `ferret deploy`'s, 5 m). Planner, prior and LLM
+    /// keywords are those of `ferret.Search`, and searches given to `finish` must have been made
+    /// with the same ones.
+    #[new]
+    #[pyo3(signature = (
+        strategies, *, method = "replay", c = 5.0, seed = 0, prior = None,
+        config = None, llm_cache = None, offline = false, fusion = None, max_containers = 8,
+        exact_max = 16, search_cost = 0.0, protocol = "ferret"
+    ))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        strategies: Vec<String>,
+        method: &str,
+        c: f64,
+        seed: u64,
+        prior: Option<&Bound<'_, PyAny>>,
+        config: Option<PathBuf>,
+        llm_cache: Option<PathBuf>,
+        offline: bool,
+        fusion: Option<PathBuf>,
+        max_containers: usize,
+        exact_max: usize,
+        search_cost: f64,
+        protocol: &str,
+    ) -> PyResult<Self> {
+        let names: Vec<String> = strategies.iter().map(|s| s.trim().to_string()).collect();
+        settings::check_distinct("strategies", &names)?;
+        if names.iter().any(|s| s == ferret_select::ORACLE) {
+            return Err(errors::StrategyError::new_err(
+                "oracle: needs the ground truth and is never a candidate of a deployment",
+            ));
+        }
+        if names.len() < 2 {
+            return Err(errors::config(format!(
+                "strategies: a deployment needs at least two candidate strategies, got {}",
+                names.len()
+            )));
+        }
+        if !(c.is_finite() && c >= 0.0) {
+            return Err(errors::config(format!(
+                "c={c}: must be a finite number ≥ 0 m"
+            )));
+        }
+        let method: Method = method
+            .parse()
+            .map_err(|e| errors::config(format!("method: {e}")))?;
+        let protocol = settings::protocol(protocol)?;
+        let planning = settings::Planning::new(prior, max_containers, exact_max, search_cost)?;
+        let llm = settings::llm(config, llm_cache, offline, false, fusion);
+        let candidates = py.allow_threads(|| {
+            errors::guarded("Deployment", || {
+                let setup = settings::registry(&planning, &llm, &names, FailurePolicy::StopForRun)
+                    .map_err(errors::lab)?;
+                names
+                    .iter()
+                    .map(|s| setup.registry.build(s).map_err(errors::plan))
+                    .collect::<PyResult<Vec<_>>>()
+            })
+        })?;
+        let live = LiveDeployment::new(method, candidates.len(), c, seed).map_err(select_error)?;
+        Ok(Self {
+            live: Mutex::new(live),
+            candidates,
+            names,
+            protocol,
+            trials: 0,
+        })
+    }
+
+    /// The strategy spec of the trial in progress (chosen now if none is): the same until that
+    /// trial is finished or abandoned.
+    fn choose(&mut self) -> String {
+        let i = self.live().choose();
+        self.names[i].clone()
+    }
+
+    /// Ends the trial in progress with the robot's `search` (a `ferret.Search` of the chosen
+    /// strategy that found the target): replays every candidate on it and learns. Returns each
+    /// candidate's cost on this trial, metres (the chosen one's is the search's own cost).
+    fn finish<'py>(
+        &mut self,
+        py: Python<'py>,
+        search: &Bound<'py, PySearch>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let chosen = self
+            .live()
+            .pending()
+            .ok_or_else(|| errors::search("no trial in progress: call choose() first"))?;
+        let mut s = search.borrow_mut();
+        if s.strategy_spec() != self.names[chosen] {
+            return Err(errors::search(format!(
+                "the search ran {:?} but this trial's strategy is {:?}",
+                s.strategy_spec(),
+                self.names[chosen]
+            )));
+        }
+        let Some(found) = s.found_index() else {
+            return Err(errors::search(
+                "the search has not found its target: finish() needs a found target, abandon() ends a trial without one",
+            ));
+        };
+        let cost = s.travelled();
+        let (scene, map) = s.scene_and_map();
+        let target = ObjectType::new(s.target_type());
+        drop(s);
+        let (candidates, settings) = (
+            &self.candidates,
+            (self.protocol.replay, self.protocol.travel_cost),
+        );
+        let replays = py.allow_threads(|| {
+            errors::guarded("Deployment.finish", || {
+                let trial = TrialSpec {
+                    target: target.clone(),
+                    revealed: Vec::new(),
+                };
+                let problem = SearchProblem::new(&scene.house, &map.1, &trial);
+                let truth = hindsight_truth(&scene.house, &target, found).map_err(errors::plan)?;
+                replay_costs(
+                    settings,
+                    candidates,
+                    &problem,
+                    &truth,
+                    found,
+                    (chosen, cost),
+                )
+                .map_err(errors::plan)
+            })
+        })?;
+        self.live().finish(cost, &replays).map_err(select_error)?;
+        self.trials += 1;
+        let out = PyDict::new(py);
+        for (name, r) in self.names.iter().zip(&replays) {
+            out.set_item(name, *r)?;
+        }
+        Ok(out)
+    }
+
+    /// Ends the trial in progress without a cost (the target was nowhere): selection learns
+    /// nothing from it.
+    fn abandon(&mut self) -> PyResult<()> {
+        if self.live().pending().is_none() {
+            return Err(errors::search("no trial in progress: call choose() first"));
+        }
+        self.live().abandon().map_err(select_error)?;
+        self.trials += 1;
+        Ok(())
+    }
+
+    /// The candidate strategies, in order.
+    #[getter]
+    fn strategies(&self) -> Vec<String> {
+        self.names.clone()
+    }
+
+    /// Trials ended so far (finished or abandoned).
+    #[getter]
+    fn trials(&self) -> usize {
+        self.trials
+    }
+
+    /// Per candidate: `strategy`, `deployed` (trials it ran), `mean_cost_m` (over them, or
+    /// None), `replay_mean_m` (its real or replayed cost over all finished trials, or None) and
+    /// `score` (the selection score of the next trial; lower is chosen, -inf: must be tried).
+    fn stats<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        self.live()
+            .stats()
+            .into_iter()
+            .zip(&self.names)
+            .map(|(s, name)| {
+                let d = PyDict::new(py);
+                d.set_item("strategy", name)?;
+                d.set_item("deployed", s.deployed)?;
+                d.set_item("mean_cost_m", s.mean_cost)?;
+                d.set_item("replay_mean_m", s.replay_mean)?;
+                d.set_item("score", s.score)?;
+                Ok(d)
+            })
+            .collect()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Deployment(strategies={:?}, method={:?}, trials={})",
+            self.names,
+            self.live().method().name(),
+            self.trials
+        )
+    }
+}

@@ -1,0 +1,588 @@
+"""The ferret ROS 2 node: find an object with ferret's planner, Nav2 and a detector.
+
+    python3 -m ferret_ros.node --ros-args -p scene:=examples/apartment/scene.yaml \\
+        -p strategies:="['model/prior', 'model/uniform', 'optimistic+greedy']"
+
+Serves the action `~/search_object` (ferret_interfaces/action/SearchObject). For each step it
+asks ferret for the next container, sends a nav2_msgs/NavigateToPose goal to the container's
+access point (or, with no Nav2 action server, a PoseStamped on /goal_pose and waits for the
+robot's pose to get there), waits for a ferret_interfaces/Detection from the detector for a
+bounded time, records what was seen and repeats until the target is found or every container
+was searched. Every wait has a timeout; a failed or timed-out step ends the goal with a status
+and a sentence saying why. The belief (per-container probability) is published on `~/belief`.
+See docs/ros2.md for the parameters and topics.
+"""
+
+import math
+import os
+import sys
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Deque, List, Optional
+
+import rclpy
+from action_msgs.msg import GoalStatus
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
+from nav2_msgs.action import NavigateToPose
+from nav_msgs.msg import OccupancyGrid
+from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+from ferret_interfaces.action import SearchObject
+from ferret_interfaces.msg import Belief, Detection
+
+from .maps import Grid, check_map, read_scene_map
+from .planners import AT_START_M, InProcessPlanner, Place, PlannerError, ServePlanner
+
+Status = SearchObject.Result
+
+# How often the waits look at cancellation and shutdown.
+POLL_S = 0.02
+
+
+class StepFailed(Exception):
+    """A step could not be completed; `status` is the result's status constant."""
+
+    def __init__(self, status: int, message: str):
+        super().__init__(message)
+        self.status = status
+
+
+@dataclass
+class StepTiming:
+    """Where one step's wall time went, seconds."""
+
+    container: str
+    plan_s: float = 0.0  # ferret: next container, recording, belief
+    nav_s: float = 0.0  # goal sent until the navigation result arrived
+    detect_s: float = 0.0  # arrival until the detection arrived
+    total_s: float = 0.0
+
+
+@dataclass
+class GoalTiming:
+    target: str
+    steps: List[StepTiming] = field(default_factory=list)
+    total_s: float = 0.0
+
+
+def yaw_to_quaternion(yaw: float):
+    return (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+
+
+class FerretNode(Node):
+    def __init__(self, name: str = "ferret", **kwargs):
+        super().__init__(name, **kwargs)
+        p = self.declare_parameter
+        p("backend", "python")
+        p("scene", "")
+        p("strategies", ["model/prior"])
+        p("selection_method", "replay")
+        p("selection_c", 5.0)
+        p("seed", 0)
+        p("prior", "")
+        p("llm_config", "")
+        p("serve_url", "")
+        p("serve_scene", "")
+        p("map_topic", "/map")
+        p("map_frame", "map")
+        p("require_map", True)
+        p("map_wait_s", 10.0)
+        p("nav_action", "navigate_to_pose")
+        p("nav_server_wait_s", 2.0)
+        p("nav_timeout_s", 300.0)
+        p("behavior_tree", "")
+        p("goal_pose_topic", "/goal_pose")
+        p("robot_pose_topic", "/amcl_pose")
+        p("plan_from_robot_pose", True)
+        p("arrival_tolerance_m", 0.3)
+        p("detections_topic", "detections")
+        p("detection_timeout_s", 5.0)
+        p("detection_window_s", 0.0)
+        g = lambda n: self.get_parameter(n).value  # noqa: E731
+
+        self.frame = g("map_frame")
+        strategies = list(g("strategies"))
+        backend = g("backend")
+        try:
+            if backend == "python":
+                if not g("scene"):
+                    raise PlannerError("parameter `scene`: the scene file to plan in is required")
+                self.planner = InProcessPlanner(
+                    g("scene"),
+                    strategies,
+                    method=g("selection_method"),
+                    c=float(g("selection_c")),
+                    seed=int(g("seed")),
+                    prior=g("prior") or None,
+                    config=g("llm_config") or None,
+                )
+            elif backend == "serve":
+                if not g("serve_url"):
+                    raise PlannerError("parameter `serve_url`: the ferret serve URL is required")
+                self.planner = ServePlanner(
+                    g("serve_url"),
+                    g("serve_scene"),
+                    strategies,
+                    method=g("selection_method"),
+                    c=float(g("selection_c")),
+                    seed=int(g("seed")),
+                    token=os.environ.get("FERRET_SERVE_TOKEN"),
+                )
+            else:
+                raise PlannerError(f"parameter `backend`: {backend!r}, expected python or serve")
+        except PlannerError as e:
+            self.get_logger().fatal(str(e))
+            raise
+        # The scene's own map (map: {ros: ...} in the scene file), when there is one, is what a
+        # received /map is compared with cell by cell.
+        self.reference_map: Optional[Grid] = None
+        if g("scene"):
+            self.reference_map = read_scene_map(g("scene"))
+
+        self.map: Optional[Grid] = None
+        self.map_problems: List[str] = ["no map received yet on " + g("map_topic")]
+        self.map_event = threading.Event()
+        self.busy = threading.Lock()
+        self.robot_pose = None
+        self.robot_yaw_deg = 0.0
+        self.pose_lock = threading.Lock()
+        self.detections: List[Detection] = []
+        self.detection_event = threading.Event()
+        self.detection_lock = threading.Lock()
+        # Where the time of the last searches went (ros/bench_overhead.py reads it).
+        self.timings: Deque[GoalTiming] = deque(maxlen=1000)
+
+        io = MutuallyExclusiveCallbackGroup()
+        self.reentrant = ReentrantCallbackGroup()
+        latched = QoSProfile(
+            depth=1,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL,
+            reliability=ReliabilityPolicy.RELIABLE,
+        )
+        self.create_subscription(OccupancyGrid, g("map_topic"), self._on_map, latched, callback_group=io)
+        self.create_subscription(Detection, g("detections_topic"), self._on_detection, 10, callback_group=io)
+        self.create_subscription(
+            PoseWithCovarianceStamped, g("robot_pose_topic"), self._on_pose, 10, callback_group=io
+        )
+        self.belief_pub = self.create_publisher(Belief, "~/belief", latched)
+        self.goal_pose_pub = self.create_publisher(PoseStamped, g("goal_pose_topic"), 10)
+        self.nav = ActionClient(self, NavigateToPose, g("nav_action"), callback_group=self.reentrant)
+        self.server = ActionServer(
+            self,
+            SearchObject,
+            "~/search_object",
+            execute_callback=self._execute,
+            goal_callback=self._on_goal,
+            cancel_callback=lambda _: CancelResponse.ACCEPT,
+            callback_group=self.reentrant,
+        )
+        self.get_logger().info(
+            f"ready: {self.planner.kind} planner, scene {self.planner.scene_name!r}, "
+            f"strategies {strategies}"
+        )
+
+    # ----- inputs ---------------------------------------------------------------------------
+
+    def _on_map(self, msg: OccupancyGrid) -> None:
+        info = msg.info
+        q = info.origin.orientation
+        yaw = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+        grid = Grid(
+            info.resolution,
+            info.width,
+            info.height,
+            (info.origin.position.x, info.origin.position.y),
+            msg.data,
+            msg.header.frame_id,
+            yaw,
+        )
+        try:
+            places = [(f"{p.id} access point", p.access[0], p.access[1]) for p in self.planner.places()]
+            sx, sy = self.planner.start_pose()
+            places.append(("start", sx, sy))
+        except PlannerError as e:
+            places = []
+            self.get_logger().warning(f"map not checked against the scene's places: {e}")
+        problems = check_map(grid, places, self.frame, self.reference_map)
+        self.map = grid
+        self.map_problems = problems
+        if problems:
+            self.get_logger().error(
+                f"refusing the map on {self.get_parameter('map_topic').value} "
+                f"({info.width}×{info.height}): it does not match scene "
+                f"{self.planner.scene_name!r}: " + "; ".join(problems)
+            )
+        else:
+            self.get_logger().info(
+                f"map {info.width}×{info.height} at {info.resolution:.3g} m matches scene "
+                f"{self.planner.scene_name!r}"
+            )
+        self.map_event.set()
+
+    def _on_detection(self, msg: Detection) -> None:
+        with self.detection_lock:
+            self.detections.append((time.monotonic(), msg))
+        self.detection_event.set()
+
+    def _on_pose(self, msg: PoseWithCovarianceStamped) -> None:
+        q = msg.pose.pose.orientation
+        yaw = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+        with self.pose_lock:
+            self.robot_pose = (msg.pose.pose.position.x, msg.pose.pose.position.y)
+            self.robot_yaw_deg = math.degrees(yaw)
+
+    # ----- the action -------------------------------------------------------------------------
+
+    def _on_goal(self, goal) -> GoalResponse:
+        if self.busy.locked():
+            self.get_logger().warning(
+                f"rejecting a search for {goal.target_type!r}: a search is running (cancel it first)"
+            )
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
+    def _execute(self, handle) -> SearchObject.Result:
+        if not self.busy.acquire(blocking=False):
+            return self._end(handle, None, Status.REFUSED, "another search is running")
+        try:
+            return self._search(handle)
+        except Exception as e:  # a bug must end the goal, not leave its client waiting
+            self.get_logger().error(f"search failed: {e!r}")
+            return self._end(handle, None, Status.PLANNER_ERROR, f"internal error: {e!r}")
+        finally:
+            self.busy.release()
+
+    def _search(self, handle) -> SearchObject.Result:
+        goal = handle.request
+        target = goal.target_type.strip()
+        log = self.get_logger()
+        if not target:
+            return self._end(handle, None, Status.REFUSED, "target_type is empty")
+        if self.get_parameter("require_map").value:
+            try:
+                self._wait(handle, self.map_event, self.get_parameter("map_wait_s").value)
+            except StepFailed as e:
+                return self._end(handle, None, e.status, "canceled while waiting for the map")
+            if self.map_problems:
+                why = "; ".join(self.map_problems)
+                return self._end(handle, None, Status.REFUSED, f"map refused: {why}")
+        started = time.perf_counter()
+        pose = None
+        if self.get_parameter("plan_from_robot_pose").value:
+            with self.pose_lock:
+                if self.robot_pose is not None:
+                    pose = (*self.robot_pose, self.robot_yaw_deg)
+        try:
+            trial = self.planner.start(target, goal.scene, goal.deployment_id, pose)
+        except PlannerError as e:
+            return self._end(handle, None, Status.REFUSED, str(e))
+        where = "the scene's start"
+        if pose is not None:
+            try:
+                away = math.dist(pose[:2], self.planner.start_pose()) > AT_START_M
+            except PlannerError:
+                away = True
+            if away:
+                where = f"({pose[0]:.2f}, {pose[1]:.2f})"
+        log.info(f"searching for {target} with {trial.strategy} from {where}")
+        timing = GoalTiming(target)
+        self.timings.append(timing)
+        places = {p.id: p for p in self.planner.places(goal.scene)}
+        try:
+            likelihoods = trial.likelihoods()
+        except Exception as e:  # a failing LLM source must not stop the search itself
+            log.warning(f"no belief to publish: {e}")
+            likelihoods = None
+        found_at = None
+        try:
+            while True:
+                t0 = time.perf_counter()
+                step = trial.next()
+                if step is None:
+                    break
+                timing.steps.append(StepTiming(step.id))
+                st = timing.steps[-1]
+                self._publish_belief(trial, likelihoods, target, places, None)
+                fb = SearchObject.Feedback()
+                fb.next_container = step.id
+                fb.next_container_type = step.type
+                fb.next_room = step.room
+                fb.next_pose = self._pose_for(step)
+                fb.travelled_m = trial.cost
+                fb.searched = len(trial.searched)
+                handle.publish_feedback(fb)
+                st.plan_s += time.perf_counter() - t0
+
+                t1 = time.perf_counter()
+                with self.detection_lock:
+                    # Detections from the drive there that name this container count; the
+                    # rest is stale.
+                    self.detections.clear()
+                    self.detection_event.clear()
+                self._navigate(handle, step, fb.next_pose)
+                st.nav_s = time.perf_counter() - t1
+                t2 = time.perf_counter()
+                objects = self._detect(handle, step)
+                st.detect_s = time.perf_counter() - t2
+
+                t3 = time.perf_counter()
+                found = target in objects
+                trial.record(step.id, found, objects)
+                log.info(
+                    f"searched {step.id} ({step.type}, {step.room}): "
+                    f"{'found ' + target if found else 'no ' + target}; saw {objects or 'nothing'}"
+                )
+                st.plan_s += time.perf_counter() - t3
+                st.total_s = time.perf_counter() - t0
+                if found:
+                    found_at = step.id
+                    break
+        except StepFailed as e:
+            trial.abandon()
+            self._publish_belief(trial, likelihoods, target, places, found_at)
+            timing.total_s = time.perf_counter() - started
+            return self._end(handle, trial, e.status, str(e))
+        except PlannerError as e:
+            trial.abandon()
+            timing.total_s = time.perf_counter() - started
+            return self._end(handle, trial, Status.PLANNER_ERROR, str(e))
+        try:
+            replays = trial.finish()
+        except Exception as e:  # selection failed to learn; the search itself is complete
+            log.error(f"selection could not learn from this trial: {e}")
+            replays = None
+        self._publish_belief(trial, likelihoods, target, places, found_at)
+        timing.total_s = time.perf_counter() - started
+        if found_at is not None:
+            msg = (
+                f"found {target} in {found_at} after {len(trial.searched)} containers, "
+                f"{trial.cost:.2f} m ({trial.strategy})"
+            )
+            if replays:
+                msg += "; replays " + ", ".join(f"{k} {v:.2f} m" for k, v in replays.items())
+            return self._end(handle, trial, Status.FOUND, msg, found_at)
+        return self._end(
+            handle,
+            trial,
+            Status.EXHAUSTED,
+            f"{target} not found in any of the {len(trial.searched)} containers",
+        )
+
+    def _end(self, handle, trial, status, message, container=None) -> SearchObject.Result:
+        r = SearchObject.Result()
+        r.status = status
+        r.found = status == Status.FOUND
+        r.container = container or ""
+        r.message = message
+        if trial is not None:
+            r.cost_m = float(trial.cost)
+            r.searched_containers = list(trial.searched)
+            r.strategy = trial.strategy
+        log = self.get_logger()
+        if status == Status.FOUND:
+            log.info(message)
+            handle.succeed()
+        elif status == Status.CANCELED:
+            log.info(message)
+            handle.canceled()
+        else:
+            log.error(message)
+            handle.abort()
+        return r
+
+    # ----- waits ------------------------------------------------------------------------------
+
+    def _wait(self, handle, event: threading.Event, timeout_s: float) -> bool:
+        """Waits for `event` up to `timeout_s`; raises StepFailed(CANCELED) on a cancel."""
+        deadline = time.monotonic() + timeout_s
+        while not event.wait(POLL_S):
+            if handle.is_cancel_requested:
+                raise StepFailed(Status.CANCELED, "canceled")
+            if time.monotonic() >= deadline or not rclpy.ok(context=self.context):
+                return False
+        return True
+
+    def _pose_for(self, place: Place) -> PoseStamped:
+        ps = PoseStamped()
+        ps.header.frame_id = self.frame
+        ps.header.stamp = self.get_clock().now().to_msg()
+        ps.pose.position.x, ps.pose.position.y = place.access
+        # Face the container from its access point.
+        yaw = math.atan2(place.position[1] - place.access[1], place.position[0] - place.access[0])
+        q = yaw_to_quaternion(yaw)
+        o = ps.pose.orientation
+        o.x, o.y, o.z, o.w = q
+        return ps
+
+    def _navigate(self, handle, place: Place, pose: PoseStamped) -> None:
+        timeout = float(self.get_parameter("nav_timeout_s").value)
+        if self.nav.server_is_ready() or self.nav.wait_for_server(
+            timeout_sec=float(self.get_parameter("nav_server_wait_s").value)
+        ):
+            self._navigate_nav2(handle, place, pose, timeout)
+        else:
+            self._navigate_goal_pose(handle, place, pose, timeout)
+
+    def _navigate_nav2(self, handle, place, pose, timeout) -> None:
+        goal = NavigateToPose.Goal()
+        goal.pose = pose
+        goal.behavior_tree = self.get_parameter("behavior_tree").value
+        sent = threading.Event()
+        future = self.nav.send_goal_async(goal)
+        future.add_done_callback(lambda _: sent.set())
+        try:
+            ok = self._wait(handle, sent, min(timeout, 10.0))
+        except StepFailed:
+            future.add_done_callback(lambda f: f.result() and f.result().cancel_goal_async())
+            raise
+        if not ok:
+            raise StepFailed(
+                Status.NAVIGATION_FAILED, f"Nav2 did not answer the goal for {place.id} within 10 s"
+            )
+        nav_handle = future.result()
+        if nav_handle is None or not nav_handle.accepted:
+            raise StepFailed(Status.NAVIGATION_FAILED, f"Nav2 rejected the goal for {place.id}")
+        done = threading.Event()
+        result_future = nav_handle.get_result_async()
+        result_future.add_done_callback(lambda _: done.set())
+        try:
+            ok = self._wait(handle, done, timeout)
+        except StepFailed:
+            self._cancel_nav(nav_handle)
+            raise
+        if not ok:
+            self._cancel_nav(nav_handle)
+            raise StepFailed(
+                Status.NAVIGATION_FAILED,
+                f"navigation to {place.id} timed out after {timeout:g} s (goal canceled)",
+            )
+        res = result_future.result()
+        if res.status != GoalStatus.STATUS_SUCCEEDED:
+            what = {GoalStatus.STATUS_ABORTED: "aborted", GoalStatus.STATUS_CANCELED: "canceled"}.get(
+                res.status, f"ended with status {res.status}"
+            )
+            detail = ""
+            if res.result is not None and (res.result.error_code or res.result.error_msg):
+                detail = f" (error {res.result.error_code}: {res.result.error_msg})"
+            raise StepFailed(
+                Status.NAVIGATION_FAILED, f"Nav2 {what} the goal to {place.id}{detail}"
+            )
+
+    def _cancel_nav(self, nav_handle) -> None:
+        done = threading.Event()
+        nav_handle.cancel_goal_async().add_done_callback(lambda _: done.set())
+        if not done.wait(2.0):
+            self.get_logger().warning("Nav2 did not confirm the cancel within 2 s")
+
+    def _navigate_goal_pose(self, handle, place, pose, timeout) -> None:
+        """No NavigateToPose server: publish the goal (as RViz's 2D Goal Pose does) and wait
+        for the robot's pose to come within the tolerance."""
+        tol = float(self.get_parameter("arrival_tolerance_m").value)
+        self.goal_pose_pub.publish(pose)
+        deadline = time.monotonic() + timeout
+        while True:
+            with self.pose_lock:
+                at = self.robot_pose
+            if at is not None and math.dist(at, place.access) <= tol:
+                return
+            if handle.is_cancel_requested:
+                raise StepFailed(Status.CANCELED, "canceled")
+            if time.monotonic() >= deadline or not rclpy.ok(context=self.context):
+                where = "no pose received" if at is None else f"last pose ({at[0]:.2f}, {at[1]:.2f})"
+                raise StepFailed(
+                    Status.NAVIGATION_FAILED,
+                    f"no NavigateToPose server, and the robot did not reach {place.id} via "
+                    f"{self.get_parameter('goal_pose_topic').value} within {timeout:g} s ({where} on "
+                    f"{self.get_parameter('robot_pose_topic').value})",
+                )
+            time.sleep(POLL_S)
+
+    def _detect(self, handle, place: Place) -> List[str]:
+        """What the detector reports at `place`: the first detection naming this container
+        (since the robot set off for it) or naming none (since it arrived), then any more within
+        `detection_window_s`."""
+        timeout = float(self.get_parameter("detection_timeout_s").value)
+        window = float(self.get_parameter("detection_window_s").value)
+        arrived = time.monotonic()
+        seen: List[str] = []
+        first = None
+        deadline = time.monotonic() + timeout
+        while True:
+            now = time.monotonic()
+            end = deadline if first is None else first + window
+            if now >= end:
+                break
+            self._wait(handle, self.detection_event, min(end - now, 0.5))
+            with self.detection_lock:
+                batch, self.detections = self.detections, []
+                self.detection_event.clear()
+            for received, d in batch:
+                if d.container != place.id and (d.container or received < arrived):
+                    continue
+                if first is None:
+                    first = time.monotonic()
+                for t in d.object_types:
+                    if t not in seen:
+                        seen.append(t)
+            if first is not None and window <= 0:
+                break
+        if first is None:
+            raise StepFailed(
+                Status.DETECTOR_TIMEOUT,
+                f"no detection at {place.id} within {timeout:g} s on "
+                f"{self.get_parameter('detections_topic').value}",
+            )
+        return seen
+
+    def _publish_belief(self, trial, likelihoods, target, places, found_at) -> None:
+        b = Belief()
+        b.header.frame_id = self.frame
+        b.header.stamp = self.get_clock().now().to_msg()
+        b.target_type = target
+        b.strategy = trial.strategy
+        searched = set(trial.searched)
+        ids = list(places)
+        b.containers = ids
+        b.searched = [i in searched for i in ids]
+        probs = []
+        for k, i in enumerate(ids):
+            if i == found_at:
+                probs.append(1.0)
+            elif i in searched:
+                probs.append(0.0)
+            elif likelihoods is not None and k < len(likelihoods):
+                probs.append(float(likelihoods[k]))
+            else:
+                probs.append(float("nan"))
+        b.probability = probs
+        self.belief_pub.publish(b)
+
+
+def main(argv=None) -> int:
+    rclpy.init(args=argv if argv is not None else sys.argv)
+    try:
+        node = FerretNode()
+    except PlannerError:
+        rclpy.try_shutdown()
+        return 1
+    executor = MultiThreadedExecutor(num_threads=6)
+    executor.add_node(node)
+    try:
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,383 @@
+"""Where the node asks which container to search next: the `ferret` Python package in process
+(default), or a `ferret serve` server shared by a fleet. Both give the node the same small
+interface, so the ROS side does not know which it talks to.
+
+A *planner* holds the scene and, across trials, the deployment that selects the strategy of
+each trial (`ferret deploy`'s selection). `start(target, scene, deployment)` opens a *trial*:
+`next()` says which container to search (None once exhausted), `record()` what was seen there,
+`finish()` ends it (selection learns from a found target) and `abandon()` ends it after a
+failure (selection learns nothing).
+"""
+
+import json
+import math
+import os
+import tempfile
+import urllib.error
+import urllib.parse
+import urllib.request
+import uuid
+from dataclasses import dataclass
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import ferret
+import yaml
+
+# A robot pose this close to the scene's start (metres) plans from the start itself.
+AT_START_M = 0.05
+# Scenes placed at other poses kept at once (each holds its grid and distances).
+PLACED_MAX = 32
+
+
+class PlannerError(Exception):
+    """ferret refused or failed; the message says why, for the action's result."""
+
+
+@dataclass(frozen=True)
+class Place:
+    """A container as the node needs it: where to drive to and where to look."""
+
+    id: str
+    type: str
+    room: str
+    access: Tuple[float, float]
+    position: Tuple[float, float]
+
+
+class InProcessPlanner:
+    """The `ferret` package in this process: `ferret.Search` per trial and, with several
+    strategies, a `ferret.Deployment` choosing among them between trials."""
+
+    kind = "python"
+
+    def __init__(
+        self,
+        scene: str,
+        strategies: Sequence[str],
+        method: str = "replay",
+        c: float = 5.0,
+        seed: int = 0,
+        prior: Optional[str] = None,
+        config: Optional[str] = None,
+    ):
+        try:
+            houses = ferret.load_houses(scene)
+        except ferret.FerretError as e:
+            raise PlannerError(f"scene {scene}: {e}") from e
+        if len(houses) != 1:
+            raise PlannerError(f"scene {scene}: holds {len(houses)} houses, the node needs one")
+        self.house = houses[0]
+        self.scene_name = self.house.name
+        self.scene_path = os.path.abspath(scene)
+        self._placed: Dict[Tuple[int, int, int], "ferret.House"] = {}
+        strategies = [s.strip() for s in strategies if s.strip()]
+        if not strategies:
+            raise PlannerError("strategies: name at least one strategy")
+        self.options = {}
+        if prior:
+            self.options["prior"] = prior
+        if config:
+            self.options["config"] = config
+        self.strategies = strategies
+        self.deployment = None
+        try:
+            if len(strategies) > 1:
+                self.deployment = ferret.Deployment(
+                    strategies, method=method, c=c, seed=seed, **self.options
+                )
+            else:
+                # Fails now, not at the first goal, for a spec that names no strategy.
+                ferret.Search(self.house, "_", strategies[0], **self.options)
+        except ferret.FerretError as e:
+            raise PlannerError(str(e)) from e
+        self._places = [
+            Place(
+                c.id,
+                c.type,
+                c.room or "",
+                c.access if c.access is not None else c.position,
+                c.position,
+            )
+            for c in self.house.containers
+        ]
+
+    def places(self, scene: str = "") -> List[Place]:
+        self._check_scene(scene)
+        return self._places
+
+    def start_pose(self) -> Tuple[float, float]:
+        return (self.house.start[0], self.house.start[1])
+
+    def _check_scene(self, scene: str) -> None:
+        if scene and scene != self.scene_name:
+            raise PlannerError(
+                f"scene {scene!r}: this node plans in {self.scene_name!r} (its `scene` parameter)"
+            )
+
+    def house_at(self, pose: Optional[Tuple[float, float, float]]) -> "ferret.House":
+        """The scene with the robot starting at `pose` (x, y metres, yaw degrees), so that a
+        trial plans from where the robot is, as a `ferret serve` trial with a pose does: the
+        scene file with its start moved, loaded again (its grid and distances are built anew,
+        about a second for the example apartment; kept per pose)."""
+        if pose is None or math.dist(pose[:2], self.start_pose()) <= AT_START_M:
+            return self.house
+        key = (round(pose[0] / 0.01), round(pose[1] / 0.01), round(pose[2]))
+        if key in self._placed:
+            return self._placed[key]
+        try:
+            with open(self.scene_path, encoding="utf-8") as f:
+                doc = yaml.safe_load(f)
+        except (OSError, UnicodeDecodeError, yaml.YAMLError) as e:
+            raise PlannerError(f"scene {self.scene_path}: cannot be read again to move its start: {e}") from e
+        if not isinstance(doc, dict) or "ferret_scene" not in doc:
+            raise PlannerError(
+                f"scene {self.scene_path}: only ferret scene files can start from the robot's "
+                "pose (set plan_from_robot_pose to false to plan from the house's start)"
+            )
+        doc["start"] = [pose[0], pose[1], pose[2]]
+        m = doc.get("map")
+        if isinstance(m, dict) and m.get("ros"):
+            # The copy lives elsewhere: its map path must not be relative.
+            m["ros"] = os.path.join(os.path.dirname(self.scene_path), m["ros"])
+        fd, tmp = tempfile.mkstemp(suffix=".json", prefix="ferret-scene-")
+        try:
+            with os.fdopen(fd, "w") as f:
+                json.dump(doc, f)
+            house = ferret.load_houses(tmp)[0]
+            house.distances()  # the grid is built here, not in the first planning step
+        except ferret.FerretError as e:
+            raise PlannerError(f"the robot's pose ({pose[0]:.2f}, {pose[1]:.2f}): {e}") from e
+        finally:
+            os.unlink(tmp)
+        if len(self._placed) >= PLACED_MAX:
+            self._placed.pop(next(iter(self._placed)))
+        self._placed[key] = house
+        return house
+
+    def start(
+        self,
+        target: str,
+        scene: str = "",
+        deployment: int = 0,
+        pose: Optional[Tuple[float, float, float]] = None,
+    ) -> "InProcessTrial":
+        self._check_scene(scene)
+        if deployment:
+            raise PlannerError(
+                f"deployment_id {deployment}: deployments by id are `ferret serve`'s; this node "
+                "runs its own (leave deployment_id 0)"
+            )
+        house = self.house_at(pose)
+        strategy = self.deployment.choose() if self.deployment else self.strategies[0]
+        try:
+            search = ferret.Search(house, target, strategy, **self.options)
+        except ferret.FerretError as e:
+            if self.deployment:
+                self.deployment.abandon()
+            raise PlannerError(str(e)) from e
+        return InProcessTrial(self, search)
+
+
+class InProcessTrial:
+    def __init__(self, planner: InProcessPlanner, search: "ferret.Search"):
+        self.planner = planner
+        self.search = search
+        self.strategy = search.strategy
+        self.ended = False
+        self._by_id = {p.id: p for p in planner._places}
+
+    def next(self) -> Optional[Place]:
+        try:
+            c = self.search.next_container()
+        except ferret.FerretError as e:
+            raise PlannerError(str(e)) from e
+        return None if c is None else self._by_id[c.id]
+
+    def record(self, container: str, found: bool, objects: Sequence[str]) -> float:
+        try:
+            return self.search.record(container, found, list(objects))
+        except ferret.FerretError as e:
+            raise PlannerError(str(e)) from e
+
+    def likelihoods(self) -> Optional[List[float]]:
+        return self.search.likelihoods()
+
+    @property
+    def searched(self) -> List[str]:
+        return self.search.searched
+
+    @property
+    def cost(self) -> float:
+        return self.search.cost
+
+    def finish(self) -> Optional[Dict[str, float]]:
+        """Ends the trial; with a deployment, every candidate's replay cost (found) or None."""
+        if self.ended:
+            return None
+        self.ended = True
+        d = self.planner.deployment
+        if d is None:
+            return None
+        if self.search.found is None:
+            d.abandon()
+            return None
+        return d.finish(self.search)
+
+    def abandon(self) -> None:
+        if not self.ended:
+            self.ended = True
+            if self.planner.deployment is not None:
+                self.planner.deployment.abandon()
+
+
+class ServePlanner:
+    """A `ferret serve` server: the scene, the deployment and every trial live there (see
+    docs/serve.md); the node only drives the robot. Requests carry ids, so a retried request
+    changes nothing."""
+
+    kind = "serve"
+
+    def __init__(
+        self,
+        url: str,
+        scene: str,
+        strategies: Sequence[str],
+        method: str = "replay",
+        c: float = 5.0,
+        seed: int = 0,
+        token: Optional[str] = None,
+        timeout_s: float = 30.0,
+    ):
+        self.url = url.rstrip("/")
+        self.token = token or None
+        self.timeout_s = timeout_s
+        self.scene_name = scene
+        self.strategies = [s.strip() for s in strategies if s.strip()]
+        self.method, self.c, self.seed = method, c, seed
+        self.deployment_id = 0
+        self._scenes: Dict[str, dict] = {}
+        if scene:
+            self.places(scene)
+
+    def request(self, method: str, path: str, body: Optional[dict] = None) -> dict:
+        data = None
+        headers = {"Accept": "application/json"}
+        if body is not None:
+            body = dict(body, request_id=str(uuid.uuid4()))
+            data = json.dumps(body).encode()
+            headers["Content-Type"] = "application/json"
+        if self.token:
+            headers["Authorization"] = "Bearer " + self.token
+        req = urllib.request.Request(self.url + path, data=data, headers=headers, method=method)
+        try:
+            with urllib.request.urlopen(req, timeout=self.timeout_s) as resp:
+                return json.loads(resp.read() or b"{}")
+        except urllib.error.HTTPError as e:
+            try:
+                err = json.loads(e.read()).get("error", {})
+                message = err.get("message", "")
+            except (ValueError, AttributeError):
+                message = ""
+            raise PlannerError(f"ferret serve: {method} {path} -> {e.code}: {message}") from e
+        except (urllib.error.URLError, OSError) as e:
+            raise PlannerError(f"ferret serve at {self.url} unreachable: {e}") from e
+
+    def _scene(self, scene: str) -> dict:
+        name = scene or self.scene_name
+        if not name:
+            raise PlannerError("no scene: set the `serve_scene` parameter or the goal's scene")
+        if name not in self._scenes:
+            self._scenes[name] = self.request("GET", "/scenes/" + urllib.parse.quote(name, safe=""))
+        return self._scenes[name]
+
+    def places(self, scene: str = "") -> List[Place]:
+        s = self._scene(scene)
+        out = []
+        for c in s["containers"]:
+            access = c.get("access") or [c["x"], c["y"]]
+            out.append(
+                Place(c["id"], c["type"], c.get("room") or "", (access[0], access[1]), (c["x"], c["y"]))
+            )
+        return out
+
+    def start_pose(self, scene: str = "") -> Tuple[float, float]:
+        start = self._scene(scene)["start"]
+        return (start[0], start[1])
+
+    def start(
+        self,
+        target: str,
+        scene: str = "",
+        deployment: int = 0,
+        pose: Optional[Tuple[float, float, float]] = None,
+    ) -> "ServeTrial":
+        scene = scene or self.scene_name
+        places = {p.id: p for p in self.places(scene)}
+        if deployment == 0:
+            if not self.deployment_id:
+                body = {"selector": self.method, "c": self.c, "seed": self.seed}
+                if self.strategies:
+                    body["strategies"] = self.strategies
+                self.deployment_id = self.request("POST", "/deployments", body)["id"]
+            deployment = self.deployment_id
+        state = self.request("GET", f"/deployments/{deployment}")
+        open_trial = state.get("open_trial")
+        if open_trial:
+            # A trial a failure left open (the API cannot abandon one): go on with it when it
+            # looks for the same object, since the deployment takes no other trial meanwhile.
+            t = self.request("GET", f"/trials/{open_trial}")
+            if t["target"] != target or t["scene"] != scene:
+                raise PlannerError(
+                    f"deployment {deployment} has trial {open_trial} open (a search for "
+                    f"{t['target']} in {t['scene']}); finish that search first"
+                )
+            return ServeTrial(self, t, places)
+        body = {"scene": scene, "target": target}
+        if pose is not None:
+            body["pose"] = [pose[0], pose[1], pose[2]]
+        t = self.request("POST", f"/deployments/{deployment}/trials", body)
+        return ServeTrial(self, t, places)
+
+
+class ServeTrial:
+    def __init__(self, planner: ServePlanner, state: dict, places: Dict[str, Place]):
+        self.planner = planner
+        self.state = state
+        self.places = places
+        self.strategy = state["strategy"]
+        self.ended = False
+
+    def next(self) -> Optional[Place]:
+        n = self.state.get("next")
+        if self.state.get("status") != "searching" or not n:
+            return None
+        return self.places[n["container"]]
+
+    def record(self, container: str, found: bool, objects: Sequence[str]) -> float:
+        before = self.state.get("cost_m") or 0.0
+        self.state = self.planner.request(
+            "POST",
+            f"/trials/{self.state['trial']}/observations",
+            {"container": container, "found": found, "objects": list(objects)},
+        )
+        return (self.state.get("cost_m") or 0.0) - before
+
+    def likelihoods(self) -> Optional[List[float]]:
+        # The server does not publish its strategies' probabilities.
+        return None
+
+    @property
+    def searched(self) -> List[str]:
+        return list(self.state.get("searched") or [])
+
+    @property
+    def cost(self) -> float:
+        return float(self.state.get("cost_m") or 0.0)
+
+    def finish(self) -> Optional[Dict[str, float]]:
+        self.ended = True
+        return self.state.get("replays_m")
+
+    def abandon(self) -> None:
+        # Left open on the server (see ServePlanner.start).
+        self.ended = True

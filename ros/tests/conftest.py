@@ -1,0 +1,199 @@
+"""The ferret node under test runs as its own process (`python -m ferret_ros.node`); the
+simulated robot (Nav2, detector, map server) and the action client run in this process, each
+node on its own executor thread. Everything talks over Fast DDS, on a domain of its own
+(ROS_DOMAIN_ID from scripts/ros-tests.sh, or one picked here) and only on this host."""
+
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+# Before rclpy starts: nothing leaves this host, nothing from other runs gets in.
+os.environ.setdefault("ROS_DOMAIN_ID", str(1 + os.getpid() % 100))
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+
+import ferret  # noqa: E402
+import rclpy  # noqa: E402
+from rclpy.action import ActionClient  # noqa: E402
+from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor  # noqa: E402
+from rclpy.node import Node  # noqa: E402
+
+from ferret_interfaces.action import SearchObject  # noqa: E402
+from ferret_interfaces.msg import Belief  # noqa: E402
+from ferret_ros.maps import read_scene_map  # noqa: E402
+from ferret_ros.sim import LATCHED, MapServer, SimDetector, SimNav2  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENE = ROOT / "examples" / "apartment" / "scene.yaml"
+ROS_DIR = ROOT / "ros"
+STRATEGIES = ["model/prior", "model/uniform", "optimistic+greedy"]
+# Generous bounds: the machine may be busy; a hang still fails the test in bounded time.
+START_TIMEOUT_S = 30.0
+GOAL_TIMEOUT_S = 60.0
+
+
+@pytest.fixture(scope="session")
+def house():
+    return ferret.load_houses(str(SCENE))[0]
+
+
+@pytest.fixture(scope="session")
+def ros():
+    rclpy.init()
+    yield
+    rclpy.try_shutdown()
+
+
+class Spinner:
+    """Nodes spun by one executor on a daemon thread until closed."""
+
+    def __init__(self, *nodes, threads=4):
+        self.nodes = nodes
+        self.executor = MultiThreadedExecutor(num_threads=threads)
+        for n in nodes:
+            self.executor.add_node(n)
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+
+    def close(self):
+        self.executor.shutdown(timeout_sec=5)
+        self.thread.join(5)
+        for n in self.nodes:
+            n.destroy_node()
+
+
+@pytest.fixture(scope="session")
+def robot(ros, house):
+    """The simulated robot: Nav2 at 200 m/s (the tests wait for no real driving), the
+    detector, and the scene's own map on /map."""
+    nav = SimNav2(house, speed=200.0)
+    detector = SimDetector(house)
+    maps = MapServer(read_scene_map(str(SCENE)))
+    spin = Spinner(nav, detector, maps)
+    yield nav, detector, maps
+    spin.close()
+
+
+class Client:
+    """The action client a user's code would be, plus a belief listener."""
+
+    def __init__(self, node_name):
+        self.node = Node("test_client_" + node_name.replace("-", "_"))
+        self.action = ActionClient(self.node, SearchObject, f"/{node_name}/search_object")
+        self.beliefs = []
+        self.node.create_subscription(
+            Belief, f"/{node_name}/belief", lambda m: self.beliefs.append(m), LATCHED
+        )
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+
+    def try_goal(self, target, timeout=10.0):
+        """Whether the node accepts a goal (the goal is canceled if it was)."""
+        sent = self.action.send_goal_async(SearchObject.Goal(target_type=target))
+        deadline = time.monotonic() + timeout
+        while not sent.done():
+            assert time.monotonic() < deadline, f"goal for {target} not answered in {timeout} s"
+            time.sleep(0.005)
+        if sent.result().accepted:
+            sent.result().cancel_goal_async()
+        return sent.result().accepted
+
+    def send(
+        self, target, timeout=GOAL_TIMEOUT_S, cancel_after_feedback=False, while_running=None
+    ):
+        """Sends a goal and waits (bounded) for its result: (status, result, feedback list)."""
+        goal = SearchObject.Goal(target_type=target)
+        fbs = []
+        first_fb = threading.Event()
+
+        def on_fb(msg):
+            fbs.append(msg.feedback)
+            first_fb.set()
+
+        sent = self.action.send_goal_async(goal, feedback_callback=on_fb)
+        deadline = time.monotonic() + timeout
+        while not sent.done():
+            assert time.monotonic() < deadline, f"goal for {target} not answered in {timeout} s"
+            time.sleep(0.005)
+        handle = sent.result()
+        assert handle.accepted, f"goal for {target} rejected"
+        if while_running is not None or cancel_after_feedback:
+            assert first_fb.wait(timeout), "no feedback from the running search"
+        if while_running is not None:
+            while_running()
+        if cancel_after_feedback:
+            handle.cancel_goal_async()
+        res = handle.get_result_async()
+        while not res.done():
+            assert time.monotonic() < deadline, f"no result for {target} within {timeout} s"
+            time.sleep(0.005)
+        return res.result().status, res.result().result, fbs
+
+    def close(self):
+        self.executor.shutdown(timeout_sec=5)
+        self.thread.join(5)
+        self.node.destroy_node()
+
+
+class FerretProcess:
+    """`python -m ferret_ros.node` with parameters, its log in a file shown on failure."""
+
+    def __init__(self, tmp_path, name, params):
+        self.name = name
+        args = [sys.executable, "-m", "ferret_ros.node", "--ros-args", "-r", f"__node:={name}"]
+        for k, v in params.items():
+            if isinstance(v, list):
+                v = "[" + ",".join(f"'{x}'" for x in v) + "]"
+            elif isinstance(v, bool):
+                v = "true" if v else "false"
+            args += ["-p", f"{k}:={v}"]
+        self.log_path = tmp_path / f"{name}.log"
+        self.log = open(self.log_path, "w")
+        env = dict(os.environ, PYTHONPATH=str(ROS_DIR), PYTHONUNBUFFERED="1")
+        self.proc = subprocess.Popen(args, stdout=self.log, stderr=subprocess.STDOUT, env=env)
+
+    def text(self):
+        if not self.log.closed:
+            self.log.flush()
+        return self.log_path.read_text()
+
+    def stop(self):
+        if self.proc.poll() is None:
+            self.proc.send_signal(2)
+            try:
+                self.proc.wait(10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(5)
+        self.log.close()
+
+
+@pytest.fixture
+def start_node(ros, robot, tmp_path):
+    """Starts a ferret node with parameters; returns (process, client) once its action server
+    is up. Stops both after the test, printing the node's log when the test failed."""
+    started = []
+
+    def start(name, **params):
+        params.setdefault("scene", str(SCENE))
+        p = FerretProcess(tmp_path, name, params)
+        c = Client(name)
+        started.append((p, c))
+        if not c.action.wait_for_server(timeout_sec=START_TIMEOUT_S):
+            raise AssertionError(
+                f"the node's action server did not come up in {START_TIMEOUT_S} s:\n{p.text()}"
+            )
+        return p, c
+
+    yield start
+    for p, c in started:
+        c.close()
+        p.stop()
+        sys.stderr.write(f"--- {p.name} log ---\n{p.text()}\n")

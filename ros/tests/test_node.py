@@ -1,0 +1,375 @@
+"""The ferret node over real DDS against a simulated Nav2 and detector."""
+
+import csv
+import dataclasses
+import json
+import math
+import os
+import socket
+import subprocess
+import time
+import urllib.request
+
+import ferret
+import pytest
+
+from conftest import SCENE, STRATEGIES
+from ferret_interfaces.action import SearchObject
+from ferret_ros.maps import read_scene_map
+
+Status = SearchObject.Result
+
+
+def ferret_bin():
+    path = os.environ.get("FERRET_BIN")
+    if not path or not os.access(path, os.X_OK):
+        pytest.fail("FERRET_BIN must name the ferret binary to compare with (scripts/ros-tests.sh sets it)")
+    return path
+
+
+def run_ferret(*args):
+    out = subprocess.run([ferret_bin(), *args], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    return out
+
+
+def test_finds_every_target_as_ferret_deploy(start_node, robot, house, tmp_path):
+    """Every target of the apartment, in one deployment over three strategies: each trial's
+    chosen strategy, searched containers, cost and found container are those of `ferret deploy`
+    (searched orders from `ferret eval` of the chosen strategy), and the robot really drove to
+    each searched container."""
+    nav, detector, _ = robot
+    targets = house.target_types()
+    run_ferret(
+        "deploy", "--houses", str(SCENE), "--find", ",".join(targets),
+        "--strategies", ",".join(STRATEGIES), "--seed", "0", "--out", str(tmp_path / "deploy"),
+    )
+    run_ferret(
+        "eval", "--houses", str(SCENE), "--strategies", ",".join(STRATEGIES),
+        "--trials-per-house", "all", "--out", str(tmp_path / "eval"),
+    )
+    with open(tmp_path / "deploy" / "deploy.csv") as f:
+        deployed = list(csv.DictReader(f))
+    with open(tmp_path / "eval" / "trials.csv") as f:
+        orders = {(r["target"], r["strategy"]): r["searched"].split() for r in csv.DictReader(f)}
+    assert [r["target"] for r in deployed] == targets
+
+    # Every trial from the scene's start, as `ferret deploy` runs them.
+    _, client = start_node("ferret_deploy", strategies=STRATEGIES, seed=0, plan_from_robot_pose=False)
+    for row in deployed:
+        nav.reset()
+        before = len(nav.visited)
+        status, result, feedback = client.send(row["target"])
+        assert result.status == Status.FOUND, result.message
+        assert result.found and status == 4  # GoalStatus.STATUS_SUCCEEDED
+        assert result.strategy == row["chosen"], row
+        assert result.container == row["found_container"], row
+        assert math.isclose(result.cost_m, float(row["cost_m"]), abs_tol=1e-9), (result.cost_m, row)
+        assert list(result.searched_containers) == orders[(row["target"], row["chosen"])], row
+        assert nav.visited[before:] == list(result.searched_containers)
+        # Feedback and result travel apart: the last feedback may land just after the result.
+        deadline = time.monotonic() + 5
+        while len(feedback) < len(result.searched_containers) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert [fb.next_container for fb in feedback] == list(result.searched_containers)
+        assert feedback[-1].searched == len(result.searched_containers) - 1
+    # The belief after the last trial: 1 where found, 0 where searched in vain.
+    deadline = time.monotonic() + 5
+    while time.monotonic() < deadline:
+        last = client.beliefs[-1] if client.beliefs else None
+        if last is not None and last.target_type == targets[-1] and 1.0 in list(last.probability):
+            break
+        time.sleep(0.02)
+    ids = list(last.containers)
+    assert sorted(ids) == sorted(c.id for c in house.containers)
+    probs = dict(zip(ids, last.probability))
+    assert probs[result.container] == 1.0
+    for c in result.searched_containers[:-1]:
+        assert probs[c] == 0.0
+
+
+def test_nav2_abort_ends_the_search(start_node, robot):
+    nav, _, _ = robot
+    _, client = start_node("ferret_abort", strategies=["model/prior"])
+    nav.reset()
+    # The second goal of the search fails.
+    nav.mode, nav.fail_from = "abort", nav.goals + 2
+    try:
+        t = time.monotonic()
+        status, result, _ = client.send("Wallet")
+    finally:
+        nav.mode = "ok"
+    assert result.status == Status.NAVIGATION_FAILED
+    assert not result.found and status == 6  # GoalStatus.STATUS_ABORTED
+    assert "aborted" in result.message and "simulated failure" in result.message, result.message
+    assert len(result.searched_containers) == 1
+    assert time.monotonic() - t < 10
+
+
+def test_nav2_timeout_cancels_navigation(start_node, robot):
+    nav, _, _ = robot
+    _, client = start_node("ferret_navtimeout", strategies=["model/prior"], nav_timeout_s=1.0)
+    nav.reset()
+    nav.mode, nav.fail_from = "hang", nav.goals + 1
+    try:
+        t = time.monotonic()
+        _, result, _ = client.send("Wallet")
+        took = time.monotonic() - t
+    finally:
+        nav.mode = "ok"
+    assert result.status == Status.NAVIGATION_FAILED
+    assert "timed out after 1 s" in result.message, result.message
+    assert result.searched_containers == []
+    assert took < 8
+
+
+def test_silent_detector_ends_the_search(start_node, robot):
+    nav, detector, _ = robot
+    _, client = start_node("ferret_mute", strategies=["model/prior"], detection_timeout_s=1.0)
+    nav.reset()
+    detector.muted = True
+    try:
+        t = time.monotonic()
+        _, result, _ = client.send("Wallet")
+        took = time.monotonic() - t
+    finally:
+        detector.muted = False
+    assert result.status == Status.DETECTOR_TIMEOUT
+    assert "no detection at" in result.message and "within 1 s" in result.message, result.message
+    assert took < 8
+
+
+def test_cancel_stops_the_search(start_node, robot):
+    nav, _, _ = robot
+    _, client = start_node("ferret_cancel", strategies=["model/prior"])
+    nav.reset()
+    nav.mode, nav.fail_from = "hang", nav.goals + 1
+    try:
+        t = time.monotonic()
+        second = []
+        status, result, _ = client.send(
+            "Wallet", cancel_after_feedback=True, while_running=lambda: second.append(client.try_goal("Apple"))
+        )
+        took = time.monotonic() - t
+    finally:
+        nav.mode = "ok"
+    assert result.status == Status.CANCELED and status == 5  # GoalStatus.STATUS_CANCELED
+    assert took < 8
+    assert second == [False]  # a second goal while one runs is rejected
+    # The simulated Nav2 saw its goal canceled: the next search runs normally.
+    nav.reset()
+    _, result, _ = client.send("Wallet")
+    assert result.status == Status.FOUND, result.message
+
+
+def test_map_that_does_not_match_is_refused(start_node, robot):
+    _, _, maps = robot
+    good = read_scene_map(str(SCENE))
+    shifted = dataclasses.replace(good, origin=(good.origin[0] + 1.5, good.origin[1]))
+    maps.publish(shifted)
+    try:
+        proc, client = start_node("ferret_badmap", strategies=["model/prior"])
+        _, result, _ = client.send("Wallet")
+        assert result.status == Status.REFUSED
+        assert result.message.startswith("map refused:"), result.message
+        assert "not the scene's map" in result.message, result.message
+        assert result.searched_containers == []
+        # Nav2 was never asked, and the log says why as soon as the map arrived.
+        assert "refusing the map on /map" in proc.text()
+        # The right map, published again, is accepted without restarting the node.
+        maps.publish(good)
+        deadline = time.monotonic() + 10
+        while "matches scene" not in proc.text():
+            assert time.monotonic() < deadline, proc.text()
+            time.sleep(0.05)
+        robot[0].reset()
+        _, result, _ = client.send("Wallet")
+        assert result.status == Status.FOUND, result.message
+    finally:
+        maps.publish(good)
+
+
+def test_map_of_another_layout_is_refused(start_node, robot):
+    """Same size and origin, but the doorways walled up: the cells disagree."""
+    _, _, maps = robot
+    good = read_scene_map(str(SCENE))
+    walled = list(good.data)
+    # Block every free cell in a band along y = 4.5 m (the wall between the two room rows).
+    j0 = int((4.2 - good.origin[1]) / good.resolution)
+    j1 = int((4.8 - good.origin[1]) / good.resolution)
+    for j in range(j0, j1):
+        for i in range(good.width):
+            walled[j * good.width + i] = 100
+    maps.publish(dataclasses.replace(good, data=walled))
+    try:
+        _, client = start_node("ferret_walled", strategies=["model/prior"])
+        _, result, _ = client.send("Wallet")
+        assert result.status == Status.REFUSED
+        assert "of the cells agree" in result.message, result.message
+    finally:
+        maps.publish(good)
+
+
+def test_unknown_scene_and_empty_target_are_refused(start_node, robot):
+    _, client = start_node("ferret_refuse", strategies=["model/prior"])
+    _, result, _ = client.send("")
+    assert result.status == Status.REFUSED and "target_type is empty" in result.message
+    goal_scene = SearchObject.Goal(target_type="Wallet", scene="another-house")
+    sent = client.action.send_goal_async(goal_scene)
+    deadline = time.monotonic() + 30
+    while not sent.done():
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    res = sent.result().get_result_async()
+    while not res.done():
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    r = res.result().result
+    assert r.status == Status.REFUSED and "another-house" in r.message, r.message
+
+
+def deploy_rows(tmp_path, targets):
+    run_ferret(
+        "deploy", "--houses", str(SCENE), "--find", ",".join(targets),
+        "--strategies", ",".join(STRATEGIES), "--seed", "0", "--out", str(tmp_path / "deploy"),
+    )
+    with open(tmp_path / "deploy" / "deploy.csv") as f:
+        return list(csv.DictReader(f))
+
+
+def test_without_nav2_goals_go_to_goal_pose(start_node, robot, house, tmp_path):
+    """No NavigateToPose server: the node publishes /goal_pose and waits for /amcl_pose to get
+    there; the search is the same one."""
+    nav, _, _ = robot
+    targets = house.target_types()[:3]
+    rows = deploy_rows(tmp_path, targets)
+    _, client = start_node(
+        "ferret_goalpose", strategies=STRATEGIES, seed=0,
+        nav_action="no_nav2_here", nav_server_wait_s=0.2, nav_timeout_s=10.0,
+        plan_from_robot_pose=False,
+    )
+    for row in rows:
+        nav.reset()
+        before = len(nav.visited)
+        _, result, _ = client.send(row["target"])
+        assert result.status == Status.FOUND, result.message
+        assert (result.strategy, result.container) == (row["chosen"], row["found_container"])
+        assert math.isclose(result.cost_m, float(row["cost_m"]), abs_tol=1e-9)
+        assert nav.visited[before:] == list(result.searched_containers)
+
+
+def test_goal_pose_fallback_times_out_when_the_robot_never_arrives(start_node, robot):
+    nav, _, _ = robot
+    _, client = start_node(
+        "ferret_goalpose_stuck", strategies=["model/prior"],
+        nav_action="no_nav2_here", nav_server_wait_s=0.2, nav_timeout_s=1.0,
+    )
+    nav.reset()
+    nav.mode, nav.fail_from = "hang", nav.goals + 1  # it ignores /goal_pose too
+    try:
+        _, result, _ = client.send("Wallet")
+    finally:
+        nav.mode = "ok"
+    assert result.status == Status.NAVIGATION_FAILED
+    assert "did not reach" in result.message and "/goal_pose" in result.message, result.message
+
+
+@pytest.fixture
+def ferret_serve(tmp_path):
+    """`ferret serve` on a free loopback port, the apartment as its scene."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    log = open(tmp_path / "serve.log", "w")
+    proc = subprocess.Popen(
+        [ferret_bin(), "serve", "--scene", str(SCENE), "--strategies", ",".join(STRATEGIES),
+         "--listen", f"127.0.0.1:{port}", "--db", str(tmp_path / "serve.sqlite")],
+        stdout=log, stderr=subprocess.STDOUT, cwd=tmp_path,
+    )
+    url = f"http://127.0.0.1:{port}"
+    deadline = time.monotonic() + 30
+    while True:
+        try:
+            with urllib.request.urlopen(url + "/health", timeout=1) as r:
+                if json.loads(r.read()).get("status") == "ok":
+                    break
+        except OSError:
+            pass
+        assert proc.poll() is None and time.monotonic() < deadline, (tmp_path / "serve.log").read_text()
+        time.sleep(0.1)
+    yield url
+    proc.terminate()
+    proc.wait(10)
+    log.close()
+
+
+def test_serve_backend_makes_the_same_searches(start_node, robot, house, ferret_serve, tmp_path):
+    """Planning and selection in `ferret serve` (a fleet's server): the same trials as
+    `ferret deploy`, and the server holds them afterwards."""
+    nav, _, _ = robot
+    targets = house.target_types()[:4]
+    rows = deploy_rows(tmp_path, targets)
+    _, client = start_node(
+        "ferret_serve_backend", backend="serve", serve_url=ferret_serve, serve_scene="apartment",
+        strategies=STRATEGIES, seed=0, plan_from_robot_pose=False,
+    )
+    for row in rows:
+        nav.reset()
+        _, result, _ = client.send(row["target"])
+        assert result.status == Status.FOUND, result.message
+        assert (result.strategy, result.container) == (row["chosen"], row["found_container"])
+        assert math.isclose(result.cost_m, float(row["cost_m"]), abs_tol=1e-9)
+    with urllib.request.urlopen(ferret_serve + "/deployments/1", timeout=5) as r:
+        state = json.loads(r.read())
+    assert [t["target"] for t in state["trials"]] == targets
+    assert [t["strategy"] for t in state["trials"]] == [r["chosen"] for r in rows]
+
+
+def test_trials_start_where_the_robot_is(start_node, robot, house, ferret_serve):
+    """Without going back to the start between searches, each trial plans from the robot's
+    pose (/amcl_pose): the node's own placing of the scene at that pose gives the searches that
+    `ferret serve` gives for trials opened with the same pose."""
+    nav, _, _ = robot
+    targets = ["AlarmClock", "RemoteControl", "Apple", "Wallet"]
+    runs = {}
+    for backend in ("python", "serve"):
+        nav.reset()
+        params = dict(strategies=STRATEGIES, seed=0)
+        if backend == "serve":
+            params.update(backend="serve", serve_url=ferret_serve, serve_scene="apartment")
+        _, client = start_node(f"ferret_pose_{backend}", **params)
+        runs[backend] = []
+        for target in targets:
+            _, r, _ = client.send(target)
+            assert r.status == Status.FOUND, r.message
+            runs[backend].append((r.strategy, list(r.searched_containers), round(r.cost_m, 9)))
+    assert runs["python"] == runs["serve"]
+    # The second search set off from the AlarmClock's dresser, not from the start.
+    strategy, searched, cost = runs["python"][1]
+    from_start = ferret.Search(house, targets[1], strategy)
+    while (c := from_start.next_container()) is not None:
+        seen = house.contents(c)
+        from_start.record(c, targets[1] in seen, seen)
+    assert runs["python"][0][1][-1] == "dresser"
+    assert cost != round(from_start.cost, 9)
+
+
+@pytest.mark.parametrize(
+    "params,message",
+    [
+        ({"scene": "no-such-scene.yaml"}, "no-such-scene.yaml: No such file or directory"),
+        ({"strategies": ["model/bogus"]}, "unknown strategy `model/bogus`"),
+        ({"backend": "ros1"}, "parameter `backend`: 'ros1'"),
+        ({"backend": "serve"}, "parameter `serve_url`"),
+    ],
+)
+def test_bad_parameters_stop_the_node_with_a_reason(ros, tmp_path, params, message):
+    from conftest import FerretProcess
+
+    params.setdefault("scene", str(SCENE))
+    p = FerretProcess(tmp_path, "ferret_badparams", params)
+    try:
+        assert p.proc.wait(30) == 1
+    finally:
+        p.stop()
+    assert "[FATAL]" in p.text() and message in p.text(), p.text()

@@ -1,14 +1,13 @@
-//! `ferret.Deployment`: the selector between a robot's trials, as `ferret deploy` and `ferret
-//! serve` run it — `ferret_select::LiveDeployment` (the selector with its seeded tie-breaks) and
-//! `ferret_plan::replay_costs` (every candidate replayed after a trial), fed by the
-//! `ferret.Search`es the robot drove.
+//! `ferret.Deployment`: the deployment loop `ferret deploy` and `ferret serve` run
+//! (`ferret_select::DeploymentLoop`: the selector with its seeded tie-breaks, every candidate
+//! replayed after a trial), fed by the `ferret.Search`es the robot drove.
 
 use std::path::PathBuf;
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Mutex, MutexGuard};
 
 use ferret_llm::FailurePolicy;
-use ferret_plan::{Protocol, SearchProblem, Strategy, TrialSpec, hindsight_truth, replay_costs};
-use ferret_select::{LiveDeployment, Method};
+use ferret_plan::{SearchProblem, TrialSpec, hindsight_truth};
+use ferret_select::{DeploymentLoop, Method};
 use ferret_world::ObjectType;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -24,17 +23,15 @@ use crate::settings;
 /// trials make `ferret deploy`'s choices and costs.
 #[pyclass(name = "Deployment", module = "ferret")]
 pub struct PyDeployment {
-    /// Behind a mutex because the selector is not `Sync`; every method holds it briefly.
-    live: Mutex<LiveDeployment>,
-    candidates: Vec<Arc<dyn Strategy>>,
+    /// Behind a mutex because the selector is not `Sync`; held while a trial is replayed.
+    deployment: Mutex<DeploymentLoop>,
     names: Vec<String>,
-    protocol: Protocol,
     trials: usize,
 }
 
 impl PyDeployment {
-    fn live(&self) -> MutexGuard<'_, LiveDeployment> {
-        self.live.lock().unwrap_or_else(|p| p.into_inner())
+    fn deployment(&self) -> MutexGuard<'_, DeploymentLoop> {
+        self.deployment.lock().unwrap_or_else(|p| p.into_inner())
     }
 }
 
@@ -106,12 +103,17 @@ impl PyDeployment {
                     .collect::<PyResult<Vec<_>>>()
             })
         })?;
-        let live = LiveDeployment::new(method, candidates.len(), c, seed).map_err(select_error)?;
-        Ok(Self {
-            live: Mutex::new(live),
+        let deployment = DeploymentLoop::new(
+            method,
             candidates,
+            c,
+            seed,
+            (protocol.replay, protocol.travel_cost),
+        )
+        .map_err(select_error)?;
+        Ok(Self {
+            deployment: Mutex::new(deployment),
             names,
-            protocol,
             trials: 0,
         })
     }
@@ -119,7 +121,7 @@ impl PyDeployment {
     /// The strategy spec of the trial in progress (chosen now if none is): the same until that
     /// trial is finished or abandoned.
     fn choose(&mut self) -> String {
-        let i = self.live().choose();
+        let i = self.deployment().choose();
         self.names[i].clone()
     }
 
@@ -132,6 +134,7 @@ impl PyDeployment {
         search: &Bound<'py, PySearch>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let chosen = self
+            .deployment()
             .live()
             .pending()
             .ok_or_else(|| errors::search("no trial in progress: call choose() first"))?;
@@ -152,10 +155,7 @@ impl PyDeployment {
         let (scene, map) = s.scene_and_map();
         let target = ObjectType::new(s.target_type());
         drop(s);
-        let (candidates, settings) = (
-            &self.candidates,
-            (self.protocol.replay, self.protocol.travel_cost),
-        );
+        let deployment = &self.deployment;
         let replays = py.allow_threads(|| {
             errors::guarded("Deployment.finish", || {
                 let trial = TrialSpec {
@@ -164,18 +164,14 @@ impl PyDeployment {
                 };
                 let problem = SearchProblem::new(&scene.house, &map.1, &trial);
                 let truth = hindsight_truth(&scene.house, &target, found).map_err(errors::plan)?;
-                replay_costs(
-                    settings,
-                    candidates,
-                    &problem,
-                    &truth,
-                    found,
-                    (chosen, cost),
-                )
-                .map_err(errors::plan)
+                let mut deployment = deployment.lock().unwrap_or_else(|p| p.into_inner());
+                let replays = deployment
+                    .replays(&problem, &truth, found, (chosen, cost))
+                    .map_err(errors::plan)?;
+                deployment.learn(cost, &replays).map_err(select_error)?;
+                Ok(replays)
             })
         })?;
-        self.live().finish(cost, &replays).map_err(select_error)?;
         self.trials += 1;
         let out = PyDict::new(py);
         for (name, r) in self.names.iter().zip(&replays) {
@@ -187,10 +183,12 @@ impl PyDeployment {
     /// Ends the trial in progress without a cost (the target was nowhere): selection learns
     /// nothing from it.
     fn abandon(&mut self) -> PyResult<()> {
-        if self.live().pending().is_none() {
+        let mut deployment = self.deployment();
+        if deployment.live().pending().is_none() {
             return Err(errors::search("no trial in progress: call choose() first"));
         }
-        self.live().abandon().map_err(select_error)?;
+        deployment.abandon().map_err(select_error)?;
+        drop(deployment);
         self.trials += 1;
         Ok(())
     }
@@ -211,7 +209,8 @@ impl PyDeployment {
     /// None), `replay_mean_m` (its real or replayed cost over all finished trials, or None) and
     /// `score` (the selection score of the next trial; lower is chosen, -inf: must be tried).
     fn stats<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
-        self.live()
+        self.deployment()
+            .live()
             .stats()
             .into_iter()
             .zip(&self.names)
@@ -231,7 +230,7 @@ impl PyDeployment {
         format!(
             "Deployment(strategies={:?}, method={:?}, trials={})",
             self.names,
-            self.live().method().name(),
+            self.deployment().live().method().name(),
             self.trials
         )
     }

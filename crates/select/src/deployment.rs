@@ -163,6 +163,15 @@ impl DeploymentLoop {
         )
     }
 
+    /// Ends the trial in progress without a cost (the target was nowhere): the selector learns
+    /// nothing from it.
+    ///
+    /// # Errors
+    /// No trial in progress.
+    pub fn abandon(&mut self) -> Result<(), SelectError> {
+        self.live.abandon()
+    }
+
     /// The selector learns a finished trial's cost and replays.
     ///
     /// # Errors

@@ -278,8 +278,10 @@ class Evaluation:
         """Per strategy, the rows of ``summary.csv``."""
     def to_pandas(self) -> Any:
         """The rows as a ``pandas.DataFrame`` (needs pandas)."""
-    def save(self, dir: _Path) -> None:
-        """Writes ``trials.csv`` and ``run.json`` into ``dir``, as ``ferret eval`` does."""
+    def save(self, dir: _Path, *, paired_against: Union[str, Sequence[str], None] = None) -> None:
+        """Writes the files ``ferret eval`` writes into ``dir``: ``trials.csv``, ``summary.csv``,
+        ``paired.csv`` (every strategy against the best, and against each of
+        ``paired_against``), ``summary.md`` and ``run.json``."""
     def __len__(self) -> int: ...
 
 class CalibrationResult:

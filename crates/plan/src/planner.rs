@@ -124,10 +124,10 @@ pub struct Solution {
     stride: usize,
     /// `h[U·stride + l]`: least expected cost still to pay (weighted by the absolute weight of
     /// the searched set, the complement of `U`) while the candidates `U` remain unsearched and the
-    /// robot stands at `l ∉ U`; entries with `l ∈ U` or `l ≥ n` are never read. Indexed by the
+    /// robot stands at `l ∉ U`; entries with `l ∈ U` or `l ≥ n` are never read, nor is the row
+    /// of `U` = everything (nothing searched: the robot stands at no candidate). Indexed by the
     /// remaining set because the recursion needs smaller remaining sets first, so rows are
-    /// appended in order; the row of `U` = everything (nothing searched yet) is never read and
-    /// absent.
+    /// appended in order.
     h: Vec<f64>,
     /// Product of `(1 - p)` over each searched set.
     weight: Vec<f64>,
@@ -205,7 +205,7 @@ pub fn solve_exact(problem: &TourProblem) -> Option<(Plan, Solution)> {
         let w = weight[s & (s - 1)] * (1.0 - problem.p[low].get());
         weight.push(w);
     }
-    h.reserve_exact(full * stride);
+    h.reserve_exact((full + 1) * stride);
     fill_table(problem, &weight, &mut h, stride);
     let solution = Solution {
         n,
@@ -281,26 +281,45 @@ fn fill_rows<const W: usize>(problem: &TourProblem, weight: &[f64], h: &mut Vec<
             *leg = problem.d(l, x) + problem.search_cost + extra;
         }
     }
-    // Nothing left: nothing more to pay.
+    let weight_of = |u: usize| weight[full ^ u];
+    // Nothing left: nothing more to pay. Only container 0 left: its leg.
     h.extend_from_slice(&[0.0; W]);
-    for u in 1..full {
-        let w = weight[full ^ u];
-        // For each next container x one lookup serves every position l: the loop over l is
-        // dense and branch-free (lanes for l ∈ U are computed and never read), so it runs on
-        // vector registers. `v < best` as in `next`: a NaN (0 · ∞ after a certain container)
-        // is never chosen.
+    let mut last = [f64::INFINITY; W];
+    relax(&mut last, weight_of(1), &leg_to[0], 0.0);
+    h.extend_from_slice(&last);
+    // Rows two at a time, U (without container 0) and U + {0}: every next container but 0 is
+    // shared, so one pass over them loads each leg row once and keeps two independent chains
+    // of minima in flight. The pair's last row is U = everything, which nothing reads.
+    for u in (2..=full).step_by(2) {
+        let with0 = u | 1;
+        let (w, w0) = (weight_of(u), weight_of(with0));
         let mut best = [f64::INFINITY; W];
+        let mut best0 = [f64::INFINITY; W];
         let mut left = u;
         while left != 0 {
             let x = left.trailing_zeros() as usize;
             left &= left - 1;
-            let after = h[(u ^ (1 << x)) * W + x];
-            for (b, &leg) in best.iter_mut().zip(&leg_to[x]) {
-                let v = w * leg + after;
-                *b = if v < *b { v } else { *b };
-            }
+            let after = (u ^ (1 << x)) * W + x;
+            relax(&mut best, w, &leg_to[x], h[after]);
+            // The row of the same remaining set with container 0 added comes next.
+            relax(&mut best0, w0, &leg_to[x], h[after + W]);
         }
+        // Container 0 next from U + {0}: what remains is U, whose row is `best`.
+        relax(&mut best0, w0, &leg_to[0], best[0]);
         h.extend_from_slice(&best);
+        h.extend_from_slice(&best0);
+    }
+}
+
+/// `best[l] = min(best[l], w · leg[l] + after)` for every lane: for each next container one
+/// lookup serves every position, branch-free on vector registers (lanes of positions still to
+/// search are computed and never read). `v < best` as in [`Solution::next`]: a NaN (0 · ∞ after
+/// a certain container) is never chosen.
+#[inline(always)]
+fn relax<const W: usize>(best: &mut [f64; W], w: f64, leg: &[f64; W], after: f64) {
+    for (b, &leg) in best.iter_mut().zip(leg) {
+        let v = w * leg + after;
+        *b = if v < *b { v } else { *b };
     }
 }
 
@@ -512,7 +531,7 @@ mod tests {
         for stride in [4, 8, 12, 16, 20, 24].into_iter().filter(|&w| w >= n) {
             let mut h = Vec::new();
             fill_table_any(problem, &solution.weight, &mut h, stride);
-            prop_assert_eq!(h.len(), full * stride);
+            prop_assert_eq!(h.len(), (full + 1) * stride);
             for s in 1..=full {
                 for l in (0..n).filter(|l| s & (1 << l) != 0) {
                     prop_assert_eq!(
@@ -581,6 +600,39 @@ mod tests {
             if n >= 2 {
                 let first = dp.order[0];
                 prop_assert_eq!(solution.next(&pr, 1 << first, Some(first)), Some(dp.order[1]));
+            }
+        }
+
+        /// After each empty search the table of the first solve answers what a fresh solve of
+        /// what remains, from where the robot stands, answers: the reuse a trial relies on.
+        /// The fresh problem's weights start at 1 instead of the searched containers' `1 - p`,
+        /// so its sums round differently; orders whose costs differ by less than that rounding
+        /// could be told apart differently, which random coordinates do not produce.
+        #[test]
+        fn one_solution_serves_every_later_decision(
+            pts in prop::collection::vec((-10.0f64..10.0, -10.0f64..10.0), 2..=8),
+            ps in prop::collection::vec(0.01f64..0.99, 8),
+            r in prop_oneof![Just(0.0), 0.0f64..3.0],
+        ) {
+            let n = pts.len();
+            let pr = problem(n, &pts, &ps[..n], r);
+            let (plan, solution) = solve_exact(&pr).unwrap();
+            let mut searched = 0usize;
+            for (step, &c) in plan.order.iter().enumerate().take(n - 1) {
+                searched |= 1 << c;
+                let reused = solution.next(&pr, searched, Some(c)).unwrap();
+                let left: Vec<usize> = (0..n).filter(|&x| searched & (1 << x) == 0).collect();
+                let sub = TourProblem {
+                    from_robot: left.iter().map(|&x| pr.d(c, x)).collect(),
+                    between: left.iter().flat_map(|&a| left.iter().map(move |&b| (a, b)))
+                        .map(|(a, b)| pr.d(a, b)).collect(),
+                    p: left.iter().map(|&x| pr.p[x]).collect(),
+                    search_cost: r,
+                    leg_extra: Vec::new(),
+                };
+                let fresh = left[solve_exact(&sub).unwrap().0.order[0]];
+                prop_assert_eq!(reused, fresh, "step {}", step);
+                prop_assert_eq!(reused, plan.order[step + 1]);
             }
         }
 

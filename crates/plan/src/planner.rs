@@ -282,32 +282,49 @@ fn fill_rows<const W: usize>(problem: &TourProblem, weight: &[f64], h: &mut Vec<
         }
     }
     let weight_of = |u: usize| weight[full ^ u];
-    // Nothing left: nothing more to pay. Only container 0 left: its leg.
+    // Nothing left: nothing more to pay.
     h.extend_from_slice(&[0.0; W]);
-    let mut last = [f64::INFINITY; W];
-    relax(&mut last, weight_of(1), &leg_to[0], 0.0);
-    h.extend_from_slice(&last);
-    // Rows two at a time, U (without container 0) and U + {0}: every next container but 0 is
-    // shared, so one pass over them loads each leg row once and keeps two independent chains
-    // of minima in flight. The pair's last row is U = everything, which nothing reads.
-    for u in (2..=full).step_by(2) {
-        let with0 = u | 1;
-        let (w, w0) = (weight_of(u), weight_of(with0));
+    // Remaining sets 1, 2, 3 (only containers 0 and 1) one by one.
+    for u in 1..=full.min(3) {
+        let w = weight_of(u);
         let mut best = [f64::INFINITY; W];
-        let mut best0 = [f64::INFINITY; W];
         let mut left = u;
         while left != 0 {
             let x = left.trailing_zeros() as usize;
             left &= left - 1;
-            let after = (u ^ (1 << x)) * W + x;
-            relax(&mut best, w, &leg_to[x], h[after]);
-            // The row of the same remaining set with container 0 added comes next.
-            relax(&mut best0, w0, &leg_to[x], h[after + W]);
+            relax(&mut best, w, &leg_to[x], h[(u ^ (1 << x)) * W + x]);
         }
-        // Container 0 next from U + {0}: what remains is U, whose row is `best`.
-        relax(&mut best0, w0, &leg_to[0], best[0]);
         h.extend_from_slice(&best);
-        h.extend_from_slice(&best0);
+    }
+    // Then four rows at a time: a remaining set U without containers 0 and 1, then U with 0,
+    // with 1, with both. Every next container but 0 and 1 is shared, so one pass over them
+    // loads each leg row once, reads four adjacent rows per lookup (one stretch of memory, where
+    // scattered lookups were what the recursion waited on) and keeps four independent chains of
+    // minima in flight. The last group ends with U = everything, a row nothing reads.
+    for u in (4..=full).step_by(4) {
+        let rows = [u, u | 1, u | 2, u | 3];
+        let w = rows.map(weight_of);
+        let mut best = [[f64::INFINITY; W]; 4];
+        let mut left = u;
+        while left != 0 {
+            let x = left.trailing_zeros() as usize;
+            left &= left - 1;
+            // The rows of U − {x} with 0 and 1 added or not are adjacent, in the same order.
+            let after = (u ^ (1 << x)) * W + x;
+            for k in 0..4 {
+                relax(&mut best[k], w[k], &leg_to[x], h[after + k * W]);
+            }
+        }
+        // Containers 0 and 1 next, from rows of this group: U + {0} leaves U, U + {1} leaves U,
+        // U + {0, 1} leaves U + {1} or U + {0}.
+        let [b, b0, b1, b01] = &mut best;
+        relax(b0, w[1], &leg_to[0], b[0]);
+        relax(b1, w[2], &leg_to[1], b[1]);
+        relax(b01, w[3], &leg_to[0], b1[0]);
+        relax(b01, w[3], &leg_to[1], b0[1]);
+        for row in &best {
+            h.extend_from_slice(row);
+        }
     }
 }
 

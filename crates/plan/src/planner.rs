@@ -105,19 +105,71 @@ pub struct Plan {
     pub expected_cost: f64,
 }
 
-/// Largest problem [`solve_exact`] accepts: 2²⁴·24 f64 cost-to-go entries are 3.2 GB.
+/// Largest problem [`solve_exact`] accepts: its table holds 2²²·24 f64 entries (0.8 GB).
 pub const MAX_EXACT: usize = 22;
+
+/// Largest problem whose table a thread keeps for its next solve (2¹⁸·20 entries, 42 MB): the
+/// exact planner solves problems of the same size decision after decision and trial after
+/// trial, and a fresh table of that size costs more in page faults than a tenth of the
+/// recursion. Larger tables are rare and would pin too much memory per thread.
+const POOLED_MAX: usize = 18;
 
 /// The cost-to-go table of one problem, reusable for every later decision of the same trial:
 /// after searching some candidates without finding the target, the best continuation is a lookup.
 #[derive(Clone, Debug)]
 pub struct Solution {
     n: usize,
-    /// `h[S·n + l]`: least expected cost still to pay (weighted by the absolute weight of `S`)
-    /// after searching set `S`, standing at `l ∈ S`.
+    /// Row length of `h`: `n` rounded up to a multiple of 4, so that a row is a fixed-size array
+    /// the compiler keeps in vector registers.
+    stride: usize,
+    /// `h[U·stride + l]`: least expected cost still to pay (weighted by the absolute weight of
+    /// the searched set, the complement of `U`) while the candidates `U` remain unsearched and the
+    /// robot stands at `l ∉ U`; entries with `l ∈ U` or `l ≥ n` are never read, nor is the row
+    /// of `U` = everything (nothing searched: the robot stands at no candidate). Indexed by the
+    /// remaining set because the recursion needs smaller remaining sets first, so rows are
+    /// appended in order.
     h: Vec<f64>,
-    /// Product of `(1 - p)` over each set.
+    /// Product of `(1 - p)` over each searched set.
     weight: Vec<f64>,
+}
+
+thread_local! {
+    /// The buffers of this thread's last dropped [`Solution`], for its next solve.
+    static SPARE: std::cell::RefCell<(Vec<f64>, Vec<f64>)> =
+        const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
+}
+
+impl Drop for Solution {
+    fn drop(&mut self) {
+        if self.n > POOLED_MAX {
+            return;
+        }
+        let h = std::mem::take(&mut self.h);
+        let weight = std::mem::take(&mut self.weight);
+        // During thread teardown the pool may be gone already; the buffers are then just freed.
+        let _ = SPARE.try_with(|spare| {
+            if let Ok(mut spare) = spare.try_borrow_mut()
+                && h.capacity() > spare.0.capacity()
+            {
+                *spare = (h, weight);
+            }
+        });
+    }
+}
+
+/// This thread's spare buffers, emptied (new ones when there are none).
+fn spare_buffers() -> (Vec<f64>, Vec<f64>) {
+    let (mut h, mut weight) = SPARE
+        .try_with(|spare| {
+            spare
+                .try_borrow_mut()
+                .map(|mut s| std::mem::take(&mut *s))
+                .unwrap_or_default()
+        })
+        .unwrap_or_default();
+    h.clear();
+    weight.clear();
+    (h, weight)
 }
 
 /// Solves `problem` exactly by Held–Karp dynamic programming.
@@ -128,52 +180,39 @@ pub fn solve_exact(problem: &TourProblem) -> Option<(Plan, Solution)> {
     if n > MAX_EXACT {
         return None;
     }
+    let (mut h, mut weight) = spare_buffers();
+    let stride = n.next_multiple_of(4).max(4);
     if n == 0 {
-        return Some((
-            Plan {
-                order: vec![],
-                expected_cost: 0.0,
-            },
-            Solution {
-                n,
-                h: vec![0.0],
-                weight: vec![1.0],
-            },
-        ));
+        h.resize(stride, 0.0);
+        weight.push(1.0);
+        let solution = Solution {
+            n,
+            stride,
+            h,
+            weight,
+        };
+        let plan = Plan {
+            order: vec![],
+            expected_cost: 0.0,
+        };
+        return Some((plan, solution));
     }
     let full = (1usize << n) - 1;
-    let mut weight = vec![1.0f64; 1 << n];
+    weight.reserve_exact(full + 1);
+    weight.push(1.0);
     for s in 1..=full {
         let low = s.trailing_zeros() as usize;
-        weight[s] = weight[s & (s - 1)] * (1.0 - problem.p[low].get());
+        let w = weight[s & (s - 1)] * (1.0 - problem.p[low].get());
+        weight.push(w);
     }
-    let mut h = vec![f64::INFINITY; (1 << n) * n];
-    for l in 0..n {
-        h[full * n + l] = 0.0;
-    }
-    // Sets in decreasing numeric order: every superset S|x is larger than S, so it is done first.
-    for s in (1..full).rev() {
-        let w = weight[s];
-        let mut l_bits = s;
-        while l_bits != 0 {
-            let l = l_bits.trailing_zeros() as usize;
-            l_bits &= l_bits - 1;
-            let row = &problem.between[l * n..(l + 1) * n];
-            let mut best = f64::INFINITY;
-            let mut free = full & !s;
-            while free != 0 {
-                let x = free.trailing_zeros() as usize;
-                free &= free - 1;
-                let v = w * (row[x] + problem.search_cost + problem.extra(x))
-                    + h[(s | (1 << x)) * n + x];
-                if v < best {
-                    best = v;
-                }
-            }
-            h[s * n + l] = best;
-        }
-    }
-    let solution = Solution { n, h, weight };
+    h.reserve_exact((full + 1) * stride);
+    fill_table(problem, &weight, &mut h, stride);
+    let solution = Solution {
+        n,
+        stride,
+        h,
+        weight,
+    };
     let order = solution.best_order(problem, 0, None);
     let expected_cost = problem.expected_cost(&order);
     Some((
@@ -183,6 +222,122 @@ pub fn solve_exact(problem: &TourProblem) -> Option<(Plan, Solution)> {
         },
         solution,
     ))
+}
+
+/// Appends every row of the table to the empty `h`, on the widest vector unit the processor has.
+fn fill_table(problem: &TourProblem, weight: &[f64], h: &mut Vec<f64>, stride: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the processor has AVX2, checked just above.
+        unsafe { fill_table_avx2(problem, weight, h, stride) };
+        return;
+    }
+    fill_table_any(problem, weight, h, stride);
+}
+
+/// The same instructions as [`fill_table_any`] on 4 lanes instead of 2: only additions,
+/// multiplications and comparisons, each rounded exactly as the scalar one (no fused
+/// multiply-add), so the table is identical bit for bit.
+///
+/// # Safety
+/// The processor must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn fill_table_avx2(problem: &TourProblem, weight: &[f64], h: &mut Vec<f64>, stride: usize) {
+    match stride {
+        4 => fill_rows::<4>(problem, weight, h),
+        8 => fill_rows::<8>(problem, weight, h),
+        12 => fill_rows::<12>(problem, weight, h),
+        16 => fill_rows::<16>(problem, weight, h),
+        20 => fill_rows::<20>(problem, weight, h),
+        _ => fill_rows::<24>(problem, weight, h),
+    }
+}
+
+fn fill_table_any(problem: &TourProblem, weight: &[f64], h: &mut Vec<f64>, stride: usize) {
+    match stride {
+        4 => fill_rows::<4>(problem, weight, h),
+        8 => fill_rows::<8>(problem, weight, h),
+        12 => fill_rows::<12>(problem, weight, h),
+        16 => fill_rows::<16>(problem, weight, h),
+        20 => fill_rows::<20>(problem, weight, h),
+        _ => fill_rows::<24>(problem, weight, h),
+    }
+}
+
+/// The Held–Karp recursion over remaining sets, `W` = row length (≥ n, at most 24).
+#[inline(always)]
+fn fill_rows<const W: usize>(problem: &TourProblem, weight: &[f64], h: &mut Vec<f64>) {
+    let n = problem.len().min(W);
+    let full = (1usize << n) - 1;
+    // Leg costs by destination: `leg_to[x][l]` is the cost of the leg l → x before its weight,
+    // summed in the order `expected_cost` and `next` sum it, so that every entry is bit for bit
+    // what the recursion written out per (set, position, next container) gives and ties break
+    // as they did. Lanes l ≥ n are padding.
+    let mut leg_to = vec![[0.0f64; W]; n];
+    for (x, row) in leg_to.iter_mut().enumerate() {
+        let extra = problem.extra(x);
+        for (l, leg) in row.iter_mut().enumerate().take(n) {
+            *leg = problem.d(l, x) + problem.search_cost + extra;
+        }
+    }
+    let weight_of = |u: usize| weight[full ^ u];
+    // Nothing left: nothing more to pay.
+    h.extend_from_slice(&[0.0; W]);
+    // Remaining sets 1, 2, 3 (only containers 0 and 1) one by one.
+    for u in 1..=full.min(3) {
+        let w = weight_of(u);
+        let mut best = [f64::INFINITY; W];
+        let mut left = u;
+        while left != 0 {
+            let x = left.trailing_zeros() as usize;
+            left &= left - 1;
+            relax(&mut best, w, &leg_to[x], h[(u ^ (1 << x)) * W + x]);
+        }
+        h.extend_from_slice(&best);
+    }
+    // Then four rows at a time: a remaining set U without containers 0 and 1, then U with 0,
+    // with 1, with both. Every next container but 0 and 1 is shared, so one pass over them
+    // loads each leg row once, reads four adjacent rows per lookup (one stretch of memory, where
+    // scattered lookups were what the recursion waited on) and keeps four independent chains of
+    // minima in flight. The last group ends with U = everything, a row nothing reads.
+    for u in (4..=full).step_by(4) {
+        let rows = [u, u | 1, u | 2, u | 3];
+        let w = rows.map(weight_of);
+        let mut best = [[f64::INFINITY; W]; 4];
+        let mut left = u;
+        while left != 0 {
+            let x = left.trailing_zeros() as usize;
+            left &= left - 1;
+            // The rows of U − {x} with 0 and 1 added or not are adjacent, in the same order.
+            let after = (u ^ (1 << x)) * W + x;
+            for k in 0..4 {
+                relax(&mut best[k], w[k], &leg_to[x], h[after + k * W]);
+            }
+        }
+        // Containers 0 and 1 next, from rows of this group: U + {0} leaves U, U + {1} leaves U,
+        // U + {0, 1} leaves U + {1} or U + {0}.
+        let [b, b0, b1, b01] = &mut best;
+        relax(b0, w[1], &leg_to[0], b[0]);
+        relax(b1, w[2], &leg_to[1], b[1]);
+        relax(b01, w[3], &leg_to[0], b1[0]);
+        relax(b01, w[3], &leg_to[1], b0[1]);
+        for row in &best {
+            h.extend_from_slice(row);
+        }
+    }
+}
+
+/// `best[l] = min(best[l], w · leg[l] + after)` for every lane: for each next container one
+/// lookup serves every position, branch-free on vector registers (lanes of positions still to
+/// search are computed and never read). `v < best` as in [`Solution::next`]: a NaN (0 · ∞ after
+/// a certain container) is never chosen.
+#[inline(always)]
+fn relax<const W: usize>(best: &mut [f64; W], w: f64, leg: &[f64; W], after: f64) {
+    for (b, &leg) in best.iter_mut().zip(leg) {
+        let v = w * leg + after;
+        *b = if v < *b { v } else { *b };
+    }
 }
 
 impl Solution {
@@ -201,8 +356,9 @@ impl Solution {
                 None => problem.from_robot[x],
                 Some(l) => problem.d(l, x),
             };
+            let remaining = full & !(searched | (1 << x));
             let v = self.weight[searched] * (leg + problem.search_cost + problem.extra(x))
-                + self.h[(searched | (1 << x)) * n + x];
+                + self.h[remaining * self.stride + x];
             if best.is_none_or(|(b, _)| v < b) {
                 best = Some((v, x));
             }
@@ -324,8 +480,122 @@ mod tests {
         assert!(solve_exact(&pr).is_none());
     }
 
+    /// The recursion as first written, indexed by the searched set, one lookup per (set, position,
+    /// next container): the reference the faster table must equal bit for bit.
+    fn reference_table(problem: &TourProblem) -> Vec<f64> {
+        let n = problem.len();
+        let full = (1usize << n) - 1;
+        let mut weight = vec![1.0f64; 1 << n];
+        for s in 1..=full {
+            let low = s.trailing_zeros() as usize;
+            weight[s] = weight[s & (s - 1)] * (1.0 - problem.p[low].get());
+        }
+        let mut h = vec![f64::INFINITY; (1 << n) * n];
+        for l in 0..n {
+            h[full * n + l] = 0.0;
+        }
+        for s in (1..full).rev() {
+            for l in (0..n).filter(|l| s & (1 << l) != 0) {
+                let mut best = f64::INFINITY;
+                for x in (0..n).filter(|x| s & (1 << x) == 0) {
+                    let v = weight[s] * (problem.d(l, x) + problem.search_cost + problem.extra(x))
+                        + h[(s | (1 << x)) * n + x];
+                    if v < best {
+                        best = v;
+                    }
+                }
+                h[s * n + l] = best;
+            }
+        }
+        h
+    }
+
+    fn assert_table_is_reference(problem: &TourProblem) -> Result<(), TestCaseError> {
+        let n = problem.len();
+        let full = (1usize << n) - 1;
+        let reference = reference_table(problem);
+        let (_, solution) = solve_exact(problem).unwrap();
+        // The portable kernel too, where the vector one is what `solve_exact` ran.
+        let mut portable = Vec::new();
+        fill_table_any(problem, &solution.weight, &mut portable, solution.stride);
+        prop_assert!(
+            portable
+                .iter()
+                .zip(&solution.h)
+                .all(|(a, b)| a.to_bits() == b.to_bits())
+        );
+        prop_assert_eq!(portable.len(), solution.h.len());
+        for s in 1..=full {
+            for l in (0..n).filter(|l| s & (1 << l) != 0) {
+                let new = solution.h[(full ^ s) * solution.stride + l];
+                let old = reference[s * n + l];
+                prop_assert!(
+                    new.to_bits() == old.to_bits(),
+                    "set {s:b}, at {l}: {new} vs {old}"
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// Rows of any width give the same entries, so the widths real problems never reach in
+    /// tests (20, 24) are checked on small ones.
+    fn assert_every_width_is_reference(problem: &TourProblem) -> Result<(), TestCaseError> {
+        let n = problem.len();
+        let full = (1usize << n) - 1;
+        let reference = reference_table(problem);
+        let (_, solution) = solve_exact(problem).unwrap();
+        for stride in [4, 8, 12, 16, 20, 24].into_iter().filter(|&w| w >= n) {
+            let mut h = Vec::new();
+            fill_table_any(problem, &solution.weight, &mut h, stride);
+            prop_assert_eq!(h.len(), (full + 1) * stride);
+            for s in 1..=full {
+                for l in (0..n).filter(|l| s & (1 << l) != 0) {
+                    prop_assert_eq!(
+                        h[(full ^ s) * stride + l].to_bits(),
+                        reference[s * n + l].to_bits()
+                    );
+                }
+            }
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn larger_tables_equal_reference_bit_for_bit() {
+        for (n, seed) in [(13, 1), (16, 2), (17, 3)] {
+            let mut pr = TourProblem::random(n, seed);
+            pr.search_cost = 0.25;
+            assert_table_is_reference(&pr).unwrap();
+        }
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(200))]
+
+        #[test]
+        fn table_equals_reference_bit_for_bit(
+            n in 1usize..=9,
+            raw in prop::collection::vec(prop_oneof![9 => 0.0f64..20.0, 1 => Just(f64::INFINITY)], 90),
+            ps in prop::collection::vec(prop_oneof![8 => 0.0f64..=1.0, 1 => Just(1.0), 1 => Just(0.0)], 9),
+            r in prop_oneof![Just(0.0), 0.0f64..3.0],
+            authors in any::<bool>(),
+        ) {
+            // Unreachable legs and certain containers included: 0 · ∞ is NaN, skipped by both.
+            let mut pr = TourProblem {
+                from_robot: raw[..n].to_vec(),
+                between: raw[9..9 + n * n].to_vec(),
+                p: ps[..n].iter().map(|&x| Probability::clamped(x, 0.0, 1.0)).collect(),
+                search_cost: r,
+                leg_extra: Vec::new(),
+            };
+            if authors {
+                pr.leg_extra = (0..n).map(|i| pr.p[i].get() * pr.from_robot[i]).collect();
+            }
+            assert_table_is_reference(&pr)?;
+            assert_every_width_is_reference(&pr)?;
+        }
+
         #[test]
         fn dp_equals_brute_force(
             pts in prop::collection::vec((-10.0f64..10.0, -10.0f64..10.0), 1..=7),
@@ -347,6 +617,39 @@ mod tests {
             if n >= 2 {
                 let first = dp.order[0];
                 prop_assert_eq!(solution.next(&pr, 1 << first, Some(first)), Some(dp.order[1]));
+            }
+        }
+
+        /// After each empty search the table of the first solve answers what a fresh solve of
+        /// what remains, from where the robot stands, answers: the reuse a trial relies on.
+        /// The fresh problem's weights start at 1 instead of the searched containers' `1 - p`,
+        /// so its sums round differently; orders whose costs differ by less than that rounding
+        /// could be told apart differently, which random coordinates do not produce.
+        #[test]
+        fn one_solution_serves_every_later_decision(
+            pts in prop::collection::vec((-10.0f64..10.0, -10.0f64..10.0), 2..=8),
+            ps in prop::collection::vec(0.01f64..0.99, 8),
+            r in prop_oneof![Just(0.0), 0.0f64..3.0],
+        ) {
+            let n = pts.len();
+            let pr = problem(n, &pts, &ps[..n], r);
+            let (plan, solution) = solve_exact(&pr).unwrap();
+            let mut searched = 0usize;
+            for (step, &c) in plan.order.iter().enumerate().take(n - 1) {
+                searched |= 1 << c;
+                let reused = solution.next(&pr, searched, Some(c)).unwrap();
+                let left: Vec<usize> = (0..n).filter(|&x| searched & (1 << x) == 0).collect();
+                let sub = TourProblem {
+                    from_robot: left.iter().map(|&x| pr.d(c, x)).collect(),
+                    between: left.iter().flat_map(|&a| left.iter().map(move |&b| (a, b)))
+                        .map(|(a, b)| pr.d(a, b)).collect(),
+                    p: left.iter().map(|&x| pr.p[x]).collect(),
+                    search_cost: r,
+                    leg_extra: Vec::new(),
+                };
+                let fresh = left[solve_exact(&sub).unwrap().0.order[0]];
+                prop_assert_eq!(reused, fresh, "step {}", step);
+                prop_assert_eq!(reused, plan.order[step + 1]);
             }
         }
 

@@ -256,6 +256,8 @@ impl Policy for Planner {
         {
             return Ok(c);
         }
+        // The old table is no longer of use; dropped first, its memory serves the new solve.
+        self.cached = None;
         let problem = self.problem(belief, &candidates);
         let (plan, solution) = planner::solve_exact(&problem).ok_or_else(|| PlanError::Policy {
             policy: "model".into(),

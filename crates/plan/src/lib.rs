@@ -74,6 +74,7 @@ pub mod logistic;
 pub mod planner;
 pub mod policy;
 pub mod probability;
+pub mod problem;
 pub mod protocol;
 pub mod pyrandom;
 pub mod replay;
@@ -94,6 +95,7 @@ pub use likelihood::{
 pub use planner::{Plan, TourProblem, solve_brute_force, solve_exact};
 pub use policy::{CandidateLimit, CostModel, Greedy, Oracle, Planner, PlannerConfig, Policy};
 pub use probability::Probability;
+pub use problem::SearchProblem;
 pub use protocol::{
     AccessRule, ContainerSet, DrawMode, InitialBelief, Protocol, ProtocolName, ReplayMode,
     TargetSet, TravelCost, TrialRng, TrialSettings, UntriedScore,
@@ -103,6 +105,6 @@ pub use replay::{
 };
 pub use strategy::{ModelStrategy, Strategy, StrategyRegistry, StrategySpec, TrialContext};
 pub use trial::{
-    Search, SearchProblem, TrialOutcome, TrialSpec, TrialsPerHouse, draw_trial, draw_trials,
-    draw_trials_with, python_seed, run_trial,
+    Search, TrialOutcome, TrialSpec, TrialsPerHouse, draw_trial, draw_trials, draw_trials_with,
+    python_seed, run_trial,
 };

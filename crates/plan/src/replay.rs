@@ -8,9 +8,10 @@
 use ferret_world::{GroundTruth, House, ObjectType, SmallObject, TravelCost};
 
 use crate::error::PlanError;
+use crate::problem::SearchProblem;
 use crate::protocol::ReplayMode;
 use crate::strategy::Strategy;
-use crate::trial::{SearchProblem, TrialOutcome, run_trial};
+use crate::trial::{TrialOutcome, run_trial};
 
 /// The hindsight world of a finished trial: the target in `found` only.
 pub fn hindsight_truth(

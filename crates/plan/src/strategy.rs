@@ -10,7 +10,7 @@ use ferret_world::GroundTruth;
 use crate::error::PlanError;
 use crate::likelihood::{LikelihoodSource, Noise, Prior, RawPrior, Uniform};
 use crate::policy::{CandidateLimit, CostModel, Greedy, Oracle, Planner, PlannerConfig, Policy};
-use crate::trial::SearchProblem;
+use crate::problem::SearchProblem;
 
 /// What a strategy needs to start a trial.
 #[derive(Clone, Copy, Debug)]

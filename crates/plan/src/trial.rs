@@ -1,5 +1,5 @@
 //! Trials: drawing a target for a house, and the simulator that runs a strategy until the target
-//! is found.
+//! is found (on a [`SearchProblem`]).
 
 use ferret_world::{Distances, GroundTruth, House, ObjectType, Place, Point, TravelCost};
 use rand::{Rng, SeedableRng};
@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use crate::belief::Belief;
 use crate::error::PlanError;
 use crate::policy::Policy;
+use crate::problem::SearchProblem;
 use crate::protocol::{InitialBelief, Protocol, TargetSet, TrialRng};
 use crate::pyrandom::PyRandom;
 use crate::strategy::{Strategy, TrialContext};
@@ -20,35 +21,6 @@ pub struct TrialSpec {
     pub target: ObjectType,
     /// Containers known to be searched before the trial starts (usually none).
     pub revealed: Vec<usize>,
-}
-
-/// One object-search problem: the map the robot knows, travel distances on it, and the trial
-/// (what to find, what was searched before it began). The ground truth is not part of it: a
-/// robot never knows it, so simulations and replays pass it beside the problem.
-#[derive(Clone, Copy, Debug)]
-pub struct SearchProblem<'a> {
-    /// The known map: rooms, containers, the start pose.
-    pub house: &'a House,
-    /// Travel distances between the start and the containers' access points.
-    pub distances: &'a Distances,
-    /// The target and the containers searched beforehand.
-    pub trial: &'a TrialSpec,
-}
-
-impl<'a> SearchProblem<'a> {
-    /// The problem of `trial` in `house`.
-    pub fn new(house: &'a House, distances: &'a Distances, trial: &'a TrialSpec) -> Self {
-        Self {
-            house,
-            distances,
-            trial,
-        }
-    }
-
-    /// The object type searched for.
-    pub fn target(&self) -> &'a ObjectType {
-        &self.trial.target
-    }
 }
 
 /// A deterministic RNG for house `index` under `seed`, independent of thread scheduling.

@@ -39,26 +39,8 @@ if [ ! -x "$PY" ] || [ ! -f "$VENV/.complete" ]; then
 fi
 [ "${1:-}" = install ] && exit 0
 
-WHEELS="$(mktemp -d)"
-trap 'rm -rf "$WHEELS"' EXIT
-log "building the wheel"
-started=$(date +%s)
-# Portable: whatever RUSTFLAGS the caller has set for local experiments stays out of the wheel.
-(cd "$ROOT" && env -u RUSTFLAGS CARGO_TARGET_DIR="$TARGET" "$VENV/bin/maturin" build --release \
-    --quiet -m crates/python/Cargo.toml --interpreter "$PY" --out "$WHEELS")
-log "wheel built in $(( $(date +%s) - started )) s: $(cd "$WHEELS" && ls)"
-"$PY" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps "$WHEELS"/*.whl
-
-if [ -z "${FERRET_BIN:-}" ]; then
-    FERRET_BIN="$TARGET/release/ferret"
-    if [ ! -x "$FERRET_BIN" ]; then
-        log "building $FERRET_BIN"
-        (cd "$ROOT" && CARGO_TARGET_DIR="$TARGET" cargo build --release --quiet -p ferret-cli)
-    fi
-fi
-# Absolute, because pytest runs from a scratch directory.
-FERRET_BIN="$(cd "$(dirname "$FERRET_BIN")" && pwd)/$(basename "$FERRET_BIN")"
-export FERRET_BIN
+. "$ROOT/scripts/lib/ferret-wheel.sh"
+install_ferret_wheel
 # From a scratch directory, so that `import ferret` finds the installed wheel rather than the
 # source tree, and no cache is left in the checkout.
 cd "$WHEELS"

@@ -67,25 +67,8 @@ if [ "${1:-}" = install ]; then
     exit 0
 fi
 
-WHEELS="$(mktemp -d)"
-trap 'rm -rf "$WHEELS"' EXIT
-log "building the ferret wheel"
-started=$(date +%s)
-# Portable: whatever RUSTFLAGS the caller has set for local experiments stays out of the wheel.
-(cd "$ROOT" && env -u RUSTFLAGS CARGO_TARGET_DIR="$TARGET" "$VENV/bin/maturin" build --release \
-    --quiet -m crates/python/Cargo.toml --interpreter "$PY" --out "$WHEELS")
-log "wheel built in $(( $(date +%s) - started )) s: $(cd "$WHEELS" && ls)"
-"$PY" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps "$WHEELS"/*.whl
-
-if [ -z "${FERRET_BIN:-}" ]; then
-    FERRET_BIN="$TARGET/release/ferret"
-    if [ ! -x "$FERRET_BIN" ]; then
-        log "building $FERRET_BIN"
-        (cd "$ROOT" && CARGO_TARGET_DIR="$TARGET" cargo build --release --quiet -p ferret-cli)
-    fi
-fi
-FERRET_BIN="$(cd "$(dirname "$FERRET_BIN")" && pwd)/$(basename "$FERRET_BIN")"
-export FERRET_BIN
+. "$ROOT/scripts/lib/ferret-wheel.sh"
+install_ferret_wheel
 # A domain of this run's own (0–101 are the ids every host can use), discovery on this host
 # only: concurrent runs and other ROS graphs on the network neither see nor disturb the tests.
 export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( 1 + $$ % 100 ))}"

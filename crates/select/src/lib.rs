@@ -1,8 +1,9 @@
 //! Strategy selection during deployment (paper section V).
 //!
 //! A robot carries several strategies (policy + prompt + LLM) and must find the best one in few
-//! trials. This crate works on plain numbers: the real cost of each deployed trial and the
-//! offline-replay costs of the alternatives (computed by the plan crate).
+//! trials. The selectors and experiments work on plain numbers: the real cost of each deployed
+//! trial and the offline-replay costs of the alternatives; the deployment loop produces those
+//! numbers from real strategies with the plan crate's simulator and replay.
 //!
 //! * [`Selector`]: one trial at a time — [`Selector::choose`] a strategy, deploy it, then
 //!   [`Selector::observe`] its cost and the replay costs. Implemented by [`Ucb`] (paper eq. 2) and

@@ -364,5 +364,7 @@ fn run_info(
         protocol,
         strategies: strategies.to_vec(),
         trials_sha256: None,
+        shard: None,
+        merged_from: Vec::new(),
     })
 }

@@ -32,6 +32,7 @@ from ._ferret import (
     evaluate,
     generate_houses,
     load_houses,
+    merge,
     select,
 )
 
@@ -58,5 +59,6 @@ __all__ = [
     "evaluate",
     "generate_houses",
     "load_houses",
+    "merge",
     "select",
 ]

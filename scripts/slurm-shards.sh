@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Sharded evaluation on a real Slurm: a one-node cluster from Debian's packages (slurmctld,
 # slurmd and munge, installed with apt-get when missing), configured in a temporary directory
-# and listening on 127.0.0.1 only (slurmctld binds the address its host name resolves to), runs `ferret eval --shard auto` as an array of 3 tasks
+# and listening on 127.0.0.1 only (slurmctld binds the address its host name resolves to, which
+# the script checks), runs `ferret eval --shard auto` as an array of 3 tasks
 # (`sbatch --array=0-2 --wait`); `ferret merge` then joins them, and the merged trials.csv,
 # summary.csv and paired.csv must be those of one machine, byte for byte. The daemons are
 # stopped and the directory removed on exit.
@@ -48,6 +49,10 @@ stop() {
 }
 trap stop EXIT
 
+if ! getent hosts "$(hostname)" | grep -q '^127\.'; then
+    log "$(hostname) does not resolve to a loopback address: slurmctld would listen beyond 127.0.0.1"
+    exit 1
+fi
 # Ports of their own, so that the cluster does not meet a Slurm already on this machine.
 free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
 CTLD_PORT="$(free_port)"

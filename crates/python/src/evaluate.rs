@@ -342,6 +342,7 @@ pub fn evaluate(
             r.cost_cells = Some(r.cost_m / CELL_M);
         }
     }
+    let failures = outcome.errors.len();
     Ok(PyEvaluation {
         rows,
         errors: outcome.errors,
@@ -353,7 +354,7 @@ pub fn evaluate(
         houses: house_indices,
         cells,
         shard,
-        failures: outcome.errors.len(),
+        failures,
     })
 }
 

@@ -470,7 +470,12 @@ pub fn merge(
             }
             answers = target.len().map_err(cache_err)?;
         }
-        Ok((merged.run.rows.len(), merged.houses.len(), answers, conflicts))
+        Ok((
+            merged.run.rows.len(),
+            merged.houses.len(),
+            answers,
+            conflicts,
+        ))
     })?;
     let d = pyo3::types::PyDict::new(py);
     d.set_item("rows", rows)?;

@@ -83,9 +83,10 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
     {
         args.llm.llm_cache = args.out.join(super::eval::SHARD_CACHE);
     }
-    let mut loaded = args.houses.load()?;
+    let loaded = args
+        .houses
+        .load_shard(ferret_world::ContainerSet::Receptacles, shard)?;
     if let Some(sh) = shard {
-        loaded.scenes.retain(|s| sh.contains(s.house.index));
         eprintln!(
             "shard {sh}: {} houses (file index mod {} = {}); its scores cover these houses only",
             loaded.scenes.len(),

@@ -113,9 +113,8 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
         anyhow::bail!("--paired-against {s}: not one of --strategies");
     }
     let protocol = args.protocol.resolve(Protocol::FERRET)?;
-    let mut loaded = args.houses.load_for(protocol.containers)?;
+    let loaded = args.houses.load_shard(protocol.containers, shard)?;
     if let Some(sh) = shard {
-        loaded.scenes.retain(|s| sh.contains(s.house.index));
         eprintln!(
             "shard {sh}: {} houses (file index mod {} = {})",
             loaded.scenes.len(),

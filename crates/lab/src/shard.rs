@@ -356,16 +356,11 @@ pub fn merge_runs(shards: &[(PathBuf, EvalRun)]) -> Result<MergedRun, MergeError
                 what: format!("both are shard {}/{}", rec.index, rec.count),
             });
         }
-        let outside = |h: usize| {
-            !Shard::contains(
-                &Shard {
-                    index: rec.index,
-                    count: rec.count,
-                },
-                h,
-            )
+        let shard = Shard {
+            index: rec.index,
+            count: rec.count,
         };
-        if let Some(h) = rec.houses.iter().copied().find(|&h| outside(h)) {
+        if let Some(h) = rec.houses.iter().copied().find(|&h| !shard.contains(h)) {
             return Err(MergeError::Inconsistent {
                 dir: dir.clone(),
                 message: format!(

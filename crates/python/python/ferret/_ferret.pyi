@@ -240,8 +240,11 @@ class Evaluation:
         """Per strategy, the rows of ``summary.csv``."""
     def to_pandas(self) -> Any:
         """The rows as a ``pandas.DataFrame`` (needs pandas)."""
-    def save(self, dir: _Path) -> None:
-        """Writes ``trials.csv`` and ``run.json`` into ``dir``, as ``ferret eval`` does."""
+    def save(
+        self, dir: _Path, *, paired_against: Union[Sequence[str], str, None] = None
+    ) -> None:
+        """Writes ``trials.csv``, ``run.json``, the summary and the paired comparisons into
+        ``dir``, as ``ferret eval`` does (and the shard, for ``merge``)."""
     def __len__(self) -> int: ...
 
 class CalibrationResult:

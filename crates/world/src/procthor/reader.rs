@@ -82,7 +82,8 @@ pub struct LoadReport {
 /// (one house per line) or either gzip-compressed (`.jsonl.gz`; compression is recognised by
 /// content). House `i` is line `i` (0-based); blank lines hold no house but keep their index.
 ///
-/// Lines are decompressed in order and only those inside `opts.range` are parsed, in parallel.
+/// Lines are decompressed in order and only those inside `opts.range` (and `opts.shard`) are
+/// parsed, in parallel.
 /// A range reaching outside the file is a [`WorldError::Range`]; an unreadable file is a
 /// [`WorldError::Io`]; a file holding no house at all (empty, or blank lines only) is
 /// [`WorldError::NoHouses`]; a line longer than [`MAX_LINE_BYTES`] is [`WorldError::Limit`]. An

@@ -67,6 +67,20 @@ impl HouseArgs {
         self.load_inner(self.skip_invalid, containers)
     }
 
+    /// Like [`load_for`](Self::load_for), only the houses of `shard` (see
+    /// [`HouseSource::load_shard`]).
+    pub fn load_shard(
+        &self,
+        containers: ContainerSet,
+        shard: Option<ferret_lab::Shard>,
+    ) -> Result<LoadedHouses> {
+        Ok(HouseSource {
+            skip_invalid: self.skip_invalid,
+            ..self.source()
+        }
+        .load_shard(containers, shard)?)
+    }
+
     fn load_inner(&self, skip_invalid: bool, containers: ContainerSet) -> Result<LoadedHouses> {
         Ok(HouseSource {
             skip_invalid,

@@ -45,6 +45,9 @@ enum Command {
     /// Score likelihood sources (uniform, prior, LLM prompts) against the ground truth: Brier,
     /// log loss, AUROC, reliability diagram.
     Calibrate(commands::calibrate::Args),
+    /// Merge the run directories and LLM caches of an evaluation's shards (`eval --shard`) into
+    /// the run one machine writes.
+    Merge(commands::merge::Args),
     /// Replay strategies on an eval run and compare UCB with replay selection over deployments.
     Select(commands::select::Args),
     /// Run a live deployment: choose, run, replay, trial after trial.
@@ -75,6 +78,7 @@ fn main() -> std::process::ExitCode {
         Command::Prior(cmd) => commands::prior::run(cmd),
         Command::Eval(args) => commands::eval::run(args),
         Command::Calibrate(args) => commands::calibrate::run(args),
+        Command::Merge(args) => commands::merge::run(args),
         Command::Select(args) => commands::select::run(args),
         Command::Deploy(args) => commands::deploy::run(args),
         Command::Llm(cmd) => commands::llm::run(cmd),

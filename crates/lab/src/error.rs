@@ -74,6 +74,12 @@ pub enum LabError {
         #[source]
         source: serde_json::Error,
     },
+    /// A `--shard` that cannot be used.
+    #[error(transparent)]
+    Shard(#[from] crate::shard::ShardError),
+    /// Shards that cannot be merged.
+    #[error(transparent)]
+    Merge(#[from] crate::shard::MergeError),
     /// An inner error, with where it happened.
     #[error("{context}")]
     Context {

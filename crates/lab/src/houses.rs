@@ -42,6 +42,28 @@ impl HouseSource {
     /// Loads the houses, ProcTHOR files read with the container set `containers` (generated
     /// houses and scene files name their containers themselves).
     pub fn load_for(&self, containers: ContainerSet) -> Result<LoadedHouses> {
+        self.load_shard(containers, None)
+    }
+
+    /// [`load_for`](Self::load_for), keeping only the houses of `shard` (all without one). The
+    /// lines of a ProcTHOR file that belong to other shards are skipped without being parsed.
+    pub fn load_shard(
+        &self,
+        containers: ContainerSet,
+        shard: Option<crate::shard::Shard>,
+    ) -> Result<LoadedHouses> {
+        let mut loaded = self.load_inner(containers, shard)?;
+        if let Some(sh) = shard {
+            loaded.scenes.retain(|s| sh.contains(s.house.index));
+        }
+        Ok(loaded)
+    }
+
+    fn load_inner(
+        &self,
+        containers: ContainerSet,
+        shard: Option<crate::shard::Shard>,
+    ) -> Result<LoadedHouses> {
         let Some(path) = &self.houses else {
             let scenes = ferret_world::generate::default_scenes(self.generate, self.house_seed)
                 .context_with(|| "generating the default houses".to_string())?;
@@ -71,6 +93,7 @@ impl HouseSource {
             None => None,
         };
         let opts = LoadOptions {
+            shard: shard.map(|sh| (sh.index, sh.count)),
             asset_db: db.as_ref(),
             range: self.range.unwrap_or_default(),
             skip_invalid: self.skip_invalid,

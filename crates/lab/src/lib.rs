@@ -6,7 +6,8 @@
 //! ([`strategies`]), evaluation of strategies on the same trials ([`evaluate`](mod@evaluate)), the run files
 //! `trials.csv` and `run.json` ([`runs`]), summaries ([`summary`]) and the paired statistics behind them ([`paired`]),
 //! calibration of likelihood sources ([`calibrate`]), the replay table behind selection with its
-//! resumable cache ([`replay`]), selection over an evaluation run ([`selection`]), batch
+//! resumable cache ([`replay`]), selection over an evaluation run ([`selection`]), sharded evaluation and its merge
+//! ([`shard`]), batch
 //! deployments in simulation with their house order ([`deploy`](mod@deploy)), atomic
 //! output files ([`files`]), and how long work reports progress without printing
 //! ([`feedback`]). Faces parse their input, call these functions and print what they return.
@@ -22,6 +23,7 @@ pub mod paired;
 pub mod replay;
 pub mod runs;
 pub mod selection;
+pub mod shard;
 pub mod strategies;
 pub mod summary;
 
@@ -32,6 +34,7 @@ pub use feedback::{Feedback, Silent};
 pub use ferret_select::HouseOrder;
 pub use houses::{HouseSource, LoadedHouses, Mapped, build_maps};
 pub use runs::{CELL_M, EvalRun, RunInfo, TrialRow, sha256_hex};
+pub use shard::{MergeError, MergedRun, Shard, ShardError, ShardSpec, merge_runs};
 pub use strategies::{
     DEFAULT_STRATEGIES, LlmSettings, PlanningSettings, Strategies, full_registry,
     full_registry_with,

@@ -81,6 +81,12 @@ pub struct RunInfo {
     /// beside it (an eval stopped between the two) is recognised.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub trials_sha256: Option<String>,
+    /// The shard this run is (`ferret eval --shard`); absent in a whole run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shard: Option<crate::shard::ShardRecord>,
+    /// The shards a merged run was made of (`ferret merge`); absent otherwise.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub merged_from: Vec<crate::shard::MergedShard>,
 }
 
 fn is_ferret_protocol(p: &Protocol) -> bool {

@@ -149,6 +149,8 @@ fn eval_run(dir: &std::path::Path, count: usize) -> EvalRun {
         protocol: Protocol::FERRET,
         strategies: names,
         trials_sha256: None,
+        shard: None,
+        merged_from: Vec::new(),
     };
     let run = EvalRun::new(info, ev.rows).unwrap();
     run.write(dir).unwrap();

@@ -154,6 +154,7 @@ fn main() {
     if let Ok(dir) = std::env::var("FERRET_PROCTHOR_DIR") {
         let path = std::path::Path::new(&dir).join("multiroom-val150.jsonl.gz");
         let opts = ferret_world::procthor::LoadOptions {
+            shard: None,
             skip_invalid: true,
             ..Default::default()
         };

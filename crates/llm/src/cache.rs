@@ -326,6 +326,65 @@ impl ResponseCache {
         })
     }
 
+    /// Every stored key, in key order.
+    pub fn keys(&self) -> Result<Vec<String>, CacheError> {
+        let conn = self.lock();
+        let sql = |source| CacheError::Sqlite {
+            file: self.file.clone(),
+            source,
+        };
+        let mut stmt = conn
+            .prepare("SELECT key FROM responses ORDER BY key")
+            .map_err(sql)?;
+        let keys = stmt
+            .query_map([], |r| r.get::<_, String>(0))
+            .map_err(sql)?
+            .collect::<rusqlite::Result<Vec<String>>>()
+            .map_err(sql)?;
+        Ok(keys)
+    }
+
+    /// Copies every answer of `other` that this cache lacks (insert-or-ignore by key), as
+    /// merging the caches of an evaluation's shards does. An answer of `other` that differs from
+    /// the one stored here under the same key (reply or log-probabilities; two shards asked an
+    /// endpoint that does not answer deterministically) is not copied but returned in
+    /// [`CacheMerge::conflicts`]: the trials of the two shards then used different answers, which
+    /// one machine never does, and whoever merges must know.
+    pub fn merge_from(&self, other: &ResponseCache) -> Result<CacheMerge, CacheError> {
+        let mut merge = CacheMerge::default();
+        for key in other.keys()? {
+            let Some(entry) = other.get(&key)? else {
+                continue;
+            };
+            let before = self.get(&key)?;
+            let stored = match before {
+                Some(b) => {
+                    merge.present += 1;
+                    b
+                }
+                None => {
+                    merge.added += 1;
+                    self.put(&entry)?
+                }
+            };
+            if stored.reply != entry.reply || stored.logprobs != entry.logprobs {
+                merge.conflicts.push(CacheConflict {
+                    key,
+                    model: entry.model.clone(),
+                    prompt: entry
+                        .messages
+                        .last()
+                        .map(|m| m.content.clone())
+                        .unwrap_or_default(),
+                    kept: stored.reply,
+                    other: entry.reply,
+                    other_file: other.file.clone(),
+                });
+            }
+        }
+        Ok(merge)
+    }
+
     /// Number of stored answers.
     pub fn len(&self) -> Result<u64, CacheError> {
         let conn = self.lock();
@@ -360,6 +419,49 @@ impl ResponseCache {
                 message: result,
             })
         }
+    }
+}
+
+/// What [`ResponseCache::merge_from`] did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CacheMerge {
+    /// Answers copied.
+    pub added: u64,
+    /// Keys already stored (the same answer, or a conflict).
+    pub present: u64,
+    /// Keys stored with a different answer.
+    pub conflicts: Vec<CacheConflict>,
+}
+
+/// One key answered differently by two caches.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CacheConflict {
+    /// The cache key.
+    pub key: String,
+    /// The model asked.
+    pub model: String,
+    /// The last message of the prompt.
+    pub prompt: String,
+    /// The answer kept (the one stored first).
+    pub kept: String,
+    /// The answer not copied.
+    pub other: String,
+    /// The cache it came from.
+    pub other_file: PathBuf,
+}
+
+impl std::fmt::Display for CacheConflict {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "key {} ({}): kept {:?}, {} answered {:?} to {:?}",
+            self.key,
+            self.model,
+            self.kept,
+            self.other_file.display(),
+            self.other,
+            self.prompt
+        )
     }
 }
 
@@ -543,5 +645,29 @@ mod tests {
         drop(conn);
         let e = ResponseCache::open(&path).unwrap_err();
         assert!(matches!(e, CacheError::Version { found: 7, .. }), "{e}");
+    }
+
+    #[test]
+    fn merge_copies_missing_answers_and_reports_conflicts() {
+        let dir = tempfile::tempdir().unwrap();
+        let a = ResponseCache::open(&dir.path().join("a.sqlite")).unwrap();
+        let b = ResponseCache::open(&dir.path().join("b.sqlite")).unwrap();
+        a.put(&entry("k1", "70")).unwrap();
+        a.put(&entry("k2", "20")).unwrap();
+        b.put(&entry("k2", "20")).unwrap();
+        b.put(&entry("k3", "5")).unwrap();
+        b.put(&entry("k1", "80")).unwrap();
+        let m = a.merge_from(&b).unwrap();
+        assert_eq!((m.added, m.present), (1, 2));
+        assert_eq!(m.conflicts.len(), 1);
+        let c = &m.conflicts[0];
+        assert_eq!(
+            (c.key.as_str(), c.kept.as_str(), c.other.as_str()),
+            ("k1", "70", "80")
+        );
+        assert!(c.to_string().contains("b.sqlite"), "{c}");
+        assert_eq!(a.len().unwrap(), 3);
+        assert_eq!(a.get("k1").unwrap().unwrap().reply, "70");
+        assert_eq!(a.keys().unwrap(), ["k1", "k2", "k3"]);
     }
 }

@@ -52,7 +52,9 @@ pub use answer::{
     read_probability, read_yes_no,
 };
 pub use async_openai::types::chat::ReasoningEffort;
-pub use cache::{CachedReply, DEFAULT_CACHE_PATH, ResponseCache, cache_key};
+pub use cache::{
+    CacheConflict, CacheMerge, CachedReply, DEFAULT_CACHE_PATH, ResponseCache, cache_key,
+};
 pub use client::{EndpointClient, Reply, TokenUsage};
 pub use config::{
     AnswerFormat, DEFAULT_CONFIG_FILE, Endpoint, EndpointConfig, LlmConfig, MaxTokensParam,

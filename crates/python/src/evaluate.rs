@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use ferret_lab::runs::{CELL_M, EvalRun, ReportView, RunInfo, TrialRow};
+use ferret_lab::shard::{SHARD_RULE, Shard, ShardRecord};
 use ferret_lab::{DEFAULT_STRATEGIES, TrialDraw};
 use ferret_llm::FailurePolicy;
 use ferret_plan::TrialsPerHouse;
@@ -35,6 +36,10 @@ pub struct PyEvaluation {
     houses: Vec<usize>,
     /// Whether rows carry costs in grid cells.
     cells: bool,
+    /// The shard this evaluation ran (`shard=(i, n)`), recorded by `save` for `ferret.merge`.
+    shard: Option<Shard>,
+    /// House or trial failures.
+    failures: usize,
 }
 
 #[pymethods]
@@ -119,6 +124,18 @@ impl PyEvaluation {
                 "paired_against: {s:?} is not one of the evaluation's strategies"
             )));
         }
+        let mut info = info;
+        info.shard = self.shard.map(|sh| ShardRecord {
+            index: sh.index,
+            count: sh.count,
+            rule: SHARD_RULE.into(),
+            houses: self.houses.clone(),
+            houses_run: self.houses_run,
+            trials_run: self.trials_run,
+            failures: self.failures,
+            paired_against: against.clone(),
+            cells: self.cells,
+        });
         let rows = self.rows.clone();
         py.allow_threads(|| {
             std::fs::create_dir_all(&dir).map_err(|e| {
@@ -167,14 +184,17 @@ impl PyEvaluation {
 /// with `containers="furniture"`, as `ferret eval --protocol paper` reads them). LLM strategies
 /// use the endpoint configuration `config` (default `ferret.toml` when present) and the SQLite
 /// response cache `llm_cache`; their questions are asked before the trials run. `progress`
-/// prints progress to stderr. Raises `FerretError` when no trial finished.
+/// prints progress to stderr. `shard=(i, n)` runs only the houses whose file index is i
+/// modulo n (as `ferret eval --shard i/n`): exactly the trials one machine runs on them; `save`
+/// records the shard, and `ferret.merge` joins the shards' directories into the run of all
+/// houses. Raises `FerretError` when no trial finished.
 #[pyfunction]
 #[pyo3(signature = (
     houses, strategies = None, *, prior = None, seed = 0, trials_per_house = None,
     reveal_fraction = 0.0, protocol = "ferret", cells = false, max_containers = 8,
     exact_max = 16, search_cost = 0.0, config = None, llm_cache = None, offline = false,
     keep_going = false, fusion = None, resolution = 0.05, robot_radius = 0.18,
-    wall_thickness = 0.05, progress = false
+    wall_thickness = 0.05, progress = false, shard = None
 ))]
 #[allow(clippy::too_many_arguments)]
 pub fn evaluate(
@@ -199,6 +219,7 @@ pub fn evaluate(
     robot_radius: f64,
     wall_thickness: f64,
     progress: bool,
+    shard: Option<(usize, usize)>,
 ) -> PyResult<PyEvaluation> {
     // Every argument is checked before any work, as the command line checks its options.
     let grid = Grid::new(resolution, robot_radius, wall_thickness)?;
@@ -218,9 +239,29 @@ pub fn evaluate(
         None => TrialsPerHouse::One,
     };
     let protocol = settings::protocol(protocol)?;
+    let shard = shard
+        .map(|(i, n)| Shard::new(i, n))
+        .transpose()
+        .map_err(|e| errors::config(format!("shard: {e}")))?;
     if houses.is_empty() {
         return Err(errors::config("houses: no houses to evaluate"));
     }
+    let houses: Vec<Py<House>> = match shard {
+        Some(sh) => {
+            let kept: Vec<Py<House>> = houses
+                .into_iter()
+                .filter(|h| sh.contains(h.get().scene.house.index))
+                .collect();
+            if kept.is_empty() {
+                return Err(errors::config(format!(
+                    "shard={sh}: no house has a file index that is {} modulo {}; use fewer shards",
+                    sh.index, sh.count
+                )));
+            }
+            kept
+        }
+        None => houses,
+    };
     for h in &houses {
         let h = h.get();
         if let Some(read) = h.read_with
@@ -301,6 +342,7 @@ pub fn evaluate(
             r.cost_cells = Some(r.cost_m / CELL_M);
         }
     }
+    let failures = outcome.errors.len();
     Ok(PyEvaluation {
         rows,
         errors: outcome.errors,
@@ -311,6 +353,8 @@ pub fn evaluate(
         source,
         houses: house_indices,
         cells,
+        shard,
+        failures,
     })
 }
 
@@ -364,5 +408,79 @@ fn run_info(
         protocol,
         strategies: strategies.to_vec(),
         trials_sha256: None,
+        shard: None,
+        merged_from: Vec::new(),
     })
+}
+
+/// Merges the run directories of an evaluation's shards (`Evaluation.save` of
+/// `evaluate(..., shard=(i, n))`, or `ferret eval --shard`) into `out`, as `ferret merge`
+/// does: trials.csv in the one-machine order (the very file one machine writes), summary,
+/// paired comparisons and run.json listing the shards. `caches` (default: each directory's
+/// `llm-cache.sqlite` that exists) are merged into `cache_out` (default
+/// `out/llm-cache.sqlite`). Returns a dict: `rows`, `houses`, `cache_answers` and `conflicts`
+/// (one message per key two caches answer differently; the first answer is kept). Raises
+/// `ConfigError` naming the directories for shards of different settings, overlaps and gaps.
+#[pyfunction]
+#[pyo3(signature = (runs, out, *, caches = None, cache_out = None))]
+pub fn merge(
+    py: Python<'_>,
+    runs: Vec<PathBuf>,
+    out: PathBuf,
+    caches: Option<Vec<PathBuf>>,
+    cache_out: Option<PathBuf>,
+) -> PyResult<Py<pyo3::types::PyDict>> {
+    const SHARD_CACHE: &str = "llm-cache.sqlite";
+    let caches: Vec<PathBuf> = caches.unwrap_or_else(|| {
+        runs.iter()
+            .map(|d| d.join(SHARD_CACHE))
+            .filter(|p| p.is_file())
+            .collect()
+    });
+    let cache_out = cache_out.unwrap_or_else(|| out.join(SHARD_CACHE));
+    let (rows, houses, answers, conflicts) = py.allow_threads(|| -> PyResult<_> {
+        let shards = runs
+            .iter()
+            .map(|d| Ok((d.clone(), EvalRun::read(d)?)))
+            .collect::<ferret_lab::Result<Vec<_>>>()
+            .map_err(errors::lab)?;
+        let merged = ferret_lab::merge_runs(&shards).map_err(|e| errors::config(e.to_string()))?;
+        std::fs::create_dir_all(&out).map_err(|e| {
+            errors::FerretError::new_err(format!("creating {}: {e}", out.display()))
+        })?;
+        let source = merged.run.info.house_source().describe();
+        let report = merged.run.report(&ReportView {
+            source: &source,
+            houses: &merged.houses,
+            houses_run: merged.houses_run,
+            trials_run: merged.trials_run,
+            paired_against: &merged.paired_against,
+            cells: merged.cells,
+        });
+        merged.run.write_all(&out, &report).map_err(errors::lab)?;
+        let mut conflicts = Vec::new();
+        let mut answers = 0;
+        if !caches.is_empty() {
+            let cache_err = |e: ferret_llm::CacheError| errors::FerretError::new_err(e.to_string());
+            let target = ferret_llm::ResponseCache::open(&cache_out).map_err(cache_err)?;
+            for c in &caches {
+                let other = ferret_llm::ResponseCache::open(c).map_err(cache_err)?;
+                let m = target.merge_from(&other).map_err(cache_err)?;
+                conflicts.extend(m.conflicts.iter().map(ToString::to_string));
+            }
+            answers = target.len().map_err(cache_err)?;
+        }
+        Ok((
+            merged.run.rows.len(),
+            merged.houses.len(),
+            answers,
+            conflicts,
+        ))
+    })?;
+    let d = pyo3::types::PyDict::new(py);
+    d.set_item("rows", rows)?;
+    d.set_item("houses", houses)?;
+    d.set_item("cache_answers", answers)?;
+    d.set_item("conflicts", conflicts)?;
+    Ok(d.unbind())
 }

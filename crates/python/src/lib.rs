@@ -40,6 +40,7 @@ fn _ferret(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(houses::load_houses, m)?)?;
     m.add_function(wrap_pyfunction!(houses::generate_houses, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate::evaluate, m)?)?;
+    m.add_function(wrap_pyfunction!(evaluate::merge, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate::calibrate, m)?)?;
     m.add_function(wrap_pyfunction!(select::select, m)?)?;
     m.add("DEFAULT_STRATEGIES", ferret_lab::DEFAULT_STRATEGIES)?;

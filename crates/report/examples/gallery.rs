@@ -248,6 +248,7 @@ fn main() -> BoxResult<()> {
     if let Some(data) = std::env::var_os("FERRET_PROCTHOR_DIR") {
         let file = Path::new(&data).join("multiroom-val150.jsonl.gz");
         let opts = ferret_world::procthor::LoadOptions {
+            shard: None,
             range: "0..3".parse()?,
             ..Default::default()
         };

@@ -30,6 +30,7 @@ fn real_houses_are_drawn() {
     let Some(dir) = data_dir() else { return };
     let db = AssetDatabase::load(&dir.join("databases/asset-database.json")).ok();
     let opts = LoadOptions {
+        shard: None,
         asset_db: db.as_ref(),
         range: "0..3".parse().unwrap(),
         skip_invalid: false,

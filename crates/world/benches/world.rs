@@ -29,6 +29,7 @@ fn val150(c: &mut Criterion) {
         .expect("the asset database loads");
     let path = dir.join("multiroom-val150.jsonl.gz");
     let opts = LoadOptions {
+        shard: None,
         asset_db: Some(&db),
         ..LoadOptions::default()
     };

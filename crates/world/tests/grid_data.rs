@@ -22,6 +22,7 @@ fn load(dir: &std::path::Path, with_db: bool) -> Vec<Scene> {
     let db =
         with_db.then(|| AssetDatabase::load(&dir.join("databases/asset-database.json")).unwrap());
     let opts = LoadOptions {
+        shard: None,
         asset_db: db.as_ref(),
         ..LoadOptions::default()
     };

@@ -26,6 +26,7 @@ fn gzip(bytes: &[u8]) -> Vec<u8> {
 
 fn range(r: &str) -> LoadOptions<'static> {
     LoadOptions {
+        shard: None,
         range: r.parse().unwrap(),
         ..LoadOptions::default()
     }
@@ -128,6 +129,7 @@ fn houses_with_too_many_containers_are_refused_by_name() {
     let r = load_scenes(
         &path,
         &LoadOptions {
+            shard: None,
             skip_invalid: true,
             ..LoadOptions::default()
         },

@@ -26,6 +26,7 @@ fn asset_db(dir: &Path) -> AssetDatabase {
 
 fn load(path: &Path, db: Option<&AssetDatabase>) -> LoadReport {
     let opts = LoadOptions {
+        shard: None,
         asset_db: db,
         range: HouseRange::ALL,
         skip_invalid: true,
@@ -196,6 +197,7 @@ fn multiroom_val150_loads_with_and_without_the_database() {
 fn a_range_of_multiroom_val150_loads_only_those_houses() {
     let Some(dir) = data_dir() else { return };
     let opts = LoadOptions {
+        shard: None,
         range: "140..150".parse().unwrap(),
         ..LoadOptions::default()
     };
@@ -203,6 +205,7 @@ fn a_range_of_multiroom_val150_loads_only_those_houses() {
     let indices: Vec<usize> = r.scenes.iter().map(|s| s.house.index).collect();
     assert_eq!(indices, (140..150).collect::<Vec<_>>());
     let opts = LoadOptions {
+        shard: None,
         range: "140..151".parse().unwrap(),
         ..LoadOptions::default()
     };

@@ -425,6 +425,7 @@ fn five_lines() -> String {
 
 fn opts(range: &str, skip_invalid: bool) -> LoadOptions<'static> {
     LoadOptions {
+        shard: None,
         asset_db: None,
         range: range.parse().unwrap(),
         skip_invalid,
@@ -598,4 +599,34 @@ fn empty_walls_are_open_connections_not_obstacles() {
     // `"empty": false` is an ordinary wall.
     v["walls"][0]["empty"] = json!(false);
     assert_eq!(parse(&v).unwrap().house.walls.len(), walls);
+}
+
+#[test]
+fn a_shard_parses_only_its_own_lines() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(dir.path(), "h.jsonl", five_lines().as_bytes());
+    let all = load_scenes(&path, &opts("..", true)).unwrap();
+    for (i, skipped) in [(0, 1), (1, 1)] {
+        let o = LoadOptions {
+            shard: Some((i, 2)),
+            ..opts("..", true)
+        };
+        let report = load_scenes(&path, &o).unwrap();
+        let want: Vec<usize> = all
+            .scenes
+            .iter()
+            .map(|s| s.house.index)
+            .filter(|h| h % 2 == i)
+            .collect();
+        let got: Vec<usize> = report.scenes.iter().map(|s| s.house.index).collect();
+        assert_eq!(got, want, "shard {i}/2");
+        // Line 1 (an invalid house) is parsed, and reported, by shard 1 only; the broken line 2
+        // by shard 0 only.
+        assert_eq!(
+            report.skipped.len(),
+            skipped,
+            "shard {i}/2: {:?}",
+            report.skipped
+        );
+    }
 }

@@ -56,6 +56,13 @@ pub struct Args {
     /// Bins of the reliability diagram.
     #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u16).range(1..=100))]
     pub bins: u16,
+    /// Score one shard of the houses (`i/n`: file index i modulo n; `auto`: from a Slurm array
+    /// task or a Kubernetes Indexed Job, as `eval --shard`). Its scores cover its houses only
+    /// and are not merged (the scores are not sums over houses); the point is its LLM cache,
+    /// <out>/llm-cache.sqlite unless --llm-cache is given: merged with `ferret merge --cache`,
+    /// it answers a calibrate of all houses with --offline without asking anything again.
+    #[arg(long, value_name = "i/n|auto")]
+    pub shard: Option<ferret_lab::ShardSpec>,
     /// Output directory.
     #[arg(long, value_name = "DIR", default_value = "ferret-calibration")]
     pub out: PathBuf,
@@ -66,9 +73,27 @@ fn parse_targets(s: &str) -> std::result::Result<TargetCount, String> {
 }
 
 /// Runs `ferret calibrate`.
-pub fn run(args: Args) -> Result<ExitCode> {
+pub fn run(mut args: Args) -> Result<ExitCode> {
     let started = Instant::now();
-    let loaded = args.houses.load()?;
+    let shard = args
+        .shard
+        .map(|s| s.resolve(|k| std::env::var(k).ok()))
+        .transpose()?;
+    if shard.is_some() && args.llm.llm_cache == std::path::Path::new(ferret_llm::DEFAULT_CACHE_PATH)
+    {
+        args.llm.llm_cache = args.out.join(super::eval::SHARD_CACHE);
+    }
+    let loaded = args
+        .houses
+        .load_shard(ferret_world::ContainerSet::Receptacles, shard)?;
+    if let Some(sh) = shard {
+        eprintln!(
+            "shard {sh}: {} houses (file index mod {} = {}); its scores cover these houses only",
+            loaded.scenes.len(),
+            sh.count,
+            sh.index
+        );
+    }
     for s in &loaded.skipped {
         eprintln!("skipped: {s}");
     }

@@ -7,6 +7,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 use ferret_lab::runs::{CELL_M, EvalRun, ReportView, RunInfo, TrialRow};
+use ferret_lab::shard::{SHARD_RULE, ShardRecord};
 use ferret_lab::{SpecEvaluation, TrialDraw, evaluate_specs};
 use ferret_plan::{Protocol, Strategy, TrialOutcome, TrialSpec, TrialsPerHouse};
 use ferret_report::{
@@ -17,6 +18,9 @@ use ferret_world::{Distances, Scene};
 pub use crate::args::PlanningArgs;
 use crate::common::{Bars, GridArgs, HouseArgs, Mapped, ProtocolArgs};
 pub use ferret_lab::DEFAULT_STRATEGIES;
+
+/// A shard's LLM cache, in its run directory unless --llm-cache says otherwise.
+pub const SHARD_CACHE: &str = "llm-cache.sqlite";
 
 /// Run every strategy on one trial per house (same target and start for all strategies) and
 /// report costs: `trials.csv`, `summary.csv`, `summary.md` (the paper's table I), a violin plot of
@@ -66,14 +70,30 @@ pub struct Args {
     /// House (index) whose trajectories are drawn; the first house when not given.
     #[arg(long)]
     pub show_house: Option<usize>,
+    /// Run one shard of the houses: `i/n` runs the houses whose index in their file is i modulo
+    /// n (0 ≤ i < n), `auto` reads the shard from a Slurm array task (SLURM_ARRAY_TASK_ID,
+    /// SLURM_ARRAY_TASK_COUNT) or a Kubernetes Indexed Job (JOB_COMPLETION_INDEX with
+    /// FERRET_SHARD_COUNT). The trials are exactly those one machine runs on these houses; give
+    /// every shard its own --out, and `ferret merge` makes the one-machine run of all of them.
+    /// The LLM cache defaults to <out>/llm-cache.sqlite, one per shard (SQLite is not safe on
+    /// network file systems); `ferret merge` merges them too.
+    #[arg(long, value_name = "i/n|auto")]
+    pub shard: Option<ferret_lab::ShardSpec>,
     /// Output directory.
     #[arg(long, value_name = "DIR", default_value = "ferret-out")]
     pub out: PathBuf,
 }
 
 /// Runs `ferret eval`.
-pub fn run(args: Args) -> Result<ExitCode> {
+pub fn run(mut args: Args) -> Result<ExitCode> {
     let started = Instant::now();
+    let shard = args
+        .shard
+        .map(|s| s.resolve(|k| std::env::var(k).ok()))
+        .transpose()?;
+    if shard.is_some() && args.llm.llm_cache == Path::new(ferret_llm::DEFAULT_CACHE_PATH) {
+        args.llm.llm_cache = args.out.join(SHARD_CACHE);
+    }
     // Every option is checked before anything is loaded or written, so a typo never replaces a
     // previous run's results.
     args.grid.validate()?;
@@ -93,12 +113,28 @@ pub fn run(args: Args) -> Result<ExitCode> {
         anyhow::bail!("--paired-against {s}: not one of --strategies");
     }
     let protocol = args.protocol.resolve(Protocol::FERRET)?;
-    let loaded = args.houses.load_for(protocol.containers)?;
+    let loaded = args.houses.load_shard(protocol.containers, shard)?;
+    if let Some(sh) = shard {
+        eprintln!(
+            "shard {sh}: {} houses (file index mod {} = {})",
+            loaded.scenes.len(),
+            sh.count,
+            sh.index
+        );
+    }
     for s in &loaded.skipped {
         eprintln!("skipped: {s}");
     }
     if loaded.scenes.is_empty() {
-        anyhow::bail!("no houses to evaluate in {}", loaded.source);
+        match shard {
+            Some(sh) => anyhow::bail!(
+                "shard {sh}: no house of {} has a file index that is {} modulo {}; use fewer shards",
+                loaded.source,
+                sh.index,
+                sh.count
+            ),
+            None => anyhow::bail!("no houses to evaluate in {}", loaded.source),
+        }
     }
     if let Some(i) = args.show_house
         && !loaded.scenes.iter().any(|s| s.house.index == i)
@@ -166,6 +202,18 @@ pub fn run(args: Args) -> Result<ExitCode> {
         protocol,
         strategies: args.strategies.clone(),
         trials_sha256: None,
+        shard: shard.map(|sh| ShardRecord {
+            index: sh.index,
+            count: sh.count,
+            rule: SHARD_RULE.into(),
+            houses: loaded.scenes.iter().map(|s| s.house.index).collect(),
+            houses_run: outcome.houses_run,
+            trials_run: outcome.trials_run,
+            failures: outcome.errors.len(),
+            paired_against: args.paired_against.clone(),
+            cells: args.cells,
+        }),
+        merged_from: Vec::new(),
     };
     let run = EvalRun::new(info, rows)?;
     let houses: Vec<usize> = loaded.scenes.iter().map(|s| s.house.index).collect();

@@ -8,6 +8,7 @@ pub mod generate;
 pub mod houses;
 pub mod llm;
 pub mod llm_setup;
+pub mod merge;
 pub mod prior;
 pub mod prompts;
 pub mod scene;

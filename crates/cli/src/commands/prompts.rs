@@ -124,6 +124,7 @@ fn load_scene(args: &ShowArgs) -> Result<Scene> {
                 .map(AssetDatabase::load)
                 .transpose()?;
             let opts = LoadOptions {
+                shard: None,
                 asset_db: db.as_ref(),
                 range: HouseRange::single(args.index),
                 skip_invalid: false,

@@ -34,6 +34,7 @@ from ._ferret import (
     evaluate,
     generate_houses,
     load_houses,
+    merge,
     select,
 )
 
@@ -61,5 +62,6 @@ __all__ = [
     "evaluate",
     "generate_houses",
     "load_houses",
+    "merge",
     "select",
 ]

@@ -281,7 +281,7 @@ class Evaluation:
     def save(self, dir: _Path, *, paired_against: Union[str, Sequence[str], None] = None) -> None:
         """Writes the files ``ferret eval`` writes into ``dir``: ``trials.csv``, ``summary.csv``,
         ``paired.csv`` (every strategy against the best, and against each of
-        ``paired_against``), ``summary.md`` and ``run.json``."""
+        ``paired_against``), ``summary.md`` and ``run.json`` (with the shard, for ``merge``)."""
     def __len__(self) -> int: ...
 
 class CalibrationResult:
@@ -383,8 +383,19 @@ def evaluate(
     robot_radius: float = 0.18,
     wall_thickness: float = 0.05,
     progress: bool = False,
+    shard: Optional[Tuple[int, int]] = None,
 ) -> Evaluation:
-    """Evaluates strategies on houses as ``ferret eval`` does (identical costs)."""
+    """Evaluates strategies on houses as ``ferret eval`` does (identical costs); with
+    ``shard=(i, n)`` only the houses whose file index is i modulo n."""
+
+def merge(
+    runs: Sequence[_Path],
+    out: _Path,
+    *,
+    caches: Optional[Sequence[_Path]] = None,
+    cache_out: Optional[_Path] = None,
+) -> Dict[str, Any]:
+    """Merges shards' run directories (and LLM caches) into the run one machine writes."""
 
 def calibrate(
     houses: Sequence[House],

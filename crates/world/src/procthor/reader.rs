@@ -63,6 +63,10 @@ pub struct LoadOptions<'a> {
     pub skip_invalid: bool,
     /// Which top-level objects are containers.
     pub containers: ContainerSet,
+    /// `Some((i, n))` keeps only the houses whose index is `i` modulo `n` (one shard of a
+    /// sharded evaluation): the others inside the range are skipped without being parsed, as
+    /// lines outside the range are, so that every shard does not pay for parsing every house.
+    pub shard: Option<(usize, usize)>,
 }
 
 /// What [`load_scenes`] read.
@@ -78,7 +82,8 @@ pub struct LoadReport {
 /// (one house per line) or either gzip-compressed (`.jsonl.gz`; compression is recognised by
 /// content). House `i` is line `i` (0-based); blank lines hold no house but keep their index.
 ///
-/// Lines are decompressed in order and only those inside `opts.range` are parsed, in parallel.
+/// Lines are decompressed in order and only those inside `opts.range` (and `opts.shard`) are
+/// parsed, in parallel.
 /// A range reaching outside the file is a [`WorldError::Range`]; an unreadable file is a
 /// [`WorldError::Io`]; a file holding no house at all (empty, or blank lines only) is
 /// [`WorldError::NoHouses`]; a line longer than [`MAX_LINE_BYTES`] is [`WorldError::Limit`]. An
@@ -117,7 +122,7 @@ pub fn load_scenes(path: &Path, opts: &LoadOptions<'_>) -> Result<LoadReport> {
                 file: path.to_path_buf(),
             });
         }
-        let results = if opts.range.contains(0) {
+        let results = if opts.range.contains(0) && in_shard(opts.shard, 0) {
             vec![(0, house_from_bytes(bytes, &at(0), db, rule))]
         } else {
             Vec::new()
@@ -128,6 +133,7 @@ pub fn load_scenes(path: &Path, opts: &LoadOptions<'_>) -> Result<LoadReport> {
             reader,
             next: 0,
             range: opts.range,
+            shard: opts.shard,
             error: None,
             buf: Vec::new(),
             houses: 0,
@@ -175,6 +181,11 @@ pub fn load_scenes(path: &Path, opts: &LoadOptions<'_>) -> Result<LoadReport> {
     Ok(report)
 }
 
+/// Whether house `index` belongs to the shard `(i, n)` (every house without one).
+fn in_shard(shard: Option<(usize, usize)>, index: usize) -> bool {
+    shard.is_none_or(|(i, n)| n == 0 || index % n == i)
+}
+
 /// `.json` and `.json.gz` hold one house; everything else is read as JSON Lines.
 fn is_single_house_file(path: &Path) -> bool {
     let name = path
@@ -210,6 +221,7 @@ struct Lines<R> {
     /// Index of the next line to read; after the end of the file, the number of lines.
     next: usize,
     range: HouseRange,
+    shard: Option<(usize, usize)>,
     error: Option<LineError>,
     buf: Vec<u8>,
     /// Non-blank lines seen so far, inside the range or before it.
@@ -252,7 +264,7 @@ impl<R: BufRead> Iterator for Lines<R> {
                 return None;
             }
             let index = self.next;
-            if !self.range.contains(index) {
+            if !self.range.contains(index) || !in_shard(self.shard, index) {
                 match self.skip_line() {
                     Ok((false, _)) => {
                         self.at_end = true;

@@ -1,0 +1,136 @@
+//! `ferret merge`: the run directories of an evaluation's shards (`ferret eval --shard`) into
+//! the run one machine writes, and their LLM caches into one cache.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{Context, Result};
+use ferret_lab::runs::{EvalRun, ReportView};
+use ferret_llm::ResponseCache;
+
+use super::eval::SHARD_CACHE;
+
+/// Merge the shards of an evaluation (`ferret eval --shard i/n --out DIR_i`) into one run:
+/// trials.csv in the order one machine writes it (byte for byte the same file), summary.csv,
+/// paired.csv and summary.md made from it as `ferret eval` makes them, and run.json listing the
+/// shards. Refuses shards run with different settings, a shard given twice, houses in two shards
+/// and missing shards, naming the directories. Each shard's LLM cache (DIR_i/llm-cache.sqlite,
+/// and every --cache) is merged into one (insert-or-ignore by key); a key that two caches
+/// answer differently is listed and makes the exit status 1. `select` and `calibrate` then read
+/// the merged run as any other.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The shards' run directories (any order). With none, only the caches are merged.
+    #[arg(value_name = "RUN_DIR")]
+    pub runs: Vec<PathBuf>,
+    /// More LLM caches to merge, besides each run directory's llm-cache.sqlite.
+    #[arg(long = "cache", value_name = "FILE")]
+    pub caches: Vec<PathBuf>,
+    /// Where the merged cache is written (created, or added to when it exists); default
+    /// <out>/llm-cache.sqlite.
+    #[arg(long, value_name = "FILE")]
+    pub cache_out: Option<PathBuf>,
+    /// Output directory of the merged run.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+}
+
+/// Runs `ferret merge`.
+pub fn run(args: Args) -> Result<ExitCode> {
+    if args.runs.is_empty() && args.caches.is_empty() {
+        anyhow::bail!("nothing to merge: give the shards' run directories, or --cache files");
+    }
+    let mut caches: Vec<PathBuf> = args
+        .runs
+        .iter()
+        .map(|d| d.join(SHARD_CACHE))
+        .filter(|p| p.is_file())
+        .collect();
+    caches.extend(args.caches.iter().cloned());
+    let cache_out = args
+        .cache_out
+        .clone()
+        .unwrap_or_else(|| args.out.join(SHARD_CACHE));
+    if let Some(c) = caches.iter().find(|c| same_file(c, &cache_out)) {
+        anyhow::bail!(
+            "--cache-out {} is one of the caches being merged ({}); write the merge elsewhere",
+            cache_out.display(),
+            c.display()
+        );
+    }
+    let mut status = ExitCode::SUCCESS;
+    if !args.runs.is_empty() {
+        let shards = args
+            .runs
+            .iter()
+            .map(|d| Ok((d.clone(), EvalRun::read(d)?)))
+            .collect::<Result<Vec<_>>>()?;
+        let merged = ferret_lab::merge_runs(&shards)?;
+        let mut lock = ferret_lab::files::DirLock::acquire(&args.out)?;
+        let source = merged.run.info.house_source().describe();
+        let report = merged.run.report(&ReportView {
+            source: &source,
+            houses: &merged.houses,
+            houses_run: merged.houses_run,
+            trials_run: merged.trials_run,
+            paired_against: &merged.paired_against,
+            cells: merged.cells,
+        });
+        lock.used();
+        merged.run.write_all(&args.out, &report)?;
+        println!("{}", report.markdown);
+        println!(
+            "merged {} shards: {} trials on {} houses; wrote {}/{{trials.csv,summary.csv,summary.md,paired.csv,run.json}}",
+            shards.len(),
+            merged.run.rows.len(),
+            merged.houses_run,
+            args.out.display()
+        );
+        if merged.failures > 0 {
+            eprintln!(
+                "{} house(s) or trial(s) failed in the shards (see their logs); every finished trial was merged",
+                merged.failures
+            );
+            status = ExitCode::FAILURE;
+        }
+    }
+    if !caches.is_empty() {
+        let out = ResponseCache::open(&cache_out)?;
+        let mut conflicts = 0;
+        for c in &caches {
+            let other = ResponseCache::open(c)
+                .with_context(|| format!("opening the cache {}", c.display()))?;
+            let m = out.merge_from(&other)?;
+            for conflict in &m.conflicts {
+                eprintln!("cache conflict: {conflict}");
+            }
+            conflicts += m.conflicts.len();
+            println!(
+                "{}: {} answers added, {} already there",
+                c.display(),
+                m.added,
+                m.present
+            );
+        }
+        println!("{}: {} answers", cache_out.display(), out.len()?);
+        if conflicts > 0 {
+            eprintln!(
+                "{conflicts} key(s) were answered differently by two caches: the first answer was \
+                 kept, but the shards' trials used different answers for the same question, \
+                 which one machine never does (an endpoint that does not answer \
+                 deterministically); rerun those shards from the merged cache with --offline to \
+                 make them agree"
+            );
+            status = ExitCode::FAILURE;
+        }
+    }
+    Ok(status)
+}
+
+/// Whether two paths name the same existing file.
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    }
+}

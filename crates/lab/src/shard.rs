@@ -1,0 +1,541 @@
+//! Sharded evaluation: which houses a shard runs, what it records, and the merge of shards'
+//! runs into the run one machine would have written.
+//!
+//! **The rule.** Shard `i` of `n` runs the houses whose index in their file satisfies
+//! `index mod n = i` ([`Shard::contains`]). The index is the house's line in its file (or its
+//! place among generated houses), so the rule needs nothing but the house itself: no count of
+//! the file's houses, no hash whose value could change between machines or language versions,
+//! and a house keeps its shard when `--range` or invalid houses change which others are
+//! loaded. Striding rather than contiguous blocks also spreads houses of every kind over all
+//! shards, so one shard does not draw all the large houses of a file sorted by size.
+//!
+//! **Why the shards' trials are the one-machine trials.** Every draw of a trial (target,
+//! revealed containers, the paper's initial belief, under both `--rng ferret` and
+//! `--rng python`) is seeded from the trial seed and the house's index alone
+//! ([`ferret_plan::draw_trials_with`]); no stream runs across houses. A shard therefore draws
+//! exactly the trials one machine draws for its houses, and nothing about the shard enters them.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::runs::{EvalRun, RunInfo, TrialRow};
+
+/// One shard of an evaluation: `index` of `count` (0-based).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub struct Shard {
+    /// This shard, `0..count`.
+    pub index: usize,
+    /// How many shards the houses are split into.
+    pub count: usize,
+}
+
+/// The rule's name as run.json records it.
+pub const SHARD_RULE: &str = "house_index mod count";
+
+impl Shard {
+    /// Shard `index` of `count`; an error unless `index < count`.
+    pub fn new(index: usize, count: usize) -> Result<Self, ShardError> {
+        if count == 0 || index >= count {
+            return Err(ShardError::OutOfRange { index, count });
+        }
+        Ok(Self { index, count })
+    }
+
+    /// Whether the house with file index `house_index` belongs to this shard.
+    pub fn contains(&self, house_index: usize) -> bool {
+        house_index % self.count == self.index
+    }
+
+    /// The shard of `count` that runs the house with file index `house_index`.
+    pub fn of_house(house_index: usize, count: usize) -> usize {
+        house_index % count.max(1)
+    }
+}
+
+impl std::fmt::Display for Shard {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}/{}", self.index, self.count)
+    }
+}
+
+impl std::str::FromStr for Shard {
+    type Err = ShardError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let bad = || ShardError::Syntax(s.to_string());
+        let (i, n) = s.trim().split_once('/').ok_or_else(bad)?;
+        let i: usize = i.trim().parse().map_err(|_| bad())?;
+        let n: usize = n.trim().parse().map_err(|_| bad())?;
+        Self::new(i, n)
+    }
+}
+
+/// `--shard` as given: a fixed shard, or `auto` (from the batch system's environment).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ShardSpec {
+    /// `i/n`.
+    Fixed(Shard),
+    /// From `SLURM_ARRAY_TASK_ID`/`SLURM_ARRAY_TASK_COUNT` or `JOB_COMPLETION_INDEX` with
+    /// [`SHARD_COUNT_VAR`]; see [`ShardSpec::resolve`].
+    Auto,
+}
+
+/// The variable that gives the shard count beside a Kubernetes Indexed Job's
+/// `JOB_COMPLETION_INDEX` (Kubernetes passes the index only; the manifest's `completions` is
+/// the count, set here too).
+pub const SHARD_COUNT_VAR: &str = "FERRET_SHARD_COUNT";
+
+impl std::str::FromStr for ShardSpec {
+    type Err = ShardError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        if s.trim() == "auto" {
+            Ok(Self::Auto)
+        } else {
+            s.parse().map(Self::Fixed)
+        }
+    }
+}
+
+impl ShardSpec {
+    /// The shard, reading the environment through `var` for `auto`: a Slurm array task
+    /// (`SLURM_ARRAY_TASK_ID` − `SLURM_ARRAY_TASK_MIN`, of `SLURM_ARRAY_TASK_COUNT`, so that
+    /// `--array=1-3` works as `--array=0-2` does), else a Kubernetes Indexed Job
+    /// (`JOB_COMPLETION_INDEX` of [`SHARD_COUNT_VAR`]).
+    pub fn resolve(&self, var: impl Fn(&str) -> Option<String>) -> Result<Shard, ShardError> {
+        if let Self::Fixed(s) = self {
+            return Ok(*s);
+        }
+        let num = |name: &str| -> Result<Option<usize>, ShardError> {
+            match var(name) {
+                None => Ok(None),
+                Some(v) => v
+                    .trim()
+                    .parse()
+                    .map(Some)
+                    .map_err(|_| ShardError::Env(format!("{name}={v:?} is not a number"))),
+            }
+        };
+        if let Some(id) = num("SLURM_ARRAY_TASK_ID")? {
+            let count = num("SLURM_ARRAY_TASK_COUNT")?.ok_or_else(|| {
+                ShardError::Env(
+                    "SLURM_ARRAY_TASK_ID is set but SLURM_ARRAY_TASK_COUNT is not".into(),
+                )
+            })?;
+            let min = num("SLURM_ARRAY_TASK_MIN")?.unwrap_or(0);
+            let index = id.checked_sub(min).ok_or_else(|| {
+                ShardError::Env(format!(
+                    "SLURM_ARRAY_TASK_ID {id} is below SLURM_ARRAY_TASK_MIN {min}"
+                ))
+            })?;
+            // An array with a step (--array=0-10:2) or a list has ids that are not 0..count.
+            return Shard::new(index, count).map_err(|_| {
+                ShardError::Env(format!(
+                    "array task {id} (min {min}) of {count} is not one of 0..{count} after the \
+                     minimum is taken off: submit a contiguous array such as --array=0-{}",
+                    count.saturating_sub(1)
+                ))
+            });
+        }
+        if let Some(index) = num("JOB_COMPLETION_INDEX")? {
+            let count = num(SHARD_COUNT_VAR)?.ok_or_else(|| {
+                ShardError::Env(format!(
+                    "JOB_COMPLETION_INDEX is set but {SHARD_COUNT_VAR} is not: set it to the \
+                     Job's completions"
+                ))
+            })?;
+            return Shard::new(index, count);
+        }
+        Err(ShardError::Env(format!(
+            "--shard auto: neither a Slurm array task (SLURM_ARRAY_TASK_ID and \
+             SLURM_ARRAY_TASK_COUNT) nor a Kubernetes Indexed Job (JOB_COMPLETION_INDEX and \
+             {SHARD_COUNT_VAR}) is in the environment; give --shard i/n"
+        )))
+    }
+}
+
+/// A `--shard` that cannot be used.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum ShardError {
+    /// Not `i/n` nor `auto`.
+    #[error("--shard {0:?}: expected i/n (e.g. 0/3) or `auto`")]
+    Syntax(String),
+    /// `i` not below `n`.
+    #[error(
+        "--shard {index}/{count}: the shard must be one of 0..{count} (and the count at least 1)"
+    )]
+    OutOfRange {
+        /// The index given.
+        index: usize,
+        /// The count given.
+        count: usize,
+    },
+    /// `auto` found no usable environment.
+    #[error("{0}")]
+    Env(String),
+}
+
+/// What a shard's run.json records besides the run's settings: enough for [`merge_runs`] to
+/// check the shards and to write the report one machine writes.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ShardRecord {
+    /// This shard.
+    pub index: usize,
+    /// Of how many.
+    pub count: usize,
+    /// The rule, [`SHARD_RULE`].
+    pub rule: String,
+    /// File indices of the houses this shard loaded (valid houses of the run's source in it).
+    pub houses: Vec<usize>,
+    /// Houses with at least one trial.
+    pub houses_run: usize,
+    /// Trials (house and target) drawn.
+    pub trials_run: usize,
+    /// House or trial failures (their messages went to the shard's log).
+    #[serde(default)]
+    pub failures: usize,
+    /// The report's extra references (`--paired-against`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub paired_against: Vec<String>,
+    /// Whether costs in grid cells were asked for (`--cells`).
+    #[serde(default)]
+    pub cells: bool,
+}
+
+/// One shard of a merged run, as the merged run.json lists it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MergedShard {
+    /// The shard's run directory, as given to the merge.
+    pub dir: PathBuf,
+    /// Its index.
+    pub index: usize,
+    /// Its houses.
+    pub houses: usize,
+    /// Its trials.csv's rows.
+    pub rows: usize,
+    /// Its trials.csv's SHA-256.
+    pub trials_sha256: String,
+}
+
+/// Why shards cannot be merged. Every message names the directories concerned.
+#[derive(Debug, thiserror::Error)]
+pub enum MergeError {
+    /// Nothing to merge.
+    #[error("no run directories to merge")]
+    Empty,
+    /// A run directory that is not a shard.
+    #[error("{}: not a shard's run (its run.json has no `shard`); run `ferret eval --shard i/n` into it", dir.display())]
+    NotShard {
+        /// The directory.
+        dir: PathBuf,
+    },
+    /// Two shards ran with different settings.
+    #[error("{} and {} ran with different settings ({fields}); shards of one run must share every option but --shard and --out", first.display(), other.display())]
+    Settings {
+        /// The first shard given.
+        first: PathBuf,
+        /// The one that differs.
+        other: PathBuf,
+        /// The settings that differ.
+        fields: String,
+    },
+    /// Two directories hold the same shard, or share a house.
+    #[error("{} and {} overlap: {what}", first.display(), other.display())]
+    Overlap {
+        /// One directory.
+        first: PathBuf,
+        /// The other.
+        other: PathBuf,
+        /// What they share.
+        what: String,
+    },
+    /// Shards missing.
+    #[error("shards missing: {missing} of {count} (given: {given})")]
+    Gap {
+        /// The missing shard indices.
+        missing: String,
+        /// The count.
+        count: usize,
+        /// The directories given, with their shards.
+        given: String,
+    },
+    /// A shard holds a house or trial that its rule does not give it.
+    #[error("{}: {message}", dir.display())]
+    Inconsistent {
+        /// The directory.
+        dir: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// The shards merged: the run one machine writes, and what its report needs.
+#[derive(Clone, Debug)]
+pub struct MergedRun {
+    /// The merged run (rows in the one-machine order; run.json lists the shards).
+    pub run: EvalRun,
+    /// File indices of every shard's houses, in order.
+    pub houses: Vec<usize>,
+    /// Houses with a trial, over all shards.
+    pub houses_run: usize,
+    /// Trials drawn, over all shards.
+    pub trials_run: usize,
+    /// Failures, over all shards.
+    pub failures: usize,
+    /// The shards' `--paired-against`.
+    pub paired_against: Vec<String>,
+    /// The shards' `--cells`.
+    pub cells: bool,
+}
+
+/// The settings of a run that must agree between shards: run.json without the fields that
+/// differ by shard. Compared as JSON, so that a new setting is compared without a change here.
+fn settings(info: &RunInfo) -> serde_json::Map<String, serde_json::Value> {
+    let mut v = match serde_json::to_value(info) {
+        Ok(serde_json::Value::Object(m)) => m,
+        _ => serde_json::Map::new(),
+    };
+    for k in ["trials_sha256", "shard", "merged_from"] {
+        v.remove(k);
+    }
+    if let Some(s) = &info.shard {
+        v.insert("shard count".into(), s.count.into());
+        v.insert("paired_against".into(), s.paired_against.clone().into());
+        v.insert("cells".into(), s.cells.into());
+    }
+    v
+}
+
+fn differing(
+    a: &serde_json::Map<String, serde_json::Value>,
+    b: &serde_json::Map<String, serde_json::Value>,
+) -> Vec<String> {
+    let mut keys: Vec<&String> = a.keys().chain(b.keys()).collect();
+    keys.sort();
+    keys.dedup();
+    keys.into_iter()
+        .filter(|k| a.get(*k) != b.get(*k))
+        .map(|k| {
+            let show = |m: &serde_json::Map<String, serde_json::Value>| {
+                m.get(k)
+                    .map_or_else(|| "absent".to_string(), |v| v.to_string())
+            };
+            format!("{k}: {} vs {}", show(a), show(b))
+        })
+        .collect()
+}
+
+/// Merges the shards' runs `shards` (each with its directory) into one run: the same settings
+/// checked in every shard, every shard `0..count` present exactly once, no house in two of
+/// them, rows ordered as one machine orders them (houses in file order; within a house, the
+/// shard's own order, which is one machine's). The merged run.json is a shard's without
+/// `shard`, with `merged_from` listing the shards.
+pub fn merge_runs(shards: &[(PathBuf, EvalRun)]) -> Result<MergedRun, MergeError> {
+    let (first_dir, first) = shards.first().ok_or(MergeError::Empty)?;
+    let base = settings(&first.info);
+    let mut records: Vec<(&Path, &EvalRun, &ShardRecord)> = Vec::new();
+    for (dir, run) in shards {
+        let rec = run
+            .info
+            .shard
+            .as_ref()
+            .ok_or_else(|| MergeError::NotShard { dir: dir.clone() })?;
+        let diff = differing(&base, &settings(&run.info));
+        if !diff.is_empty() {
+            return Err(MergeError::Settings {
+                first: first_dir.clone(),
+                other: dir.clone(),
+                fields: diff.join("; "),
+            });
+        }
+        if let Some((other, _, _)) = records.iter().find(|(_, _, r)| r.index == rec.index) {
+            return Err(MergeError::Overlap {
+                first: other.to_path_buf(),
+                other: dir.clone(),
+                what: format!("both are shard {}/{}", rec.index, rec.count),
+            });
+        }
+        let shard = Shard {
+            index: rec.index,
+            count: rec.count,
+        };
+        if let Some(h) = rec.houses.iter().copied().find(|&h| !shard.contains(h)) {
+            return Err(MergeError::Inconsistent {
+                dir: dir.clone(),
+                message: format!(
+                    "house {h} is not in shard {}/{} by the rule {SHARD_RULE}",
+                    rec.index, rec.count
+                ),
+            });
+        }
+        if let Some(r) = run
+            .rows
+            .iter()
+            .find(|r| !rec.houses.contains(&r.house_index))
+        {
+            return Err(MergeError::Inconsistent {
+                dir: dir.clone(),
+                message: format!(
+                    "trials.csv has a trial of house {} ({}), which the shard did not load",
+                    r.house_index, r.house
+                ),
+            });
+        }
+        for (other, _, r) in &records {
+            if let Some(h) = rec.houses.iter().find(|h| r.houses.contains(h)) {
+                return Err(MergeError::Overlap {
+                    first: other.to_path_buf(),
+                    other: dir.clone(),
+                    what: format!("both ran house {h}"),
+                });
+            }
+        }
+        records.push((dir, run, rec));
+    }
+    let count = records[0].2.count;
+    let missing: Vec<String> = (0..count)
+        .filter(|i| !records.iter().any(|(_, _, r)| r.index == *i))
+        .map(|i| i.to_string())
+        .collect();
+    if !missing.is_empty() {
+        return Err(MergeError::Gap {
+            missing: missing.join(", "),
+            count,
+            given: records
+                .iter()
+                .map(|(d, _, r)| format!("{} = {}/{}", d.display(), r.index, r.count))
+                .collect::<Vec<_>>()
+                .join(", "),
+        });
+    }
+    records.sort_by_key(|(_, _, r)| r.index);
+    let mut houses: Vec<usize> = records
+        .iter()
+        .flat_map(|(_, _, r)| r.houses.iter().copied())
+        .collect();
+    houses.sort_unstable();
+    // Concatenated shard by shard, then a stable sort by house: a house's rows stay in its
+    // shard's order, which is the one-machine order within a house.
+    let mut rows: Vec<TrialRow> = records
+        .iter()
+        .flat_map(|(_, run, _)| run.rows.iter().cloned())
+        .collect();
+    rows.sort_by_key(|r| r.house_index);
+    let mut info = first.info.clone();
+    info.shard = None;
+    info.merged_from = records
+        .iter()
+        .map(|(dir, run, r)| MergedShard {
+            dir: dir.to_path_buf(),
+            index: r.index,
+            houses: r.houses.len(),
+            rows: run.rows.len(),
+            trials_sha256: run.info.trials_sha256.clone().unwrap_or_default(),
+        })
+        .collect();
+    let rec0 = records[0].2;
+    let merged = MergedRun {
+        houses,
+        houses_run: records.iter().map(|(_, _, r)| r.houses_run).sum(),
+        trials_run: records.iter().map(|(_, _, r)| r.trials_run).sum(),
+        failures: records.iter().map(|(_, _, r)| r.failures).sum(),
+        paired_against: rec0.paired_against.clone(),
+        cells: rec0.cells,
+        run: EvalRun::new(info, rows).map_err(|e| MergeError::Inconsistent {
+            dir: first_dir.clone(),
+            message: e.to_string(),
+        })?,
+    };
+    Ok(merged)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_rule_is_pinned() {
+        // Fixed house → fixed shard: a change here reassigns houses between existing shards.
+        let of = |h| Shard::of_house(h, 3);
+        assert_eq!(
+            (0..10).map(of).collect::<Vec<_>>(),
+            [0, 1, 2, 0, 1, 2, 0, 1, 2, 0]
+        );
+        assert_eq!(Shard::of_house(149, 3), 2);
+        assert_eq!(Shard::of_house(9_999, 16), 15);
+        assert_eq!(Shard::of_house(9_999, 128), 15);
+        let s: Shard = "1/3".parse().unwrap();
+        assert!(s.contains(4) && !s.contains(5));
+        assert_eq!(s.to_string(), "1/3");
+    }
+
+    #[test]
+    fn shards_partition_the_houses() {
+        for n in 1..8 {
+            for h in 0..100 {
+                let owners = (0..n).filter(|&i| Shard { index: i, count: n }.contains(h));
+                assert_eq!(owners.count(), 1);
+            }
+        }
+    }
+
+    #[test]
+    fn bad_shards_are_refused() {
+        assert!(matches!(
+            "3/3".parse::<Shard>(),
+            Err(ShardError::OutOfRange { .. })
+        ));
+        assert!(matches!(
+            "0/0".parse::<Shard>(),
+            Err(ShardError::OutOfRange { .. })
+        ));
+        assert!(matches!("x".parse::<Shard>(), Err(ShardError::Syntax(_))));
+        assert_eq!("auto".parse::<ShardSpec>().unwrap(), ShardSpec::Auto);
+    }
+
+    fn env<'a>(vars: &'a [(&'a str, &'a str)]) -> impl Fn(&str) -> Option<String> + 'a {
+        move |k| {
+            vars.iter()
+                .find(|(n, _)| *n == k)
+                .map(|(_, v)| v.to_string())
+        }
+    }
+
+    #[test]
+    fn auto_reads_slurm_then_kubernetes() {
+        let slurm = [
+            ("SLURM_ARRAY_TASK_ID", "2"),
+            ("SLURM_ARRAY_TASK_COUNT", "3"),
+            ("SLURM_ARRAY_TASK_MIN", "0"),
+        ];
+        assert_eq!(
+            ShardSpec::Auto.resolve(env(&slurm)),
+            Ok(Shard { index: 2, count: 3 })
+        );
+        let one_based = [
+            ("SLURM_ARRAY_TASK_ID", "3"),
+            ("SLURM_ARRAY_TASK_COUNT", "3"),
+            ("SLURM_ARRAY_TASK_MIN", "1"),
+        ];
+        assert_eq!(
+            ShardSpec::Auto.resolve(env(&one_based)),
+            Ok(Shard { index: 2, count: 3 })
+        );
+        let k8s = [("JOB_COMPLETION_INDEX", "4"), (SHARD_COUNT_VAR, "5")];
+        assert_eq!(
+            ShardSpec::Auto.resolve(env(&k8s)),
+            Ok(Shard { index: 4, count: 5 })
+        );
+        let e = ShardSpec::Auto.resolve(env(&[])).unwrap_err().to_string();
+        assert!(
+            e.contains("SLURM_ARRAY_TASK_ID") && e.contains("JOB_COMPLETION_INDEX"),
+            "{e}"
+        );
+        let e = ShardSpec::Auto
+            .resolve(env(&[("JOB_COMPLETION_INDEX", "1")]))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(SHARD_COUNT_VAR), "{e}");
+    }
+}

@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::runs::{EvalRun, RunInfo, TrialRow};
+use crate::runs::{EvalRun, ReportView, RunInfo, RunReport, TrialRow};
 
 /// One shard of an evaluation: `index` of `count` (0-based).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -287,6 +287,28 @@ pub struct MergedRun {
     pub paired_against: Vec<String>,
     /// The shards' `--cells`.
     pub cells: bool,
+}
+
+impl MergedRun {
+    /// The merged run's report (summary, paired comparisons, `summary.md`), the same a
+    /// one-machine `ferret eval` writes, and every file of it written into `dir` through the one
+    /// run writer.
+    ///
+    /// # Errors
+    /// A file that cannot be written.
+    pub fn write_all(&self, dir: &Path) -> crate::Result<RunReport> {
+        let source = self.run.info.house_source().describe();
+        let report = self.run.report(&ReportView {
+            source: &source,
+            houses: &self.houses,
+            houses_run: self.houses_run,
+            trials_run: self.trials_run,
+            paired_against: &self.paired_against,
+            cells: self.cells,
+        });
+        self.run.write_all(dir, &report)?;
+        Ok(report)
+    }
 }
 
 /// The settings of a run that must agree between shards: run.json without the fields that

@@ -448,16 +448,7 @@ pub fn merge(
         std::fs::create_dir_all(&out).map_err(|e| {
             errors::FerretError::new_err(format!("creating {}: {e}", out.display()))
         })?;
-        let source = merged.run.info.house_source().describe();
-        let report = merged.run.report(&ReportView {
-            source: &source,
-            houses: &merged.houses,
-            houses_run: merged.houses_run,
-            trials_run: merged.trials_run,
-            paired_against: &merged.paired_against,
-            cells: merged.cells,
-        });
-        merged.run.write_all(&out, &report).map_err(errors::lab)?;
+        merged.write_all(&out).map_err(errors::lab)?;
         let mut conflicts = Vec::new();
         let mut answers = 0;
         if !caches.is_empty() {

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use ferret_lab::runs::{EvalRun, ReportView};
+use ferret_lab::runs::EvalRun;
 use ferret_llm::ResponseCache;
 
 use super::eval::SHARD_CACHE;
@@ -67,17 +67,8 @@ pub fn run(args: Args) -> Result<ExitCode> {
             .collect::<Result<Vec<_>>>()?;
         let merged = ferret_lab::merge_runs(&shards)?;
         let mut lock = ferret_lab::files::DirLock::acquire(&args.out)?;
-        let source = merged.run.info.house_source().describe();
-        let report = merged.run.report(&ReportView {
-            source: &source,
-            houses: &merged.houses,
-            houses_run: merged.houses_run,
-            trials_run: merged.trials_run,
-            paired_against: &merged.paired_against,
-            cells: merged.cells,
-        });
         lock.used();
-        merged.run.write_all(&args.out, &report)?;
+        let report = merged.write_all(&args.out)?;
         println!("{}", report.markdown);
         println!(
             "merged {} shards: {} trials on {} houses; wrote {}/{{trials.csv,summary.csv,summary.md,paired.csv,run.json}}",

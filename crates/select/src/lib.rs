@@ -35,7 +35,7 @@ pub use experiment::{
     DeploymentRecord, ExperimentOptions, ExperimentResult, MAX_EXPERIMENT_TRIALS, MethodRun,
     MethodSummary, run_experiment, run_on_table,
 };
-pub use live::{FinishedTrial, LiveDeployment, StrategyStats, TrialEnd};
+pub use live::{DeploymentEvent, FinishedTrial, LiveDeployment, StrategyStats, TrialEnd};
 pub use order::HouseOrder;
 pub use results::{
     ChoiceRow, PAPER_KS, SelectionRow, choice_rows, selection_rows, selection_table_markdown,

@@ -37,6 +37,19 @@ pub enum TrialEnd {
     },
 }
 
+/// What happened in a deployment whose trials may overlap (several robots sharing it), in the
+/// order it happened: a trial started with a choice, or a trial ended.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum DeploymentEvent {
+    /// A trial started with this strategy, chosen from the trials ended so far.
+    Started {
+        /// Index of the chosen strategy.
+        chosen: usize,
+    },
+    /// A trial (any open one) ended.
+    Ended(TrialEnd),
+}
+
 /// Per-strategy statistics of a deployment.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StrategyStats {
@@ -167,6 +180,71 @@ impl LiveDeployment {
         Ok(d)
     }
 
+    /// Rebuilds a deployment whose trials may overlap from its events in the order they
+    /// happened. Each start's choice is made again from the trials ended before it (drawing the
+    /// same tie-breaks from the seed's stream, one draw per start in start order) and must match
+    /// the stored one. A deployment of strictly sequential trials gives the same state as
+    /// [`restore`](Self::restore); no trial is left pending (open trials are the caller's).
+    ///
+    /// # Errors
+    /// [`SelectError::Live`] when a stored choice differs from the one the selector makes now,
+    /// or more trials end than started; the errors of [`LiveDeployment::finish`].
+    pub fn replay_events(
+        method: Method,
+        strategies: usize,
+        c: f64,
+        seed: u64,
+        events: &[DeploymentEvent],
+    ) -> Result<Self, SelectError> {
+        let mut d = Self::new(method, strategies, c, seed)?;
+        let (mut started, mut ended) = (0usize, 0usize);
+        for event in events {
+            match event {
+                DeploymentEvent::Started { chosen } => {
+                    started += 1;
+                    let again = d.choose_overlapping();
+                    if again != *chosen {
+                        return Err(SelectError::Live(format!(
+                            "trial {started}: stored choice {chosen} but the selector now chooses {again}"
+                        )));
+                    }
+                }
+                DeploymentEvent::Ended(end) => {
+                    ended += 1;
+                    if ended > started {
+                        return Err(SelectError::Live(format!(
+                            "end {ended} comes before any open trial started"
+                        )));
+                    }
+                    d.end_overlapping(end)?;
+                }
+            }
+        }
+        Ok(d)
+    }
+
+    /// The strategy for a trial that may run alongside other open ones: chosen from the trials
+    /// ended so far, each call a new trial (it draws the next tie-break; nothing is pending).
+    pub fn choose_overlapping(&mut self) -> usize {
+        self.selector.choose(&mut self.rng)
+    }
+
+    /// Records the end of one of the open trials started by
+    /// [`choose_overlapping`](Self::choose_overlapping).
+    ///
+    /// # Errors
+    /// Costs that are not finite or replays of the wrong length (see
+    /// [`finish`](Self::finish)).
+    pub fn end_overlapping(&mut self, end: &TrialEnd) -> Result<(), SelectError> {
+        match end {
+            TrialEnd::Finished(t) => self.record_finished(t.chosen, t.cost, &t.replays),
+            TrialEnd::Abandoned { chosen } => {
+                self.ends.push(End::Abandoned { chosen: *chosen });
+                Ok(())
+            }
+        }
+    }
+
     /// Makes room for `trials` more trials, so that a deployment of known length grows its
     /// history once.
     pub fn reserve(&mut self, trials: usize) {
@@ -246,6 +324,18 @@ impl LiveDeployment {
         let chosen = self.pending.ok_or_else(|| {
             SelectError::Live("no trial in progress: choose a strategy first".into())
         })?;
+        self.record_finished(chosen, cost, replays)?;
+        self.pending = None;
+        Ok(())
+    }
+
+    /// The selector learns a finished trial of `chosen` and it joins the history.
+    fn record_finished(
+        &mut self,
+        chosen: usize,
+        cost: f64,
+        replays: &[f64],
+    ) -> Result<(), SelectError> {
         self.selector.observe(chosen, cost, replays)?;
         let start = self.replays.len();
         self.replays.extend_from_slice(replays);
@@ -257,7 +347,6 @@ impl LiveDeployment {
             cost,
             replays: replays.len(),
         });
-        self.pending = None;
         Ok(())
     }
 

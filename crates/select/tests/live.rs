@@ -1,6 +1,6 @@
 //! A live deployment rebuilt from its stored trials behaves exactly as the one that ran.
 
-use ferret_select::{LiveDeployment, Method, TrialEnd};
+use ferret_select::{DeploymentEvent, FinishedTrial, LiveDeployment, Method, TrialEnd};
 use proptest::prelude::*;
 
 /// Runs `trials` trials with the given per-trial costs (`costs[k][i]` = cost of strategy i in
@@ -60,6 +60,110 @@ proptest! {
             d.finish(row[i], &row).unwrap();
         }
     }
+}
+
+/// Drives a deployment whose trials overlap: `script[j]` says, at step j, either start a trial
+/// (`None`) or end the open trial at position `Some(p)` (mod the open ones), with costs from
+/// `costs`. Returns the deployment, its event log and the choices made at each start.
+fn overlapping(
+    method: Method,
+    seed: u64,
+    script: &[Option<usize>],
+    costs: &[Vec<f64>],
+) -> (LiveDeployment, Vec<DeploymentEvent>) {
+    let mut d = LiveDeployment::new(method, 3, 5.0, seed).unwrap();
+    let (mut open, mut events) = (Vec::new(), Vec::new());
+    for (j, step) in script.iter().enumerate() {
+        match step {
+            Some(p) if !open.is_empty() => {
+                let chosen: usize = open.remove(p % open.len());
+                let row = &costs[j % costs.len()];
+                let end = if row[0] > 4.0 {
+                    TrialEnd::Abandoned { chosen }
+                } else {
+                    let mut replays = row.clone();
+                    replays[chosen] = row[chosen];
+                    TrialEnd::Finished(FinishedTrial {
+                        chosen,
+                        cost: row[chosen],
+                        replays,
+                    })
+                };
+                d.end_overlapping(&end).unwrap();
+                events.push(DeploymentEvent::Ended(end));
+            }
+            _ => {
+                let chosen = d.choose_overlapping();
+                open.push(chosen);
+                events.push(DeploymentEvent::Started { chosen });
+            }
+        }
+    }
+    (d, events)
+}
+
+proptest! {
+    #[test]
+    fn overlapping_trials_replay_exactly_from_their_events(
+        method in method(),
+        seed in 0u64..1000,
+        script in prop::collection::vec(prop::option::of(0usize..4), 1..40),
+        costs in prop::collection::vec(prop::collection::vec(0u8..6, 3), 1..8),
+    ) {
+        let costs: Vec<Vec<f64>> = costs.iter().map(|r| r.iter().map(|&c| f64::from(c)).collect()).collect();
+        let (mut original, events) = overlapping(method, seed, &script, &costs);
+        let mut replayed = LiveDeployment::replay_events(method, 3, 5.0, seed, &events).unwrap();
+        prop_assert_eq!(replayed.stats(), original.stats());
+        prop_assert_eq!(replayed.peek(), original.peek());
+        prop_assert!(original.finished().eq(replayed.finished()));
+        // And both go on choosing alike.
+        for _ in 0..3 {
+            prop_assert_eq!(original.choose_overlapping(), replayed.choose_overlapping());
+        }
+    }
+
+    #[test]
+    fn sequential_events_are_the_sequential_deployment(
+        method in method(),
+        seed in 0u64..1000,
+        costs in prop::collection::vec(prop::collection::vec(0u8..6, 3), 1..15),
+    ) {
+        let costs: Vec<Vec<f64>> = costs.iter().map(|r| r.iter().map(|&c| f64::from(c)).collect()).collect();
+        let original = run(method, &costs, seed);
+        let events: Vec<DeploymentEvent> = original
+            .history()
+            .into_iter()
+            .flat_map(|end| {
+                let chosen = match &end {
+                    TrialEnd::Finished(t) => t.chosen,
+                    TrialEnd::Abandoned { chosen } => *chosen,
+                };
+                [DeploymentEvent::Started { chosen }, DeploymentEvent::Ended(end)]
+            })
+            .collect();
+        let replayed = LiveDeployment::replay_events(method, 3, 5.0, seed, &events).unwrap();
+        prop_assert_eq!(replayed.stats(), original.stats());
+        prop_assert_eq!(replayed.peek(), original.peek());
+    }
+}
+
+#[test]
+fn overlapping_events_that_contradict_the_selector_are_refused() {
+    let costs = vec![vec![1.0, 9.0, 9.0]];
+    let script = [None, None, Some(0), None, Some(0), Some(0), None];
+    let (_, mut events) = overlapping(Method::ReplaySelection, 1, &script, &costs);
+    // An end before any start.
+    let early = [events[2].clone()];
+    let e = LiveDeployment::replay_events(Method::ReplaySelection, 3, 5.0, 1, &early).unwrap_err();
+    assert!(e.to_string().contains("before any open trial"), "{e}");
+    // A start whose stored choice is not the selector's.
+    let last = events.len() - 1;
+    let DeploymentEvent::Started { chosen } = &mut events[last] else {
+        panic!("the script ends with a start")
+    };
+    *chosen = (*chosen + 1) % 3;
+    let e = LiveDeployment::replay_events(Method::ReplaySelection, 3, 5.0, 1, &events).unwrap_err();
+    assert!(e.to_string().contains("trial 4"), "{e}");
 }
 
 #[test]

@@ -190,6 +190,10 @@ pub struct CreateDeployment {
     #[serde(default, deserialize_with = "integer_valued")]
     #[schema(minimum = 0, maximum = 9007199254740991_i64)]
     pub seed: Option<u64>,
+    /// One trial at a time, as in the paper (default false: several robots may run trials of
+    /// the deployment at once, each chosen from the trials ended before it started).
+    #[serde(default)]
+    pub sequential: Option<bool>,
 }
 
 /// A non-negative integer as JSON Schema counts one: `2232.0` is the integer 2232, as many JSON
@@ -424,14 +428,18 @@ pub struct DeploymentState {
     pub c: f64,
     /// Seed of the tie breaks.
     pub seed: u64,
+    /// One trial at a time.
+    pub sequential: bool,
     /// Candidates, in order.
     pub strategies: Vec<String>,
     /// Its trials.
     pub trials: Vec<TrialSummary>,
     /// Per-strategy statistics.
     pub per_strategy: Vec<StrategyRow>,
-    /// The trial in progress.
+    /// The first trial in progress (see `open_trials`).
     pub open_trial: Option<i64>,
+    /// Every trial in progress, in the order they started.
+    pub open_trials: Vec<i64>,
     /// What the next trial will deploy.
     pub next: NextChoice,
 }

@@ -5,7 +5,9 @@
 use std::sync::Arc;
 
 use ferret_plan::{ReplayMode, Strategy};
-use ferret_select::{DEFAULT_C, DeploymentLoop, FinishedTrial, LiveDeployment, TrialEnd};
+use ferret_select::{
+    DEFAULT_C, DeploymentEvent, DeploymentLoop, FinishedTrial, LiveDeployment, TrialEnd,
+};
 use ferret_world::TravelCost;
 
 use crate::api::{
@@ -13,6 +15,7 @@ use crate::api::{
 };
 use crate::error::{ApiError, ErrorKind};
 use crate::model::{ApiReply, DeploymentSpec, Outcome, StoredTrial, TrialStatus};
+use crate::replies::Begun;
 use crate::service::{Service, json};
 
 impl Service {
@@ -61,6 +64,10 @@ impl Service {
         req: CreateDeployment,
         body: &[u8],
     ) -> Result<ApiReply, ApiError> {
+        let _claim = match self.begin(req.request_id.as_deref(), "POST /deployments", body)? {
+            Begun::Replied(reply) => return Ok(reply),
+            Begun::Fresh(claim) => claim,
+        };
         let strategies = req.strategies.unwrap_or_else(|| self.strategy_names());
         if strategies.is_empty() {
             return Err(ApiError::new(
@@ -104,6 +111,7 @@ impl Service {
                 .map_or(ferret_select::Method::ReplaySelection, |s| s.0),
             c,
             seed,
+            sequential: req.sequential.unwrap_or(false),
         };
         self.candidates_of(&spec)?;
         self.idempotent(req.request_id.as_deref(), "POST /deployments", body, |w| {
@@ -125,14 +133,12 @@ impl Service {
         spec: &DeploymentSpec,
         trials: &[StoredTrial],
     ) -> Result<LiveDeployment, ApiError> {
-        let (history, pending) = history(trials);
-        LiveDeployment::restore(
+        LiveDeployment::replay_events(
             spec.selector,
             spec.strategies.len(),
             spec.c,
             spec.seed,
-            &history,
-            pending,
+            &events(trials)?,
         )
         .map_err(|e| ApiError::internal(e.to_string()))
     }
@@ -144,13 +150,11 @@ impl Service {
         trials: &[StoredTrial],
         candidates: Vec<Arc<dyn Strategy>>,
     ) -> Result<DeploymentLoop, ApiError> {
-        let (history, pending) = history(trials);
-        DeploymentLoop::restore(
+        DeploymentLoop::replay_events(
             (spec.selector, spec.c, spec.seed),
             candidates,
             ROBOT_REPLAY,
-            &history,
-            pending,
+            &events(trials)?,
         )
         .map_err(|e| ApiError::internal(e.to_string()))
     }
@@ -169,6 +173,7 @@ impl Service {
             selector: spec.selector.name().to_string(),
             c: spec.c,
             seed: spec.seed,
+            sequential: spec.sequential,
             strategies: spec.strategies.clone(),
             trials: trials
                 .iter()
@@ -197,6 +202,11 @@ impl Service {
                 .iter()
                 .find(|t| t.status == TrialStatus::Searching)
                 .map(|t| t.id),
+            open_trials: trials
+                .iter()
+                .filter(|t| t.status == TrialStatus::Searching)
+                .map(|t| t.id)
+                .collect(),
             next: NextChoice {
                 strategy: spec.strategies.get(next).cloned().unwrap_or_default(),
                 why: live.why(&spec.strategies),
@@ -209,20 +219,52 @@ impl Service {
 pub(crate) const ROBOT_REPLAY: (ReplayMode, TravelCost) =
     (ReplayMode::Pessimistic, TravelCost::Plain);
 
-/// How the stored trials ended, in order, and the choice of the open one.
-fn history(trials: &[StoredTrial]) -> (Vec<TrialEnd>, Option<usize>) {
-    let mut history = Vec::new();
-    let mut pending = None;
-    for t in trials {
-        match t.status {
-            TrialStatus::Done => history.push(TrialEnd::Finished(FinishedTrial {
-                chosen: t.chosen,
-                cost: t.cost.unwrap_or(f64::NAN),
-                replays: t.replays.clone().unwrap_or_default(),
-            })),
-            TrialStatus::Exhausted => history.push(TrialEnd::Abandoned { chosen: t.chosen }),
-            TrialStatus::Searching => pending = Some(t.chosen),
+/// A deployment's history as the selector saw it: each trial's start (after the ends it was
+/// chosen from) and each end, in the order they happened.
+pub(crate) fn events(trials: &[StoredTrial]) -> Result<Vec<DeploymentEvent>, ApiError> {
+    let mut ends: Vec<&StoredTrial> = trials.iter().filter(|t| t.end_seq.is_some()).collect();
+    ends.sort_by_key(|t| t.end_seq);
+    let corrupt = |t: &StoredTrial, what: &str| {
+        ApiError::internal(format!(
+            "deployment {}: trial {} {what}; the stored order of starts and ends is inconsistent",
+            t.deployment, t.id
+        ))
+    };
+    for (i, t) in ends.iter().enumerate() {
+        if t.end_seq != Some(i as i64 + 1) {
+            return Err(corrupt(t, "ended out of sequence"));
+        }
+        if t.started_after > i as i64 {
+            return Err(corrupt(t, "ended before it started"));
         }
     }
-    (history, pending)
+    let mut events = Vec::with_capacity(trials.len() + ends.len());
+    let mut starts = trials.iter().peekable();
+    let mut last_after = 0;
+    let mut start = |t: &StoredTrial, events: &mut Vec<DeploymentEvent>| {
+        if t.started_after < last_after {
+            return Err(corrupt(t, "started before an earlier trial"));
+        }
+        last_after = t.started_after;
+        events.push(DeploymentEvent::Started { chosen: t.chosen });
+        Ok(())
+    };
+    for (i, end) in ends.iter().enumerate() {
+        // The starts that saw only the `i` ends before this one.
+        while let Some(t) = starts.next_if(|t| t.started_after <= i as i64) {
+            start(t, &mut events)?;
+        }
+        events.push(DeploymentEvent::Ended(match end.status {
+            TrialStatus::Done => TrialEnd::Finished(FinishedTrial {
+                chosen: end.chosen,
+                cost: end.cost.unwrap_or(f64::NAN),
+                replays: end.replays.clone().unwrap_or_default(),
+            }),
+            _ => TrialEnd::Abandoned { chosen: end.chosen },
+        }));
+    }
+    for t in starts {
+        start(t, &mut events)?;
+    }
+    Ok(events)
 }

@@ -30,4 +30,4 @@ pub use http::{ApiDoc, HttpOptions, document, router};
 pub use model::{ApiReply, Outcome};
 pub use server::{ServeOptions, serve};
 pub use service::{SceneLimits, Service, ServiceOptions};
-pub use store::Store;
+pub use store::{PostgresOptions, Store, is_postgres_url};

@@ -37,6 +37,10 @@ pub struct DeploymentSpec {
     pub c: f64,
     /// Seed of the selector's tie breaks.
     pub seed: u64,
+    /// One trial at a time (the paper's setting): a second open trial is refused. Otherwise
+    /// several robots may run trials of the deployment at once.
+    #[serde(default)]
+    pub sequential: bool,
 }
 
 /// A stored deployment.
@@ -102,6 +106,11 @@ pub struct StoredTrial {
     pub cost: Option<f64>,
     /// Every candidate's replay cost (entry `chosen` = `cost`), once done.
     pub replays: Option<Vec<f64>>,
+    /// How many trials of the deployment had ended when it started (its choice was made from
+    /// those).
+    pub started_after: i64,
+    /// Its place (1-based) among the deployment's trials in the order they ended, once ended.
+    pub end_seq: Option<i64>,
 }
 
 /// One search reported by the robot.

@@ -10,6 +10,7 @@ use crate::api::{ContainerInfo, MAX_TYPE_NAME, RoomInfo, SceneDetail, SceneSumma
 use crate::error::{ApiError, ErrorKind};
 use crate::grids::Placed;
 use crate::model::{ApiReply, Outcome};
+use crate::replies::Begun;
 use crate::service::{Scenes, Service, json};
 use crate::trials::is_type_name;
 
@@ -142,9 +143,10 @@ impl Service {
     pub fn upload_scene(&self, req: UploadScene, body: &[u8]) -> Result<ApiReply, ApiError> {
         const ROUTE: &str = "POST /scenes";
         let request_id = req.request_id.as_deref();
-        if let Some(reply) = self.earlier_reply(request_id, ROUTE, body)? {
-            return Ok(reply);
-        }
+        let _claim = match self.begin(request_id, ROUTE, body)? {
+            Begun::Replied(reply) => return Ok(reply),
+            Begun::Fresh(claim) => claim,
+        };
         let text = req.scene.to_string();
         let file = parse_file(&text)?;
         // Counts first: checking the rooms for overlaps takes time in their vertices squared.

@@ -92,6 +92,8 @@ pub struct Service {
     pub(crate) options: ServiceOptions,
     pub(crate) scenes: RwLock<Scenes>,
     pub(crate) grids: Grids,
+    /// Request ids being run on this replica now.
+    pub(crate) in_flight: std::sync::Mutex<std::collections::HashSet<String>>,
 }
 
 impl std::fmt::Debug for Service {
@@ -172,6 +174,7 @@ impl Service {
                 uploaded,
             }),
             grids: Grids::new(grid, options.grid_cache_bytes, options.concurrent_builds),
+            in_flight: std::sync::Mutex::default(),
         })
     }
 

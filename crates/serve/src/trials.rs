@@ -17,7 +17,9 @@ use crate::grids::Placed;
 use crate::model::{
     ApiReply, DeploymentSpec, Outcome, StoredObservation, StoredTrial, TrialStatus,
 };
+use crate::replies::Begun;
 use crate::service::{Service, json};
+use crate::store::NewTrial;
 
 /// An object type as the API takes it: ASCII letters and digits, as in `CellPhone`.
 pub(crate) fn is_type_name(s: &str) -> bool {
@@ -25,7 +27,10 @@ pub(crate) fn is_type_name(s: &str) -> bool {
 }
 
 impl Service {
-    /// `POST /deployments/{id}/trials`.
+    /// `POST /deployments/{id}/trials`. The strategy is chosen from the trials ended so far and
+    /// the first container planned without holding the database; when another trial of the
+    /// deployment started or ended meanwhile (another robot, perhaps on another replica), the
+    /// choice is made again from the new state.
     pub fn start_trial(
         &self,
         deployment: i64,
@@ -33,9 +38,10 @@ impl Service {
         body: &[u8],
     ) -> Result<ApiReply, ApiError> {
         let route = format!("POST /deployments/{deployment}/trials");
-        if let Some(reply) = self.earlier_reply(req.request_id.as_deref(), &route, body)? {
-            return Ok(reply);
-        }
+        let _claim = match self.begin(req.request_id.as_deref(), &route, body)? {
+            Begun::Replied(reply) => return Ok(reply),
+            Begun::Fresh(claim) => claim,
+        };
         let spec = self.spec(deployment)?;
         if !is_type_name(&req.target) {
             return Err(ApiError::new(
@@ -48,60 +54,94 @@ impl Service {
             ));
         }
         let placed = self.placed(&req.scene, req.pose)?;
-        let trials = self.store.read(|r| r.trials_of(deployment))?;
-        if let Some(open) = trials.iter().find(|t| t.status == TrialStatus::Searching) {
-            return Err(ApiError::new(
-                ErrorKind::Conflict,
-                "deployment",
-                format!(
-                    "trial {} of deployment {deployment} is still searching; finish it first",
-                    open.id
-                ),
-            ));
-        }
         let candidates = self.candidates_of(&spec)?;
-        let mut state = self.deployment(&spec, &trials, candidates.clone())?;
-        let chosen = state.choose();
         let trial = TrialSpec {
             target: ObjectType::new(req.target.clone()),
             revealed: Vec::new(),
         };
-        let next = {
-            let problem = SearchProblem::new(&placed.house, &placed.distances, &trial);
-            let mut search =
-                Search::start(candidates[chosen].as_ref(), &problem, None).map_err(plan_error)?;
-            let c = search.next_container().map_err(plan_error)?;
-            c.map(|c| next_container(&placed, Place::Start, c))
-        };
-        let k = trials.len() as i64 + 1;
-        self.idempotent(req.request_id.as_deref(), &route, body, |w| {
-            // Another request may have started a trial since the read above.
-            if w.reader().trials_of(deployment)?.len() != trials.len() {
+        for _ in 0..START_ATTEMPTS {
+            let trials = self.store.read(|r| r.trials_of(deployment))?;
+            if spec.sequential
+                && let Some(open) = trials.iter().find(|t| t.status == TrialStatus::Searching)
+            {
                 return Err(ApiError::new(
                     ErrorKind::Conflict,
                     "deployment",
-                    "another trial was started at the same time; read the deployment and retry",
+                    format!(
+                        "trial {} of deployment {deployment} is still searching and the deployment is sequential; finish it first",
+                        open.id
+                    ),
                 ));
             }
-            let id = w.insert_trial(deployment, k, &req.scene, &req.target, req.pose, chosen)?;
-            json(
-                Outcome::Created,
-                &TrialState {
-                    trial: id,
+            let snapshot = Snapshot::of(&trials);
+            let chosen = self
+                .deployment(&spec, &trials, candidates.clone())?
+                .choose_overlapping();
+            let next = {
+                let problem = SearchProblem::new(&placed.house, &placed.distances, &trial);
+                let mut search = Search::start(candidates[chosen].as_ref(), &problem, None)
+                    .map_err(plan_error)?;
+                let c = search.next_container().map_err(plan_error)?;
+                c.map(|c| next_container(&placed, Place::Start, c))
+            };
+            let k = trials.len() as i64 + 1;
+            let started = self.idempotent(req.request_id.as_deref(), &route, body, |w| {
+                w.lock_deployment(deployment)?;
+                let now = w.reader().trials_of(deployment)?;
+                if Snapshot::of(&now) != snapshot {
+                    return Err(stale());
+                }
+                if spec.sequential && snapshot.open > 0 {
+                    return Err(ApiError::new(
+                        ErrorKind::Conflict,
+                        "deployment",
+                        "another trial was started at the same time and the deployment is sequential",
+                    ));
+                }
+                let id = w.insert_trial(&NewTrial {
                     deployment,
                     k,
-                    scene: req.scene.clone(),
-                    target: req.target.clone(),
-                    strategy: spec.strategies[chosen].clone(),
-                    status: TrialStatus::Searching,
-                    searched: Vec::new(),
-                    cost_m: 0.0,
-                    travelled_m: None,
-                    next: next.clone(),
-                    replays_m: None,
-                },
-            )
-        })
+                    scene: &req.scene,
+                    target: &req.target,
+                    pose: req.pose,
+                    chosen,
+                    started_after: snapshot.ended,
+                })?;
+                json(
+                    Outcome::Created,
+                    &TrialState {
+                        trial: id,
+                        deployment,
+                        k,
+                        scene: req.scene.clone(),
+                        target: req.target.clone(),
+                        strategy: spec.strategies[chosen].clone(),
+                        status: TrialStatus::Searching,
+                        searched: Vec::new(),
+                        cost_m: 0.0,
+                        travelled_m: None,
+                        next: next.clone(),
+                        replays_m: None,
+                    },
+                )
+            });
+            match started {
+                Err(e) if is_stale(&e) => {
+                    tracing::debug!(
+                        deployment,
+                        "deployment changed while a trial was planned; planning again"
+                    );
+                }
+                other => return other,
+            }
+        }
+        Err(ApiError::new(
+            ErrorKind::Conflict,
+            "deployment",
+            format!(
+                "deployment {deployment} changed {START_ATTEMPTS} times while this trial was planned; retry"
+            ),
+        ))
     }
 
     fn trial_row(&self, id: i64) -> Result<StoredTrial, ApiError> {
@@ -161,9 +201,10 @@ impl Service {
         body: &[u8],
     ) -> Result<ApiReply, ApiError> {
         let route = format!("POST /trials/{id}/observations");
-        if let Some(reply) = self.earlier_reply(req.request_id.as_deref(), &route, body)? {
-            return Ok(reply);
-        }
+        let _claim = match self.begin(req.request_id.as_deref(), &route, body)? {
+            Begun::Replied(reply) => return Ok(reply),
+            Begun::Fresh(claim) => claim,
+        };
         let row = self.trial_row(id)?;
         if row.status != TrialStatus::Searching {
             return Err(ApiError::new(
@@ -262,6 +303,9 @@ impl Service {
             }
         };
         self.idempotent(req.request_id.as_deref(), &route, body, |w| {
+            // Every write of a deployment's trials holds its row: the order trials end in is
+            // the deployment's history, and one observation per sequence number is kept.
+            w.lock_deployment(row.deployment)?;
             let r = w.reader();
             let now = r.observations(id)?;
             let still = r
@@ -275,8 +319,15 @@ impl Service {
                 ));
             }
             w.insert_observation(id, observations.len(), &observation)?;
+            let mut end_seq = None;
             if status != TrialStatus::Searching {
-                w.end_trial(id, status, cost, replays.as_deref())?;
+                let ended = r
+                    .trials_of(row.deployment)?
+                    .iter()
+                    .filter(|t| t.end_seq.is_some())
+                    .count() as i64;
+                end_seq = Some(ended + 1);
+                w.end_trial(id, status, (cost, ended + 1), replays.as_deref())?;
             }
             let mut all = observations.clone();
             all.push(observation.clone());
@@ -284,6 +335,7 @@ impl Service {
             updated.status = status;
             updated.cost = (status != TrialStatus::Searching).then_some(cost);
             updated.replays = replays.clone();
+            updated.end_seq = end_seq;
             json(
                 Outcome::Done,
                 &trial_state(&updated, spec, &all, cost, next.clone()),
@@ -291,6 +343,40 @@ impl Service {
         })
     }
 }
+/// How often a trial's start is planned again when its deployment keeps changing under it.
+const START_ATTEMPTS: usize = 8;
+
+/// What a trial's choice depends on: how many trials started and how many ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Snapshot {
+    started: usize,
+    ended: i64,
+    open: usize,
+}
+
+impl Snapshot {
+    fn of(trials: &[StoredTrial]) -> Self {
+        Snapshot {
+            started: trials.len(),
+            ended: trials.iter().filter(|t| t.end_seq.is_some()).count() as i64,
+            open: trials
+                .iter()
+                .filter(|t| t.status == TrialStatus::Searching)
+                .count(),
+        }
+    }
+}
+
+const STALE: &str = "the deployment changed while this trial was planned";
+
+fn stale() -> ApiError {
+    ApiError::new(ErrorKind::Conflict, "deployment", STALE)
+}
+
+fn is_stale(e: &ApiError) -> bool {
+    e.kind == ErrorKind::Conflict && e.message == STALE
+}
+
 /// A stored trial with what it needs to plan its next step.
 struct LoadedTrial {
     observations: Vec<StoredObservation>,

@@ -273,7 +273,9 @@ async fn a_deployment_through_the_api_costs_what_the_simulator_says() {
 #[tokio::test(flavor = "multi_thread")]
 async fn bad_input_is_a_4xx_naming_the_field() {
     let s = start(None, None).await;
-    let (_, dep) = s.post("/deployments", json!({})).await;
+    // Sequential, as in the paper: a second open trial is a conflict.
+    let (_, dep) = s.post("/deployments", json!({"sequential": true})).await;
+    assert_eq!(dep["sequential"], true, "{dep}");
     let id = dep["id"].as_i64().unwrap();
     let (_, trial) = s
         .post(
@@ -455,7 +457,7 @@ async fn a_retried_request_changes_nothing_and_a_reused_id_is_refused() {
     let (st, reply) = s
         .post("/deployments", json!({"request_id": "dep-1", "seed": 10}))
         .await;
-    assert_eq!(st, 409, "{reply}");
+    assert_eq!(st, 422, "the same id with another body: {reply}");
     assert_eq!(reply["error"]["field"], "request_id");
     let id = first["id"].as_i64().unwrap();
     let start = json!({"request_id": "t-1", "scene": "flat", "target": "Wallet"});

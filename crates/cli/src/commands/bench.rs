@@ -4,7 +4,7 @@
 use std::process::ExitCode;
 use std::time::Instant;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use ferret_plan::{TourProblem, solve_exact};
 use serde::Serialize;
 
@@ -16,8 +16,12 @@ pub enum Command {
     Planner(PlannerArgs),
     /// Load on `ferret serve`: many concurrent deployments (simulated robots) over HTTP on
     /// 127.0.0.1, each running its trials to the end; requests per second, latency of the
-    /// "next container" replies, errors. The database is a real SQLite file (WAL, synchronous
-    /// FULL) in a temporary directory.
+    /// "next container" replies, errors. By default one server in this process on a real
+    /// SQLite file (WAL, synchronous FULL) in a temporary directory; with --replicas or a
+    /// PostgreSQL --db, that many `ferret serve` processes on one database, each robot on one
+    /// replica and moving to the next when its replica fails. Every write carries a request
+    /// id and is retried until acknowledged; at the end every trial is read back and each
+    /// acknowledged observation must be stored exactly once.
     Serve(Box<ServeArgs>),
 }
 
@@ -48,6 +52,21 @@ pub struct ServeArgs {
     /// Seed of the targets.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// `ferret serve` processes sharing --db (needs --houses: each replica loads the file).
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    replicas: usize,
+    /// The database: a PostgreSQL URL (`postgres://user@host:port/database`, which should be
+    /// empty or hold only earlier benchmarks) or an SQLite file; default a new SQLite file in a
+    /// temporary directory.
+    #[arg(long, value_name = "URL|FILE")]
+    db: Option<String>,
+    /// Kill (SIGKILL) the first replica this many seconds into the run; its robots carry on
+    /// against the others.
+    #[arg(long, value_name = "SECS")]
+    kill_replica_after: Option<f64>,
+    /// PostgreSQL connections per replica.
+    #[arg(long, value_name = "N", default_value_t = ferret_serve::PostgresOptions::default().pool_size)]
+    db_pool: usize,
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
@@ -89,16 +108,31 @@ pub fn run(cmd: Command) -> Result<ExitCode> {
 
 #[derive(Serialize)]
 struct ServeLine {
+    replicas: usize,
+    database: String,
     deployments: usize,
     trials: usize,
     requests: usize,
+    /// Attempts beyond the first of a request (a replica down, a request id in flight).
+    retries: usize,
     errors: usize,
     seconds: f64,
     requests_per_second: f64,
     next_p50_ms: f64,
     next_p99_ms: f64,
     next_max_ms: f64,
-    database_mib: f64,
+    /// SQLite only: the file and its log.
+    database_mib: Option<f64>,
+    /// Replica killed, and when.
+    killed_after_s: Option<f64>,
+    /// Acknowledged observations read back.
+    verified_observations: usize,
+    /// Acknowledged observations missing from their trial.
+    lost_observations: usize,
+    /// Stored observations beyond the acknowledged ones (a write counted twice).
+    duplicated_observations: usize,
+    /// Deployments whose stored trials are not the ones their robot started.
+    mismatched_deployments: usize,
 }
 
 fn serve(args: ServeArgs) -> Result<ExitCode> {
@@ -106,16 +140,38 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
 
     use ferret_plan::draw_trial;
 
-    if args.deployments == 0 || args.trials == 0 {
-        anyhow::bail!("--deployments and --trials must be at least 1");
+    if args.deployments == 0 || args.trials == 0 || args.replicas == 0 {
+        anyhow::bail!("--deployments, --trials and --replicas must be at least 1");
+    }
+    let in_process = args.replicas == 1
+        && args.kill_replica_after.is_none()
+        && !args
+            .db
+            .as_deref()
+            .is_some_and(ferret_serve::is_postgres_url);
+    if !in_process && args.houses.houses.is_none() {
+        anyhow::bail!(
+            "--replicas, --kill-replica-after and a PostgreSQL --db run `ferret serve` processes, which load --houses: give a house file (`ferret generate --out FILE` writes one)"
+        );
+    }
+    if let Some(k) = args.kill_replica_after
+        && (args.replicas < 2 || !(k.is_finite() && k >= 0.0))
+    {
+        anyhow::bail!(
+            "--kill-replica-after needs --replicas 2 or more and a number of seconds ≥ 0"
+        );
     }
     let loaded = args.houses.load()?;
     if loaded.scenes.is_empty() {
         anyhow::bail!("no houses in {}", loaded.source);
     }
     let dir = tempfile::tempdir()?;
-    let db = dir.path().join("bench.sqlite");
-    let store = ferret_serve::Store::open(&db)?;
+    let db = args.db.clone().unwrap_or_else(|| {
+        dir.path()
+            .join("bench.sqlite")
+            .to_string_lossy()
+            .into_owned()
+    });
     // The work list: per deployment, (scene name, target) per trial, with the truth to answer.
     let mut plans = Vec::with_capacity(args.deployments);
     for d in 0..args.deployments {
@@ -142,70 +198,118 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
         }
         plans.push(trials);
     }
-    let service = ferret_serve::Service::new(store, args.grid.params(), {
-        let setup = super::llm_setup::full_registry(&args.planning, &args.llm, &args.strategies)?;
-        args.strategies
-            .iter()
-            .map(|s| setup.registry.build(s))
-            .collect::<Result<Vec<_>, _>>()?
-    })
-    .map_err(|e| anyhow::anyhow!("{}", e.message))?;
-    let bar = crate::common::progress(loaded.scenes.len(), "scenes");
-    for scene in loaded.scenes {
-        let name = scene.house.name.clone();
-        service
-            .add_scene(&name, scene)
-            .map_err(|e| anyhow::anyhow!("{name}: {}", e.message))?;
-        bar.inc(1);
-    }
-    bar.finish_and_clear();
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()?;
-    let listener = runtime.block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))?;
-    let addr = listener.local_addr()?;
-    // The server's own guards and connection loop, as `ferret serve` runs them.
-    let options = ferret_serve::HttpOptions {
-        listen: Some(addr),
-        ..ferret_serve::HttpOptions::default()
-    };
-    let app = ferret_serve::router(Arc::new(service), &options)
+    // Either one server in this process, or replicas as processes of their own.
+    let mut replicas: Vec<std::process::Child> = Vec::new();
+    let mut urls = Vec::new();
+    let mut server = None;
+    if in_process {
+        let store = ferret_serve::Store::open(std::path::Path::new(&db))?;
+        let service = ferret_serve::Service::new(store, args.grid.params(), {
+            let setup =
+                super::llm_setup::full_registry(&args.planning, &args.llm, &args.strategies)?;
+            args.strategies
+                .iter()
+                .map(|s| setup.registry.build(s))
+                .collect::<Result<Vec<_>, _>>()?
+        })
         .map_err(|e| anyhow::anyhow!("{}", e.message))?;
-    let total_trials = args.deployments * args.trials;
-    let bar = crate::common::progress(total_trials, "trials");
-    let (latencies, requests, errors, seconds) = runtime.block_on(async {
-        let url = format!("http://{addr}");
-        let server = tokio::spawn(ferret_serve::serve(
+        let bar = crate::common::progress(loaded.scenes.len(), "scenes");
+        for scene in loaded.scenes {
+            let name = scene.house.name.clone();
+            service
+                .add_scene(&name, scene)
+                .map_err(|e| anyhow::anyhow!("{name}: {}", e.message))?;
+            bar.inc(1);
+        }
+        bar.finish_and_clear();
+        let listener = runtime.block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))?;
+        let addr = listener.local_addr()?;
+        // The server's own guards and connection loop, as `ferret serve` runs them.
+        let options = ferret_serve::HttpOptions {
+            listen: Some(addr),
+            ..ferret_serve::HttpOptions::default()
+        };
+        let app = ferret_serve::router(Arc::new(service), &options)
+            .map_err(|e| anyhow::anyhow!("{}", e.message))?;
+        server = Some(runtime.spawn(ferret_serve::serve(
             listener,
             app,
             ferret_serve::ServeOptions::default(),
             std::future::pending(),
-        ));
-        let client = reqwest::Client::new();
+        )));
+        urls.push(format!("http://{addr}"));
+    } else {
+        drop(loaded);
+        for i in 0..args.replicas {
+            let (child, url) =
+                spawn_replica(&args, &db, &dir.path().join(format!("replica-{i}.log")))
+                    .with_context(|| format!("starting replica {i}"))?;
+            replicas.push(child);
+            urls.push(url);
+        }
+    }
+    let total_trials = args.deployments * args.trials;
+    let bar = crate::common::progress(total_trials, "trials");
+    let kill_at = args.kill_replica_after;
+    let outcome = runtime.block_on(async {
+        let client = reqwest::Client::builder()
+            .timeout(std::time::Duration::from_secs(60))
+            .build()?;
+        let urls = Arc::new(urls.clone());
         let started = Instant::now();
         let tasks: Vec<_> = plans
             .into_iter()
-            .map(|trials| {
-                let (client, url, bar) = (client.clone(), url.clone(), bar.clone());
-                tokio::spawn(async move { robot(&client, &url, trials, &bar).await })
+            .enumerate()
+            .map(|(r, trials)| {
+                let (client, urls, bar) = (client.clone(), urls.clone(), bar.clone());
+                tokio::spawn(async move {
+                    let mut robot = Robot::new(client, urls, r);
+                    robot.run(trials, &bar).await;
+                    robot
+                })
             })
             .collect();
-        let mut latencies = Vec::new();
-        let (mut requests, mut errors) = (0usize, 0usize);
+        let mut killed = None;
+        if let Some(after) = kill_at {
+            tokio::time::sleep(std::time::Duration::from_secs_f64(after)).await;
+            if let Some(first) = replicas.first_mut() {
+                // `Child::kill` is SIGKILL on Unix: no shutdown, no flush.
+                first.kill()?;
+                first.wait()?;
+                killed = Some(started.elapsed().as_secs_f64());
+            }
+        }
+        let mut robots = Vec::new();
         for t in tasks {
-            let (l, r, e) = t.await?;
-            latencies.extend(l);
-            requests += r;
-            errors += e;
+            robots.push(t.await?);
         }
         let seconds = started.elapsed().as_secs_f64();
-        server.abort();
-        anyhow::Ok((latencies, requests, errors, seconds))
-    })?;
+        // Read every trial back from a replica that is still up.
+        let alive = usize::from(killed.is_some());
+        let check = Robot::new(client.clone(), Arc::new(urls[alive..].to_vec()), 0);
+        let mut verified = Verified::default();
+        for robot in &robots {
+            check.verify(robot, &mut verified).await;
+        }
+        anyhow::Ok((robots, seconds, killed, verified))
+    });
     bar.finish_and_clear();
-    let mut ms: Vec<f64> = latencies
+    if let Some(s) = server {
+        s.abort();
+    }
+    for mut child in replicas {
+        // Replicas stop on SIGTERM; kill is enough for a benchmark's throwaway processes.
+        let _ = child.kill();
+        let _ = child.wait();
+    }
+    let (robots, seconds, killed, verified) = outcome?;
+    let mut ms: Vec<f64> = robots
         .iter()
-        .map(|d: &std::time::Duration| d.as_secs_f64() * 1e3)
+        .flat_map(|r| r.latencies.iter())
+        .map(|d| d.as_secs_f64() * 1e3)
         .collect();
     ms.sort_by(f64::total_cmp);
     let pick = |q: f64| {
@@ -213,25 +317,44 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
             .copied()
             .unwrap_or(f64::NAN)
     };
+    let requests: usize = robots.iter().map(|r| r.requests).sum();
+    let errors: usize = robots.iter().map(|r| r.errors).sum::<usize>() + verified.errors;
     let size = |p: &std::path::Path| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
     let line = ServeLine {
+        replicas: args.replicas,
+        database: if ferret_serve::is_postgres_url(&db) {
+            "postgres".into()
+        } else {
+            "sqlite".into()
+        },
         deployments: args.deployments,
         trials: args.trials,
         requests,
+        retries: robots.iter().map(|r| r.retries).sum(),
         errors,
         seconds,
         requests_per_second: requests as f64 / seconds,
         next_p50_ms: pick(0.5),
         next_p99_ms: pick(0.99),
         next_max_ms: ms.last().copied().unwrap_or(f64::NAN),
-        database_mib: (size(&db) + size(&dir.path().join("bench.sqlite-wal"))) as f64
-            / (1024.0 * 1024.0),
+        database_mib: (!ferret_serve::is_postgres_url(&db)).then(|| {
+            let file = std::path::PathBuf::from(&db);
+            let wal = std::path::PathBuf::from(format!("{db}-wal"));
+            (size(&file) + size(&wal)) as f64 / (1024.0 * 1024.0)
+        }),
+        killed_after_s: killed,
+        verified_observations: verified.observations,
+        lost_observations: verified.lost,
+        duplicated_observations: verified.duplicated,
+        mismatched_deployments: verified.mismatched,
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&line)?);
     } else {
         println!(
-            "{} deployments × {} trials: {} requests in {:.1} s = {:.0} requests/s; next-container reply p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms; {} errors; database {:.1} MiB",
+            "{} replica(s) on {}, {} deployments × {} trials: {} requests in {:.1} s = {:.0} requests/s; next-container reply p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms; {} retries, {} errors",
+            line.replicas,
+            line.database,
             line.deployments,
             line.trials,
             line.requests,
@@ -240,15 +363,99 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
             line.next_p50_ms,
             line.next_p99_ms,
             line.next_max_ms,
+            line.retries,
             line.errors,
+        );
+        if let Some(k) = line.killed_after_s {
+            println!("replica 0 killed (SIGKILL) after {k:.1} s");
+        }
+        println!(
+            "read back: {} acknowledged observations, {} lost, {} duplicated; {} deployments with other trials than their robot started{}",
+            line.verified_observations,
+            line.lost_observations,
+            line.duplicated_observations,
+            line.mismatched_deployments,
             line.database_mib
+                .map(|m| format!("; database {m:.1} MiB"))
+                .unwrap_or_default()
         );
     }
-    Ok(if errors == 0 {
+    let clean =
+        errors == 0 && verified.lost == 0 && verified.duplicated == 0 && verified.mismatched == 0;
+    Ok(if clean {
         ExitCode::SUCCESS
     } else {
         ExitCode::FAILURE
     })
+}
+
+/// Starts `ferret serve` on `db` with the benchmark's houses and strategies, on a free port of
+/// 127.0.0.1; returns the process and its URL once it listens.
+fn spawn_replica(
+    args: &ServeArgs,
+    db: &str,
+    log: &std::path::Path,
+) -> Result<(std::process::Child, String)> {
+    use std::io::BufRead;
+    let exe = std::env::current_exe().context("finding the ferret executable")?;
+    let mut cmd = std::process::Command::new(exe);
+    cmd.arg("serve");
+    if let Some(h) = &args.houses.houses {
+        cmd.arg("--scene").arg(h);
+    }
+    if let Some(r) = &args.houses.range {
+        cmd.arg("--range").arg(r.to_string());
+    }
+    if let Some(a) = &args.houses.asset_db {
+        cmd.arg("--asset-db").arg(a);
+    }
+    if let Some(p) = &args.planning.prior {
+        cmd.arg("--prior").arg(p);
+    }
+    if let Some(c) = &args.llm.config {
+        cmd.arg("--config").arg(c);
+    }
+    cmd.args([
+        "--resolution",
+        &args.grid.resolution.to_string(),
+        "--robot-radius",
+        &args.grid.robot_radius.to_string(),
+        "--wall-thickness",
+        &args.grid.wall_thickness.to_string(),
+        "--max-containers",
+        &args.planning.max_containers.to_string(),
+        "--exact-max",
+        &args.planning.exact_max.to_string(),
+        "--strategies",
+        &args.strategies.join(","),
+        "--db",
+        db,
+        "--db-pool",
+        &args.db_pool.to_string(),
+        "--listen",
+        "127.0.0.1:0",
+    ]);
+    cmd.stdout(std::process::Stdio::piped())
+        .stderr(std::fs::File::create(log)?);
+    let mut child = cmd.spawn().context("spawning ferret serve")?;
+    let stdout = child.stdout.take().context("the replica's output")?;
+    let mut lines = std::io::BufReader::new(stdout).lines();
+    for line in lines.by_ref() {
+        let line = line?;
+        if let Some(rest) = line.split("listening on ").nth(1)
+            && let Some(url) = rest.split_whitespace().next()
+        {
+            // Keep reading its output in the background so it never blocks on a full pipe.
+            std::thread::spawn(move || lines.for_each(drop));
+            return Ok((child, url.to_string()));
+        }
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+    anyhow::bail!(
+        "ferret serve exited before listening: {}",
+        std::fs::read_to_string(log).unwrap_or_default().trim()
+    )
 }
 
 type RobotTrial = (
@@ -257,77 +464,230 @@ type RobotTrial = (
     std::collections::HashMap<String, Vec<String>>,
 );
 
-/// One simulated robot: a deployment, its trials to the end. Returns the latencies of the
-/// replies that carry a next container (trial starts and observations), requests and errors.
-async fn robot(
-    client: &reqwest::Client,
-    url: &str,
-    trials: Vec<RobotTrial>,
-    bar: &indicatif::ProgressBar,
-) -> (Vec<std::time::Duration>, usize, usize) {
-    use serde_json::{Value, json};
-    let (mut lat, mut requests, mut errors) = (Vec::new(), 0usize, 0usize);
-    let mut post =
-        async |path: String, body: Value, lat: &mut Vec<std::time::Duration>| -> Option<Value> {
-            requests += 1;
+/// What was read back after the run.
+#[derive(Default)]
+struct Verified {
+    observations: usize,
+    lost: usize,
+    duplicated: usize,
+    mismatched: usize,
+    errors: usize,
+}
+
+/// One simulated robot: a deployment and its trials, run to the end against its replica (and
+/// the next one when a request to it fails).
+struct Robot {
+    client: reqwest::Client,
+    urls: std::sync::Arc<Vec<String>>,
+    /// The replica it talks to now.
+    at: usize,
+    id: usize,
+    /// Writes so far, for request ids.
+    writes: usize,
+    latencies: Vec<std::time::Duration>,
+    requests: usize,
+    retries: usize,
+    errors: usize,
+    deployment: Option<i64>,
+    /// Per trial started: its id and the containers whose observation was acknowledged.
+    acked: Vec<(i64, Vec<String>)>,
+}
+
+/// What makes this run's request ids its own: a database may hold earlier runs' replies.
+fn run_tag() -> &'static str {
+    static TAG: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    TAG.get_or_init(|| {
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos());
+        format!("bench-{}-{nanos:x}", std::process::id())
+    })
+}
+
+/// Attempts of one request before the robot gives up on it (about a minute with the pauses).
+const ATTEMPTS: u32 = 60;
+
+impl Robot {
+    fn new(client: reqwest::Client, urls: std::sync::Arc<Vec<String>>, id: usize) -> Self {
+        let at = id % urls.len().max(1);
+        Self {
+            client,
+            urls,
+            at,
+            id,
+            writes: 0,
+            latencies: Vec::new(),
+            requests: 0,
+            retries: 0,
+            errors: 0,
+            deployment: None,
+            acked: Vec::new(),
+        }
+    }
+
+    /// POSTs `body` with a request id of its own until a replica acknowledges it; `None` when
+    /// refused (4xx other than 409) or out of attempts.
+    async fn post(&mut self, path: &str, mut body: serde_json::Value) -> Option<serde_json::Value> {
+        self.writes += 1;
+        body["request_id"] = format!("{}-robot-{}-{}", run_tag(), self.id, self.writes).into();
+        self.requests += 1;
+        for attempt in 0..ATTEMPTS {
+            if attempt > 0 {
+                self.retries += 1;
+                // Another replica, after a pause that grows to half a second.
+                self.at = (self.at + 1) % self.urls.len();
+                tokio::time::sleep(std::time::Duration::from_millis(
+                    (20 * u64::from(attempt)).min(500),
+                ))
+                .await;
+            }
             let t = Instant::now();
-            let r = client
-                .post(format!("{url}{path}"))
+            let sent = self
+                .client
+                .post(format!("{}{path}", self.urls[self.at]))
                 .json(&body)
                 .send()
-                .await
-                .ok()?;
-            let ok = r.status().is_success();
-            let v: Value = r.json().await.ok()?;
-            lat.push(t.elapsed());
-            if ok {
-                Some(v)
-            } else {
-                tracing::warn!(%path, reply = %v, "request failed");
-                None
+                .await;
+            let Ok(reply) = sent else { continue };
+            let status = reply.status();
+            let Ok(value) = reply.json::<serde_json::Value>().await else {
+                continue;
+            };
+            if status.is_success() {
+                self.latencies.push(t.elapsed());
+                return Some(value);
             }
+            // 409: the same request in flight (on a replica that may have died) or the
+            // deployment busy; 5xx: the replica or its database in trouble. Both pass.
+            if status.as_u16() == 409 || status.is_server_error() {
+                continue;
+            }
+            tracing::warn!(%path, reply = %value, "request refused");
+            return None;
+        }
+        tracing::warn!(%path, "no replica acknowledged the request");
+        None
+    }
+
+    async fn run(&mut self, trials: Vec<RobotTrial>, bar: &indicatif::ProgressBar) {
+        use serde_json::json;
+        let Some(dep) = self.post("/deployments", json!({})).await else {
+            self.errors += 1;
+            return;
         };
-    let Some(dep) = post("/deployments".into(), json!({}), &mut lat).await else {
-        return (lat, requests, 1);
-    };
-    lat.clear();
-    let id = dep["id"].as_i64().unwrap_or_default();
-    for (scene, target, contents) in trials {
-        let Some(mut reply) = post(
-            format!("/deployments/{id}/trials"),
-            json!({"scene": scene, "target": target}),
-            &mut lat,
-        )
-        .await
-        else {
-            errors += 1;
-            break;
+        // The latencies that count are those of replies carrying a next container.
+        self.latencies.clear();
+        let Some(id) = dep["id"].as_i64() else {
+            self.errors += 1;
+            return;
         };
-        let trial = reply["trial"].as_i64().unwrap_or_default();
-        while reply["status"] == "searching" {
-            let next = reply["next"]["container"]
-                .as_str()
-                .unwrap_or_default()
-                .to_string();
-            let seen = contents.get(&next).cloned().unwrap_or_default();
-            let found = seen.contains(&target);
-            match post(
-                format!("/trials/{trial}/observations"),
-                json!({"container": next, "found": found, "objects": seen}),
-                &mut lat,
-            )
-            .await
-            {
-                Some(r) => reply = r,
-                None => {
-                    errors += 1;
-                    break;
+        self.deployment = Some(id);
+        for (scene, target, contents) in trials {
+            let Some(mut reply) = self
+                .post(
+                    &format!("/deployments/{id}/trials"),
+                    json!({"scene": scene, "target": target}),
+                )
+                .await
+            else {
+                self.errors += 1;
+                break;
+            };
+            let trial = reply["trial"].as_i64().unwrap_or_default();
+            self.acked.push((trial, Vec::new()));
+            while reply["status"] == "searching" {
+                let next = reply["next"]["container"]
+                    .as_str()
+                    .unwrap_or_default()
+                    .to_string();
+                let seen = contents.get(&next).cloned().unwrap_or_default();
+                let found = seen.contains(&target);
+                match self
+                    .post(
+                        &format!("/trials/{trial}/observations"),
+                        json!({"container": next, "found": found, "objects": seen}),
+                    )
+                    .await
+                {
+                    Some(r) => {
+                        if let Some((_, acked)) = self.acked.last_mut() {
+                            acked.push(next);
+                        }
+                        reply = r;
+                    }
+                    None => {
+                        self.errors += 1;
+                        break;
+                    }
                 }
             }
+            bar.inc(1);
         }
-        bar.inc(1);
     }
-    (lat, requests, errors)
+
+    async fn get(&self, path: &str) -> Option<serde_json::Value> {
+        for attempt in 0..ATTEMPTS {
+            if attempt > 0 {
+                tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+            }
+            let url = &self.urls[attempt as usize % self.urls.len()];
+            if let Ok(r) = self.client.get(format!("{url}{path}")).send().await
+                && r.status().is_success()
+                && let Ok(v) = r.json().await
+            {
+                return Some(v);
+            }
+        }
+        None
+    }
+
+    /// Reads `robot`'s deployment and trials back: its trials exactly, each acknowledged
+    /// observation once.
+    async fn verify(&self, robot: &Robot, out: &mut Verified) {
+        let Some(id) = robot.deployment else { return };
+        match self.get(&format!("/deployments/{id}")).await {
+            Some(dep) => {
+                let stored: Vec<i64> = dep["trials"]
+                    .as_array()
+                    .map(|t| t.iter().filter_map(|t| t["trial"].as_i64()).collect())
+                    .unwrap_or_default();
+                let started: Vec<i64> = robot.acked.iter().map(|(t, _)| *t).collect();
+                if stored != started {
+                    out.mismatched += 1;
+                }
+            }
+            None => out.errors += 1,
+        }
+        for (trial, acked) in &robot.acked {
+            let Some(t) = self.get(&format!("/trials/{trial}")).await else {
+                out.errors += 1;
+                continue;
+            };
+            let searched: Vec<String> = t["searched"]
+                .as_array()
+                .map(|s| {
+                    s.iter()
+                        .filter_map(|c| c.as_str().map(str::to_string))
+                        .collect()
+                })
+                .unwrap_or_default();
+            out.observations += acked.len();
+            out.lost += acked.iter().filter(|c| !searched.contains(c)).count();
+            out.duplicated += searched
+                .len()
+                .saturating_sub(searched.iter().filter(|c| acked.contains(c)).count())
+                + acked
+                    .iter()
+                    .map(|c| {
+                        searched
+                            .iter()
+                            .filter(|s| *s == c)
+                            .count()
+                            .saturating_sub(1)
+                    })
+                    .sum::<usize>();
+        }
+    }
 }
 
 fn planner(args: PlannerArgs) -> Result<ExitCode> {

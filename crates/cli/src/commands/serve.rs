@@ -13,7 +13,9 @@ use anyhow::{Context, Result, bail};
 use ferret_llm::FailurePolicy;
 use ferret_plan::Strategy;
 use ferret_select::ORACLE;
-use ferret_serve::{HttpOptions, SceneLimits, ServeOptions, Service, ServiceOptions, Store};
+use ferret_serve::{
+    HttpOptions, PostgresOptions, SceneLimits, ServeOptions, Service, ServiceOptions, Store,
+};
 use ferret_world::Scene;
 use ferret_world::procthor::HouseRange;
 
@@ -52,9 +54,20 @@ pub struct Args {
     /// set a token.
     #[arg(long, default_value = "127.0.0.1:8080")]
     listen: SocketAddr,
-    /// The SQLite database holding scenes, deployments, trials and replies.
-    #[arg(long, value_name = "FILE", default_value = "ferret-serve.sqlite")]
-    db: PathBuf,
+    /// The database holding scenes, deployments, trials and replies: an SQLite file, or a
+    /// PostgreSQL URL (`postgres://user@host:port/database`) that several replicas of the
+    /// server share (a fleet behind a load balancer; see docs/serve.md).
+    #[arg(
+        long,
+        value_name = "FILE|URL",
+        env = "FERRET_SERVE_DB",
+        default_value = "ferret-serve.sqlite"
+    )]
+    db: String,
+    /// PostgreSQL only: connections this replica keeps open; requests that need one beyond
+    /// them wait (503 after 10 s). Keep replicas × this below the server's max_connections.
+    #[arg(long, value_name = "N", default_value_t = PostgresOptions::default().pool_size)]
+    db_pool: usize,
     /// Environment variable holding the bearer token; when it is set, requests need
     /// `Authorization: Bearer <token>` (all but /health).
     #[arg(long, value_name = "VAR", default_value = "FERRET_SERVE_TOKEN")]
@@ -294,7 +307,14 @@ pub fn run(args: Args) -> Result<ExitCode> {
         .block_on(tokio::net::TcpListener::bind(args.listen))
         .with_context(|| format!("listening on {}", args.listen))?;
     let addr = listener.local_addr()?;
-    let store = Store::open(&args.db)?;
+    let store = Store::open_any(
+        &args.db,
+        PostgresOptions {
+            pool_size: args.db_pool,
+            ..PostgresOptions::default()
+        },
+    )?;
+    let db = store.describe();
     let service = Service::with_options(store, args.grid.params(), candidates, checked.service)
         .map_err(|e| anyhow::anyhow!("{}", e.message))?;
     for (path, scene) in scenes {
@@ -316,8 +336,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     runtime.block_on(async move {
         // Tests and scripts read this line to learn the port (with --listen 127.0.0.1:0).
         println!(
-            "ferret serve: listening on http://{addr} (db {}; strategies {})",
-            args.db.display(),
+            "ferret serve: listening on http://{addr} (db {db}; strategies {})",
             names.join(", ")
         );
         ferret_serve::serve(listener, app, checked.serve, shutdown())

@@ -1,0 +1,801 @@
+//! The service's memory, on one of two backends: an SQLite file (the embedded default: WAL,
+//! `synchronous = FULL`) or a PostgreSQL database that several server replicas share. A row is
+//! on disk before the reply that reports it leaves the server, and everything the service knows
+//! is derived from the rows (a trial's belief from its observations, a deployment's selector from
+//! its trials and the order they ended), which is what makes a `kill -9` of any replica harmless.
+//!
+//! Both backends run the same statements (written in the SQL both speak, `$n` parameters in
+//! order) and read rows into the same [`Value`]s, so the row parsing below exists once; only
+//! the schema's column types, its migrations and row locks differ.
+
+mod postgres;
+mod sqlite;
+
+use std::path::Path;
+
+use crate::model::{
+    DeploymentSpec, Outcome, StoredDeployment, StoredObservation, StoredReply, StoredTrial,
+    TrialStatus,
+};
+
+pub use postgres::PostgresOptions;
+
+/// The newest schema version this build writes. Version 1 is the schema of the first servers
+/// (their SQLite files record no version); version 2 records the order trials started and ended
+/// in, for deployments whose trials overlap.
+pub const SCHEMA_VERSION: i64 = 2;
+
+/// Storage failures (the database, not the request).
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    /// SQLite refused.
+    #[error("database {file}: {source}")]
+    Sql {
+        /// The database file.
+        file: String,
+        /// SQLite's error.
+        #[source]
+        source: rusqlite::Error,
+    },
+    /// PostgreSQL refused or could not be reached.
+    #[error("database {db}: {source}")]
+    Postgres {
+        /// The database, without its password.
+        db: String,
+        /// The client's error.
+        #[source]
+        source: tokio_postgres::Error,
+    },
+    /// No connection to PostgreSQL could be had (the pool, or the server, is overwhelmed or down).
+    #[error("database {db}: {what}")]
+    Unreachable {
+        /// The database, without its password.
+        db: String,
+        /// What failed.
+        what: String,
+    },
+    /// A stored row does not parse (the database was edited or written by another version).
+    #[error("database {file}: {what}")]
+    Corrupt {
+        /// The database.
+        file: String,
+        /// What is wrong.
+        what: String,
+    },
+    /// The database's schema is one this build cannot use.
+    #[error("database {db}: {what}")]
+    Schema {
+        /// The database.
+        db: String,
+        /// What is wrong, and what to do.
+        what: String,
+    },
+}
+
+impl StoreError {
+    /// True when the failure is the database being out of reach (or shutting down) rather than
+    /// a fault in its data: a request may be retried, here or on another replica.
+    pub fn is_unavailable(&self) -> bool {
+        match self {
+            StoreError::Unreachable { .. } => true,
+            StoreError::Postgres { source, .. } => source.is_closed() || source.code().is_none(),
+            StoreError::Sql { source, .. } => matches!(
+                source.sqlite_error_code(),
+                Some(rusqlite::ErrorCode::DatabaseBusy | rusqlite::ErrorCode::DatabaseLocked)
+            ),
+            _ => false,
+        }
+    }
+}
+
+/// A value of a row or a statement parameter, whichever backend holds it.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) enum Value {
+    Null,
+    Int(i64),
+    Real(f64),
+    Text(String),
+    Bool(bool),
+}
+
+impl From<i64> for Value {
+    fn from(v: i64) -> Self {
+        Value::Int(v)
+    }
+}
+impl From<f64> for Value {
+    fn from(v: f64) -> Self {
+        Value::Real(v)
+    }
+}
+impl From<bool> for Value {
+    fn from(v: bool) -> Self {
+        Value::Bool(v)
+    }
+}
+impl From<&str> for Value {
+    fn from(v: &str) -> Self {
+        Value::Text(v.to_string())
+    }
+}
+impl From<String> for Value {
+    fn from(v: String) -> Self {
+        Value::Text(v)
+    }
+}
+impl<T: Into<Value>> From<Option<T>> for Value {
+    fn from(v: Option<T>) -> Self {
+        v.map_or(Value::Null, Into::into)
+    }
+}
+
+/// One row, read whole.
+pub(crate) type Row = Vec<Value>;
+
+/// How a reply's outcome is stored: as the numbers databases have always held (200, 201), so
+/// that a database written by any version answers its retries the same.
+fn stored_code(o: Outcome) -> i64 {
+    match o {
+        Outcome::Done => 200,
+        Outcome::Created => 201,
+    }
+}
+
+fn outcome_of(code: i64) -> Outcome {
+    if code == 201 {
+        Outcome::Created
+    } else {
+        Outcome::Done
+    }
+}
+
+enum Backend {
+    Sqlite(Box<sqlite::Sqlite>),
+    Postgres(Box<postgres::Postgres>),
+}
+
+/// The database.
+pub struct Store {
+    backend: Backend,
+}
+
+/// A connection (or a transaction on one) of either backend.
+enum Conn<'a> {
+    Sqlite(&'a rusqlite::Connection, &'a sqlite::Sqlite),
+    Postgres(postgres::Conn<'a>),
+}
+
+impl Store {
+    /// Opens (creating if needed) the SQLite database at `path`, migrating an older schema.
+    ///
+    /// # Errors
+    /// The file cannot be opened, is not a ferret database, or has a newer schema.
+    pub fn open(path: &Path) -> Result<Store, StoreError> {
+        Ok(Store {
+            backend: Backend::Sqlite(Box::new(sqlite::Sqlite::open(path)?)),
+        })
+    }
+
+    /// A database in memory (tests, benchmarks).
+    ///
+    /// # Errors
+    /// SQLite cannot allocate it.
+    pub fn in_memory() -> Result<Store, StoreError> {
+        Ok(Store {
+            backend: Backend::Sqlite(Box::new(sqlite::Sqlite::in_memory()?)),
+        })
+    }
+
+    /// Connects to the PostgreSQL database at `url` (`postgres://user@host:port/db`), creating
+    /// or migrating its schema (one replica at a time: the migration holds a lock).
+    ///
+    /// # Errors
+    /// The URL does not parse, the server cannot be reached, or its schema is newer.
+    pub fn connect(url: &str, options: PostgresOptions) -> Result<Store, StoreError> {
+        Ok(Store {
+            backend: Backend::Postgres(Box::new(postgres::Postgres::connect(url, options)?)),
+        })
+    }
+
+    /// Opens what `db` names: a `postgres://` or `postgresql://` URL, or an SQLite file path.
+    ///
+    /// # Errors
+    /// See [`Store::open`] and [`Store::connect`].
+    pub fn open_any(db: &str, options: PostgresOptions) -> Result<Store, StoreError> {
+        if is_postgres_url(db) {
+            Self::connect(db, options)
+        } else {
+            Self::open(Path::new(db))
+        }
+    }
+
+    /// The database as logs and messages name it (a PostgreSQL URL without its password).
+    pub fn describe(&self) -> String {
+        match &self.backend {
+            Backend::Sqlite(s) => s.file.clone(),
+            Backend::Postgres(p) => p.db.clone(),
+        }
+    }
+
+    /// True on PostgreSQL (several replicas may share it).
+    pub fn is_shared(&self) -> bool {
+        matches!(self.backend, Backend::Postgres(_))
+    }
+
+    /// The schema version the database records.
+    ///
+    /// # Errors
+    /// The database cannot be read.
+    pub fn schema_version(&self) -> Result<i64, StoreError> {
+        match &self.backend {
+            Backend::Sqlite(s) => s.schema_version(),
+            Backend::Postgres(p) => p.schema_version(),
+        }
+    }
+
+    /// Reads every page of an SQLite file on a connection of its own, so damage is seen
+    /// wherever it is (see [`sqlite`]); PostgreSQL checks its own pages, so there this passes.
+    ///
+    /// # Errors
+    /// [`StoreError::Corrupt`] with SQLite's first finding, or [`StoreError::Sql`].
+    pub fn check_file(&self) -> Result<(), StoreError> {
+        match &self.backend {
+            Backend::Sqlite(s) => s.check_file(),
+            Backend::Postgres(_) => Ok(()),
+        }
+    }
+
+    /// Reads with a connection.
+    ///
+    /// # Errors
+    /// What `f` returns, or no connection to be had.
+    pub fn read<T>(
+        &self,
+        f: impl FnOnce(&Reader<'_>) -> Result<T, StoreError>,
+    ) -> Result<T, StoreError> {
+        match &self.backend {
+            Backend::Sqlite(s) => {
+                let conn = s.lock();
+                f(&Reader {
+                    conn: Conn::Sqlite(&conn, s),
+                })
+            }
+            Backend::Postgres(p) => p.read(|conn| f(&Reader { conn })),
+        }
+    }
+
+    /// Runs `f` in one transaction, committed when it returns `Ok`, rolled back otherwise.
+    ///
+    /// # Errors
+    /// What `f` returns, or the transaction failing to begin or commit.
+    pub fn write<T, E: From<StoreError>>(
+        &self,
+        f: impl FnOnce(&Writer<'_>) -> Result<T, E>,
+    ) -> Result<T, E> {
+        match &self.backend {
+            Backend::Sqlite(s) => s.write(|conn| f(&Writer { conn })),
+            Backend::Postgres(p) => p.write(|conn| f(&Writer { conn })),
+        }
+    }
+
+    /// Claims `key` for one request across every replica of the database while the returned
+    /// guard lives: `None` when another replica holds it. On SQLite (one server per file) there
+    /// is nothing to claim across processes and this always succeeds.
+    ///
+    /// # Errors
+    /// The database cannot be reached.
+    pub fn claim(&self, key: &str) -> Result<Option<Claim<'_>>, StoreError> {
+        match &self.backend {
+            Backend::Sqlite(_) => Ok(Some(Claim { held: None })),
+            Backend::Postgres(p) => Ok(p.claim(key)?.map(|k| Claim { held: Some((p, k)) })),
+        }
+    }
+}
+
+/// A request key held across replicas; released when dropped (or when the replica holding it
+/// dies, since the lock belongs to its database session).
+pub struct Claim<'a> {
+    held: Option<(&'a postgres::Postgres, (i32, i32))>,
+}
+
+impl Drop for Claim<'_> {
+    fn drop(&mut self) {
+        if let Some((p, key)) = self.held.take() {
+            p.release(key);
+        }
+    }
+}
+
+/// True when `db` is a PostgreSQL URL rather than a file path.
+pub fn is_postgres_url(db: &str) -> bool {
+    db.starts_with("postgres://") || db.starts_with("postgresql://")
+}
+
+impl Conn<'_> {
+    fn execute(&self, sql: &str, params: &[Value]) -> Result<u64, StoreError> {
+        match self {
+            Conn::Sqlite(c, s) => sqlite::execute(c, s, sql, params),
+            Conn::Postgres(c) => c.execute(sql, params),
+        }
+    }
+
+    fn query(&self, sql: &str, params: &[Value]) -> Result<Vec<Row>, StoreError> {
+        match self {
+            Conn::Sqlite(c, s) => sqlite::query(c, s, sql, params),
+            Conn::Postgres(c) => c.query(sql, params),
+        }
+    }
+
+    fn query_opt(&self, sql: &str, params: &[Value]) -> Result<Option<Row>, StoreError> {
+        Ok(self.query(sql, params)?.into_iter().next())
+    }
+
+    fn corrupt(&self, what: String) -> StoreError {
+        let file = match self {
+            Conn::Sqlite(_, s) => s.file.clone(),
+            Conn::Postgres(c) => c.db().to_string(),
+        };
+        StoreError::Corrupt { file, what }
+    }
+
+    /// The value at `i` of `row`, or a corrupt-row error naming `what`.
+    fn int(&self, row: &Row, i: usize, what: &str) -> Result<i64, StoreError> {
+        match row.get(i) {
+            Some(Value::Int(v)) => Ok(*v),
+            other => Err(self.corrupt(format!("{what}: expected an integer, found {other:?}"))),
+        }
+    }
+
+    fn real(&self, row: &Row, i: usize, what: &str) -> Result<Option<f64>, StoreError> {
+        match row.get(i) {
+            Some(Value::Real(v)) => Ok(Some(*v)),
+            // SQLite hands back a whole REAL as an integer when it was stored as one.
+            Some(Value::Int(v)) => Ok(Some(*v as f64)),
+            Some(Value::Null) => Ok(None),
+            other => Err(self.corrupt(format!("{what}: expected a number, found {other:?}"))),
+        }
+    }
+
+    fn text(&self, row: &Row, i: usize, what: &str) -> Result<Option<String>, StoreError> {
+        match row.get(i) {
+            Some(Value::Text(v)) => Ok(Some(v.clone())),
+            Some(Value::Null) => Ok(None),
+            other => Err(self.corrupt(format!("{what}: expected text, found {other:?}"))),
+        }
+    }
+
+    fn some_text(&self, row: &Row, i: usize, what: &str) -> Result<String, StoreError> {
+        self.text(row, i, what)?
+            .ok_or_else(|| self.corrupt(format!("{what}: missing")))
+    }
+
+    fn bool(&self, row: &Row, i: usize, what: &str) -> Result<bool, StoreError> {
+        match row.get(i) {
+            Some(Value::Bool(v)) => Ok(*v),
+            Some(Value::Int(v)) => Ok(*v != 0),
+            other => Err(self.corrupt(format!("{what}: expected a boolean, found {other:?}"))),
+        }
+    }
+}
+
+/// Read access inside [`Store::read`] (also available to writers).
+pub struct Reader<'a> {
+    conn: Conn<'a>,
+}
+
+/// Write access inside [`Store::write`].
+pub struct Writer<'a> {
+    conn: Conn<'a>,
+}
+
+impl Writer<'_> {
+    /// Reads inside the transaction.
+    pub fn reader(&self) -> Reader<'_> {
+        Reader {
+            conn: match &self.conn {
+                Conn::Sqlite(c, s) => Conn::Sqlite(c, s),
+                Conn::Postgres(c) => Conn::Postgres(c.reborrow()),
+            },
+        }
+    }
+
+    /// Locks deployment `id` until the transaction ends, so that the trials of one deployment
+    /// are started and ended by one replica at a time (on SQLite, every write transaction
+    /// already holds the whole file). Returns false when there is no such deployment.
+    ///
+    /// # Errors
+    /// The database refuses.
+    pub fn lock_deployment(&self, id: i64) -> Result<bool, StoreError> {
+        match &self.conn {
+            Conn::Sqlite(..) => Ok(self.reader().deployment(id)?.is_some()),
+            Conn::Postgres(c) => Ok(!c
+                .query(
+                    "SELECT id FROM deployments WHERE id = $1 FOR UPDATE",
+                    &[id.into()],
+                )?
+                .is_empty()),
+        }
+    }
+
+    /// Stores a scene's text under its name.
+    ///
+    /// # Errors
+    /// The database refuses (a taken name).
+    pub fn insert_scene(&self, name: &str, body: &str) -> Result<(), StoreError> {
+        self.conn.execute(
+            "INSERT INTO scenes (name, body) VALUES ($1, $2)",
+            &[name.into(), body.into()],
+        )?;
+        Ok(())
+    }
+
+    /// Stores a new deployment; returns its id.
+    ///
+    /// # Errors
+    /// The database refuses.
+    pub fn insert_deployment(&self, spec: &DeploymentSpec) -> Result<i64, StoreError> {
+        let json = serde_json::to_string(spec).map_err(|e| self.conn.corrupt(e.to_string()))?;
+        let row = self
+            .conn
+            .query_opt(
+                "INSERT INTO deployments (spec) VALUES ($1) RETURNING id",
+                &[json.into()],
+            )?
+            .ok_or_else(|| self.conn.corrupt("a new deployment has no id".into()))?;
+        self.conn.int(&row, 0, "deployment id")
+    }
+
+    /// Stores a new trial (status searching), number `k` of its deployment, started when
+    /// `started_after` trials of it had ended; returns its id.
+    ///
+    /// # Errors
+    /// The database refuses (a taken `k`).
+    pub fn insert_trial(&self, t: &NewTrial<'_>) -> Result<i64, StoreError> {
+        let pose = t.pose.map(|p| serde_json::json!(p).to_string());
+        let row = self
+            .conn
+            .query_opt(
+                "INSERT INTO trials (deployment, k, scene, target, pose, chosen, status, started_after)
+                 VALUES ($1, $2, $3, $4, $5, $6, 'searching', $7) RETURNING id",
+                &[
+                    t.deployment.into(),
+                    t.k.into(),
+                    t.scene.into(),
+                    t.target.into(),
+                    pose.into(),
+                    (t.chosen as i64).into(),
+                    t.started_after.into(),
+                ],
+            )?
+            .ok_or_else(|| self.conn.corrupt("a new trial has no id".into()))?;
+        self.conn.int(&row, 0, "trial id")
+    }
+
+    /// Appends an observation as number `seq` (0-based) of `trial`.
+    ///
+    /// # Errors
+    /// The database refuses (a taken `seq`).
+    pub fn insert_observation(
+        &self,
+        trial: i64,
+        seq: usize,
+        o: &StoredObservation,
+    ) -> Result<(), StoreError> {
+        let objects = serde_json::json!(o.objects).to_string();
+        self.conn.execute(
+            "INSERT INTO observations (trial, seq, container, found, objects, travelled, leg)
+             VALUES ($1, $2, $3, $4, $5, $6, $7)",
+            &[
+                trial.into(),
+                (seq as i64).into(),
+                o.container.as_str().into(),
+                o.found.into(),
+                objects.into(),
+                o.travelled.into(),
+                o.leg.into(),
+            ],
+        )?;
+        Ok(())
+    }
+
+    /// Ends a trial as the `end_seq`-th of its deployment to end.
+    ///
+    /// # Errors
+    /// The database refuses (a taken `end_seq`).
+    pub fn end_trial(
+        &self,
+        trial: i64,
+        status: TrialStatus,
+        (cost, end_seq): (f64, i64),
+        replays: Option<&[f64]>,
+    ) -> Result<(), StoreError> {
+        let replays = replays.map(|r| serde_json::json!(r).to_string());
+        self.conn.execute(
+            "UPDATE trials SET status = $2, cost = $3, replays = $4, end_seq = $5 WHERE id = $1",
+            &[
+                trial.into(),
+                status.as_str().into(),
+                cost.into(),
+                replays.into(),
+                end_seq.into(),
+            ],
+        )?;
+        Ok(())
+    }
+
+    /// Stores the reply to a request id.
+    ///
+    /// # Errors
+    /// The database refuses (a taken id).
+    pub fn insert_reply(&self, id: &str, reply: &StoredReply) -> Result<(), StoreError> {
+        self.conn.execute(
+            "INSERT INTO requests (id, fingerprint, status, body) VALUES ($1, $2, $3, $4)",
+            &[
+                id.into(),
+                reply.fingerprint.as_str().into(),
+                stored_code(reply.outcome).into(),
+                reply.body.as_str().into(),
+            ],
+        )?;
+        Ok(())
+    }
+}
+
+/// A trial to store.
+#[derive(Clone, Copy, Debug)]
+pub struct NewTrial<'a> {
+    /// Its deployment.
+    pub deployment: i64,
+    /// 1-based position in the deployment.
+    pub k: i64,
+    /// The scene's name.
+    pub scene: &'a str,
+    /// The target type.
+    pub target: &'a str,
+    /// The robot's pose at the start, when given.
+    pub pose: Option<[f64; 3]>,
+    /// Index of the chosen strategy.
+    pub chosen: usize,
+    /// How many of the deployment's trials had ended when it started.
+    pub started_after: i64,
+}
+
+const TRIAL_COLUMNS: &str =
+    "id, deployment, k, scene, target, pose, chosen, status, cost, replays, started_after, end_seq";
+
+impl Reader<'_> {
+    /// Every stored scene: `(name, body)`.
+    ///
+    /// # Errors
+    /// The database refuses.
+    pub fn scenes(&self) -> Result<Vec<(String, String)>, StoreError> {
+        self.conn
+            .query("SELECT name, body FROM scenes ORDER BY name", &[])?
+            .iter()
+            .map(|r| {
+                Ok((
+                    self.conn.some_text(r, 0, "scene name")?,
+                    self.conn.some_text(r, 1, "scene body")?,
+                ))
+            })
+            .collect()
+    }
+
+    /// Every stored scene's name with its numbers of rooms and containers, counted by the
+    /// database without loading the scenes (0 for a body that is not JSON).
+    ///
+    /// # Errors
+    /// The database refuses.
+    pub fn scene_summaries(&self) -> Result<Vec<(String, usize, usize)>, StoreError> {
+        let sql = match &self.conn {
+            Conn::Sqlite(..) => {
+                "SELECT name,
+                    CASE WHEN json_valid(body) THEN json_array_length(body, '$.rooms') END,
+                    CASE WHEN json_valid(body) THEN json_array_length(body, '$.containers') END
+                 FROM scenes ORDER BY name"
+            }
+            // Uploaded bodies were parsed before they were stored, so the cast cannot fail.
+            Conn::Postgres(_) => {
+                "SELECT name,
+                    json_array_length((body::json) -> 'rooms')::bigint,
+                    json_array_length((body::json) -> 'containers')::bigint
+                 FROM scenes ORDER BY name"
+            }
+        };
+        let count = |v: Option<&Value>| match v {
+            Some(Value::Int(n)) => usize::try_from(*n).unwrap_or(0),
+            _ => 0,
+        };
+        self.conn
+            .query(sql, &[])?
+            .iter()
+            .map(|r| {
+                Ok((
+                    self.conn.some_text(r, 0, "scene name")?,
+                    count(r.get(1)),
+                    count(r.get(2)),
+                ))
+            })
+            .collect()
+    }
+
+    /// A stored scene's body.
+    ///
+    /// # Errors
+    /// The database refuses.
+    pub fn scene(&self, name: &str) -> Result<Option<String>, StoreError> {
+        self.conn
+            .query_opt("SELECT body FROM scenes WHERE name = $1", &[name.into()])?
+            .map(|r| self.conn.some_text(&r, 0, "scene body"))
+            .transpose()
+    }
+
+    /// How many scenes are stored.
+    ///
+    /// # Errors
+    /// The database refuses.
+    pub fn scene_count(&self) -> Result<usize, StoreError> {
+        let row = self.conn.query_opt("SELECT count(*) FROM scenes", &[])?;
+        let n = row.map_or(Ok(0), |r| self.conn.int(&r, 0, "scene count"))?;
+        Ok(usize::try_from(n).unwrap_or(usize::MAX))
+    }
+
+    /// Reads the schema and a row of every table: a damaged database fails here as it would on
+    /// every route. Cheap, for health checks.
+    ///
+    /// # Errors
+    /// The database refuses.
+    pub fn check(&self) -> Result<(), StoreError> {
+        for table in [
+            "scenes",
+            "deployments",
+            "trials",
+            "observations",
+            "requests",
+        ] {
+            self.conn.query(
+                &format!("SELECT count(*) FROM (SELECT * FROM {table} LIMIT 1) AS one"),
+                &[],
+            )?;
+        }
+        Ok(())
+    }
+
+    /// A deployment by id.
+    ///
+    /// # Errors
+    /// The database refuses, or the stored spec does not parse.
+    pub fn deployment(&self, id: i64) -> Result<Option<StoredDeployment>, StoreError> {
+        let Some(row) = self
+            .conn
+            .query_opt("SELECT spec FROM deployments WHERE id = $1", &[id.into()])?
+        else {
+            return Ok(None);
+        };
+        let spec = self.conn.some_text(&row, 0, "deployment spec")?;
+        serde_json::from_str(&spec)
+            .map(|spec| Some(StoredDeployment { id, spec }))
+            .map_err(|e| self.conn.corrupt(format!("deployment {id}: {e}")))
+    }
+
+    /// Every deployment id.
+    ///
+    /// # Errors
+    /// The database refuses.
+    pub fn deployment_ids(&self) -> Result<Vec<i64>, StoreError> {
+        self.conn
+            .query("SELECT id FROM deployments ORDER BY id", &[])?
+            .iter()
+            .map(|r| self.conn.int(r, 0, "deployment id"))
+            .collect()
+    }
+
+    fn trials_where(&self, clause: &str, key: i64) -> Result<Vec<StoredTrial>, StoreError> {
+        let rows = self.conn.query(
+            &format!("SELECT {TRIAL_COLUMNS} FROM trials WHERE {clause} ORDER BY k"),
+            &[key.into()],
+        )?;
+        let c = &self.conn;
+        rows.iter()
+            .map(|r| {
+                let id = c.int(r, 0, "trial id")?;
+                let bad = |what: &str| c.corrupt(format!("trial {id}: {what}"));
+                let json =
+                    |i: usize, what: &str| -> Result<Option<serde_json::Value>, StoreError> {
+                        c.text(r, i, what)?
+                            .map(|p| serde_json::from_str(&p).map_err(|_| bad(what)))
+                            .transpose()
+                    };
+                Ok(StoredTrial {
+                    id,
+                    deployment: c.int(r, 1, "trial deployment")?,
+                    k: c.int(r, 2, "trial k")?,
+                    scene: c.some_text(r, 3, "trial scene")?,
+                    target: c.some_text(r, 4, "trial target")?,
+                    pose: json(5, "pose")?
+                        .map(serde_json::from_value)
+                        .transpose()
+                        .map_err(|_| bad("pose"))?,
+                    chosen: usize::try_from(c.int(r, 6, "trial chosen")?)
+                        .map_err(|_| bad("chosen"))?,
+                    status: TrialStatus::parse(&c.some_text(r, 7, "trial status")?)
+                        .ok_or_else(|| bad("status"))?,
+                    cost: c.real(r, 8, "trial cost")?,
+                    replays: json(9, "replays")?
+                        .map(serde_json::from_value)
+                        .transpose()
+                        .map_err(|_| bad("replays"))?,
+                    started_after: c.int(r, 10, "trial started_after")?,
+                    end_seq: match r.get(11) {
+                        Some(Value::Null) => None,
+                        _ => Some(c.int(r, 11, "trial end_seq")?),
+                    },
+                })
+            })
+            .collect()
+    }
+
+    /// A deployment's trials, in order.
+    ///
+    /// # Errors
+    /// The database refuses, or a row does not parse.
+    pub fn trials_of(&self, deployment: i64) -> Result<Vec<StoredTrial>, StoreError> {
+        self.trials_where("deployment = $1", deployment)
+    }
+
+    /// A trial by id.
+    ///
+    /// # Errors
+    /// The database refuses, or the row does not parse.
+    pub fn trial(&self, id: i64) -> Result<Option<StoredTrial>, StoreError> {
+        Ok(self.trials_where("id = $1", id)?.into_iter().next())
+    }
+
+    /// A trial's observations, in order.
+    ///
+    /// # Errors
+    /// The database refuses, or a row does not parse.
+    pub fn observations(&self, trial: i64) -> Result<Vec<StoredObservation>, StoreError> {
+        let c = &self.conn;
+        c.query(
+            "SELECT container, found, objects, travelled, leg FROM observations
+             WHERE trial = $1 ORDER BY seq",
+            &[trial.into()],
+        )?
+        .iter()
+        .map(|r| {
+            let objects = c.some_text(r, 2, "observation objects")?;
+            Ok(StoredObservation {
+                container: c.some_text(r, 0, "observation container")?,
+                found: c.bool(r, 1, "observation found")?,
+                objects: serde_json::from_str(&objects)
+                    .map_err(|_| c.corrupt(format!("trial {trial}: objects")))?,
+                travelled: c.real(r, 3, "observation travelled")?,
+                leg: c
+                    .real(r, 4, "observation leg")?
+                    .ok_or_else(|| c.corrupt(format!("trial {trial}: leg")))?,
+            })
+        })
+        .collect()
+    }
+
+    /// The stored reply to request `id`.
+    ///
+    /// # Errors
+    /// The database refuses.
+    pub fn reply(&self, id: &str) -> Result<Option<StoredReply>, StoreError> {
+        let c = &self.conn;
+        c.query_opt(
+            "SELECT fingerprint, status, body FROM requests WHERE id = $1",
+            &[id.into()],
+        )?
+        .map(|r| {
+            Ok(StoredReply {
+                fingerprint: c.some_text(&r, 0, "request fingerprint")?,
+                outcome: outcome_of(c.int(&r, 1, "request status")?),
+                body: c.some_text(&r, 2, "request body")?,
+            })
+        })
+        .transpose()
+    }
+}

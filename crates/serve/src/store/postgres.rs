@@ -1,0 +1,471 @@
+//! The PostgreSQL backend: a pool of connections (deadpool over tokio-postgres) driven by a
+//! small runtime of its own, so that the service's synchronous code (which runs on blocking
+//! threads) can wait on it from anywhere. Writes of one deployment's trials serialize on the
+//! deployment's row (`SELECT … FOR UPDATE`); request ids in flight are held as session
+//! advisory locks on one connection of the replica, so they vanish with a replica that dies.
+
+use std::sync::Mutex;
+use std::time::Duration;
+
+use bytes::BytesMut;
+use deadpool_postgres::{Manager, ManagerConfig, Pool, RecyclingMethod};
+use sha2::{Digest, Sha256};
+use tokio_postgres::NoTls;
+use tokio_postgres::types::{IsNull, ToSql, Type, to_sql_checked};
+
+use super::{Row, SCHEMA_VERSION, StoreError, Value};
+
+/// Schema migrations, version `i + 1` at index `i` (the same versions as SQLite's).
+const MIGRATIONS: [&str; 2] = [
+    "CREATE TABLE scenes (name TEXT PRIMARY KEY, body TEXT NOT NULL);
+    CREATE TABLE deployments (id BIGSERIAL PRIMARY KEY, spec TEXT NOT NULL);
+    CREATE TABLE trials (
+        id BIGSERIAL PRIMARY KEY,
+        deployment BIGINT NOT NULL REFERENCES deployments(id),
+        k BIGINT NOT NULL, scene TEXT NOT NULL, target TEXT NOT NULL, pose TEXT,
+        chosen BIGINT NOT NULL, status TEXT NOT NULL, cost DOUBLE PRECISION, replays TEXT,
+        UNIQUE (deployment, k));
+    CREATE TABLE observations (
+        trial BIGINT NOT NULL REFERENCES trials(id), seq BIGINT NOT NULL,
+        container TEXT NOT NULL, found BOOLEAN NOT NULL, objects TEXT NOT NULL,
+        travelled DOUBLE PRECISION, leg DOUBLE PRECISION NOT NULL,
+        PRIMARY KEY (trial, seq));
+    CREATE TABLE requests (
+        id TEXT PRIMARY KEY, fingerprint TEXT NOT NULL, status BIGINT NOT NULL, body TEXT NOT NULL);",
+    "ALTER TABLE trials ADD COLUMN started_after BIGINT NOT NULL DEFAULT 0;
+    ALTER TABLE trials ADD COLUMN end_seq BIGINT;
+    UPDATE trials SET started_after = (
+        SELECT count(*) FROM trials AS t
+        WHERE t.deployment = trials.deployment AND t.k < trials.k AND t.status <> 'searching');
+    UPDATE trials SET end_seq = (
+        SELECT count(*) FROM trials AS t
+        WHERE t.deployment = trials.deployment AND t.k <= trials.k AND t.status <> 'searching')
+    WHERE status <> 'searching';
+    CREATE UNIQUE INDEX trials_end_order ON trials (deployment, end_seq);",
+];
+
+/// The advisory lock every replica takes while it migrates, so two starting at once do not
+/// both migrate ("ferret" in ASCII).
+const MIGRATION_LOCK: i64 = 0x6665_7272_6574;
+
+/// How a replica uses PostgreSQL.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PostgresOptions {
+    /// Connections in the replica's pool: requests that need one beyond this wait.
+    pub pool_size: usize,
+    /// How long a request waits for a connection (or for one to be made) before it fails
+    /// with 503.
+    pub wait: Duration,
+}
+
+impl Default for PostgresOptions {
+    fn default() -> Self {
+        Self {
+            pool_size: 16,
+            wait: Duration::from_secs(10),
+        }
+    }
+}
+
+pub(super) struct Postgres {
+    pool: Pool,
+    /// Drives the pool's connections; `Option` so that dropping the store (possibly on an
+    /// async thread) shuts it down without blocking.
+    runtime: Option<tokio::runtime::Runtime>,
+    config: tokio_postgres::Config,
+    pub(super) db: String,
+    /// The session that holds this replica's request claims (advisory locks belong to a
+    /// session, so they cannot live on pooled connections).
+    claims: Mutex<Option<tokio_postgres::Client>>,
+}
+
+impl Drop for Postgres {
+    fn drop(&mut self) {
+        if let Some(rt) = self.runtime.take() {
+            rt.shutdown_background();
+        }
+    }
+}
+
+impl ToSql for Value {
+    fn to_sql(
+        &self,
+        ty: &Type,
+        out: &mut BytesMut,
+    ) -> Result<IsNull, Box<dyn std::error::Error + Sync + Send>> {
+        match self {
+            Value::Null => Ok(IsNull::Yes),
+            Value::Int(v) if *ty == Type::INT4 => i32::try_from(*v)?.to_sql(ty, out),
+            Value::Int(v) if *ty == Type::FLOAT8 => (*v as f64).to_sql(ty, out),
+            Value::Int(v) => v.to_sql(ty, out),
+            Value::Real(v) => v.to_sql(ty, out),
+            Value::Text(v) => v.to_sql(ty, out),
+            Value::Bool(v) => v.to_sql(ty, out),
+        }
+    }
+
+    fn accepts(_: &Type) -> bool {
+        true
+    }
+
+    to_sql_checked!();
+}
+
+/// `url` as logs may show it: without its password.
+fn describe(config: &tokio_postgres::Config) -> String {
+    let host = config
+        .get_hosts()
+        .first()
+        .map(|h| match h {
+            tokio_postgres::config::Host::Tcp(h) => h.clone(),
+            #[cfg(unix)]
+            tokio_postgres::config::Host::Unix(p) => p.display().to_string(),
+        })
+        .unwrap_or_default();
+    let port = config.get_ports().first().copied().unwrap_or(5432);
+    format!(
+        "postgres://{}@{host}:{port}/{}",
+        config.get_user().unwrap_or(""),
+        config.get_dbname().unwrap_or("")
+    )
+}
+
+impl Postgres {
+    pub(super) fn connect(url: &str, options: PostgresOptions) -> Result<Postgres, StoreError> {
+        let config: tokio_postgres::Config =
+            url.parse()
+                .map_err(|e: tokio_postgres::Error| StoreError::Unreachable {
+                    db: "postgres".into(),
+                    what: format!(
+                        "not a PostgreSQL URL ({e}); write postgres://user@host:port/database"
+                    ),
+                })?;
+        let db = describe(&config);
+        let unreachable = |what: String| StoreError::Unreachable {
+            db: db.clone(),
+            what,
+        };
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(1)
+            .thread_name("ferret-postgres")
+            .enable_all()
+            .build()
+            .map_err(|e| unreachable(format!("starting the client's runtime: {e}")))?;
+        let manager = Manager::from_config(
+            config.clone(),
+            NoTls,
+            ManagerConfig {
+                recycling_method: RecyclingMethod::Fast,
+            },
+        );
+        let pool = Pool::builder(manager)
+            .max_size(options.pool_size.max(1))
+            .runtime(deadpool_postgres::Runtime::Tokio1)
+            .wait_timeout(Some(options.wait))
+            .create_timeout(Some(options.wait))
+            .build()
+            .map_err(|e| unreachable(format!("building the connection pool: {e}")))?;
+        let pg = Postgres {
+            pool,
+            runtime: Some(runtime),
+            config,
+            db,
+            claims: Mutex::new(None),
+        };
+        pg.migrate()?;
+        Ok(pg)
+    }
+
+    fn block_on<F: std::future::Future>(&self, f: F) -> F::Output {
+        match &self.runtime {
+            Some(rt) => rt.block_on(f),
+            // Only while dropping, when nothing runs statements any more.
+            None => unreachable!("the PostgreSQL runtime is gone"),
+        }
+    }
+
+    fn pg(&self, source: tokio_postgres::Error) -> StoreError {
+        StoreError::Postgres {
+            db: self.db.clone(),
+            source,
+        }
+    }
+
+    fn client(&self) -> Result<deadpool_postgres::Client, StoreError> {
+        self.block_on(self.pool.get())
+            .map_err(|e| StoreError::Unreachable {
+                db: self.db.clone(),
+                what: format!("no connection: {e}"),
+            })
+    }
+
+    pub(super) fn read<T>(
+        &self,
+        f: impl FnOnce(super::Conn<'_>) -> Result<T, StoreError>,
+    ) -> Result<T, StoreError> {
+        let client = self.client()?;
+        f(super::Conn::Postgres(Conn {
+            on: On::Client(&client),
+            pg: self,
+        }))
+    }
+
+    pub(super) fn write<T, E: From<StoreError>>(
+        &self,
+        f: impl FnOnce(super::Conn<'_>) -> Result<T, E>,
+    ) -> Result<T, E> {
+        let mut client = self.client()?;
+        let tx = self
+            .block_on(client.transaction())
+            .map_err(|e| self.pg(e))?;
+        let out = f(super::Conn::Postgres(Conn {
+            on: On::Tx(&tx),
+            pg: self,
+        }))?;
+        self.block_on(tx.commit()).map_err(|e| self.pg(e))?;
+        Ok(out)
+    }
+
+    pub(super) fn schema_version(&self) -> Result<i64, StoreError> {
+        self.read(|c| {
+            let rows = c.query("SELECT max(version) FROM ferret_schema", &[])?;
+            Ok(match rows.first().and_then(|r| r.first()) {
+                Some(Value::Int(v)) => *v,
+                _ => 0,
+            })
+        })
+    }
+
+    /// Brings the schema to [`SCHEMA_VERSION`] in one transaction under the migration lock, or
+    /// refuses a newer one.
+    fn migrate(&self) -> Result<(), StoreError> {
+        let mut client = self.client()?;
+        let tx = self
+            .block_on(client.transaction())
+            .map_err(|e| self.pg(e))?;
+        let c = Conn {
+            on: On::Tx(&tx),
+            pg: self,
+        };
+        c.execute("SELECT pg_advisory_xact_lock($1)", &[MIGRATION_LOCK.into()])?;
+        c.execute(
+            "CREATE TABLE IF NOT EXISTS ferret_schema (version BIGINT NOT NULL)",
+            &[],
+        )?;
+        let rows = c.query("SELECT max(version) FROM ferret_schema", &[])?;
+        let version = match rows.first().and_then(|r| r.first()) {
+            Some(Value::Int(v)) => *v,
+            _ => 0,
+        };
+        if version > SCHEMA_VERSION {
+            return Err(StoreError::Schema {
+                db: self.db.clone(),
+                what: format!(
+                    "schema version {version} was written by a newer ferret; this one knows versions up to {SCHEMA_VERSION}: upgrade every replica"
+                ),
+            });
+        }
+        let from = usize::try_from(version).unwrap_or(0);
+        for (i, step) in MIGRATIONS.iter().enumerate().skip(from) {
+            c.batch(step).map_err(|e| StoreError::Schema {
+                db: self.db.clone(),
+                what: format!("migrating to schema version {}: {e}", i + 1),
+            })?;
+        }
+        if version != SCHEMA_VERSION {
+            c.execute("DELETE FROM ferret_schema", &[])?;
+            c.execute(
+                "INSERT INTO ferret_schema (version) VALUES ($1)",
+                &[SCHEMA_VERSION.into()],
+            )?;
+            tracing::info!(
+                "{}: schema migrated from version {version} to {SCHEMA_VERSION}",
+                self.db
+            );
+        }
+        self.block_on(tx.commit()).map_err(|e| self.pg(e))
+    }
+
+    /// The two halves of `key`'s advisory lock: the first 8 bytes of its SHA-256, so that every
+    /// replica (whatever its build) locks the same number for the same id.
+    fn lock_key(key: &str) -> (i32, i32) {
+        let h = Sha256::digest(key.as_bytes());
+        let half = |i: usize| i32::from_be_bytes([h[i], h[i + 1], h[i + 2], h[i + 3]]);
+        (half(0), half(4))
+    }
+
+    /// Takes `key`'s advisory lock on the claims session; `None` when another session holds it.
+    pub(super) fn claim(&self, key: &str) -> Result<Option<(i32, i32)>, StoreError> {
+        let lock = Self::lock_key(key);
+        let mut session = self
+            .claims
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        // One retry on a fresh session: the old one may have died with the server's restart.
+        for attempt in 0..2 {
+            if session
+                .as_ref()
+                .is_none_or(tokio_postgres::Client::is_closed)
+            {
+                *session = Some(self.session()?);
+            }
+            let Some(client) = session.as_ref() else {
+                continue;
+            };
+            match self.block_on(
+                client.query_one("SELECT pg_try_advisory_lock($1, $2)", &[&lock.0, &lock.1]),
+            ) {
+                Ok(row) => {
+                    let took: bool = row.get(0);
+                    return Ok(took.then_some(lock));
+                }
+                Err(e) if attempt == 0 && client.is_closed() => {
+                    tracing::warn!("{}: the claims session closed ({e}); reconnecting", self.db);
+                    *session = None;
+                }
+                Err(e) => return Err(self.pg(e)),
+            }
+        }
+        Err(StoreError::Unreachable {
+            db: self.db.clone(),
+            what: "the claims session cannot be opened".into(),
+        })
+    }
+
+    /// Releases a claim taken by [`claim`](Self::claim). A failure is logged: the lock then
+    /// goes with the session.
+    pub(super) fn release(&self, lock: (i32, i32)) {
+        let session = self
+            .claims
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some(client) = session.as_ref()
+            && let Err(e) = self.block_on(
+                client.query_one("SELECT pg_advisory_unlock($1, $2)", &[&lock.0, &lock.1]),
+            )
+        {
+            tracing::warn!("{}: releasing a request claim: {e}", self.db);
+        }
+    }
+
+    fn session(&self) -> Result<tokio_postgres::Client, StoreError> {
+        let (client, connection) = self
+            .block_on(self.config.connect(NoTls))
+            .map_err(|e| self.pg(e))?;
+        let db = self.db.clone();
+        self.block_on(async move {
+            tokio::spawn(async move {
+                if let Err(e) = connection.await {
+                    tracing::warn!("{db}: claims session: {e}");
+                }
+            });
+        });
+        Ok(client)
+    }
+}
+
+/// What a [`Conn`] runs its statements on.
+enum On<'a> {
+    Client(&'a deadpool_postgres::Client),
+    Tx(&'a deadpool_postgres::Transaction<'a>),
+}
+
+/// A pooled connection, or a transaction on one.
+pub(super) struct Conn<'a> {
+    on: On<'a>,
+    pg: &'a Postgres,
+}
+
+impl Conn<'_> {
+    pub(super) fn reborrow(&self) -> Conn<'_> {
+        Conn {
+            on: match &self.on {
+                On::Client(c) => On::Client(c),
+                On::Tx(t) => On::Tx(t),
+            },
+            pg: self.pg,
+        }
+    }
+
+    pub(super) fn db(&self) -> &str {
+        &self.pg.db
+    }
+
+    fn batch(&self, sql: &str) -> Result<(), tokio_postgres::Error> {
+        match &self.on {
+            On::Client(c) => self.pg.block_on(c.batch_execute(sql)),
+            On::Tx(t) => self.pg.block_on(t.batch_execute(sql)),
+        }
+    }
+
+    pub(super) fn execute(&self, sql: &str, params: &[Value]) -> Result<u64, StoreError> {
+        let params: Vec<&(dyn ToSql + Sync)> = params.iter().map(|p| p as _).collect();
+        let pg = self.pg;
+        pg.block_on(async {
+            match &self.on {
+                On::Client(c) => {
+                    let stmt = c.prepare_cached(sql).await?;
+                    c.execute(&stmt, &params).await
+                }
+                On::Tx(t) => {
+                    let stmt = t.prepare_cached(sql).await?;
+                    t.execute(&stmt, &params).await
+                }
+            }
+        })
+        .map_err(|e| pg.pg(e))
+    }
+
+    pub(super) fn query(&self, sql: &str, params: &[Value]) -> Result<Vec<Row>, StoreError> {
+        let params: Vec<&(dyn ToSql + Sync)> = params.iter().map(|p| p as _).collect();
+        let pg = self.pg;
+        let rows = pg
+            .block_on(async {
+                match &self.on {
+                    On::Client(c) => {
+                        let stmt = c.prepare_cached(sql).await?;
+                        c.query(&stmt, &params).await
+                    }
+                    On::Tx(t) => {
+                        let stmt = t.prepare_cached(sql).await?;
+                        t.query(&stmt, &params).await
+                    }
+                }
+            })
+            .map_err(|e| pg.pg(e))?;
+        rows.iter().map(|r| row(pg, r)).collect()
+    }
+}
+
+fn row(pg: &Postgres, r: &tokio_postgres::Row) -> Result<Row, StoreError> {
+    let err = |e| pg.pg(e);
+    (0..r.len())
+        .map(|i| {
+            let ty = r.columns()[i].type_();
+            Ok(if *ty == Type::INT8 {
+                r.try_get::<_, Option<i64>>(i).map_err(err)?.into()
+            } else if *ty == Type::INT4 {
+                r.try_get::<_, Option<i32>>(i)
+                    .map_err(err)?
+                    .map(i64::from)
+                    .into()
+            } else if *ty == Type::FLOAT8 {
+                r.try_get::<_, Option<f64>>(i).map_err(err)?.into()
+            } else if *ty == Type::BOOL {
+                r.try_get::<_, Option<bool>>(i).map_err(err)?.into()
+            } else if *ty == Type::TEXT || *ty == Type::VARCHAR || *ty == Type::NAME {
+                r.try_get::<_, Option<String>>(i).map_err(err)?.into()
+            } else if *ty == Type::VOID {
+                Value::Null
+            } else {
+                return Err(StoreError::Corrupt {
+                    file: pg.db.clone(),
+                    what: format!(
+                        "column {} has type {ty}, which ferret does not read",
+                        r.columns()[i].name()
+                    ),
+                });
+            })
+        })
+        .collect()
+}

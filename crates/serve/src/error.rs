@@ -94,7 +94,14 @@ impl ApiError {
 
 impl From<StoreError> for ApiError {
     fn from(e: StoreError) -> Self {
-        Self::internal(e.to_string())
+        if e.is_unavailable() {
+            // The database is out of reach or busy for now: the request may be retried, here
+            // or on another replica.
+            tracing::warn!("{e}");
+            Self::unavailable("", e.to_string())
+        } else {
+            Self::internal(e.to_string())
+        }
     }
 }
 

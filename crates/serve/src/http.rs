@@ -411,12 +411,16 @@ async fn post_observation(
 pub struct ApiDoc;
 
 /// Statuses every route may answer besides its own, and why.
-const COMMON_STATUSES: [(u16, &str); 2] = [
+const COMMON_STATUSES: [(u16, &str); 3] = [
     (
         403,
         "The Host header names another server, or a browser Origin is not allowed",
     ),
     (500, "The server's own failure (its database)"),
+    (
+        503,
+        "The database is out of reach or busy for now: retry, here or on another replica",
+    ),
 ];
 
 /// Statuses of every route that takes a body.
@@ -427,7 +431,7 @@ const BODY_STATUSES: [(u16, &str); 6] = [
     ),
     (
         409,
-        "A request id reused with another body, or a conflicting state",
+        "The same request id is still in flight (retry later), or a conflicting state",
     ),
     (
         408,
@@ -435,7 +439,10 @@ const BODY_STATUSES: [(u16, &str); 6] = [
     ),
     (413, "The body is larger than the server's limit"),
     (415, "The body is not application/json"),
-    (422, "A value the server cannot use (named in `field`)"),
+    (
+        422,
+        "A value the server cannot use (named in `field`), or a request id used before with another body",
+    ),
 ];
 
 /// Every route with its handler, each declared once: the path and method come from the

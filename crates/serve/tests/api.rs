@@ -2,54 +2,18 @@
 //! costs what the same trials cost in the simulator; bad input gets a 4xx naming the field;
 //! retries are idempotent; a restarted service resumes from its database.
 
+mod support;
+
+use support::{SCENE, TARGETS, strategies};
+
 use std::path::Path;
 use std::sync::Arc;
 
-use ferret_plan::{
-    PlannerConfig, ReplayMode, SearchProblem, Strategy, StrategyRegistry, TrialSpec, replay_costs,
-    run_trial,
-};
+use ferret_plan::{ReplayMode, SearchProblem, TrialSpec, replay_costs, run_trial};
 use ferret_select::{LiveDeployment, Method};
 use ferret_serve::{HttpOptions, ServeOptions, Service, ServiceOptions, Store};
 use ferret_world::{GridParams, ObjectType, SceneFile, TravelCost};
 use serde_json::{Value, json};
-
-/// Three rooms in a row with doors, seven containers, targets in several places.
-const SCENE: &str = r#"{
-  "ferret_scene": 1, "name": "flat",
-  "rooms": [
-    {"name": "kitchen", "type": "Kitchen", "polygon": [[0,0],[4,0],[4,4],[0,4]]},
-    {"name": "living room", "type": "LivingRoom", "polygon": [[4,0],[9,0],[9,4],[4,4]]},
-    {"name": "bedroom", "type": "Bedroom", "polygon": [[9,0],[13,0],[13,4],[9,4]]}
-  ],
-  "doors": [{"from": [4, 1], "to": [4, 2]}, {"from": [9, 2.5], "to": [9, 3.5]}],
-  "containers": [
-    {"id": "fridge", "type": "Fridge", "pose": [0.5, 3.4, 0], "size": [0.7, 0.7], "contents": ["Egg", "Apple"]},
-    {"id": "counter", "type": "CounterTop", "pose": [2.5, 3.6, 0], "size": [1.5, 0.6], "contents": ["Mug", "CellPhone"]},
-    {"id": "sofa", "type": "Sofa", "pose": [6.5, 3.5, 0], "size": [2.0, 0.8], "contents": ["Pillow", "RemoteControl"]},
-    {"id": "table", "type": "CoffeeTable", "pose": [6.5, 1.5, 0], "size": [1.0, 0.6], "contents": ["Book", "RemoteControl"]},
-    {"id": "tv", "type": "TVStand", "pose": [8.6, 1.0, 90], "size": [1.2, 0.4], "contents": []},
-    {"id": "bed", "type": "Bed", "pose": [11.5, 2.0, 0], "size": [2.0, 1.6], "contents": ["Pillow", "CellPhone"]},
-    {"id": "dresser", "type": "Dresser", "pose": [12.6, 0.5, 0], "size": [0.6, 0.5], "contents": ["Wallet"]}
-  ],
-  "start": [5.0, 2.0, 0]
-}"#;
-
-const TARGETS: [&str; 5] = [
-    "CellPhone",
-    "RemoteControl",
-    "Pillow",
-    "Wallet",
-    "CellPhone",
-];
-
-fn strategies() -> Vec<Arc<dyn Strategy>> {
-    let registry = StrategyRegistry::builtin(None, PlannerConfig::default(), 10);
-    ["optimistic+greedy", "model/uniform", "model/uniform/k2"]
-        .iter()
-        .map(|s| registry.build(s).unwrap())
-        .collect()
-}
 
 struct Server {
     url: String,
@@ -80,17 +44,22 @@ async fn start_with(
     service_options: ServiceOptions,
     serve_options: ServeOptions,
 ) -> Server {
-    let store = match db {
-        Some(p) => Store::open(p).unwrap(),
-        None => Store::in_memory().unwrap(),
-    };
-    let service =
-        Service::with_options(store, GridParams::default(), strategies(), service_options).unwrap();
-    let scene = SceneFile::parse(SCENE, Path::new("flat.json"))
-        .unwrap()
-        .to_scene(Path::new("flat.json"), None)
-        .unwrap();
-    service.add_scene("flat", scene).unwrap();
+    // The store waits on its database from blocking threads, as the service runs it.
+    let service = tokio::task::block_in_place(|| {
+        let store = match db {
+            Some(p) => Store::open(p).unwrap(),
+            None => support::store(),
+        };
+        let service =
+            Service::with_options(store, GridParams::default(), strategies(), service_options)
+                .unwrap();
+        let scene = SceneFile::parse(SCENE, Path::new("flat.json"))
+            .unwrap()
+            .to_scene(Path::new("flat.json"), None)
+            .unwrap();
+        service.add_scene("flat", scene).unwrap();
+        service
+    });
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let addr = listener.local_addr().unwrap();
     let options = HttpOptions {

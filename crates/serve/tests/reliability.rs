@@ -4,6 +4,8 @@
 //! server listens on 127.0.0.1 on an ephemeral port; connection tests are bounded in count and
 //! time.
 
+mod support;
+
 use std::io::{Read, Write};
 use std::path::Path;
 use std::sync::Arc;
@@ -78,7 +80,7 @@ fn start(setup: Setup) -> Server {
         .unwrap();
     let store = match &setup.db {
         Some(p) => Store::open(p).unwrap(),
-        None => Store::in_memory().unwrap(),
+        None => support::store(),
     };
     let service = Arc::new(
         Service::with_options(store, GridParams::default(), strategies(), setup.service).unwrap(),

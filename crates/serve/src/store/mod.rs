@@ -38,7 +38,7 @@ pub enum StoreError {
         source: rusqlite::Error,
     },
     /// PostgreSQL refused or could not be reached.
-    #[error("database {db}: {source}")]
+    #[error("database {db}: {}", postgres_detail(source))]
     Postgres {
         /// The database, without its password.
         db: String,
@@ -78,13 +78,34 @@ impl StoreError {
     pub fn is_unavailable(&self) -> bool {
         match self {
             StoreError::Unreachable { .. } => true,
-            StoreError::Postgres { source, .. } => source.is_closed() || source.code().is_none(),
+            StoreError::Postgres { source, .. } => {
+                use tokio_postgres::error::SqlState;
+                source.is_closed()
+                    || match source.code() {
+                        None => true,
+                        // The transaction lost a race; it may simply be run again.
+                        Some(c) => {
+                            *c == SqlState::T_R_SERIALIZATION_FAILURE
+                                || *c == SqlState::T_R_DEADLOCK_DETECTED
+                                || *c == SqlState::ADMIN_SHUTDOWN
+                                || *c == SqlState::CANNOT_CONNECT_NOW
+                        }
+                    }
+            }
             StoreError::Sql { source, .. } => matches!(
                 source.sqlite_error_code(),
                 Some(rusqlite::ErrorCode::DatabaseBusy | rusqlite::ErrorCode::DatabaseLocked)
             ),
             _ => false,
         }
+    }
+}
+
+/// What PostgreSQL said: the server's message and code when it answered, else the client's.
+fn postgres_detail(e: &tokio_postgres::Error) -> String {
+    match e.as_db_error() {
+        Some(db) => format!("{} ({})", db.message(), db.code().code()),
+        None => e.to_string(),
     }
 }
 

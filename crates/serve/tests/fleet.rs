@@ -1,0 +1,278 @@
+//! A fleet: two replicas of the service on one PostgreSQL database, robots sharing one
+//! deployment, each request sent to either replica. Needs a PostgreSQL server
+//! (`FERRET_TEST_POSTGRES`; `scripts/postgres.sh start` starts a throwaway one); skipped with a
+//! message without it.
+
+mod support;
+
+use std::collections::BTreeSet;
+use std::sync::Arc;
+
+use ferret_serve::{HttpOptions, ServeOptions, Service};
+use ferret_world::{GridParams, SceneFile};
+use serde_json::{Value, json};
+use support::{SCENE, TARGETS, strategies};
+
+/// A replica: its own service, store (pool and claims session) and port.
+async fn replica(url: &str) -> (String, tokio::task::JoinHandle<()>) {
+    let service = tokio::task::block_in_place(|| {
+        let service =
+            Service::new(support::connect(url), GridParams::default(), strategies()).unwrap();
+        let scene = SceneFile::parse(SCENE, std::path::Path::new("flat.json"))
+            .unwrap()
+            .to_scene(std::path::Path::new("flat.json"), None)
+            .unwrap();
+        service.add_scene("flat", scene).unwrap();
+        service
+    });
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let options = HttpOptions {
+        listen: Some(addr),
+        ..HttpOptions::default()
+    };
+    let app = ferret_serve::router(Arc::new(service), &options).unwrap();
+    let handle = tokio::spawn(async move {
+        ferret_serve::serve(
+            listener,
+            app,
+            ServeOptions::default(),
+            std::future::pending(),
+        )
+        .await
+        .unwrap();
+    });
+    (format!("http://{addr}"), handle)
+}
+
+/// What contents each container of the scene holds, for answering the robot's searches.
+fn contents(container: &str) -> Vec<&'static str> {
+    match container {
+        "fridge" => vec!["Egg", "Apple"],
+        "counter" => vec!["Mug", "CellPhone"],
+        "sofa" => vec!["Pillow", "RemoteControl"],
+        "table" => vec!["Book", "RemoteControl"],
+        "bed" => vec!["Pillow", "CellPhone"],
+        "dresser" => vec!["Wallet"],
+        _ => vec![],
+    }
+}
+
+/// A robot's view of what happened: its trials and the observations acknowledged in each.
+type Acked = Vec<(i64, Vec<String>)>;
+
+/// POSTs with a request id to a replica chosen by `pick`, again (same id) until one
+/// acknowledges; any refusal but 409 (the same request in flight, or the deployment changing
+/// under a start) fails the test.
+async fn post(
+    client: &reqwest::Client,
+    urls: &[String],
+    pick: &mut impl FnMut() -> usize,
+    path: &str,
+    body: Value,
+) -> Value {
+    for _ in 0..200 {
+        let url = &urls[pick() % urls.len()];
+        let reply = client
+            .post(format!("{url}{path}"))
+            .json(&body)
+            .send()
+            .await
+            .unwrap();
+        let status = reply.status().as_u16();
+        let value: Value = reply.json().await.unwrap();
+        match status {
+            200 | 201 => return value,
+            409 => tokio::time::sleep(std::time::Duration::from_millis(5)).await,
+            _ => panic!("{path} {body}: {status} {value}"),
+        }
+    }
+    panic!("{path} {body}: never acknowledged")
+}
+
+async fn robot(urls: Arc<Vec<String>>, deployment: i64, robot: u64, trials: usize) -> Acked {
+    let client = reqwest::Client::new();
+    // xorshift: each request to one replica or the other, differently for each robot.
+    let mut state = 0x9e37_79b9_7f4a_7c15_u64 ^ robot.wrapping_mul(0x2545_f491_4f6c_dd1d);
+    let mut pick = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state as usize
+    };
+    let mut acked = Vec::new();
+    for t in 0..trials {
+        let target = TARGETS[(robot as usize + t) % TARGETS.len()];
+        let mut reply = post(
+            &client,
+            &urls,
+            &mut pick,
+            &format!("/deployments/{deployment}/trials"),
+            json!({"request_id": format!("r{robot}-t{t}"), "scene": "flat", "target": target}),
+        )
+        .await;
+        let trial = reply["trial"].as_i64().unwrap();
+        let mut searched = Vec::new();
+        while reply["status"] == "searching" {
+            let next = reply["next"]["container"].as_str().unwrap().to_string();
+            let seen = contents(&next);
+            let body = json!({
+                "request_id": format!("r{robot}-t{t}-o{}", searched.len()),
+                "container": next,
+                "found": seen.contains(&target),
+                "objects": seen,
+            });
+            reply = post(
+                &client,
+                &urls,
+                &mut pick,
+                &format!("/trials/{trial}/observations"),
+                body,
+            )
+            .await;
+            searched.push(next);
+        }
+        acked.push((trial, searched));
+    }
+    acked
+}
+
+/// Eight robots with trials open at once in one deployment, each request to a random replica:
+/// every trial is stored once with its own number, every acknowledged observation once, and
+/// the deployment's history replays to the choices the robots were given. Without the
+/// deployment's row lock two replicas number two trials alike (or end two as the same) and a
+/// robot is refused with 500.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn two_replicas_share_a_deployment_without_losing_or_doubling_a_trial() {
+    let Some(url) = support::postgres_or_skip("two_replicas_share_a_deployment") else {
+        return;
+    };
+    let (a, ha) = replica(&url).await;
+    let (b, hb) = replica(&url).await;
+    let urls = Arc::new(vec![a.clone(), b.clone()]);
+    let client = reqwest::Client::new();
+    let dep: Value = client
+        .post(format!("{a}/deployments"))
+        .json(&json!({"seed": 3}))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(dep["sequential"], false, "{dep}");
+    let id = dep["id"].as_i64().unwrap();
+    let (robots, trials) = (8u64, 3usize);
+    let runs: Vec<_> = (0..robots)
+        .map(|r| tokio::spawn(robot(urls.clone(), id, r, trials)))
+        .collect();
+    let mut acked = Vec::new();
+    for r in runs {
+        acked.extend(r.await.unwrap());
+    }
+    // Read back through the other replica than the one that created the deployment.
+    let state: Value = client
+        .get(format!("{b}/deployments/{id}"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let stored = state["trials"].as_array().unwrap();
+    assert_eq!(stored.len(), robots as usize * trials, "{state}");
+    let ks: Vec<i64> = stored.iter().map(|t| t["k"].as_i64().unwrap()).collect();
+    assert_eq!(ks, (1..=stored.len() as i64).collect::<Vec<_>>());
+    let stored_ids: BTreeSet<i64> = stored
+        .iter()
+        .map(|t| t["trial"].as_i64().unwrap())
+        .collect();
+    let robot_ids: BTreeSet<i64> = acked.iter().map(|(t, _)| *t).collect();
+    assert_eq!(stored_ids, robot_ids, "each started trial stored once");
+    assert_eq!(state["open_trials"], json!([]));
+    let done = stored.iter().filter(|t| t["status"] == "done").count();
+    let deployed: u64 = state["per_strategy"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["deployed"].as_u64().unwrap())
+        .sum();
+    assert_eq!(
+        deployed as usize, done,
+        "the selector learned each found trial once"
+    );
+    for (trial, searched) in &acked {
+        let t: Value = client
+            .get(format!("{a}/trials/{trial}"))
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
+        let stored: Vec<String> = t["searched"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c.as_str().unwrap().to_string())
+            .collect();
+        assert_eq!(&stored, searched, "trial {trial}: {t}");
+    }
+    ha.abort();
+    hb.abort();
+}
+
+/// A request id in flight on one replica is a 409 on the other; once it completed, both give
+/// its reply byte for byte, and the same id with another body is a 422 on either.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_request_id_is_one_request_across_replicas() {
+    let Some(url) = support::postgres_or_skip("a_request_id_is_one_request_across_replicas") else {
+        return;
+    };
+    let (a, ha) = replica(&url).await;
+    let (b, hb) = replica(&url).await;
+    // Hold the id from a third session, as a replica in the middle of the request would.
+    let holder = tokio::task::block_in_place(|| support::connect(&url));
+    let claim = tokio::task::block_in_place(|| holder.claim("dep-x").unwrap());
+    assert!(claim.is_some());
+    let client = reqwest::Client::new();
+    let body = json!({"request_id": "dep-x", "seed": 1});
+    for url in [&a, &b] {
+        let r = client
+            .post(format!("{url}/deployments"))
+            .json(&body)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status().as_u16(), 409, "{}", r.text().await.unwrap());
+    }
+    tokio::task::block_in_place(|| drop(claim));
+    let first = client
+        .post(format!("{a}/deployments"))
+        .json(&body)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(first.status().as_u16(), 201);
+    let first = first.bytes().await.unwrap();
+    let again = client
+        .post(format!("{b}/deployments"))
+        .json(&body)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(again.status().as_u16(), 201);
+    assert_eq!(again.bytes().await.unwrap(), first);
+    for url in [&a, &b] {
+        let r = client
+            .post(format!("{url}/deployments"))
+            .json(&json!({"request_id": "dep-x", "seed": 2}))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status().as_u16(), 422);
+    }
+    tokio::task::block_in_place(|| drop(holder));
+    ha.abort();
+    hb.abort();
+}

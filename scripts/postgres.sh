@@ -4,6 +4,7 @@
 # with fsync on (what a fleet runs) and a trust login for the local test user.
 #
 #   eval "$(scripts/postgres.sh start)"   # prints: export FERRET_TEST_POSTGRES=postgres://...
+#   scripts/postgres.sh new-db NAME       # another empty database there; prints its URL
 #   scripts/postgres.sh stop "$FERRET_PG_DIR"
 #
 # `start` picks a free port, waits until the server accepts connections and creates a database
@@ -65,11 +66,21 @@ stop() {
     rm -rf "$dir"
 }
 
+new_db() {
+    local name="${1:?give the new database a name}" url="${FERRET_TEST_POSTGRES:?run start first}"
+    local psql base
+    psql="$(find_bin psql)"
+    base="${url%/*}"
+    "$psql" "$url" -qc "CREATE DATABASE \"$name\"" >/dev/null
+    echo "$base/$name"
+}
+
 case "${1:-}" in
 start) start ;;
+new-db) new_db "${2:-}" ;;
 stop) stop "${2:-}" ;;
 *)
-    echo "usage: $0 start | stop DIR" >&2
+    echo "usage: $0 start | new-db NAME | stop DIR" >&2
     exit 2
     ;;
 esac

@@ -11,7 +11,8 @@
 # --release, into CARGO_TARGET_DIR when set). Schemathesis (pinned below) is installed with pip
 # into a venv under $FERRET_ST_CACHE (default ~/.cache/ferret-schemathesis), once. pip takes its
 # package index from its own configuration (PIP_INDEX_URL, pip.conf), never from this script.
-# FERRET_ST_EXAMPLES sets the examples per operation (default 60).
+# FERRET_ST_EXAMPLES sets the examples per operation (default 60). FERRET_ST_DB gives the server
+# another database (a PostgreSQL URL, say; default a new SQLite file).
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
@@ -62,7 +63,7 @@ TOKEN="schemathesis-$$-$RANDOM"
 FERRET_SERVE_TOKEN="$TOKEN" "$BIN" serve \
     --scene "$ROOT/examples/apartment/scene.yaml" \
     --strategies optimistic+greedy,model/uniform \
-    --listen 127.0.0.1:0 --db "$WORK/serve.sqlite" \
+    --listen 127.0.0.1:0 --db "${FERRET_ST_DB:-$WORK/serve.sqlite}" \
     >"$WORK/serve.out" 2>"$WORK/serve.err" &
 SERVER_PID=$!
 URL=""
@@ -81,7 +82,8 @@ log "testing $URL/openapi.json ($EXAMPLES examples per operation)"
 
 started=$(date +%s)
 status=0
-(cd "$WORK" && "$ST" --config-file "$ROOT/scripts/schemathesis.toml" run "$URL/openapi.json" --checks all -n "$EXAMPLES" \
+# scripts/schemathesis_hooks.py gives every valid request id a fresh value (see there).
+(cd "$WORK" && PYTHONPATH="$ROOT/scripts" SCHEMATHESIS_HOOKS=schemathesis_hooks "$ST" --config-file "$ROOT/scripts/schemathesis.toml" run "$URL/openapi.json" --checks all -n "$EXAMPLES" \
     --header "Authorization: Bearer $TOKEN" --seed 1 --no-color) || status=$?
 log "finished in $(( $(date +%s) - started )) s with status $status"
 if [ "$status" -ne 0 ]; then

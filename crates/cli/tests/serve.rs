@@ -465,3 +465,66 @@ fn serve_asks_a_failed_llm_endpoint_again_after_the_pause() {
     assert!(asked() > before);
     assert_eq!(reply["strategy"], "llm+model/p-yesno/mock");
 }
+
+/// A fleet of two `ferret serve` replicas on one PostgreSQL database: one is killed with SIGKILL
+/// in the middle of a burst of robots, which carry on against the other, retrying with their
+/// request ids. Every acknowledged observation is stored exactly once, every deployment holds
+/// exactly the trials its robot started, and no robot gets an error. Needs a PostgreSQL server
+/// (`FERRET_TEST_POSTGRES`; `scripts/postgres.sh start` starts a throwaway one).
+#[test]
+fn a_replica_killed_mid_burst_loses_and_doubles_no_acknowledged_observation() {
+    let Ok(pg) = std::env::var("FERRET_TEST_POSTGRES") else {
+        eprintln!(
+            "skipped: set FERRET_TEST_POSTGRES to a PostgreSQL URL (eval \"$(scripts/postgres.sh start)\" starts a throwaway server and sets it)"
+        );
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let houses = dir.path().join("houses.jsonl");
+    let out = ferret(&[
+        "generate",
+        "--count",
+        "12",
+        "--seed",
+        "4",
+        "--out",
+        s(&houses),
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    let out = ferret(&[
+        "bench",
+        "serve",
+        "--houses",
+        s(&houses),
+        "--strategies",
+        STRATEGIES,
+        "--deployments",
+        "24",
+        "--trials",
+        "12",
+        "--replicas",
+        "2",
+        "--db",
+        &pg,
+        "--kill-replica-after",
+        "0.4",
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    let line: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(line["killed_after_s"].as_f64().is_some(), "{line}");
+    // The kill interrupted robots: some requests had to go to the other replica.
+    assert!(line["retries"].as_u64().unwrap() > 0, "{line}");
+    assert!(
+        line["verified_observations"].as_u64().unwrap() > 100,
+        "{line}"
+    );
+    for field in [
+        "errors",
+        "lost_observations",
+        "duplicated_observations",
+        "mismatched_deployments",
+    ] {
+        assert_eq!(line[field], 0, "{field}: {line}");
+    }
+}

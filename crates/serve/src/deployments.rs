@@ -58,6 +58,25 @@ impl Service {
             .collect()
     }
 
+    /// The candidates of a stored deployment. A strategy this server does not offer means the
+    /// deployment was made by a server started with other strategies (another replica, or this
+    /// one before a restart): the server's configuration is at fault, not the request.
+    pub(crate) fn stored_candidates(
+        &self,
+        id: i64,
+        spec: &DeploymentSpec,
+    ) -> Result<Vec<Arc<dyn Strategy>>, ApiError> {
+        self.candidates_of(spec).map_err(|e| {
+            ApiError::unavailable(
+                "",
+                format!(
+                    "deployment {id} was made with a strategy this server does not offer ({}); replicas sharing a database must be started with the same --strategies",
+                    e.message
+                ),
+            )
+        })
+    }
+
     /// `POST /deployments`.
     pub fn create_deployment(
         &self,

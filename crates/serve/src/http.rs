@@ -367,7 +367,7 @@ async fn get_deployment(State(s): State<Arc<Service>>, Id(id, _): Id<DeploymentI
 #[utoipa::path(post, path = "/deployments/{id}/trials", request_body = StartTrial,
     params(("id" = i64, Path, description = "Deployment id", minimum = 1)),
     responses((status = 201, body = TrialState),
-        (status = 404, description = "No such deployment or scene", body = ErrorBody),
+        (status = 404, description = "No such deployment", body = ErrorBody),
         (status = 503, description = "A strategy could not plan (an LLM endpoint is down); retry later", body = ErrorBody)))]
 async fn start_trial(
     State(s): State<Arc<Service>>,
@@ -389,7 +389,7 @@ async fn get_trial(State(s): State<Arc<Service>>, Id(trial, _): Id<TrialId>) -> 
     operation_id = "observe",
     params(("id" = i64, Path, description = "Trial id", minimum = 1)),
     responses((status = 200, body = TrialState),
-        (status = 404, description = "No such trial, or no such container in its scene", body = ErrorBody),
+        (status = 404, description = "No such trial", body = ErrorBody),
         (status = 503, description = "A strategy could not plan (an LLM endpoint is down); retry later", body = ErrorBody)))]
 async fn post_observation(
     State(s): State<Arc<Service>>,

@@ -53,8 +53,16 @@ impl Service {
                 ),
             ));
         }
-        let placed = self.placed(&req.scene, req.pose)?;
-        let candidates = self.candidates_of(&spec)?;
+        // The route's resource is the deployment (404 when missing); a scene named in the body
+        // that does not exist makes the body unusable: 422.
+        let placed = self.placed(&req.scene, req.pose).map_err(|e| {
+            if e.kind == ErrorKind::NotFound {
+                ApiError::new(ErrorKind::Invalid, e.field, e.message)
+            } else {
+                e
+            }
+        })?;
+        let candidates = self.stored_candidates(deployment, &spec)?;
         let trial = TrialSpec {
             target: ObjectType::new(req.target.clone()),
             revealed: Vec::new(),
@@ -154,7 +162,7 @@ impl Service {
     fn stored_trial(&self, row: &StoredTrial) -> Result<LoadedTrial, ApiError> {
         let observations = self.store.read(|r| r.observations(row.id))?;
         let spec = self.spec(row.deployment)?;
-        let candidates = self.candidates_of(&spec)?;
+        let candidates = self.stored_candidates(row.deployment, &spec)?;
         let strategy = candidates.get(row.chosen).cloned().ok_or_else(|| {
             ApiError::internal(format!("trial {}: no strategy {}", row.id, row.chosen))
         })?;
@@ -244,7 +252,7 @@ impl Service {
         let house = &placed.house;
         let c = house.container_index(&req.container).ok_or_else(|| {
             ApiError::new(
-                ErrorKind::NotFound,
+                ErrorKind::Invalid,
                 "container",
                 format!(
                     "{:?} is not a container of scene {:?}",

@@ -284,7 +284,7 @@ async fn bad_input_is_a_4xx_naming_the_field() {
         (
             format!("/deployments/{id}/trials"),
             json!({"scene": "attic", "target": "Wallet"}),
-            404,
+            422,
             "scene",
         ),
         (
@@ -308,7 +308,7 @@ async fn bad_input_is_a_4xx_naming_the_field() {
         (
             format!("/trials/{tid}/observations"),
             json!({"container": "piano", "found": false}),
-            404,
+            422,
             "container",
         ),
         (
@@ -428,6 +428,20 @@ async fn a_retried_request_changes_nothing_and_a_reused_id_is_refused() {
         .await;
     assert_eq!(st, 422, "the same id with another body: {reply}");
     assert_eq!(reply["error"]["field"], "request_id");
+    // Any text is an id, NUL included (which PostgreSQL text cannot hold), and names with NUL
+    // name nothing.
+    let nul = json!({"request_id": "dep\u{0}2", "seed": 4});
+    let (a, first_nul) = s.post("/deployments", nul.clone()).await;
+    let (b, again_nul) = s.post("/deployments", nul).await;
+    assert_eq!((a, b), (201, 201), "{first_nul}");
+    assert_eq!(first_nul, again_nul);
+    let (st, reply) = s
+        .post(
+            &format!("/deployments/{}/trials", first_nul["id"]),
+            json!({"scene": "fl\u{0}at", "target": "Wallet"}),
+        )
+        .await;
+    assert_eq!(st, 422, "{reply}");
     let id = first["id"].as_i64().unwrap();
     let start = json!({"request_id": "t-1", "scene": "flat", "target": "Wallet"});
     let (_, t1) = s

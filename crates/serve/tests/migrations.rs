@@ -146,5 +146,8 @@ fn a_postgres_database_at_version_1_is_migrated_and_a_newer_one_refused() {
     .expect("a newer schema is refused");
     assert!(matches!(e, StoreError::Schema { .. }), "{e}");
     assert!(e.to_string().contains("upgrade every replica"), "{e}");
-    assert!(e.to_string().contains("postgres://"), "names the database: {e}");
+    assert!(
+        e.to_string().contains("postgres://"),
+        "names the database: {e}"
+    );
 }

@@ -552,7 +552,7 @@ impl Writer<'_> {
         self.conn.execute(
             "INSERT INTO requests (id, fingerprint, status, body) VALUES ($1, $2, $3, $4)",
             &[
-                id.into(),
+                request_key(id).as_ref().into(),
                 reply.fingerprint.as_str().into(),
                 stored_code(reply.outcome).into(),
                 reply.body.as_str().into(),
@@ -560,6 +560,20 @@ impl Writer<'_> {
         )?;
         Ok(())
     }
+}
+
+/// How a request id is stored: as given, unless it holds NUL, which PostgreSQL text cannot.
+/// Such an id is stored as the hex of its bytes behind 201 `~`: longer than any id the API
+/// takes (200 characters), so it never equals an id stored as given.
+fn request_key(id: &str) -> std::borrow::Cow<'_, str> {
+    if !id.contains('\0') {
+        return std::borrow::Cow::Borrowed(id);
+    }
+    let mut key = "~".repeat(201);
+    for b in id.bytes() {
+        key.push_str(&format!("{b:02x}"));
+    }
+    std::borrow::Cow::Owned(key)
 }
 
 /// A trial to store.
@@ -645,6 +659,10 @@ impl Reader<'_> {
     /// # Errors
     /// The database refuses.
     pub fn scene(&self, name: &str) -> Result<Option<String>, StoreError> {
+        // Stored names are printable ASCII; PostgreSQL cannot even compare text holding NUL.
+        if name.contains('\0') {
+            return Ok(None);
+        }
         self.conn
             .query_opt("SELECT body FROM scenes WHERE name = $1", &[name.into()])?
             .map(|r| self.conn.some_text(&r, 0, "scene body"))
@@ -808,7 +826,7 @@ impl Reader<'_> {
         let c = &self.conn;
         c.query_opt(
             "SELECT fingerprint, status, body FROM requests WHERE id = $1",
-            &[id.into()],
+            &[request_key(id).as_ref().into()],
         )?
         .map(|r| {
             Ok(StoredReply {

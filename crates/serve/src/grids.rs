@@ -7,7 +7,7 @@ use std::collections::HashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 
-use ferret_world::distance;
+use ferret_world::distance::{self, Place};
 use ferret_world::{Distances, GridParams, House, OccupancyGrid, Point, Pose, Scene};
 
 use crate::error::{ApiError, ErrorKind};
@@ -24,14 +24,56 @@ pub const MAX_YAW_DEG: f64 = 360.0;
 pub(crate) struct Placed {
     pub(crate) house: House,
     pub(crate) distances: Distances,
+    /// Paths between places already traced for replies: tracing one searches the grid, and a
+    /// fleet's robots are sent along the same few legs again and again.
+    paths: Mutex<HashMap<(Place, Place), FloorPath>>,
 }
 
+/// A traced path: `[x, y]` corners on the floor.
+pub(crate) type FloorPath = Arc<[[f64; 2]]>;
+
+/// Paths a placed scene keeps (about 10 corners of 16 bytes each): at most about 1 MiB.
+const KEPT_PATHS: usize = 4096;
+
 impl Placed {
-    /// Memory it holds, roughly: two bytes per grid cell, the distance matrix, the house.
+    pub(crate) fn new(house: House, distances: Distances) -> Self {
+        Self {
+            house,
+            distances,
+            paths: Mutex::default(),
+        }
+    }
+
+    /// Memory it holds, roughly: two bytes per grid cell, the distance matrix, the house, and
+    /// room for the paths it keeps.
     fn bytes(&self) -> usize {
         let n = self.house.containers.len() + 1;
         let cells = self.distances.grid().map_or(0, OccupancyGrid::cell_count);
-        cells * 2 + n * n * 8 + n * 64 + 64 * 1024
+        cells * 2 + n * n * 8 + n * 64 + 64 * 1024 + (1 << 20)
+    }
+
+    /// The path from `from` to `to` as `[x, y]` corners on the floor (empty without a grid).
+    pub(crate) fn path(&self, from: Place, to: Place) -> FloorPath {
+        let lock = || {
+            self.paths
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+        };
+        if let Some(p) = lock().get(&(from, to)) {
+            return p.clone();
+        }
+        let traced: FloorPath = self
+            .distances
+            .path(from, to)
+            .unwrap_or_default()
+            .iter()
+            .map(|p| [p.x, p.z])
+            .collect();
+        let mut paths = lock();
+        if paths.len() < KEPT_PATHS {
+            paths.insert((from, to), traced.clone());
+        }
+        traced
     }
 }
 
@@ -246,7 +288,7 @@ impl Grids {
         if let Some(pose) = pose {
             check_shift(&grid, &house, pose, field)?;
         }
-        Ok(Arc::new(Placed { house, distances }))
+        Ok(Arc::new(Placed::new(house, distances)))
     }
 
     /// The scene `name` with the robot at `pose` (cached per pose), `load` reading the scene
@@ -365,7 +407,7 @@ impl Grids {
         };
         check_shift(&grid, &house, pose, "pose")?;
         let distances = base.distances.with_start(&house, &grid).map_err(invalid)?;
-        Ok(Arc::new(Placed { house, distances }))
+        Ok(Arc::new(Placed::new(house, distances)))
     }
 
     fn lock_cache(&self) -> MutexGuard<'_, GridCache> {

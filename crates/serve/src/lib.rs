@@ -20,6 +20,7 @@ pub mod http;
 pub mod model;
 mod replies;
 mod scenes;
+mod searches;
 pub mod server;
 pub mod service;
 pub mod store;

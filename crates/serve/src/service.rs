@@ -61,6 +61,10 @@ pub struct ServiceOptions {
     /// One scene's work takes one at a time, so with two or more a heavy scene never holds up
     /// the others.
     pub concurrent_builds: usize,
+    /// Searches of open trials kept between requests (see `searches`), at most this many; 0
+    /// rebuilds every search from the store. An exact planner's table is up to 8 MiB (16
+    /// containers), so this bounds that memory too.
+    pub live_searches: usize,
 }
 
 impl Default for ServiceOptions {
@@ -71,6 +75,7 @@ impl Default for ServiceOptions {
             // At least two, so that one scene's work (which holds one at a time) never holds
             // every other scene's up.
             concurrent_builds: std::thread::available_parallelism().map_or(2, |n| n.get().max(2)),
+            live_searches: 64,
         }
     }
 }
@@ -92,6 +97,8 @@ pub struct Service {
     pub(crate) options: ServiceOptions,
     pub(crate) scenes: RwLock<Scenes>,
     pub(crate) grids: Grids,
+    /// Open trials' searches kept between requests.
+    pub(crate) searches: crate::searches::Searches,
     /// Request ids being run on this replica now.
     pub(crate) in_flight: std::sync::Mutex<std::collections::HashSet<String>>,
 }
@@ -175,6 +182,7 @@ impl Service {
             }),
             grids: Grids::new(grid, options.grid_cache_bytes, options.concurrent_builds),
             in_flight: std::sync::Mutex::default(),
+            searches: crate::searches::Searches::new(options.live_searches),
         })
     }
 
@@ -193,6 +201,12 @@ impl Service {
     /// it is used (or again after the cache dropped it), for monitoring.
     pub fn grids_built(&self) -> u64 {
         self.grids.built()
+    }
+
+    /// Open trials whose search is kept between requests now (at most
+    /// [`ServiceOptions::live_searches`]).
+    pub fn live_searches(&self) -> usize {
+        self.searches.len()
     }
 
     /// The scenes with a grid in the cache, each once, sorted.

@@ -18,6 +18,7 @@ use crate::model::{
     ApiReply, DeploymentSpec, Outcome, StoredObservation, StoredTrial, TrialStatus,
 };
 use crate::replies::Begun;
+use crate::searches::{LiveSearch, Owner};
 use crate::service::{Service, json};
 use crate::store::NewTrial;
 
@@ -85,13 +86,20 @@ impl Service {
             let chosen = self
                 .deployment(&spec, &trials, candidates.clone())?
                 .choose_overlapping();
-            let next = {
-                let problem = SearchProblem::new(&placed.house, &placed.distances, &trial);
-                let mut search = Search::start(candidates[chosen].as_ref(), &problem, None)
-                    .map_err(plan_error)?;
-                let c = search.next_container().map_err(plan_error)?;
-                c.map(|c| next_container(&placed, Place::Start, c))
+            let owner = Owner {
+                placed: placed.clone(),
+                trial: trial.clone(),
+                strategy: candidates[chosen].clone(),
             };
+            let mut live = LiveSearch::try_new(owner, |o| {
+                let problem = SearchProblem::new(&o.placed.house, &o.placed.distances, &o.trial);
+                Search::start(o.strategy.as_ref(), &problem, None).map_err(plan_error)
+            })?;
+            let next = live
+                .with_dependent_mut(|_, search| search.next_container())
+                .map_err(plan_error)?
+                .map(|c| next_container(&placed, Place::Start, c));
+            let mut created = None;
             let k = trials.len() as i64 + 1;
             let started = self.idempotent(req.request_id.as_deref(), &route, body, |w| {
                 w.lock_deployment(deployment)?;
@@ -115,6 +123,7 @@ impl Service {
                     chosen,
                     started_after: snapshot.ended,
                 })?;
+                created = Some(id);
                 json(
                     Outcome::Created,
                     &TrialState {
@@ -133,6 +142,9 @@ impl Service {
                     },
                 )
             });
+            if let (Ok(_), Some(id)) = (&started, created) {
+                self.searches.keep(id, 0, live);
+            }
             match started {
                 Err(e) if is_stale(&e) => {
                     tracing::debug!(
@@ -261,14 +273,11 @@ impl Service {
             )
         })?;
         let target = &t.trial.target;
-        let mut search = t.search()?;
-        if search.belief().is_searched(c) {
-            return Err(ApiError::new(
-                ErrorKind::Conflict,
-                "container",
-                format!("{:?} was already searched in trial {id}", req.container),
-            ));
-        }
+        // The search this replica kept after the trial's last reply, else one rebuilt.
+        let mut live = match self.searches.take(id, observations.len()) {
+            Some(live) => live,
+            None => t.live_search()?,
+        };
         let mut seen: Vec<ObjectType> = req
             .objects
             .iter()
@@ -277,7 +286,29 @@ impl Service {
         if req.found && !seen.contains(target) {
             seen.push(target.clone());
         }
-        let leg = search.record(c, seen).map_err(plan_error)?;
+        let (leg, cost, upcoming) = live.with_dependent_mut(|_, search| {
+            if search.belief().is_searched(c) {
+                return Err(ApiError::new(
+                    ErrorKind::Conflict,
+                    "container",
+                    format!("{:?} was already searched in trial {id}", req.container),
+                ));
+            }
+            let leg = search.record(c, seen).map_err(plan_error)?;
+            let cost = search.belief().travelled();
+            let upcoming = if req.found {
+                None
+            } else {
+                let from = search.belief().position();
+                Some(
+                    search
+                        .next_container()
+                        .map_err(plan_error)?
+                        .map(|n| (from, n)),
+                )
+            };
+            Ok((leg, cost, upcoming))
+        })?;
         let observation = StoredObservation {
             container: req.container.clone(),
             found: req.found,
@@ -285,7 +316,6 @@ impl Service {
             travelled: req.travelled_m,
             leg,
         };
-        let cost = search.belief().travelled();
         let (status, next, replays) = if req.found {
             let truth = hindsight_truth(house, target, c).map_err(plan_error)?;
             let trials = self.store.read(|r| r.trials_of(row.deployment))?;
@@ -300,9 +330,8 @@ impl Service {
                 .map_err(plan_error)?;
             (TrialStatus::Done, None, Some(replays))
         } else {
-            let from = search.belief().position();
-            match search.next_container().map_err(plan_error)? {
-                Some(n) => (
+            match upcoming.flatten() {
+                Some((from, n)) => (
                     TrialStatus::Searching,
                     Some(next_container(placed, from, n)),
                     None,
@@ -310,7 +339,7 @@ impl Service {
                 None => (TrialStatus::Exhausted, None, None),
             }
         };
-        self.idempotent(req.request_id.as_deref(), &route, body, |w| {
+        let reply = self.idempotent(req.request_id.as_deref(), &route, body, |w| {
             // Every write of a deployment's trials holds its row: the order trials end in is
             // the deployment's history, and one observation per sequence number is kept.
             w.lock_deployment(row.deployment)?;
@@ -348,7 +377,13 @@ impl Service {
                 Outcome::Done,
                 &trial_state(&updated, spec, &all, cost, next.clone()),
             )
-        })
+        });
+        if reply.is_ok() && status == TrialStatus::Searching {
+            self.searches.keep(id, observations.len() + 1, live);
+        } else {
+            self.searches.forget(id);
+        }
+        reply
     }
 }
 /// How often a trial's start is planned again when its deployment keeps changing under it.
@@ -396,6 +431,18 @@ struct LoadedTrial {
 }
 
 impl LoadedTrial {
+    /// The trial's search replayed up to its last observation, owning what it borrows.
+    fn live_search(&self) -> Result<LiveSearch, ApiError> {
+        let owner = Owner {
+            placed: self.placed.clone(),
+            trial: self.trial.clone(),
+            strategy: self.strategy.clone(),
+        };
+        LiveSearch::try_new(owner, |o| {
+            rebuild(o.strategy.as_ref(), &o.placed, &o.trial, &self.observations)
+        })
+    }
+
     /// The trial's search, replayed up to its last observation.
     fn search(&self) -> Result<Search<'_>, ApiError> {
         rebuild(
@@ -477,12 +524,6 @@ fn next_container(placed: &Placed, from: Place, c: usize) -> NextContainer {
         x: container.position.x,
         y: container.position.z,
         distance_m: placed.distances.between(from, to),
-        path: placed
-            .distances
-            .path(from, to)
-            .unwrap_or_default()
-            .iter()
-            .map(|p| [p.x, p.z])
-            .collect(),
+        path: placed.path(from, to).to_vec(),
     }
 }

@@ -593,3 +593,57 @@ async fn a_restarted_service_resumes_every_open_trial() {
     }
     assert_eq!(results, reference);
 }
+
+/// A search kept between requests answers exactly as one rebuilt from the store on every
+/// request: the same deployment driven twice, once with kept searches and once without, gets
+/// the same replies byte for byte.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_kept_search_answers_as_one_rebuilt_from_the_store() {
+    let mut runs = Vec::new();
+    for keep in [64, 0] {
+        let options = ServiceOptions {
+            live_searches: keep,
+            ..ServiceOptions::default()
+        };
+        let s = start_with(None, None, options, ServeOptions::default()).await;
+        let (_, scene) = s.get("/scenes/flat").await;
+        let contents = |id: &str| -> Vec<Value> {
+            scene["containers"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|c| c["id"] == id)
+                .map(|c| c["contents"].as_array().unwrap().clone())
+                .unwrap_or_default()
+        };
+        let (_, dep) = s.post("/deployments", json!({"seed": 2})).await;
+        let mut replies = Vec::new();
+        for target in TARGETS.iter().chain(TARGETS.iter()) {
+            let (st, mut t) = s
+                .post(
+                    &format!("/deployments/{}/trials", dep["id"]),
+                    json!({"scene": "flat", "target": target}),
+                )
+                .await;
+            assert_eq!(st, 201, "{t}");
+            replies.push(t.clone());
+            while t["status"] == "searching" {
+                let next = t["next"]["container"].as_str().unwrap().to_string();
+                let seen = contents(&next);
+                let found = seen.iter().any(|o| o == target);
+                let (st, reply) = s
+                    .post(
+                        &format!("/trials/{}/observations", t["trial"]),
+                        json!({"container": next, "found": found, "objects": seen}),
+                    )
+                    .await;
+                assert_eq!(st, 200, "{reply}");
+                replies.push(reply.clone());
+                t = reply;
+            }
+        }
+        runs.push(replies);
+    }
+    assert!(runs[0].len() > 20, "{}", runs[0].len());
+    assert_eq!(runs[0], runs[1]);
+}

@@ -107,6 +107,23 @@ pub fn run(cmd: Command) -> Result<ExitCode> {
 }
 
 #[derive(Serialize)]
+struct KindLine {
+    reply: &'static str,
+    count: usize,
+    p50_ms: f64,
+    p99_ms: f64,
+    max_ms: f64,
+}
+
+/// What a reply answered, for latencies by kind.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Reply {
+    Start,
+    Step,
+    End,
+}
+
+#[derive(Serialize)]
 struct ServeLine {
     replicas: usize,
     database: String,
@@ -121,6 +138,9 @@ struct ServeLine {
     next_p50_ms: f64,
     next_p99_ms: f64,
     next_max_ms: f64,
+    /// The same per kind of reply: a trial's start, an observation that leaves it searching, the
+    /// observation that ends it (which replays every candidate).
+    by_reply: Vec<KindLine>,
     /// SQLite only: the file and its log.
     database_mib: Option<f64>,
     /// Replica killed, and when.
@@ -306,17 +326,40 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
         let _ = child.wait();
     }
     let (robots, seconds, killed, verified) = outcome?;
-    let mut ms: Vec<f64> = robots
-        .iter()
-        .flat_map(|r| r.latencies.iter())
-        .map(|d| d.as_secs_f64() * 1e3)
-        .collect();
-    ms.sort_by(f64::total_cmp);
-    let pick = |q: f64| {
+    let sorted = |kind: Option<Reply>| {
+        let mut ms: Vec<f64> = robots
+            .iter()
+            .flat_map(|r| r.latencies.iter())
+            .filter(|(k, _)| kind.is_none_or(|kind| *k == kind))
+            .map(|(_, d)| d.as_secs_f64() * 1e3)
+            .collect();
+        ms.sort_by(f64::total_cmp);
+        ms
+    };
+    let quantile = |ms: &[f64], q: f64| {
         ms.get(((ms.len() as f64 - 1.0) * q).round() as usize)
             .copied()
             .unwrap_or(f64::NAN)
     };
+    let ms = sorted(None);
+    let pick = |q: f64| quantile(&ms, q);
+    let by_kind: Vec<KindLine> = [
+        (Reply::Start, "start"),
+        (Reply::Step, "step"),
+        (Reply::End, "end"),
+    ]
+    .into_iter()
+    .map(|(kind, name)| {
+        let ms = sorted(Some(kind));
+        KindLine {
+            reply: name,
+            count: ms.len(),
+            p50_ms: quantile(&ms, 0.5),
+            p99_ms: quantile(&ms, 0.99),
+            max_ms: ms.last().copied().unwrap_or(f64::NAN),
+        }
+    })
+    .collect();
     let requests: usize = robots.iter().map(|r| r.requests).sum();
     let errors: usize = robots.iter().map(|r| r.errors).sum::<usize>() + verified.errors;
     let size = |p: &std::path::Path| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
@@ -337,6 +380,7 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
         next_p50_ms: pick(0.5),
         next_p99_ms: pick(0.99),
         next_max_ms: ms.last().copied().unwrap_or(f64::NAN),
+        by_reply: by_kind,
         database_mib: (!ferret_serve::is_postgres_url(&db)).then(|| {
             let file = std::path::PathBuf::from(&db);
             let wal = std::path::PathBuf::from(format!("{db}-wal"));
@@ -366,6 +410,12 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
             line.retries,
             line.errors,
         );
+        for k in &line.by_reply {
+            println!(
+                "  {:<5} {:>6} replies: p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms",
+                k.reply, k.count, k.p50_ms, k.p99_ms, k.max_ms
+            );
+        }
         if let Some(k) = line.killed_after_s {
             println!("replica 0 killed (SIGKILL) after {k:.1} s");
         }
@@ -484,7 +534,7 @@ struct Robot {
     id: usize,
     /// Writes so far, for request ids.
     writes: usize,
-    latencies: Vec<std::time::Duration>,
+    latencies: Vec<(Reply, std::time::Duration)>,
     requests: usize,
     retries: usize,
     errors: usize,
@@ -554,7 +604,16 @@ impl Robot {
                 continue;
             };
             if status.is_success() {
-                self.latencies.push(t.elapsed());
+                let kind = if value["status"] == "searching" {
+                    if path.ends_with("/trials") {
+                        Reply::Start
+                    } else {
+                        Reply::Step
+                    }
+                } else {
+                    Reply::End
+                };
+                self.latencies.push((kind, t.elapsed()));
                 return Some(value);
             }
             // 409: the same request in flight (on a replica that may have died) or the

@@ -53,11 +53,7 @@ async fn start_with(
         let service =
             Service::with_options(store, GridParams::default(), strategies(), service_options)
                 .unwrap();
-        let scene = SceneFile::parse(SCENE, Path::new("flat.json"))
-            .unwrap()
-            .to_scene(Path::new("flat.json"), None)
-            .unwrap();
-        service.add_scene("flat", scene).unwrap();
+        service.add_scene("flat", support::flat()).unwrap();
         service
     });
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();

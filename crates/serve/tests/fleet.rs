@@ -9,20 +9,16 @@ use std::collections::BTreeSet;
 use std::sync::Arc;
 
 use ferret_serve::{HttpOptions, ServeOptions, Service};
-use ferret_world::{GridParams, SceneFile};
+use ferret_world::GridParams;
 use serde_json::{Value, json};
-use support::{SCENE, TARGETS, strategies};
+use support::{TARGETS, strategies};
 
 /// A replica: its own service, store (pool and claims session) and port.
 async fn replica(url: &str) -> (String, tokio::task::JoinHandle<()>) {
     let service = tokio::task::block_in_place(|| {
         let service =
             Service::new(support::connect(url), GridParams::default(), strategies()).unwrap();
-        let scene = SceneFile::parse(SCENE, std::path::Path::new("flat.json"))
-            .unwrap()
-            .to_scene(std::path::Path::new("flat.json"), None)
-            .unwrap();
-        service.add_scene("flat", scene).unwrap();
+        service.add_scene("flat", support::flat()).unwrap();
         service
     });
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
@@ -56,6 +52,10 @@ fn contents(container: &str) -> Vec<&'static str> {
         "dresser" => vec!["Wallet"],
         _ => vec![],
     }
+}
+
+async fn get(client: &reqwest::Client, url: &str) -> Value {
+    client.get(url).send().await.unwrap().json().await.unwrap()
 }
 
 /// A robot's view of what happened: its trials and the observations acknowledged in each.
@@ -151,15 +151,14 @@ async fn two_replicas_share_a_deployment_without_losing_or_doubling_a_trial() {
     let (b, hb) = replica(&url).await;
     let urls = Arc::new(vec![a.clone(), b.clone()]);
     let client = reqwest::Client::new();
-    let dep: Value = client
-        .post(format!("{a}/deployments"))
-        .json(&json!({"seed": 3}))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let dep = post(
+        &client,
+        &[a.clone()],
+        &mut || 0,
+        "/deployments",
+        json!({"seed": 3}),
+    )
+    .await;
     assert_eq!(dep["sequential"], false, "{dep}");
     let id = dep["id"].as_i64().unwrap();
     let (robots, trials) = (8u64, 3usize);
@@ -171,14 +170,7 @@ async fn two_replicas_share_a_deployment_without_losing_or_doubling_a_trial() {
         acked.extend(r.await.unwrap());
     }
     // Read back through the other replica than the one that created the deployment.
-    let state: Value = client
-        .get(format!("{b}/deployments/{id}"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let state = get(&client, &format!("{b}/deployments/{id}")).await;
     let stored = state["trials"].as_array().unwrap();
     assert_eq!(stored.len(), robots as usize * trials, "{state}");
     let ks: Vec<i64> = stored.iter().map(|t| t["k"].as_i64().unwrap()).collect();
@@ -202,14 +194,7 @@ async fn two_replicas_share_a_deployment_without_losing_or_doubling_a_trial() {
         "the selector learned each found trial once"
     );
     for (trial, searched) in &acked {
-        let t: Value = client
-            .get(format!("{a}/trials/{trial}"))
-            .send()
-            .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
+        let t = get(&client, &format!("{a}/trials/{trial}")).await;
         let stored: Vec<String> = t["searched"]
             .as_array()
             .unwrap()

@@ -92,26 +92,6 @@ fn an_sqlite_file_of_a_newer_server_is_refused() {
     assert!(message.contains("new.sqlite"), "{message}");
 }
 
-/// Runs `sql` on the PostgreSQL database at `url`.
-fn psql(url: &str, sql: &str) {
-    let (url, sql) = (url.to_string(), sql.to_string());
-    std::thread::spawn(move || {
-        let rt = tokio::runtime::Builder::new_current_thread()
-            .enable_all()
-            .build()
-            .unwrap();
-        rt.block_on(async move {
-            let (client, connection) = tokio_postgres::connect(&url, tokio_postgres::NoTls)
-                .await
-                .unwrap();
-            tokio::spawn(connection);
-            client.batch_execute(&sql).await.unwrap();
-        });
-    })
-    .join()
-    .unwrap();
-}
-
 #[test]
 fn a_postgres_database_at_version_1_is_migrated_and_a_newer_one_refused() {
     let Some(url) = support::postgres_or_skip("postgres migrations") else {
@@ -122,7 +102,7 @@ fn a_postgres_database_at_version_1_is_migrated_and_a_newer_one_refused() {
         .replace("INTEGER", "BIGINT")
         .replace("REAL", "DOUBLE PRECISION")
         .replace("found BIGINT", "found BOOLEAN");
-    psql(
+    support::psql(
         &url,
         &format!(
             "{v1} CREATE TABLE ferret_schema (version BIGINT NOT NULL);
@@ -133,7 +113,7 @@ fn a_postgres_database_at_version_1_is_migrated_and_a_newer_one_refused() {
     assert_eq!(store.schema_version().unwrap(), SCHEMA_VERSION);
     assert_eq!(order(&store), expected());
     drop(store);
-    psql(
+    support::psql(
         &url,
         &format!("UPDATE ferret_schema SET version = {}", SCHEMA_VERSION + 1),
     );

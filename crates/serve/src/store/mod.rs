@@ -25,6 +25,19 @@ pub use postgres::PostgresOptions;
 /// in, for deployments whose trials overlap.
 pub const SCHEMA_VERSION: i64 = 2;
 
+/// Version 2 on both backends, once its columns exist: the trials of the first servers, one at a
+/// time per deployment, started after every earlier trial ended and ended in the order they
+/// started.
+const END_ORDER: &str = "
+    UPDATE trials SET started_after = (
+        SELECT count(*) FROM trials AS t
+        WHERE t.deployment = trials.deployment AND t.k < trials.k AND t.status <> 'searching');
+    UPDATE trials SET end_seq = (
+        SELECT count(*) FROM trials AS t
+        WHERE t.deployment = trials.deployment AND t.k <= trials.k AND t.status <> 'searching')
+    WHERE status <> 'searching';
+    CREATE UNIQUE INDEX trials_end_order ON trials (deployment, end_seq);";
+
 /// Storage failures (the database, not the request).
 #[derive(Debug, thiserror::Error)]
 pub enum StoreError {

@@ -16,8 +16,8 @@ use tokio_postgres::types::{IsNull, ToSql, Type, to_sql_checked};
 use super::{Row, SCHEMA_VERSION, StoreError, Value};
 
 /// Schema migrations, version `i + 1` at index `i` (the same versions as SQLite's).
-const MIGRATIONS: [&str; 2] = [
-    "CREATE TABLE scenes (name TEXT PRIMARY KEY, body TEXT NOT NULL);
+const MIGRATIONS: [&[&str]; 2] = [
+    &["CREATE TABLE scenes (name TEXT PRIMARY KEY, body TEXT NOT NULL);
     CREATE TABLE deployments (id BIGSERIAL PRIMARY KEY, spec TEXT NOT NULL);
     CREATE TABLE trials (
         id BIGSERIAL PRIMARY KEY,
@@ -31,17 +31,12 @@ const MIGRATIONS: [&str; 2] = [
         travelled DOUBLE PRECISION, leg DOUBLE PRECISION NOT NULL,
         PRIMARY KEY (trial, seq));
     CREATE TABLE requests (
-        id TEXT PRIMARY KEY, fingerprint TEXT NOT NULL, status BIGINT NOT NULL, body TEXT NOT NULL);",
-    "ALTER TABLE trials ADD COLUMN started_after BIGINT NOT NULL DEFAULT 0;
-    ALTER TABLE trials ADD COLUMN end_seq BIGINT;
-    UPDATE trials SET started_after = (
-        SELECT count(*) FROM trials AS t
-        WHERE t.deployment = trials.deployment AND t.k < trials.k AND t.status <> 'searching');
-    UPDATE trials SET end_seq = (
-        SELECT count(*) FROM trials AS t
-        WHERE t.deployment = trials.deployment AND t.k <= trials.k AND t.status <> 'searching')
-    WHERE status <> 'searching';
-    CREATE UNIQUE INDEX trials_end_order ON trials (deployment, end_seq);",
+        id TEXT PRIMARY KEY, fingerprint TEXT NOT NULL, status BIGINT NOT NULL, body TEXT NOT NULL);"],
+    &[
+        "ALTER TABLE trials ADD COLUMN started_after BIGINT NOT NULL DEFAULT 0;
+        ALTER TABLE trials ADD COLUMN end_seq BIGINT;",
+        super::END_ORDER,
+    ],
 ];
 
 /// The advisory lock every replica takes while it migrates, so two starting at once do not
@@ -266,11 +261,13 @@ impl Postgres {
             });
         }
         let from = usize::try_from(version).unwrap_or(0);
-        for (i, step) in MIGRATIONS.iter().enumerate().skip(from) {
-            c.batch(step).map_err(|e| StoreError::Schema {
-                db: self.db.clone(),
-                what: format!("migrating to schema version {}: {e}", i + 1),
-            })?;
+        for (i, steps) in MIGRATIONS.iter().enumerate().skip(from) {
+            for step in *steps {
+                c.batch(step).map_err(|e| StoreError::Schema {
+                    db: self.db.clone(),
+                    what: format!("migrating to schema version {}: {e}", i + 1),
+                })?;
+            }
         }
         if version != SCHEMA_VERSION {
             c.execute("DELETE FROM ferret_schema", &[])?;

@@ -14,8 +14,8 @@ use super::{Row, SCHEMA_VERSION, StoreError, Value};
 
 /// Schema migrations, version `i + 1` at index `i`. Version 1 is the schema of the first
 /// servers, written with `IF NOT EXISTS` so that it also describes their files.
-const MIGRATIONS: [&str; 2] = [
-    "CREATE TABLE IF NOT EXISTS scenes (
+const MIGRATIONS: [&[&str]; 2] = [
+    &["CREATE TABLE IF NOT EXISTS scenes (
         name TEXT PRIMARY KEY, body TEXT NOT NULL);
     CREATE TABLE IF NOT EXISTS deployments (
         id INTEGER PRIMARY KEY AUTOINCREMENT, spec TEXT NOT NULL);
@@ -31,17 +31,12 @@ const MIGRATIONS: [&str; 2] = [
         travelled REAL, leg REAL NOT NULL,
         PRIMARY KEY (trial, seq));
     CREATE TABLE IF NOT EXISTS requests (
-        id TEXT PRIMARY KEY, fingerprint TEXT NOT NULL, status INTEGER NOT NULL, body TEXT NOT NULL);",
-    "ALTER TABLE trials ADD COLUMN started_after INTEGER NOT NULL DEFAULT 0;
-    ALTER TABLE trials ADD COLUMN end_seq INTEGER;
-    UPDATE trials SET started_after = (
-        SELECT count(*) FROM trials AS t
-        WHERE t.deployment = trials.deployment AND t.k < trials.k AND t.status <> 'searching');
-    UPDATE trials SET end_seq = (
-        SELECT count(*) FROM trials AS t
-        WHERE t.deployment = trials.deployment AND t.k <= trials.k AND t.status <> 'searching')
-    WHERE status <> 'searching';
-    CREATE UNIQUE INDEX trials_end_order ON trials (deployment, end_seq);",
+        id TEXT PRIMARY KEY, fingerprint TEXT NOT NULL, status INTEGER NOT NULL, body TEXT NOT NULL);"],
+    &[
+        "ALTER TABLE trials ADD COLUMN started_after INTEGER NOT NULL DEFAULT 0;
+        ALTER TABLE trials ADD COLUMN end_seq INTEGER;",
+        super::END_ORDER,
+    ],
 ];
 
 pub(super) struct Sqlite {
@@ -289,12 +284,14 @@ fn migrate(conn: &mut Connection, file: &str) -> Result<(), StoreError> {
         });
     }
     let from = usize::try_from(version).unwrap_or(0);
-    for (i, step) in MIGRATIONS.iter().enumerate().skip(from) {
-        tx.execute_batch(step)
-            .map_err(|source| StoreError::Schema {
-                db: file.to_string(),
-                what: format!("migrating to schema version {}: {source}", i + 1),
-            })?;
+    for (i, steps) in MIGRATIONS.iter().enumerate().skip(from) {
+        for step in *steps {
+            tx.execute_batch(step)
+                .map_err(|source| StoreError::Schema {
+                    db: file.to_string(),
+                    what: format!("migrating to schema version {}: {source}", i + 1),
+                })?;
+        }
     }
     if version != SCHEMA_VERSION || recorded != SCHEMA_VERSION {
         tx.pragma_update(None, "user_version", SCHEMA_VERSION)

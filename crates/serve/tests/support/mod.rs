@@ -50,24 +50,37 @@ pub fn fresh_postgres() -> Option<String> {
     let (base, _) = admin
         .rsplit_once('/')
         .expect("FERRET_TEST_POSTGRES is a URL ending in /database");
-    let create = format!("CREATE DATABASE {name}");
-    let admin2 = admin.clone();
+    psql(&admin, &format!("CREATE DATABASE {name}"));
+    Some(format!("{base}/{name}"))
+}
+
+/// Runs `sql` on the PostgreSQL database at `url`, from a thread of its own (as [`connect`]).
+pub fn psql(url: &str, sql: &str) {
+    let (url, sql) = (url.to_string(), sql.to_string());
     std::thread::spawn(move || {
         let rt = tokio::runtime::Builder::new_current_thread()
             .enable_all()
             .build()
             .unwrap();
         rt.block_on(async move {
-            let (client, connection) = tokio_postgres::connect(&admin2, tokio_postgres::NoTls)
+            let (client, connection) = tokio_postgres::connect(&url, tokio_postgres::NoTls)
                 .await
                 .unwrap();
             tokio::spawn(connection);
-            client.batch_execute(&create).await.unwrap();
+            client.batch_execute(&sql).await.unwrap();
         });
     })
     .join()
     .unwrap();
-    Some(format!("{base}/{name}"))
+}
+
+/// The scene `flat` of [`SCENE`].
+pub fn flat() -> ferret_world::Scene {
+    let file = std::path::Path::new("flat.json");
+    ferret_world::SceneFile::parse(SCENE, file)
+        .unwrap()
+        .to_scene(file, None)
+        .unwrap()
 }
 
 /// The PostgreSQL server of `FERRET_TEST_POSTGRES`, or a message on stderr saying how to give

@@ -153,7 +153,7 @@ async fn two_replicas_share_a_deployment_without_losing_or_doubling_a_trial() {
     let client = reqwest::Client::new();
     let dep = post(
         &client,
-        &[a.clone()],
+        std::slice::from_ref(&a),
         &mut || 0,
         "/deployments",
         json!({"seed": 3}),

@@ -66,7 +66,8 @@ pub struct Args {
     /// prior). Every strategy is always compared with the first one and with the best.
     #[arg(long, value_delimiter = ',', value_name = "STRATEGY")]
     pub paired_against: Vec<String>,
-    /// House (index) whose trajectories are drawn; the first house when not given.
+    /// House (index) whose trajectories are drawn; the first house when not given. Shards draw
+    /// no pictures: they record it for `ferret merge`, which draws them.
     #[arg(long)]
     pub show_house: Option<usize>,
     /// Run one shard of the houses: `i/n` runs the houses whose index in their file is i modulo
@@ -135,7 +136,9 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
             None => anyhow::bail!("no houses to evaluate in {}", loaded.source),
         }
     }
+    // A shard draws no pictures and may not hold the house: the merge draws it.
     if let Some(i) = args.show_house
+        && shard.is_none()
         && !loaded.scenes.iter().any(|s| s.house.index == i)
     {
         anyhow::bail!(

@@ -265,7 +265,7 @@ pub fn evaluate_specs_each(
     let batch = (rayon::current_num_threads() * HOUSES_PER_THREAD_IN_FLIGHT).max(1);
     feedback.begin("houses", scenes.len());
     for chunk in scenes.chunks(batch) {
-        let done: Vec<(Mapped, (Vec<TrialRow>, Vec<String>, usize))> = chunk
+        let done: Vec<(Mapped, HouseRun)> = chunk
             .par_iter()
             .map(|scene| {
                 let map = ferret_world::distance::build(&scene.house, grid);
@@ -296,12 +296,15 @@ pub fn evaluate_specs_each(
     Ok(totals)
 }
 
+/// One house's rows, failure messages and trials drawn.
+type HouseRun = (Vec<TrialRow>, Vec<String>, usize);
+
 fn evaluate_house(
     scene: &Scene,
     map: &Mapped,
     strategies: &[Arc<dyn Strategy>],
     draw: &TrialDraw<'_>,
-) -> (Vec<TrialRow>, Vec<String>, usize) {
+) -> HouseRun {
     let (_, distances) = match map {
         Ok(m) => m,
         Err(e) => return (vec![], vec![e.to_string()], 0),

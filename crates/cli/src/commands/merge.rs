@@ -16,8 +16,9 @@ use super::eval::{Pictures, SHARD_CACHE, Shown, draw_pictures, no_trajectories};
 
 /// Merge the shards of an evaluation (`ferret eval --shard i/n --out DIR_i`) into one run:
 /// trials.csv in the order one machine writes it (byte for byte the same file), summary.csv,
-/// paired.csv and summary.md made from it as `ferret eval` makes them, and run.json listing the
-/// shards. Refuses shards run with different settings, a shard given twice, houses in two shards
+/// paired.csv and summary.md made from it as `ferret eval` makes them, costs.png and
+/// trajectories.png drawn as it draws them (shards draw none; the shown house is read again from
+/// the house file), and run.json listing the shards. Refuses shards run with different settings, a shard given twice, houses in two shards
 /// and missing shards, naming the directories. Each shard's LLM cache (DIR_i/llm-cache.sqlite,
 /// and every --cache) is merged into one (insert-or-ignore by key); a key that two caches
 /// answer differently is listed and makes the exit status 1. `select` and `calibrate` then read

@@ -9,7 +9,6 @@ use ferret_lab::Feedback;
 use indicatif::{ProgressBar, ProgressStyle};
 
 pub use crate::args::{GridArgs, HouseArgs, ProtocolArgs};
-pub use ferret_lab::Mapped;
 pub use ferret_lab::strategies::check_distinct;
 
 /// Sends `tracing` output to stderr; `-v` raises the level, `RUST_LOG` overrides.

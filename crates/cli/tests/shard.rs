@@ -39,13 +39,26 @@ fn shards_equal_one_machine(args: &[&str], n: usize) {
     m.extend(shards.iter().rev().map(|d| s(d)));
     let o = ferret(&m);
     assert!(o.status.success(), "{}", text(&o));
-    for f in ["trials.csv", "summary.csv", "paired.csv", "summary.md"] {
+    // The pictures too: shards draw none, the merge draws the one machine's.
+    for f in [
+        "trials.csv",
+        "summary.csv",
+        "paired.csv",
+        "summary.md",
+        "costs.png",
+        "trajectories.png",
+    ] {
         let a = std::fs::read(one.join(f)).unwrap();
         let b = std::fs::read(merged.join(f)).unwrap();
         assert!(
             a == b,
             "{f} differs between one machine and {n} shards merged ({args:?})"
         );
+    }
+    for d in &shards {
+        for f in ["paired.csv", "costs.png", "trajectories.png"] {
+            assert!(!d.join(f).exists(), "a shard wrote {f}");
+        }
     }
     let info = common::read_json(&merged.join("run.json"));
     assert_eq!(info["merged_from"].as_array().map(Vec::len), Some(n));
@@ -68,7 +81,15 @@ fn three_shards_merged_are_one_machine_byte_for_byte() {
         3,
     );
     shards_equal_one_machine(
-        &["--generate", "7", "--trials-per-house", "2", "--cells"],
+        &[
+            "--generate",
+            "7",
+            "--trials-per-house",
+            "2",
+            "--cells",
+            "--show-house",
+            "5",
+        ],
         4,
     );
 }

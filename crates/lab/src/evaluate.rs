@@ -11,7 +11,7 @@ use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::feedback::Feedback;
-use crate::houses::{Mapped, build_maps};
+use crate::houses::Mapped;
 use crate::runs::TrialRow;
 use crate::strategies::{LlmSettings, Strategies, prefetch};
 
@@ -55,10 +55,20 @@ impl TrialDraw<'_> {
         scenes: &'s [Scene],
         maps: &[Mapped],
     ) -> Vec<(&'s House, ObjectType)> {
+        let mapped: Vec<bool> = maps.iter().map(Result::is_ok).collect();
+        self.targets_where(scenes, &mapped)
+    }
+
+    /// [`targets`](Self::targets) of the houses whose `mapped` entry is true.
+    pub fn targets_where<'s>(
+        &self,
+        scenes: &'s [Scene],
+        mapped: &[bool],
+    ) -> Vec<(&'s House, ObjectType)> {
         scenes
             .iter()
-            .zip(maps)
-            .filter(|(_, m)| m.is_ok())
+            .zip(mapped)
+            .filter(|(_, m)| **m)
             .flat_map(|(s, _)| {
                 self.trials(s)
                     .unwrap_or_default()
@@ -115,8 +125,6 @@ pub fn evaluate(
 
 /// An evaluation of strategy specs, with what it was run on.
 pub struct SpecEvaluation {
-    /// Every house's map (or why it has none), in the houses' order.
-    pub maps: Vec<Mapped>,
     /// The strategies that ran, in the order of the specs: those of an LLM that failed are left
     /// out under `keep_going`.
     pub strategies: Vec<Arc<dyn Strategy>>,
@@ -124,9 +132,8 @@ pub struct SpecEvaluation {
     pub evaluation: Evaluation,
 }
 
-/// Evaluates the strategies `specs` of `setup` on `scenes` mapped on `grid`, as `ferret eval`
-/// does: the strategies built, the maps built, every LLM question of the drawn trials asked
-/// before the trials run (through the response cache), then [`evaluate`].
+/// Evaluates the strategies `specs` of `setup` on `scenes` mapped on `grid`, keeping every row:
+/// [`evaluate_specs_each`] collecting what it hands over.
 ///
 /// Errors: a spec the registry cannot build, and the errors of prefetching LLM answers.
 pub fn evaluate_specs(
@@ -138,32 +145,166 @@ pub fn evaluate_specs(
     llm: &LlmSettings,
     feedback: &dyn Feedback,
 ) -> Result<SpecEvaluation> {
+    let mut rows = Vec::new();
+    let run = evaluate_specs_each(scenes, setup, specs, draw, grid, llm, feedback, &mut |h| {
+        rows.extend(h.rows);
+        Ok(())
+    })?;
+    Ok(SpecEvaluation {
+        strategies: run.strategies,
+        evaluation: Evaluation {
+            rows,
+            errors: run.errors,
+            houses_run: run.houses_run,
+            trials_run: run.trials_run,
+        },
+    })
+}
+
+/// One house evaluated, as [`evaluate_specs_each`] hands it over. Its map is dropped when the
+/// callback returns: a caller that needs it later (to draw the house) clones it.
+pub struct HouseOutcome<'a> {
+    /// The house.
+    pub scene: &'a Scene,
+    /// Its map, or why it has none.
+    pub map: &'a Mapped,
+    /// One row per trial and strategy that finished, in the one-machine order.
+    pub rows: Vec<TrialRow>,
+    /// One message per failure on this house.
+    pub errors: &'a [String],
+    /// Trials (house and target) drawn on it.
+    pub trials: usize,
+    /// The strategies that ran, by name, in the order of the specs.
+    pub strategies: &'a [String],
+}
+
+impl HouseOutcome<'_> {
+    /// Whether every strategy that ran finished a trial here (a house that can show every
+    /// trajectory).
+    pub fn every_strategy_finished(&self) -> bool {
+        self.map.is_ok()
+            && self
+                .strategies
+                .iter()
+                .all(|s| self.rows.iter().any(|r| &r.strategy == s))
+    }
+}
+
+/// What an evaluation handed house by house leaves besides its rows.
+#[derive(Clone, Default)]
+pub struct EvaluationTotals {
+    /// The strategies that ran, in the order of the specs.
+    pub strategies: Vec<Arc<dyn Strategy>>,
+    /// One message per house or trial that failed, houses in order.
+    pub errors: Vec<String>,
+    /// Houses with a map and a target.
+    pub houses_run: usize,
+    /// Trials (house and target) drawn on those houses.
+    pub trials_run: usize,
+}
+
+/// Houses mapped and evaluated at once per worker thread: what bounds the maps in memory. A
+/// batch ends when its slowest house does, so batches much larger than the threads keep every
+/// thread busy most of the time.
+const HOUSES_PER_THREAD_IN_FLIGHT: usize = 8;
+
+/// Evaluates the strategies `specs` of `setup` on `scenes` mapped on `grid`, as `ferret eval`
+/// does, handing each house's rows to `each` in house order as houses finish: the strategies
+/// built, every LLM question of the drawn trials asked before the trials run (through the
+/// response cache), then the houses mapped and run in parallel a batch at a time. Only a batch's
+/// maps and rows are in memory at once, so a caller that writes the rows out (a [`RunWriter`])
+/// runs any number of houses in the same memory.
+///
+/// [`RunWriter`]: crate::runs::RunWriter
+///
+/// Errors: a spec the registry cannot build, the errors of prefetching LLM answers, and the
+/// first error of `each` (which stops the evaluation).
+#[allow(clippy::too_many_arguments)]
+pub fn evaluate_specs_each(
+    scenes: &[Scene],
+    setup: &Strategies,
+    specs: &[String],
+    draw: &TrialDraw<'_>,
+    grid: &GridParams,
+    llm: &LlmSettings,
+    feedback: &dyn Feedback,
+    each: &mut dyn FnMut(HouseOutcome<'_>) -> Result<()>,
+) -> Result<EvaluationTotals> {
     let built: Vec<Arc<dyn Strategy>> = specs
         .iter()
         .map(|s| setup.registry.build(s))
         .collect::<std::result::Result<_, _>>()?;
-    let maps = build_maps(scenes, grid, feedback);
-    let targets = draw.targets(scenes, &maps);
-    let pairs: Vec<(&House, &ObjectType)> = targets.iter().map(|(h, t)| (*h, t)).collect();
-    let dropped = prefetch(&setup.service, llm, specs, &pairs, feedback)?;
+    let dropped = if crate::strategies::asks_llm(specs) {
+        // The questions are asked for the houses that have a map, all at once; the maps are
+        // built again with their batch rather than all kept.
+        feedback.begin("maps", scenes.len());
+        let mapped: Vec<bool> = scenes
+            .par_iter()
+            .map(|s| {
+                let ok = ferret_world::distance::build(&s.house, grid).is_ok();
+                feedback.tick();
+                ok
+            })
+            .collect();
+        feedback.end();
+        let targets = draw.targets_where(scenes, &mapped);
+        let pairs: Vec<(&House, &ObjectType)> = targets.iter().map(|(h, t)| (*h, t)).collect();
+        prefetch(&setup.service, llm, specs, &pairs, feedback)?
+    } else {
+        Vec::new()
+    };
     let strategies: Vec<Arc<dyn Strategy>> = built
         .into_iter()
         .filter(|s| !dropped.iter().any(|d| d == s.name()))
         .collect();
-    let evaluation = evaluate(scenes, &maps, &strategies, draw, feedback);
-    Ok(SpecEvaluation {
-        maps,
-        strategies,
-        evaluation,
-    })
+    let names: Vec<String> = strategies.iter().map(|s| s.name().to_string()).collect();
+    let mut totals = EvaluationTotals {
+        strategies: strategies.clone(),
+        ..EvaluationTotals::default()
+    };
+    let batch = (rayon::current_num_threads() * HOUSES_PER_THREAD_IN_FLIGHT).max(1);
+    feedback.begin("houses", scenes.len());
+    for chunk in scenes.chunks(batch) {
+        let done: Vec<(Mapped, HouseRun)> = chunk
+            .par_iter()
+            .map(|scene| {
+                let map = ferret_world::distance::build(&scene.house, grid);
+                let r = evaluate_house(scene, &map, &strategies, draw);
+                feedback.tick();
+                (map, r)
+            })
+            .collect();
+        for (scene, (map, (rows, errors, trials))) in chunk.iter().zip(done) {
+            totals.houses_run += usize::from(trials > 0);
+            totals.trials_run += trials;
+            let r = each(HouseOutcome {
+                scene,
+                map: &map,
+                rows,
+                errors: &errors,
+                trials,
+                strategies: &names,
+            });
+            totals.errors.extend(errors);
+            if let Err(e) = r {
+                feedback.end();
+                return Err(e);
+            }
+        }
+    }
+    feedback.end();
+    Ok(totals)
 }
+
+/// One house's rows, failure messages and trials drawn.
+type HouseRun = (Vec<TrialRow>, Vec<String>, usize);
 
 fn evaluate_house(
     scene: &Scene,
     map: &Mapped,
     strategies: &[Arc<dyn Strategy>],
     draw: &TrialDraw<'_>,
-) -> (Vec<TrialRow>, Vec<String>, usize) {
+) -> HouseRun {
     let (_, distances) = match map {
         Ok(m) => m,
         Err(e) => return (vec![], vec![e.to_string()], 0),

@@ -150,6 +150,46 @@ pub fn write_csv<T: Serialize>(path: &Path, rows: &[T]) -> Result<()> {
     write_bytes(path, csv_bytes(rows)?)
 }
 
+/// A file written a piece at a time and put in place whole: the same temporary file beside
+/// `path` as [`write_atomic`], for output too large to hold in memory first (an evaluation's
+/// trials, written as houses finish). Dropped without [`commit`](Self::commit), the temporary
+/// file is removed and `path` keeps what it held.
+#[derive(Debug)]
+pub struct AtomicFile {
+    tmp: tempfile::NamedTempFile,
+    path: std::path::PathBuf,
+}
+
+impl AtomicFile {
+    /// Starts writing `path`.
+    ///
+    /// # Errors
+    /// I/O errors creating the temporary file (the caller says which file).
+    pub fn create(path: &Path) -> std::io::Result<Self> {
+        Ok(Self {
+            tmp: temp_beside(path)?,
+            path: path.to_path_buf(),
+        })
+    }
+
+    /// A handle on the temporary file to write through (shares its position).
+    ///
+    /// # Errors
+    /// I/O errors duplicating the handle.
+    pub fn handle(&self) -> std::io::Result<File> {
+        self.tmp.as_file().try_clone()
+    }
+
+    /// Puts the written file in place of `path`, once its data reached the disk. Every writer on
+    /// a [`handle`](Self::handle) must have been flushed.
+    ///
+    /// # Errors
+    /// I/O errors syncing or renaming.
+    pub fn commit(self) -> std::io::Result<()> {
+        persist(self.tmp, &self.path)
+    }
+}
+
 /// Produces `path` atomically with a writer that only takes a path (picture backends): `draw`
 /// writes a temporary path in the same directory with the same extension, so that format
 /// detection by extension still works, and that file is then renamed to `path`.

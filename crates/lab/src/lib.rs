@@ -29,14 +29,17 @@ pub mod summary;
 
 pub use deploy::{DeploySettings, DeployedTrial, deploy, house_order};
 pub use error::{LabError, Result};
-pub use evaluate::{Evaluation, SpecEvaluation, TrialDraw, evaluate, evaluate_specs, trial_row};
+pub use evaluate::{
+    Evaluation, EvaluationTotals, HouseOutcome, SpecEvaluation, TrialDraw, evaluate,
+    evaluate_specs, evaluate_specs_each, trial_row,
+};
 pub use feedback::{Feedback, Silent};
 pub use ferret_select::HouseOrder;
 pub use houses::{HouseSource, LoadedHouses, Mapped, build_maps};
-pub use runs::{CELL_M, EvalRun, RunInfo, TrialRow, sha256_hex};
+pub use runs::{CELL_M, EvalRun, RunInfo, RunWriter, TrialRow, WrittenRun, sha256_hex};
 pub use shard::{MergeError, MergedRun, Shard, ShardError, ShardSpec, merge_runs};
 pub use strategies::{
     DEFAULT_STRATEGIES, LlmSettings, PlanningSettings, Strategies, full_registry,
     full_registry_with,
 };
-pub use summary::{PairedRow, SummaryRow, paired_comparisons, summarize};
+pub use summary::{CostTable, PairedRow, SummaryRow, paired_comparisons, summarize};

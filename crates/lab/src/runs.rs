@@ -12,8 +12,8 @@ use crate::error::{Context, LabError, Result};
 use crate::houses::HouseSource;
 use crate::strategies::PlanningSettings;
 use crate::summary::{
-    PairedRow, SummaryRow, cells_markdown, paired_comparisons, paired_markdown, reference_means,
-    reference_means_markdown, summarize, summary_markdown,
+    CostTable, PairedRow, SummaryRow, cells_markdown, paired_comparisons_of, paired_markdown,
+    reference_means_markdown, reference_means_of, summarize_costs, summary_markdown,
 };
 
 /// One row of `trials.csv`.
@@ -192,48 +192,14 @@ impl EvalRun {
     /// The summary (the paper's table I), the paired comparisons and `summary.md` of this run,
     /// as `ferret eval` writes them; `view` says what the run's files cannot.
     pub fn report(&self, view: &ReportView<'_>) -> RunReport {
-        let info = &self.info;
-        let mut summary = summarize(&self.rows, &info.strategies);
-        if view.cells {
-            summary = summary.into_iter().map(SummaryRow::with_cells).collect();
-        }
-        let paired =
-            paired_comparisons(&self.rows, &info.strategies, view.paired_against, info.seed);
-        let mut markdown = summary_markdown(
-            &summary,
-            view.source,
-            view.houses_run,
-            info.trials_per_house,
-            view.trials_run,
-        );
-        if view.cells {
-            markdown += &cells_markdown(&summary);
-        }
-        if info.protocol.rng == ferret_plan::TrialRng::Python
-            && info.trials_per_house == TrialsPerHouse::One
-        {
-            markdown += &reference_means_markdown(&reference_means(
-                &self.rows,
-                &info.strategies,
-                view.houses,
-            ));
-        }
-        markdown += &paired_markdown(&paired);
-        RunReport {
-            summary,
-            paired,
-            markdown,
-        }
+        run_report(&self.info, &CostTable::from_rows(&self.rows), view)
     }
 
     /// Writes every file of an evaluation into `dir`: `summary.csv`, `paired.csv`, `summary.md`
-    /// of `report`, then the run itself ([`EvalRun::write`]). `ferret eval` and the Python
-    /// package's `Evaluation.save` both write through here, so their directories hold the same
-    /// files.
+    /// of `report`, then the run itself ([`EvalRun::write`]). `ferret eval`'s streaming writer
+    /// ([`RunWriter`]) and the Python package's `Evaluation.save` write the same files.
     pub fn write_all(&self, dir: &Path, report: &RunReport) -> Result<()> {
-        crate::files::write_csv(&dir.join("summary.csv"), &report.summary)?;
-        crate::files::write_csv(&dir.join("paired.csv"), &report.paired)?;
-        crate::files::write_bytes(&dir.join("summary.md"), &report.markdown)?;
+        write_report(dir, &self.info, report)?;
         self.write(dir)
     }
 
@@ -266,6 +232,233 @@ impl EvalRun {
             run_json,
             trials_csv,
         })
+    }
+}
+
+/// The report of a run described by `info` whose rows' costs are `costs`: the summary (the
+/// paper's table I), the paired comparisons and `summary.md`.
+///
+/// A shard's report has no paired comparisons: its bootstrap over a part of the trials is
+/// thrown away when `ferret merge` compares all of them, and it is most of the report's cost, so
+/// every shard would repeat a third of the one machine's work for nothing. Its summary.md says
+/// so.
+pub fn run_report(info: &RunInfo, costs: &CostTable, view: &ReportView<'_>) -> RunReport {
+    let mut summary = summarize_costs(costs, &info.strategies);
+    if view.cells {
+        summary = summary.into_iter().map(SummaryRow::with_cells).collect();
+    }
+    let paired = if info.shard.is_some() {
+        Vec::new()
+    } else {
+        paired_comparisons_of(costs, &info.strategies, view.paired_against, info.seed)
+    };
+    let mut markdown = summary_markdown(
+        &summary,
+        view.source,
+        view.houses_run,
+        info.trials_per_house,
+        view.trials_run,
+    );
+    if view.cells {
+        markdown += &cells_markdown(&summary);
+    }
+    if info.protocol.rng == ferret_plan::TrialRng::Python
+        && info.trials_per_house == TrialsPerHouse::One
+    {
+        markdown +=
+            &reference_means_markdown(&reference_means_of(costs, &info.strategies, view.houses));
+    }
+    match &info.shard {
+        Some(sh) => {
+            markdown += &format!(
+                "\nShard {}/{}: the paired comparisons (and the pictures) are made by `ferret merge` over every shard.\n",
+                sh.index, sh.count
+            );
+        }
+        None => markdown += &paired_markdown(&paired),
+    }
+    RunReport {
+        summary,
+        paired,
+        markdown,
+    }
+}
+
+/// Files a shard does not write (see [`run_report`]); one left in its directory by an earlier
+/// run there would be taken for this run's.
+const NOT_IN_A_SHARD: [&str; 3] = ["paired.csv", "costs.png", "trajectories.png"];
+
+/// Writes `summary.csv`, `paired.csv` (not for a shard) and `summary.md` of `report` into `dir`.
+fn write_report(dir: &Path, info: &RunInfo, report: &RunReport) -> Result<()> {
+    crate::files::write_csv(&dir.join("summary.csv"), &report.summary)?;
+    if info.shard.is_some() {
+        for f in NOT_IN_A_SHARD {
+            match std::fs::remove_file(dir.join(f)) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                    return Err(LabError::io(
+                        format!("removing the stale {f} in {}", dir.display()),
+                        e,
+                    ));
+                }
+                _ => {}
+            }
+        }
+    } else {
+        crate::files::write_csv(&dir.join("paired.csv"), &report.paired)?;
+    }
+    crate::files::write_bytes(&dir.join("summary.md"), &report.markdown)
+}
+
+/// Writes an evaluation run as its trials finish: each row goes to `trials.csv` (a temporary
+/// file until [`finish`](Self::finish)) and only its cost stays in memory ([`CostTable`]), so
+/// that an evaluation's memory does not grow with its houses. The files are those of
+/// [`EvalRun::new`] and [`EvalRun::write_all`], byte for byte.
+pub struct RunWriter {
+    dir: PathBuf,
+    file: crate::files::AtomicFile,
+    csv: csv::Writer<HashingWriter<std::io::BufWriter<std::fs::File>>>,
+    costs: CostTable,
+    cells: bool,
+}
+
+impl std::fmt::Debug for RunWriter {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RunWriter")
+            .field("dir", &self.dir)
+            .field("rows", &self.costs.len())
+            .field("cells", &self.cells)
+            .finish_non_exhaustive()
+    }
+}
+
+impl RunWriter {
+    /// Starts a run in `dir` (which must exist); with `cells`, rows get their cost in 0.05 m
+    /// cells (`cost_cells`). Nothing in `dir` changes until [`finish`](Self::finish).
+    ///
+    /// # Errors
+    /// I/O errors creating the temporary trials file.
+    pub fn create(dir: &Path, cells: bool) -> Result<Self> {
+        let path = dir.join("trials.csv");
+        let io = |e| LabError::io(format!("writing {}", path.display()), e);
+        let file = crate::files::AtomicFile::create(&path).map_err(io)?;
+        let handle = file.handle().map_err(io)?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            file,
+            csv: csv::Writer::from_writer(HashingWriter::new(std::io::BufWriter::new(handle))),
+            costs: CostTable::default(),
+            cells,
+        })
+    }
+
+    /// Appends a finished trial.
+    ///
+    /// # Errors
+    /// I/O errors writing it.
+    pub fn push(&mut self, row: &TrialRow) -> Result<()> {
+        self.costs.push(row);
+        let result = if self.cells {
+            self.csv.serialize(TrialRow {
+                cost_cells: Some(row.cost_m / CELL_M),
+                ..row.clone()
+            })
+        } else {
+            self.csv.serialize(row)
+        };
+        result.map_err(|source| LabError::Csv {
+            context: format!("writing {}", self.dir.join("trials.csv").display()),
+            source,
+        })
+    }
+
+    /// Rows written so far.
+    pub fn rows(&self) -> usize {
+        self.costs.len()
+    }
+
+    /// The costs of the rows written so far.
+    pub fn costs(&self) -> &CostTable {
+        &self.costs
+    }
+
+    /// Writes the report of the run `info` describes (its `trials_sha256` set to the written
+    /// trials'), then puts `trials.csv` in place and writes `run.json`, in the order of
+    /// [`EvalRun::write_all`]. Returns the report, the costs and run.json as written.
+    ///
+    /// # Errors
+    /// I/O errors; then `trials.csv` and `run.json` keep what they held.
+    pub fn finish(self, mut info: RunInfo, view: &ReportView<'_>) -> Result<WrittenRun> {
+        let trials_path = self.dir.join("trials.csv");
+        let io = |e| LabError::io(format!("writing {}", trials_path.display()), e);
+        let hashing = self
+            .csv
+            .into_inner()
+            .map_err(|e| io(std::io::Error::other(e.error().to_string())))?;
+        let (buffered, sha) = hashing.finish();
+        buffered.into_inner().map_err(|e| io(e.into_error()))?;
+        info.trials_sha256 = Some(sha);
+        let run_json = serde_json::to_string_pretty(&info)
+            .map_err(|source| LabError::Json {
+                context: "writing run.json".into(),
+                source,
+            })?
+            .into_bytes();
+        let report = run_report(&info, &self.costs, view);
+        write_report(&self.dir, &info, &report)?;
+        self.file.commit().map_err(io)?;
+        crate::files::write_bytes(&self.dir.join("run.json"), &run_json)?;
+        Ok(WrittenRun {
+            info,
+            report,
+            costs: self.costs,
+        })
+    }
+}
+
+/// What [`RunWriter::finish`] wrote.
+#[derive(Clone, Debug)]
+pub struct WrittenRun {
+    /// run.json.
+    pub info: RunInfo,
+    /// summary.csv, paired.csv and summary.md.
+    pub report: RunReport,
+    /// The costs of trials.csv's rows.
+    pub costs: CostTable,
+}
+
+/// A writer that hashes (SHA-256) what passes through it: trials.csv's hash for run.json
+/// without reading the file back.
+struct HashingWriter<W> {
+    inner: W,
+    hasher: sha2::Sha256,
+}
+
+impl<W: std::io::Write> HashingWriter<W> {
+    fn new(inner: W) -> Self {
+        use sha2::Digest;
+        Self {
+            inner,
+            hasher: sha2::Sha256::new(),
+        }
+    }
+
+    /// The writer and the lower-case hex hash of everything written.
+    fn finish(self) -> (W, String) {
+        use sha2::Digest;
+        (self.inner, format!("{:x}", self.hasher.finalize()))
+    }
+}
+
+impl<W: std::io::Write> std::io::Write for HashingWriter<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        use sha2::Digest;
+        let n = self.inner.write(buf)?;
+        self.hasher.update(&buf[..n]);
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
     }
 }
 

@@ -201,6 +201,10 @@ pub struct ShardRecord {
     /// Whether costs in grid cells were asked for (`--cells`).
     #[serde(default)]
     pub cells: bool,
+    /// The house whose trajectories the merged run shows (`--show-house`): shards draw no
+    /// pictures, the merge draws them once.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub show_house: Option<usize>,
 }
 
 /// One shard of a merged run, as the merged run.json lists it.
@@ -287,6 +291,8 @@ pub struct MergedRun {
     pub paired_against: Vec<String>,
     /// The shards' `--cells`.
     pub cells: bool,
+    /// The shards' `--show-house`.
+    pub show_house: Option<usize>,
 }
 
 impl MergedRun {
@@ -325,6 +331,7 @@ fn settings(info: &RunInfo) -> serde_json::Map<String, serde_json::Value> {
         v.insert("shard count".into(), s.count.into());
         v.insert("paired_against".into(), s.paired_against.clone().into());
         v.insert("cells".into(), s.cells.into());
+        v.insert("show_house".into(), s.show_house.into());
     }
     v
 }
@@ -464,6 +471,7 @@ pub fn merge_runs(shards: &[(PathBuf, EvalRun)]) -> Result<MergedRun, MergeError
         failures: records.iter().map(|(_, _, r)| r.failures).sum(),
         paired_against: rec0.paired_against.clone(),
         cells: rec0.cells,
+        show_house: rec0.show_house,
         run: EvalRun::new(info, rows).map_err(|e| MergeError::Inconsistent {
             dir: first_dir.clone(),
             message: e.to_string(),

@@ -256,6 +256,17 @@ pub fn full_registry_over(
     })
 }
 
+/// True when one of `specs` asks an LLM for probabilities, i.e. when [`prefetch`] has questions
+/// to ask (`fused/noise` is fused like an LLM source but asks nothing).
+pub fn asks_llm(specs: &[String]) -> bool {
+    specs.iter().any(|s| {
+        ferret_plan::StrategySpec::parse(s).is_ok_and(|spec| {
+            ferret_llm::asks_probabilities(&spec.kind)
+                && ferret_llm::control_source(&spec).is_none()
+        })
+    })
+}
+
 /// Asks every probability question of the `llm+model` strategies concurrently before trials
 /// run, so trials answer from the cache. When an endpoint fails (after its retries), the run
 /// stops with the endpoint's error, or, with `keep_going`, goes on without the strategies of
@@ -268,14 +279,7 @@ pub fn prefetch(
     trials: &[(&House, &ObjectType)],
     feedback: &dyn Feedback,
 ) -> Result<Vec<String>> {
-    // `fused/noise` is fused like an LLM source but asks nothing.
-    let asks = |s: &String| {
-        ferret_plan::StrategySpec::parse(s).is_ok_and(|spec| {
-            ferret_llm::asks_probabilities(&spec.kind)
-                && ferret_llm::control_source(&spec).is_none()
-        })
-    };
-    if !specs.iter().any(asks) {
+    if !asks_llm(specs) {
         return Ok(Vec::new());
     }
     feedback.begin("LLM questions", 0);

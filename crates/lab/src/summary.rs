@@ -59,6 +59,15 @@ pub fn reference_means(
     order: &[String],
     houses: &[usize],
 ) -> Vec<(String, f64)> {
+    reference_means_of(&CostTable::from_rows(rows), order, houses)
+}
+
+/// [`reference_means`] over a run's [`CostTable`].
+pub fn reference_means_of(
+    costs: &CostTable,
+    order: &[String],
+    houses: &[usize],
+) -> Vec<(String, f64)> {
     let counts = ferret_select::numpy::reference_draw_counts(houses.len(), 500, 100);
     let weight: HashMap<usize, f64> = houses
         .iter()
@@ -68,9 +77,9 @@ pub fn reference_means(
     order
         .iter()
         .filter_map(|s| {
-            let (sum, total) = rows
+            let (sum, total) = costs
                 .iter()
-                .filter(|r| &r.strategy == s)
+                .filter(|r| r.strategy == s)
                 .filter_map(|r| weight.get(&r.house_index).map(|w| (w * r.cost_m, *w)))
                 .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
             (total > 0.0).then(|| (s.clone(), sum / total))
@@ -111,13 +120,107 @@ pub fn cells_markdown(summary: &[SummaryRow]) -> String {
 /// same key ran the same trial, so their costs pair.
 pub type TrialKey<'a> = (usize, &'a str);
 
+/// What the statistics of a run read of each trial row: its strategy, house, target and cost,
+/// in the rows' order. A run too large to hold its rows keeps this instead: 24 bytes a row, the
+/// strategy and target names stored once.
+#[derive(Clone, Debug, Default)]
+pub struct CostTable {
+    names: Vec<String>,
+    ids: HashMap<String, u32>,
+    entries: Vec<CostEntry>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct CostEntry {
+    house_index: usize,
+    cost_m: f64,
+    strategy: u32,
+    target: u32,
+}
+
+/// One row of a [`CostTable`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CostRow<'a> {
+    /// Strategy spec.
+    pub strategy: &'a str,
+    /// House index in its file.
+    pub house_index: usize,
+    /// Target object type.
+    pub target: &'a str,
+    /// Distance travelled, metres.
+    pub cost_m: f64,
+}
+
+impl CostTable {
+    /// The table of `rows`, in their order.
+    pub fn from_rows(rows: &[TrialRow]) -> Self {
+        let mut t = Self::default();
+        for r in rows {
+            t.push(r);
+        }
+        t
+    }
+
+    /// Appends a row.
+    pub fn push(&mut self, row: &TrialRow) {
+        let strategy = self.id(&row.strategy);
+        let target = self.id(&row.target);
+        self.entries.push(CostEntry {
+            house_index: row.house_index,
+            cost_m: row.cost_m,
+            strategy,
+            target,
+        });
+    }
+
+    fn id(&mut self, name: &str) -> u32 {
+        if let Some(&i) = self.ids.get(name) {
+            return i;
+        }
+        // More distinct names than u32 holds cannot occur: each is a strategy or an object type.
+        let i = u32::try_from(self.names.len()).unwrap_or(u32::MAX);
+        self.names.push(name.to_string());
+        self.ids.insert(name.to_string(), i);
+        i
+    }
+
+    /// Rows held.
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    /// True when it holds no row.
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
+    /// The rows in order.
+    pub fn iter(&self) -> impl Iterator<Item = CostRow<'_>> + '_ {
+        let name = |i: u32| self.names.get(i as usize).map_or("", String::as_str);
+        self.entries.iter().map(move |e| CostRow {
+            strategy: name(e.strategy),
+            house_index: e.house_index,
+            target: name(e.target),
+            cost_m: e.cost_m,
+        })
+    }
+
+    /// The costs of `strategy`'s trials, in row order.
+    pub fn costs_of(&self, strategy: &str) -> Vec<f64> {
+        self.iter()
+            .filter(|r| r.strategy == strategy)
+            .map(|r| r.cost_m)
+            .collect()
+    }
+}
+
 /// Each strategy's cost per trial.
-fn costs_by_trial(rows: &[TrialRow]) -> BTreeMap<&str, BTreeMap<TrialKey<'_>, f64>> {
+fn costs_by_trial(costs: &CostTable) -> BTreeMap<&str, BTreeMap<TrialKey<'_>, f64>> {
     let mut by: BTreeMap<&str, BTreeMap<TrialKey<'_>, f64>> = BTreeMap::new();
-    for r in rows {
-        by.entry(r.strategy.as_str())
+    for r in costs.iter() {
+        by.entry(r.strategy)
             .or_default()
-            .insert((r.house_index, r.target.as_str()), r.cost_m);
+            .insert((r.house_index, r.target), r.cost_m);
     }
     by
 }
@@ -126,10 +229,15 @@ fn costs_by_trial(rows: &[TrialRow]) -> BTreeMap<&str, BTreeMap<TrialKey<'_>, f6
 /// improvement compares means over the paired trials only: the trials (house and target) that
 /// every strategy of `order` that finished any trial finished.
 pub fn summarize(rows: &[TrialRow], order: &[String]) -> Vec<SummaryRow> {
+    summarize_costs(&CostTable::from_rows(rows), order)
+}
+
+/// [`summarize`] over a run's [`CostTable`].
+pub fn summarize_costs(costs: &CostTable, order: &[String]) -> Vec<SummaryRow> {
     let mut by: BTreeMap<&str, Vec<f64>> = BTreeMap::new();
-    let by_house = costs_by_trial(rows);
-    for r in rows {
-        by.entry(r.strategy.as_str()).or_default().push(r.cost_m);
+    let by_house = costs_by_trial(costs);
+    for r in costs.iter() {
+        by.entry(r.strategy).or_default().push(r.cost_m);
     }
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
     let compared: Vec<&BTreeMap<TrialKey<'_>, f64>> = order
@@ -232,7 +340,17 @@ pub fn paired_comparisons(
     named: &[String],
     seed: u64,
 ) -> Vec<PairedRow> {
-    let by = costs_by_trial(rows);
+    paired_comparisons_of(&CostTable::from_rows(rows), order, named, seed)
+}
+
+/// [`paired_comparisons`] over a run's [`CostTable`].
+pub fn paired_comparisons_of(
+    costs: &CostTable,
+    order: &[String],
+    named: &[String],
+    seed: u64,
+) -> Vec<PairedRow> {
+    let by = costs_by_trial(costs);
     let present: Vec<&str> = order
         .iter()
         .map(String::as_str)

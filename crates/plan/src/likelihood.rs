@@ -161,16 +161,45 @@ struct Counts {
     /// present: the denominator of P(holds | the target is in the house).
     #[serde(default)]
     present: BTreeMap<ObjectType, u32>,
+    /// The sums over every type that [`any_type`](Self::any_type) reads.
+    #[serde(skip)]
+    totals: Totals,
+}
+
+/// Adds one to `t`'s count, cloning the type only when it is new (`entry` would clone it every
+/// time, and training counts every type of every house for every container in it).
+fn bump(counts: &mut BTreeMap<ObjectType, u32>, t: &ObjectType) {
+    match counts.get_mut(t) {
+        Some(n) => *n += 1,
+        None => {
+            counts.insert(t.clone(), 1);
+        }
+    }
+}
+
+/// The sums of [`Counts::holding`] and [`Counts::present`], computed on first use and forgotten
+/// whenever the counts change. Every question asks them of three counts, and summing a hundred
+/// types each time was most of training a prior (its cross-fitting asks hundreds of thousands of
+/// questions), paid again by every process that trains the default prior.
+#[derive(Clone, Debug, Default)]
+struct Totals(std::sync::OnceLock<(f64, f64)>);
+
+impl PartialEq for Totals {
+    /// A cache of what the counts say: never what makes two counts differ.
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
 }
 
 impl Counts {
     fn add(&mut self, held: &BTreeSet<ObjectType>, in_house: &BTreeSet<ObjectType>) {
+        self.totals = Totals::default();
         self.containers += 1;
         for t in held {
-            *self.holding.entry(t.clone()).or_default() += 1;
+            bump(&mut self.holding, t);
         }
         for t in in_house {
-            *self.present.entry(t.clone()).or_default() += 1;
+            bump(&mut self.present, t);
         }
     }
 
@@ -200,8 +229,12 @@ impl Counts {
     /// whatever is in its house (a counter holds more than a toilet), smoothed toward
     /// `back_off`. What the prior says about a type it never saw.
     fn any_type(&self, alpha: f64, back_off: f64) -> f64 {
-        let k: f64 = self.holding.values().map(|&v| f64::from(v)).sum();
-        let n: f64 = self.present.values().map(|&v| f64::from(v)).sum();
+        let &(k, n) = self.totals.0.get_or_init(|| {
+            (
+                self.holding.values().map(|&v| f64::from(v)).sum(),
+                self.present.values().map(|&v| f64::from(v)).sum(),
+            )
+        });
         if n + alpha <= 0.0 {
             return back_off;
         }
@@ -209,6 +242,7 @@ impl Counts {
     }
 
     fn forget(&mut self, hidden: &dyn Fn(&ObjectType) -> bool) {
+        self.totals = Totals::default();
         self.holding.retain(|t, _| !hidden(t));
         self.present.retain(|t, _| !hidden(t));
     }
@@ -358,10 +392,14 @@ impl Prior {
                 smoothing,
             );
             for scene in scenes.iter().skip(f).step_by(folds) {
+                // Each container's counts, looked up once for all the house's targets.
+                let kinds: Vec<(Option<&Counts>, Option<&Counts>)> =
+                    (0..scene.house.containers.len())
+                        .map(|c| counted.kind_counts(&scene.house, c))
+                        .collect();
                 for target in scene.truth.target_types() {
-                    for (c, container) in scene.house.containers.iter().enumerate() {
-                        let room = scene.house.container_room(c).map(|r| r.room_type.as_str());
-                        let p = counted.counted_probability(&target, &container.object_type, room);
+                    for (c, &(by_container, pair)) in kinds.iter().enumerate() {
+                        let p = counted.counted_from(&target, by_container, pair);
                         rows.push((
                             [crate::logistic::logit(p), 1.0],
                             scene.truth.holds(c, &target),
@@ -460,24 +498,42 @@ impl Prior {
         container: &ObjectType,
         room: Option<&str>,
     ) -> f64 {
+        let pair = room.and_then(|r| self.by_pair.get(&format!("{container}@{r}")));
+        self.counted_from(target, self.by_container.get(container), pair)
+    }
+
+    /// The counts of container `c`'s kind in `house`: of its type, and of its type in its room.
+    fn kind_counts(&self, house: &House, c: usize) -> (Option<&Counts>, Option<&Counts>) {
+        let Some(container) = house.containers.get(c) else {
+            return (None, None);
+        };
+        let room = house.container_room(c).map(|r| r.room_type.as_str());
+        (
+            self.by_container.get(&container.object_type),
+            room.and_then(|r| self.by_pair.get(&format!("{}@{r}", container.object_type))),
+        )
+    }
+
+    /// [`counted_probability`](Self::counted_probability) from the counts of the container's
+    /// type (`by_type`) and of its type in its room (`pair`).
+    fn counted_from(
+        &self,
+        target: &ObjectType,
+        by_type: Option<&Counts>,
+        pair: Option<&Counts>,
+    ) -> f64 {
         let a = self.smoothing.max(0.0);
         // The fallback of a prior that has seen nothing at all: the uniform source's value.
         let any = self.overall.any_type(0.0, Uniform::default().p.get());
         let ratio = |x: f64, y: f64| if y > 0.0 { x / y } else { 1.0 };
-        let any_c = self
-            .by_container
-            .get(container)
-            .map_or(any, |c| c.any_type(a, any));
-        let pair = room.and_then(|r| self.by_pair.get(&format!("{container}@{r}")));
+        let any_c = by_type.map_or(any, |c| c.any_type(a, any));
         let any_p = pair.map_or(any_c, |c| c.any_type(a, any_c));
         // Back-offs multiply relative rates: the target's rate over all containers scaled by how
         // much this kind of container holds, and that by how much more it holds in this room.
         let rate = self.overall.conditioned(target, a, any);
         let by_type = {
             let back_off = (any_c * ratio(rate, any)).clamp(0.0, 1.0);
-            self.by_container
-                .get(container)
-                .map_or(back_off, |c| c.conditioned(target, a, back_off))
+            by_type.map_or(back_off, |c| c.conditioned(target, a, back_off))
         };
         let back_off = (by_type * ratio(any_p, any_c)).clamp(0.0, 1.0);
         pair.map_or(back_off, |c| c.conditioned(target, a, back_off))

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use ferret_lab::runs::{CELL_M, EvalRun, ReportView, RunInfo, TrialRow};
+use ferret_lab::runs::{CELL_M, EvalRun, ReportView, RunInfo, RunWriter, TrialRow};
 use ferret_lab::shard::{SHARD_RULE, Shard, ShardRecord};
 use ferret_lab::{DEFAULT_STRATEGIES, TrialDraw};
 use ferret_llm::FailurePolicy;
@@ -102,7 +102,8 @@ impl PyEvaluation {
 
     /// Writes the files `ferret eval` writes into `dir` (created if missing): `trials.csv`
     /// with these rows, `summary.csv`, `paired.csv` (each strategy against the best, and against
-    /// each of `paired_against`), `summary.md`, and `run.json`, which names the houses' source,
+    /// each of `paired_against`; not for a shard, whose comparisons `merge` makes over all
+    /// shards), `summary.md`, and `run.json`, which names the houses' source,
     /// the prior, the planner, grid and protocol settings, so that `ferret.select(dir)` and
     /// `ferret select --trials dir` can replay the run. Possible when the houses come from one
     /// `load_houses` or `generate_houses` call and the prior is the default or a file; raises
@@ -135,22 +136,32 @@ impl PyEvaluation {
             failures: self.failures,
             paired_against: against.clone(),
             cells: self.cells,
+            show_house: None,
         });
-        let rows = self.rows.clone();
         py.allow_threads(|| {
             std::fs::create_dir_all(&dir).map_err(|e| {
                 errors::FerretError::new_err(format!("creating {}: {e}", dir.display()))
             })?;
-            let run = EvalRun::new(info, rows).map_err(errors::lab)?;
-            let report = run.report(&ReportView {
-                source: &self.source,
-                houses: &self.houses,
-                houses_run: self.houses_run,
-                trials_run: self.trials_run,
-                paired_against: &against,
-                cells: self.cells,
-            });
-            run.write_all(&dir, &report).map_err(errors::lab)
+            // Through the writer `ferret eval` streams its rows into, so that the files are the
+            // same; the rows already carry their cost in cells when asked for.
+            let mut writer = RunWriter::create(&dir, false).map_err(errors::lab)?;
+            for r in &self.rows {
+                writer.push(r).map_err(errors::lab)?;
+            }
+            writer
+                .finish(
+                    info,
+                    &ReportView {
+                        source: &self.source,
+                        houses: &self.houses,
+                        houses_run: self.houses_run,
+                        trials_run: self.trials_run,
+                        paired_against: &against,
+                        cells: self.cells,
+                    },
+                )
+                .map_err(errors::lab)?;
+            Ok(())
         })
     }
 

@@ -2,21 +2,20 @@
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::Result;
-use ferret_lab::runs::{CELL_M, EvalRun, ReportView, RunInfo, TrialRow};
+use ferret_lab::runs::{ReportView, RunInfo, RunWriter, TrialRow};
 use ferret_lab::shard::{SHARD_RULE, ShardRecord};
-use ferret_lab::{SpecEvaluation, TrialDraw, evaluate_specs};
-use ferret_plan::{Protocol, Strategy, TrialOutcome, TrialSpec, TrialsPerHouse};
+use ferret_lab::{CostTable, TrialDraw, evaluate_specs_each};
+use ferret_plan::{Protocol, TrialOutcome, TrialSpec, TrialsPerHouse};
 use ferret_report::{
     TrajectoryOptions, TrajectoryPanel, ViolinOptions, draw_trajectories, draw_violins,
 };
 use ferret_world::{Distances, Scene};
 
 pub use crate::args::PlanningArgs;
-use crate::common::{Bars, GridArgs, HouseArgs, Mapped, ProtocolArgs};
+use crate::common::{Bars, GridArgs, HouseArgs, ProtocolArgs};
 pub use ferret_lab::DEFAULT_STRATEGIES;
 
 /// A shard's LLM cache, in its run directory unless --llm-cache says otherwise.
@@ -67,7 +66,8 @@ pub struct Args {
     /// prior). Every strategy is always compared with the first one and with the best.
     #[arg(long, value_delimiter = ',', value_name = "STRATEGY")]
     pub paired_against: Vec<String>,
-    /// House (index) whose trajectories are drawn; the first house when not given.
+    /// House (index) whose trajectories are drawn; the first house when not given. Shards draw
+    /// no pictures: they record it for `ferret merge`, which draws them.
     #[arg(long)]
     pub show_house: Option<usize>,
     /// Run one shard of the houses: `i/n` runs the houses whose index in their file is i modulo
@@ -136,7 +136,9 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
             None => anyhow::bail!("no houses to evaluate in {}", loaded.source),
         }
     }
+    // A shard draws no pictures and may not hold the house: the merge draws it.
     if let Some(i) = args.show_house
+        && shard.is_none()
         && !loaded.scenes.iter().any(|s| s.house.index == i)
     {
         anyhow::bail!(
@@ -155,11 +157,11 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
     // Claimed before the evaluation, so that a second run into the same directory stops at
     // once rather than after its work, its files then replacing this one's.
     let mut out_lock = ferret_lab::files::DirLock::acquire(&args.out)?;
-    let SpecEvaluation {
-        maps,
-        strategies,
-        evaluation: outcome,
-    } = evaluate_specs(
+    // Rows go to trials.csv as houses finish and only their costs stay in memory; of the maps,
+    // only the shown house's is kept (a shard draws no pictures: the merge draws them once).
+    let mut writer = RunWriter::create(&args.out, args.cells)?;
+    let mut shown: Option<Shown> = None;
+    let totals = evaluate_specs_each(
         &loaded.scenes,
         &setup,
         &args.strategies,
@@ -167,23 +169,35 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
         &args.grid.params_for(protocol.access),
         &args.llm.settings(),
         &Bars::default(),
+        &mut |h| {
+            if shard.is_none()
+                && shown.is_none()
+                && args.show_house.is_none_or(|i| h.scene.house.index == i)
+                && h.every_strategy_finished()
+                && let Ok((_, distances)) = h.map
+            {
+                shown = Some(Shown {
+                    scene: h.scene.clone(),
+                    distances: distances.clone(),
+                    rows: h.rows.clone(),
+                });
+            }
+            for r in &h.rows {
+                writer.push(r)?;
+            }
+            Ok(())
+        },
     )?;
-    for e in &outcome.errors {
+    for e in &totals.errors {
         eprintln!("error: {e}");
     }
-    if outcome.rows.is_empty() {
+    if writer.rows() == 0 {
         anyhow::bail!(
             "no trial finished; {} was left as it was",
             args.out.display()
         );
     }
     out_lock.used();
-    let mut rows = outcome.rows.clone();
-    if args.cells {
-        for r in &mut rows {
-            r.cost_cells = Some(r.cost_m / CELL_M);
-        }
-    }
     let info = RunInfo {
         houses: args.houses.houses.clone(),
         range: args.houses.range.as_ref().map(ToString::to_string),
@@ -207,109 +221,141 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
             count: sh.count,
             rule: SHARD_RULE.into(),
             houses: loaded.scenes.iter().map(|s| s.house.index).collect(),
-            houses_run: outcome.houses_run,
-            trials_run: outcome.trials_run,
-            failures: outcome.errors.len(),
+            houses_run: totals.houses_run,
+            trials_run: totals.trials_run,
+            failures: totals.errors.len(),
             paired_against: args.paired_against.clone(),
             cells: args.cells,
+            show_house: args.show_house,
         }),
         merged_from: Vec::new(),
     };
-    let run = EvalRun::new(info, rows)?;
     let houses: Vec<usize> = loaded.scenes.iter().map(|s| s.house.index).collect();
-    let report = run.report(&ReportView {
-        source: &loaded.source,
-        houses: &houses,
-        houses_run: outcome.houses_run,
-        trials_run: outcome.trials_run,
-        paired_against: &args.paired_against,
-        cells: args.cells,
-    });
-    run.write_all(&args.out, &report)?;
-    let md = report.markdown;
-    let pictures = draw_pictures(&args, &loaded.scenes, &maps, &strategies, &outcome.rows)?;
-    println!("{md}");
+    let rows = writer.rows();
+    let written = writer.finish(
+        info,
+        &ReportView {
+            source: &loaded.source,
+            houses: &houses,
+            houses_run: totals.houses_run,
+            trials_run: totals.trials_run,
+            paired_against: &args.paired_against,
+            cells: args.cells,
+        },
+    )?;
+    let names: Vec<String> = totals
+        .strategies
+        .iter()
+        .map(|s| s.name().to_string())
+        .collect();
+    let pictures = if shard.is_some() {
+        Vec::new()
+    } else {
+        draw_pictures(
+            &Pictures {
+                out: &args.out,
+                strategies: &args.strategies,
+                ran: &names,
+                houses: loaded.scenes.len(),
+                seed: args.seed,
+            },
+            &written.costs,
+            shown.as_ref(),
+        )?
+    };
+    if shard.is_none() && shown.is_none() {
+        no_trajectories(args.show_house);
+    }
+    println!("{}", written.report.markdown);
     super::llm_setup::write_token_report(&setup.service, &args.out)?;
     super::llm_setup::check_fallback_gate(&setup.service, &args.llm)?;
     println!(
-        "{} trials on {} houses in {:.1} s; wrote {}/{{trials.csv,summary.csv,summary.md,paired.csv,run.json{}}}",
-        outcome.rows.len(),
-        outcome.houses_run,
+        "{} trials on {} houses in {:.1} s; wrote {}/{{trials.csv,summary.csv,summary.md{},run.json{}}}",
+        rows,
+        totals.houses_run,
         started.elapsed().as_secs_f64(),
         args.out.display(),
+        if shard.is_some() { "" } else { ",paired.csv" },
         pictures.iter().map(|p| format!(",{p}")).collect::<String>()
     );
-    if outcome.errors.is_empty() {
+    if totals.errors.is_empty() {
         Ok(ExitCode::SUCCESS)
     } else {
         eprintln!(
             "{} trial(s) failed; every finished trial was written",
-            outcome.errors.len()
+            totals.errors.len()
         );
         Ok(ExitCode::FAILURE)
     }
 }
 
-/// Draws `costs.png` and `trajectories.png`; returns the names of the pictures drawn.
-fn draw_pictures(
-    args: &Args,
-    scenes: &[Scene],
-    maps: &[Mapped],
-    strategies: &[Arc<dyn Strategy>],
-    rows: &[TrialRow],
+/// The house whose trajectories are drawn: the first (in house order) where every strategy that
+/// ran finished a trial, or `--show-house`; all of it that the picture needs.
+pub struct Shown {
+    /// The house.
+    pub scene: Scene,
+    /// Its distances (and routes).
+    pub distances: Distances,
+    /// Its rows.
+    pub rows: Vec<TrialRow>,
+}
+
+/// What the pictures of a run need besides its costs and the shown house.
+pub struct Pictures<'a> {
+    /// The run directory.
+    pub out: &'a Path,
+    /// The strategies asked for, in order (the violins').
+    pub strategies: &'a [String],
+    /// The strategies that ran (the trajectory panels').
+    pub ran: &'a [String],
+    /// Houses evaluated (the violin plot's title).
+    pub houses: usize,
+    /// The trial seed (the violins' jitter).
+    pub seed: u64,
+}
+
+/// Says why trajectories.png was not drawn: no house where every strategy finished (or not
+/// the `--show-house` one). A house whose trial could not be drawn has already been reported.
+pub fn no_trajectories(show_house: Option<usize>) {
+    match show_house {
+        Some(i) => eprintln!(
+            "--show-house {i}: not every strategy finished a trial on that house; trajectories.png not drawn"
+        ),
+        None => eprintln!("no house where every strategy finished; trajectories.png not drawn"),
+    }
+}
+
+/// Draws `costs.png` and `trajectories.png` (of `shown`, when there is one); returns the names
+/// of the pictures drawn. `ferret eval` and `ferret merge` draw through here, so a merged run's pictures are
+/// one machine's.
+pub fn draw_pictures(
+    p: &Pictures<'_>,
+    costs: &CostTable,
+    shown: Option<&Shown>,
 ) -> Result<Vec<&'static str>> {
     let mut drawn = Vec::new();
-    let series: Vec<(String, Vec<f64>)> = args
+    let series: Vec<(String, Vec<f64>)> = p
         .strategies
         .iter()
-        .map(|s| {
-            (
-                s.clone(),
-                rows.iter()
-                    .filter(|r| &r.strategy == s)
-                    .map(|r| r.cost_m)
-                    .collect(),
-            )
-        })
+        .map(|s| (s.clone(), costs.costs_of(s)))
         .filter(|(_, v): &(String, Vec<f64>)| !v.is_empty())
         .collect();
     if !series.is_empty() {
         let opts = ViolinOptions {
-            title: format!("Navigation cost per strategy ({} houses)", scenes.len()),
-            seed: args.seed,
+            title: format!("Navigation cost per strategy ({} houses)", p.houses),
+            seed: p.seed,
             ..ViolinOptions::default()
         };
-        crate::output::write_with_path(&args.out.join("costs.png"), |p| {
-            Ok(draw_violins(&series, &opts, p)?)
+        crate::output::write_with_path(&p.out.join("costs.png"), |path| {
+            Ok(draw_violins(&series, &opts, path)?)
         })?;
         drawn.push("costs.png");
     }
-    // Only a house where every strategy finished its trial can show all trajectories; one whose
-    // trial could not be drawn has already been reported.
-    let finished = |index: usize| {
-        strategies.iter().all(|s| {
-            rows.iter()
-                .any(|r| r.house_index == index && r.strategy == s.name())
-        })
-    };
-    let pick = scenes.iter().zip(maps).position(|(s, m)| {
-        m.is_ok() && args.show_house.is_none_or(|i| s.house.index == i) && finished(s.house.index)
-    });
-    match (pick, args.show_house) {
-        (Some(i), _) => {
-            if let Ok((_, distances)) = &maps[i] {
-                crate::output::write_with_path(&args.out.join("trajectories.png"), |p| {
-                    draw_house_trajectories(&scenes[i], distances, strategies, rows, p)
-                })?;
-                drawn.push("trajectories.png");
-            }
-        }
-        (None, Some(i)) => eprintln!(
-            "--show-house {i}: not every strategy finished a trial on that house; trajectories.png not drawn"
-        ),
-        (None, None) => {
-            eprintln!("no house where every strategy finished; trajectories.png not drawn")
-        }
+    if let Some(h) = shown {
+        crate::output::write_with_path(&p.out.join("trajectories.png"), |path| {
+            draw_house_trajectories(&h.scene, &h.distances, p.ran, &h.rows, path)
+        })?;
+        drawn.push("trajectories.png");
     }
     Ok(drawn)
 }
@@ -319,7 +365,7 @@ fn draw_pictures(
 pub fn draw_house_trajectories(
     scene: &Scene,
     distances: &Distances,
-    strategies: &[Arc<dyn Strategy>],
+    strategies: &[String],
     rows: &[TrialRow],
     out: &Path,
 ) -> Result<()> {
@@ -335,7 +381,7 @@ pub fn draw_house_trajectories(
         let Some(row) = rows.iter().find(|r| {
             r.house_index == house.index
                 && r.house == house.name
-                && r.strategy == s.name()
+                && &r.strategy == s
                 && Some(r.target.as_str()) == shown
         }) else {
             continue;
@@ -354,7 +400,7 @@ pub fn draw_house_trajectories(
             found: house.container_index(&row.found_container),
         };
         panels.push(TrajectoryPanel {
-            title: s.name().to_string(),
+            title: s.clone(),
             cost_m: o.cost,
             path: o.trajectory(distances).unwrap_or_default(),
             searched,

@@ -5,15 +5,20 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use ferret_lab::runs::EvalRun;
-use ferret_llm::ResponseCache;
+use std::collections::{BTreeMap, BTreeSet};
 
-use super::eval::SHARD_CACHE;
+use ferret_lab::runs::{EvalRun, RunInfo, TrialRow};
+use ferret_lab::{CostTable, HouseSource, MergedRun};
+use ferret_llm::ResponseCache;
+use ferret_world::procthor::HouseRange;
+
+use super::eval::{Pictures, SHARD_CACHE, Shown, draw_pictures, no_trajectories};
 
 /// Merge the shards of an evaluation (`ferret eval --shard i/n --out DIR_i`) into one run:
 /// trials.csv in the order one machine writes it (byte for byte the same file), summary.csv,
-/// paired.csv and summary.md made from it as `ferret eval` makes them, and run.json listing the
-/// shards. Refuses shards run with different settings, a shard given twice, houses in two shards
+/// paired.csv and summary.md made from it as `ferret eval` makes them, costs.png and
+/// trajectories.png drawn as it draws them (shards draw none; the shown house is read again from
+/// the house file), and run.json listing the shards. Refuses shards run with different settings, a shard given twice, houses in two shards
 /// and missing shards, naming the directories. Each shard's LLM cache (DIR_i/llm-cache.sqlite,
 /// and every --cache) is merged into one (insert-or-ignore by key); a key that two caches
 /// answer differently is listed and makes the exit status 1. `select` and `calibrate` then read
@@ -69,13 +74,15 @@ pub fn run(args: Args) -> Result<ExitCode> {
         let mut lock = ferret_lab::files::DirLock::acquire(&args.out)?;
         lock.used();
         let report = merged.write_all(&args.out)?;
+        let pictures = draw_merged_pictures(&merged, &args.out)?;
         println!("{}", report.markdown);
         println!(
-            "merged {} shards: {} trials on {} houses; wrote {}/{{trials.csv,summary.csv,summary.md,paired.csv,run.json}}",
+            "merged {} shards: {} trials on {} houses; wrote {}/{{trials.csv,summary.csv,summary.md,paired.csv,run.json{}}}",
             shards.len(),
             merged.run.rows.len(),
             merged.houses_run,
-            args.out.display()
+            args.out.display(),
+            pictures.iter().map(|p| format!(",{p}")).collect::<String>()
         );
         if merged.failures > 0 {
             eprintln!(
@@ -116,6 +123,86 @@ pub fn run(args: Args) -> Result<ExitCode> {
         }
     }
     Ok(status)
+}
+
+/// Draws the merged run's costs.png and trajectories.png, those one machine draws: shards draw
+/// none, so that the pictures are drawn once. The shown house is read again from the run's house
+/// source and mapped alone; when that source cannot be read here (shards run on other machines
+/// with other paths), trajectories.png is left out, saying why.
+fn draw_merged_pictures(merged: &MergedRun, out: &Path) -> Result<Vec<&'static str>> {
+    let info = &merged.run.info;
+    let rows = &merged.run.rows;
+    let costs = CostTable::from_rows(rows);
+    // The strategies that ran: a strategy one machine dropped (its LLM failed under
+    // --keep-going) has no row in any shard.
+    let ran: Vec<String> = info
+        .strategies
+        .iter()
+        .filter(|s| rows.iter().any(|r| &r.strategy == *s))
+        .cloned()
+        .collect();
+    let mut finished: BTreeMap<usize, BTreeSet<&str>> = BTreeMap::new();
+    for r in rows {
+        finished
+            .entry(r.house_index)
+            .or_default()
+            .insert(r.strategy.as_str());
+    }
+    let pick = merged.houses.iter().copied().find(|h| {
+        merged.show_house.is_none_or(|i| i == *h)
+            && finished
+                .get(h)
+                .is_some_and(|done| ran.iter().all(|s| done.contains(s.as_str())))
+    });
+    let shown = match pick {
+        Some(h) => match shown_house(info, h, rows) {
+            Ok(shown) => Some(shown),
+            Err(e) => {
+                eprintln!("house {h} could not be read again: {e:#}; trajectories.png not drawn");
+                None
+            }
+        },
+        None => {
+            no_trajectories(merged.show_house);
+            None
+        }
+    };
+    draw_pictures(
+        &Pictures {
+            out,
+            strategies: &info.strategies,
+            ran: &ran,
+            houses: merged.houses.len(),
+            seed: info.seed,
+        },
+        &costs,
+        shown.as_ref(),
+    )
+}
+
+/// House `index` of the run's source, mapped as the run mapped it, with its rows.
+fn shown_house(info: &RunInfo, index: usize, rows: &[TrialRow]) -> Result<Shown> {
+    let source = HouseSource {
+        range: Some(HouseRange::single(index)),
+        ..info.house_source()
+    };
+    let loaded = source.load_for(info.protocol.containers)?;
+    let scene = loaded
+        .scenes
+        .into_iter()
+        .find(|s| s.house.index == index)
+        .with_context(|| format!("not in {}", source.describe()))?;
+    let (_, distances) =
+        ferret_world::distance::build(&scene.house, &info.grid_params(info.protocol.access))?;
+    Ok(Shown {
+        scene,
+        distances,
+        rows: rows
+            .iter()
+            .filter(|r| r.house_index == index)
+            .cloned()
+            .collect(),
+    })
 }
 
 /// Whether two paths name the same existing file.

@@ -281,7 +281,8 @@ class Evaluation:
     def save(self, dir: _Path, *, paired_against: Union[str, Sequence[str], None] = None) -> None:
         """Writes the files ``ferret eval`` writes into ``dir``: ``trials.csv``, ``summary.csv``,
         ``paired.csv`` (every strategy against the best, and against each of
-        ``paired_against``), ``summary.md`` and ``run.json`` (with the shard, for ``merge``)."""
+        ``paired_against``; a shard writes none, ``merge`` compares over all shards),
+        ``summary.md`` and ``run.json`` (with the shard, for ``merge``)."""
     def __len__(self) -> int: ...
 
 class CalibrationResult:

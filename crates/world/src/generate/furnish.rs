@@ -6,8 +6,6 @@
 //! door of the room and get close to every piece. Rooms are joined by their doors, so a house
 //! whose rooms each pass this check is connected.
 
-use std::collections::VecDeque;
-
 use rand::Rng;
 use rand::seq::{IndexedRandom, SliceRandom};
 
@@ -302,44 +300,53 @@ impl RoomGrid {
     /// Cells reachable from the first door of the room with `pieces` standing in it (4-connected,
     /// stricter than the occupancy grid's 8), or `None` when some door cannot be reached.
     fn reachable(&self, pieces: &[Bx]) -> Option<Vec<bool>> {
-        let mut blocked = self.walls.clone();
+        // One byte per cell and a stack rather than a queue: the cells reached are the same in
+        // any order, and this runs for every placement tried in every generated house (most of
+        // training the default prior, which every `ferret eval` process does).
+        const FREE: u8 = 0;
+        const BLOCKED: u8 = 1;
+        const SEEN: u8 = 2;
+        let mut state: Vec<u8> = self.walls.iter().map(|&w| u8::from(w)).collect();
         for b in pieces {
             for c in self.cells_in(&b.grow(self.inflate)) {
-                blocked[c] = true;
+                state[c] = BLOCKED;
             }
         }
         let seed = match self.anchors.first() {
             Some(&a) => a,
-            None => blocked.iter().position(|b| !b)?,
+            None => state.iter().position(|&s| s == FREE)?,
         };
-        if blocked[seed] {
+        if state[seed] != FREE {
             return None;
         }
-        let mut seen = vec![false; blocked.len()];
-        let mut queue = VecDeque::from([seed]);
-        seen[seed] = true;
-        while let Some(c) = queue.pop_front() {
-            let (i, j) = (c % self.nx, c / self.nx);
-            let mut visit = |n: usize| {
-                if !blocked[n] && !seen[n] {
-                    seen[n] = true;
-                    queue.push_back(n);
+        let (nx, n) = (self.nx, state.len());
+        // Each cell travels with its column, so that no step divides.
+        let mut stack = vec![(seed, seed % nx)];
+        state[seed] = SEEN;
+        while let Some((c, i)) = stack.pop() {
+            let mut visit = |m: usize, mi: usize| {
+                if state[m] == FREE {
+                    state[m] = SEEN;
+                    stack.push((m, mi));
                 }
             };
             if i > 0 {
-                visit(c - 1);
+                visit(c - 1, i - 1);
             }
-            if i + 1 < self.nx {
-                visit(c + 1);
+            if i + 1 < nx {
+                visit(c + 1, i + 1);
             }
-            if j > 0 {
-                visit(c - self.nx);
+            if c >= nx {
+                visit(c - nx, i);
             }
-            if j + 1 < self.nz {
-                visit(c + self.nx);
+            if c + nx < n {
+                visit(c + nx, i);
             }
         }
-        self.anchors.iter().all(|&a| seen[a]).then_some(seen)
+        self.anchors
+            .iter()
+            .all(|&a| state[a] == SEEN)
+            .then(|| state.into_iter().map(|s| s == SEEN).collect())
     }
 
     /// True when the robot can reach every door and come close to every piece.
@@ -369,12 +376,14 @@ impl RoomGrid {
             index(b.z1, self.origin.1, self.nz) + 1,
         );
         let b = *b;
-        (j0..j1.min(self.nz))
-            .flat_map(move |j| (i0..i1.min(self.nx)).map(move |i| j * self.nx + i))
-            .filter(move |&c| {
-                let (x, z) = self.centre(c);
-                b.contains(x, z)
-            })
+        // The centre of cell (i, j) as `centre` computes it, without dividing the flat index.
+        let (ox, oz) = self.origin;
+        (j0..j1.min(self.nz)).flat_map(move |j| {
+            let z = oz + (j as f64 + 0.5) * CELL;
+            (i0..i1.min(self.nx))
+                .filter(move |&i| b.contains(ox + (i as f64 + 0.5) * CELL, z))
+                .map(move |i| j * self.nx + i)
+        })
     }
 }
 

@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# The figures of docs/serve.md's fleet section: `ferret bench serve` on val150 houses 0..40
+# (50 robots × 20 trials by default) as one server on SQLite, before and after (when
+# FERRET_BEFORE_BIN names an older ferret binary, alternating runs), and as two replicas on one
+# PostgreSQL, then two replicas with one killed (SIGKILL) mid-run. Each line of the output is one
+# run's JSON from `ferret bench serve --json`, prefixed by its label.
+#
+#   FERRET_PROCTHOR_DIR=/abs/path/to/procthor scripts/serve-fleet-figures.sh > figures.jsonl
+#
+# Needs Debian's PostgreSQL: a throwaway cluster is started (scripts/postgres.sh) unless
+# FERRET_TEST_POSTGRES names a server. FERRET_BIN runs a given ferret instead of building this
+# checkout's; FERRET_FIG_RUNS sets how many runs of each (default 2).
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "$0")/.." && pwd)"
+DATA="${FERRET_PROCTHOR_DIR:?set FERRET_PROCTHOR_DIR to the ProcTHOR directory}"
+RUNS="${FERRET_FIG_RUNS:-2}"
+ferret="${FERRET_BIN:-}"
+if [ -z "$ferret" ]; then
+    (cd "$ROOT" && cargo build --release -q -p ferret-cli)
+    ferret="${CARGO_TARGET_DIR:-$ROOT/target}/release/ferret"
+fi
+log() { printf '[fleet-figures %s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }
+if [ -z "${FERRET_TEST_POSTGRES:-}" ]; then
+    eval "$("$ROOT/scripts/postgres.sh" start)"
+    trap '"$ROOT/scripts/postgres.sh" stop "$FERRET_PG_DIR"' EXIT
+fi
+houses=(--houses "$DATA/multiroom-val150.jsonl.gz" --asset-db "$DATA/databases/asset-database.json"
+    --range 0..40)
+run() {
+    local label="$1"
+    shift
+    log "$label"
+    printf '%s\t' "$label"
+    "$@" "${houses[@]}" --json | tr -d '\n '
+    echo
+}
+for ((i = 1; i <= RUNS; i++)); do
+    if [ -n "${FERRET_BEFORE_BIN:-}" ]; then
+        run "sqlite-before" "$FERRET_BEFORE_BIN" bench serve
+    fi
+    run "sqlite" "$ferret" bench serve
+    db="$("$ROOT/scripts/postgres.sh" new-db "fleet_$$_$i")"
+    run "postgres-2-replicas" "$ferret" bench serve --replicas 2 --db "$db"
+done
+db="$("$ROOT/scripts/postgres.sh" new-db "fleet_$$_kill")"
+run "postgres-2-replicas-kill" "$ferret" bench serve --replicas 2 --db "$db" --kill-replica-after 5

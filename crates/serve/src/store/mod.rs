@@ -5,7 +5,7 @@
 //! its trials and the order they ended), which is what makes a `kill -9` of any replica harmless.
 //!
 //! Both backends run the same statements (written in the SQL both speak, `$n` parameters in
-//! order) and read rows into the same [`Value`]s, so the row parsing below exists once; only
+//! order) and read rows into the same `Value`s, so the row parsing below exists once; only
 //! the schema's column types, its migrations and row locks differ.
 
 mod postgres;
@@ -268,7 +268,7 @@ impl Store {
     }
 
     /// Reads every page of an SQLite file on a connection of its own, so damage is seen
-    /// wherever it is (see [`sqlite`]); PostgreSQL checks its own pages, so there this passes.
+    /// wherever it is; PostgreSQL checks its own pages, so there this passes.
     ///
     /// # Errors
     /// [`StoreError::Corrupt`] with SQLite's first finding, or [`StoreError::Sql`].

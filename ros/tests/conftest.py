@@ -190,6 +190,11 @@ def start_node(ros, robot, tmp_path):
             raise AssertionError(
                 f"the node's action server did not come up in {START_TIMEOUT_S} s:\n{p.text()}"
             )
+        # wait_for_server sees the server's endpoints, not the server seeing ours: a goal sent
+        # at once can be executed while its acceptance is lost ("failed to send response
+        # (timeout)" in the node's log) when the server has not matched the client's response
+        # reader yet. A moment for discovery to finish both ways.
+        time.sleep(1.0)
         return p, c
 
     yield start

@@ -162,18 +162,23 @@ pub struct EvalRun {
     pub trials_csv: Vec<u8>,
 }
 
+/// run.json's text.
+fn run_json_bytes(info: &RunInfo) -> Result<Vec<u8>> {
+    serde_json::to_string_pretty(info)
+        .map(String::into_bytes)
+        .map_err(|source| LabError::Json {
+            context: "writing run.json".into(),
+            source,
+        })
+}
+
 impl EvalRun {
     /// The run of `rows` that `info` describes, as `ferret eval` writes it: `info`'s
     /// `trials_sha256` is set to the hash of the rows' CSV text.
     pub fn new(mut info: RunInfo, rows: Vec<TrialRow>) -> Result<Self> {
         let trials_csv = crate::files::csv_bytes(&rows)?;
         info.trials_sha256 = Some(sha256_hex(&trials_csv));
-        let run_json = serde_json::to_string_pretty(&info)
-            .map_err(|source| LabError::Json {
-                context: "writing run.json".into(),
-                source,
-            })?
-            .into_bytes();
+        let run_json = run_json_bytes(&info)?;
         Ok(Self {
             info,
             rows,
@@ -397,12 +402,7 @@ impl RunWriter {
         let (buffered, sha) = hashing.finish();
         buffered.into_inner().map_err(|e| io(e.into_error()))?;
         info.trials_sha256 = Some(sha);
-        let run_json = serde_json::to_string_pretty(&info)
-            .map_err(|source| LabError::Json {
-                context: "writing run.json".into(),
-                source,
-            })?
-            .into_bytes();
+        let run_json = run_json_bytes(&info)?;
         let report = run_report(&info, &self.costs, view);
         write_report(&self.dir, &info, &report)?;
         self.file.commit().map_err(io)?;

@@ -20,7 +20,7 @@ use crate::model::{
 use crate::replies::Begun;
 use crate::searches::{LiveSearch, Owner};
 use crate::service::{Service, json};
-use crate::store::NewTrial;
+use crate::store::{NewTrial, TrialCounts};
 
 /// An object type as the API takes it: ASCII letters and digits, as in `CellPhone`.
 pub(crate) fn is_type_name(s: &str) -> bool {
@@ -82,7 +82,7 @@ impl Service {
                     ),
                 ));
             }
-            let snapshot = Snapshot::of(&trials);
+            let snapshot = snapshot(&trials);
             let chosen = self
                 .deployment(&spec, &trials, candidates.clone())?
                 .choose_overlapping();
@@ -103,8 +103,7 @@ impl Service {
             let k = trials.len() as i64 + 1;
             let started = self.idempotent(req.request_id.as_deref(), &route, body, |w| {
                 w.lock_deployment(deployment)?;
-                let now = w.reader().trials_of(deployment)?;
-                if Snapshot::of(&now) != snapshot {
+                if w.reader().trial_counts(deployment)? != snapshot {
                     return Err(stale());
                 }
                 if spec.sequential && snapshot.open > 0 {
@@ -121,7 +120,7 @@ impl Service {
                     target: &req.target,
                     pose: req.pose,
                     chosen,
-                    started_after: snapshot.ended,
+                    started_after: snapshot.ended as i64,
                 })?;
                 created = Some(id);
                 json(
@@ -358,11 +357,7 @@ impl Service {
             w.insert_observation(id, observations.len(), &observation)?;
             let mut end_seq = None;
             if status != TrialStatus::Searching {
-                let ended = r
-                    .trials_of(row.deployment)?
-                    .iter()
-                    .filter(|t| t.end_seq.is_some())
-                    .count() as i64;
+                let ended = r.trial_counts(row.deployment)?.ended as i64;
                 end_seq = Some(ended + 1);
                 w.end_trial(id, status, (cost, ended + 1), replays.as_deref())?;
             }
@@ -390,23 +385,14 @@ impl Service {
 const START_ATTEMPTS: usize = 8;
 
 /// What a trial's choice depends on: how many trials started and how many ended.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct Snapshot {
-    started: usize,
-    ended: i64,
-    open: usize,
-}
-
-impl Snapshot {
-    fn of(trials: &[StoredTrial]) -> Self {
-        Snapshot {
-            started: trials.len(),
-            ended: trials.iter().filter(|t| t.end_seq.is_some()).count() as i64,
-            open: trials
-                .iter()
-                .filter(|t| t.status == TrialStatus::Searching)
-                .count(),
-        }
+fn snapshot(trials: &[StoredTrial]) -> TrialCounts {
+    TrialCounts {
+        started: trials.len(),
+        ended: trials.iter().filter(|t| t.end_seq.is_some()).count(),
+        open: trials
+            .iter()
+            .filter(|t| t.status == TrialStatus::Searching)
+            .count(),
     }
 }
 

@@ -441,7 +441,10 @@ impl Writer<'_> {
     /// The database refuses.
     pub fn lock_deployment(&self, id: i64) -> Result<bool, StoreError> {
         match &self.conn {
-            Conn::Sqlite(..) => Ok(self.reader().deployment(id)?.is_some()),
+            Conn::Sqlite(..) => Ok(!self
+                .conn
+                .query("SELECT id FROM deployments WHERE id = $1", &[id.into()])?
+                .is_empty()),
             Conn::Postgres(c) => Ok(!c
                 .query(
                     "SELECT id FROM deployments WHERE id = $1 FOR UPDATE",
@@ -587,6 +590,17 @@ fn request_key(id: &str) -> std::borrow::Cow<'_, str> {
         key.push_str(&format!("{b:02x}"));
     }
     std::borrow::Cow::Owned(key)
+}
+
+/// How many trials of a deployment started, ended, and are open.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TrialCounts {
+    /// Trials started.
+    pub started: usize,
+    /// Trials ended (done or exhausted).
+    pub ended: usize,
+    /// Trials still searching.
+    pub open: usize,
 }
 
 /// A trial to store.
@@ -793,6 +807,30 @@ impl Reader<'_> {
     /// The database refuses, or a row does not parse.
     pub fn trials_of(&self, deployment: i64) -> Result<Vec<StoredTrial>, StoreError> {
         self.trials_where("deployment = $1", deployment)
+    }
+
+    /// How many trials of a deployment started, ended and are still searching, counted by the
+    /// database (what a new trial's choice depends on, read under the deployment's lock).
+    ///
+    /// # Errors
+    /// The database refuses.
+    pub fn trial_counts(&self, deployment: i64) -> Result<TrialCounts, StoreError> {
+        let c = &self.conn;
+        let row = c
+            .query_opt(
+                "SELECT count(*), count(end_seq), count(*) - count(end_seq) FROM trials
+                 WHERE deployment = $1",
+                &[deployment.into()],
+            )?
+            .ok_or_else(|| c.corrupt("counting trials gave no row".into()))?;
+        let count = |i: usize, what: &str| -> Result<usize, StoreError> {
+            usize::try_from(c.int(&row, i, what)?).map_err(|_| c.corrupt(format!("{what} < 0")))
+        };
+        Ok(TrialCounts {
+            started: count(0, "trials started")?,
+            ended: count(1, "trials ended")?,
+            open: count(2, "trials open")?,
+        })
     }
 
     /// A trial by id.

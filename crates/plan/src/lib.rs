@@ -101,7 +101,7 @@ pub use protocol::{
     TargetSet, TravelCost, TrialRng, TrialSettings, UntriedScore,
 };
 pub use replay::{
-    hindsight_truth, replay_cost, replay_cost_with, replay_costs, replay_outcome_with,
+    ReplayMemo, hindsight_truth, replay_cost, replay_cost_with, replay_costs, replay_outcome_with,
 };
 pub use strategy::{ModelStrategy, Strategy, StrategyRegistry, StrategySpec, TrialContext};
 pub use trial::{

@@ -5,6 +5,7 @@
 
 use ferret_world::{Distances, House, ObjectType};
 
+use crate::replay::ReplayMemo;
 use crate::trial::TrialSpec;
 
 /// One object-search problem: the map the robot knows, travel distances on it, and the trial
@@ -18,6 +19,8 @@ pub struct SearchProblem<'a> {
     pub distances: &'a Distances,
     /// The target and the containers searched beforehand.
     pub trial: &'a TrialSpec,
+    /// Replays already computed in this house from this start, when the caller keeps them.
+    memo: Option<&'a ReplayMemo>,
 }
 
 impl<'a> SearchProblem<'a> {
@@ -27,7 +30,22 @@ impl<'a> SearchProblem<'a> {
             house,
             distances,
             trial,
+            memo: None,
         }
+    }
+
+    /// The same problem, its replays looked up in and added to `memo`. The memo must belong to
+    /// this house seen from this start (these distances); see [`ReplayMemo`].
+    pub fn with_replay_memo(self, memo: &'a ReplayMemo) -> Self {
+        Self {
+            memo: Some(memo),
+            ..self
+        }
+    }
+
+    /// The replay memo given with [`with_replay_memo`](Self::with_replay_memo).
+    pub fn replay_memo(&self) -> Option<&'a ReplayMemo> {
+        self.memo
     }
 
     /// The object type searched for.

@@ -5,6 +5,10 @@
 //! container is assumed empty. The replay reuses [`run_trial`] and the strategies' own policies,
 //! so a replay cannot drift from a real run.
 
+use std::collections::HashMap;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+
 use ferret_world::{GroundTruth, House, ObjectType, SmallObject, TravelCost};
 
 use crate::error::PlanError;
@@ -106,14 +110,116 @@ pub fn replay_costs(
         .enumerate()
         .map(|(j, s)| {
             if j == deployed.0 {
-                Ok(deployed.1)
-            } else {
+                return Ok(deployed.1);
+            }
+            let replay = || {
                 replay_outcome_with(mode, s.as_ref(), problem, truth, found)?.reported_cost(
                     problem.house,
                     problem.distances,
                     travel,
                 )
+            };
+            match problem.replay_memo() {
+                // A counterfactual replay also depends on the true world, which no key holds.
+                Some(memo) if mode == ReplayMode::Pessimistic => {
+                    let key = ReplayKey {
+                        strategy: s.name().to_string(),
+                        target: problem.trial.target.clone(),
+                        revealed: problem.trial.revealed.clone(),
+                        found,
+                        travel,
+                    };
+                    memo.get_or_replay(key, replay)
+                }
+                _ => replay(),
             }
         })
         .collect()
+}
+
+/// Pessimistic replay costs already computed in one house seen from one start.
+///
+/// A fleet's robots search the same house for the same things from the same dock, so the same
+/// trial ends the same way again and again; each end replays every other candidate, which is a
+/// whole simulated search (an exact planner's one solves a Held–Karp problem per decision).
+/// Under the pessimistic hindsight belief a replay depends only on the house, the start (both
+/// fixed by whoever owns the memo), the trial (target, containers revealed), the container the
+/// target was found in, the strategy and the travel cost; the last four are the key, the
+/// strategy by name. So a memo must not outlive what its strategies' names mean (the registry
+/// that built them) nor be shared between houses or starts. Counterfactual replays, which also
+/// depend on the true world, are never kept.
+///
+/// Bounded by entry count (a key and a cost, about a hundred bytes): once full, new replays are
+/// computed and not kept.
+#[derive(Debug)]
+pub struct ReplayMemo {
+    capacity: usize,
+    costs: Mutex<HashMap<ReplayKey, f64>>,
+    hits: AtomicU64,
+}
+
+#[derive(Debug, Hash, PartialEq, Eq)]
+struct ReplayKey {
+    strategy: String,
+    target: ObjectType,
+    revealed: Vec<usize>,
+    found: usize,
+    travel: TravelCost,
+}
+
+impl ReplayMemo {
+    /// A memo keeping at most `capacity` replay costs (0 keeps none).
+    pub fn new(capacity: usize) -> Self {
+        Self {
+            capacity,
+            costs: Mutex::default(),
+            hits: AtomicU64::new(0),
+        }
+    }
+
+    /// Most replay costs kept.
+    pub fn capacity(&self) -> usize {
+        self.capacity
+    }
+
+    /// Replay costs kept.
+    pub fn len(&self) -> usize {
+        self.lock().len()
+    }
+
+    /// True when no replay cost is kept.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Replays answered from the memo so far.
+    pub fn hits(&self) -> u64 {
+        self.hits.load(Ordering::Relaxed)
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<ReplayKey, f64>> {
+        // A poisoned map still holds only complete entries: each is inserted in one call.
+        self.costs
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// The kept cost of `key`, else `replay`'s, kept when there is room. The replay runs
+    /// outside the lock: two ends of the same trial at once both compute it, and agree.
+    fn get_or_replay(
+        &self,
+        key: ReplayKey,
+        replay: impl FnOnce() -> Result<f64, PlanError>,
+    ) -> Result<f64, PlanError> {
+        if let Some(&cost) = self.lock().get(&key) {
+            self.hits.fetch_add(1, Ordering::Relaxed);
+            return Ok(cost);
+        }
+        let cost = replay()?;
+        let mut costs = self.lock();
+        if costs.len() < self.capacity {
+            costs.insert(key, cost);
+        }
+        Ok(cost)
+    }
 }

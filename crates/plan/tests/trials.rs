@@ -452,3 +452,109 @@ fn python_draws_give_the_reference_trials() {
     let t = draw_trials_with(&house, &truth, 0, 0.0, TrialsPerHouse::One, &empty).unwrap();
     assert_eq!((t[0].target.as_str(), t[0].revealed.len()), ("A6", 0));
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// A replay memo shared by every trial of a house answers exactly what replaying again
+    /// answers, whatever the order the trials end in: same target and found container but other
+    /// containers revealed, other targets, other found containers are all told apart; a repeat
+    /// is answered from the memo; counterfactual replays are never kept.
+    #[test]
+    fn a_replay_memo_answers_exactly_what_replaying_again_answers(
+        (pts, kinds, contents) in arb_house(),
+        reveal in prop::collection::vec(0usize..9, 0..3),
+    ) {
+        use ferret_plan::{ReplayMemo, ReplayMode, TravelCost, replay_costs};
+        let (house, truth, distances) = house(&pts, &kinds, &contents);
+        let scene = Scene { house: house.clone(), truth: truth.clone() };
+        let reg = registry(std::slice::from_ref(&scene));
+        let candidates: Vec<_> = SPECS.iter().map(|s| reg.build(s).unwrap()).collect();
+        let n = house.containers.len();
+        let mut revealed: Vec<usize> = reveal.into_iter().filter(|&c| c < n).collect();
+        revealed.sort_unstable();
+        revealed.dedup();
+        let mut trials = Vec::new();
+        for target in truth.target_types() {
+            for revealed in [vec![], revealed.clone()] {
+                let goals = truth.goal_containers(&target);
+                if goals.iter().all(|g| revealed.contains(g)) {
+                    continue;
+                }
+                trials.push(TrialSpec { target: target.clone(), revealed });
+            }
+        }
+        prop_assume!(!trials.is_empty());
+        let memo = ReplayMemo::new(10_000);
+        let settings = (ReplayMode::Pessimistic, TravelCost::Plain);
+        let mut asked = std::collections::HashSet::new();
+        let mut repeats = 0;
+        // Every trial twice, the second time in reverse order.
+        for trial in trials.iter().chain(trials.iter().rev()) {
+            let plain = SearchProblem::new(&house, &distances, trial);
+            let found = truth
+                .goal_containers(&trial.target)
+                .into_iter()
+                .find(|g| !trial.revealed.contains(g))
+                .unwrap();
+            let fresh = replay_costs(settings, &candidates, &plain, &truth, found, (0, 1.0)).unwrap();
+            let kept = replay_costs(settings, &candidates, &plain.with_replay_memo(&memo), &truth, found, (0, 1.0)).unwrap();
+            prop_assert_eq!(
+                fresh.iter().map(|c| c.to_bits()).collect::<Vec<_>>(),
+                kept.iter().map(|c| c.to_bits()).collect::<Vec<_>>()
+            );
+            let key = (trial.target.clone(), trial.revealed.clone(), found);
+            if !asked.insert(key) {
+                repeats += candidates.len() - 1;
+            }
+        }
+        prop_assert_eq!(memo.hits(), repeats as u64);
+        prop_assert_eq!(memo.len(), asked.len() * (candidates.len() - 1));
+        let before = memo.len();
+        let trial = &trials[0];
+        let found = truth.goal_containers(&trial.target)[0];
+        let problem = SearchProblem::new(&house, &distances, trial).with_replay_memo(&memo);
+        replay_costs((ReplayMode::Counterfactual, TravelCost::Plain), &candidates, &problem, &truth, found, (0, 1.0)).unwrap();
+        prop_assert_eq!(memo.len(), before);
+    }
+}
+
+/// A full memo keeps what it has and still answers every replay.
+#[test]
+fn a_full_replay_memo_keeps_no_more_and_still_answers() {
+    use ferret_plan::{ReplayMemo, ReplayMode, TravelCost, replay_costs};
+    let (house, truth, distances) = house(
+        &[(1.0, 0.0), (0.0, 4.0), (-3.0, 0.0)],
+        &[0, 1, 2],
+        &[vec![0], vec![1], vec![2]],
+    );
+    let scene = Scene {
+        house: house.clone(),
+        truth: truth.clone(),
+    };
+    let reg = registry(std::slice::from_ref(&scene));
+    let candidates: Vec<_> = SPECS[..3].iter().map(|s| reg.build(s).unwrap()).collect();
+    let memo = ReplayMemo::new(1);
+    let settings = (ReplayMode::Pessimistic, TravelCost::Plain);
+    for (target, found) in [("Egg", 0), ("Book", 1), ("Book", 1)] {
+        let trial = TrialSpec {
+            target: ObjectType::new(target),
+            revealed: vec![],
+        };
+        let plain = SearchProblem::new(&house, &distances, &trial);
+        let fresh = replay_costs(settings, &candidates, &plain, &truth, found, (0, 1.0)).unwrap();
+        let kept = replay_costs(
+            settings,
+            &candidates,
+            &plain.with_replay_memo(&memo),
+            &truth,
+            found,
+            (0, 1.0),
+        )
+        .unwrap();
+        assert_eq!(fresh, kept);
+        assert_eq!(memo.len(), 1);
+    }
+    // Only the first replay of the first trial was kept, so nothing repeated was found.
+    assert_eq!(memo.hits(), 0);
+}

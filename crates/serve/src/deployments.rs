@@ -20,7 +20,16 @@ use crate::service::{Service, json};
 
 impl Service {
     pub(crate) fn spec(&self, id: i64) -> Result<DeploymentSpec, ApiError> {
-        self.store
+        let specs = || {
+            self.specs
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+        };
+        if let Some(spec) = specs().get(&id) {
+            return Ok(spec.clone());
+        }
+        let spec = self
+            .store
             .read(|r| r.deployment(id))?
             .map(|d| d.spec)
             .ok_or_else(|| {
@@ -29,7 +38,13 @@ impl Service {
                     "deployment",
                     format!("no deployment {id}"),
                 )
-            })
+            })?;
+        let mut kept = specs();
+        if kept.len() >= KEPT_SPECS {
+            kept.clear();
+        }
+        kept.insert(id, spec.clone());
+        Ok(spec)
     }
 
     pub(crate) fn candidates_of(
@@ -233,6 +248,10 @@ impl Service {
         })
     }
 }
+/// Deployment specs a replica keeps (a few hundred bytes each); past it they are all read
+/// again, which costs one statement each.
+const KEPT_SPECS: usize = 4096;
+
 /// What a robot's replays assume: the target only where it was found, and plain path lengths,
 /// since a robot's trial costs what it travelled.
 pub(crate) const ROBOT_REPLAY: (ReplayMode, TravelCost) =

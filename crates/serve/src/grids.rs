@@ -7,6 +7,7 @@ use std::collections::HashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 
+use ferret_plan::ReplayMemo;
 use ferret_world::distance::{self, Place};
 use ferret_world::{Distances, GridParams, House, OccupancyGrid, Point, Pose, Scene};
 
@@ -27,6 +28,9 @@ pub(crate) struct Placed {
     /// Paths between places already traced for replies: tracing one searches the grid, and a
     /// fleet's robots are sent along the same few legs again and again.
     paths: Mutex<HashMap<(Place, Place), FloorPath>>,
+    /// Replays of trials that ended here: the same trial ends the same way for every robot of
+    /// a fleet, and each end replays every other candidate.
+    pub(crate) replays: ReplayMemo,
 }
 
 /// A traced path: `[x, y]` corners on the floor.
@@ -36,11 +40,12 @@ pub(crate) type FloorPath = Arc<[[f64; 2]]>;
 const KEPT_PATHS: usize = 4096;
 
 impl Placed {
-    pub(crate) fn new(house: House, distances: Distances) -> Self {
+    pub(crate) fn new(house: House, distances: Distances, kept_replays: usize) -> Self {
         Self {
             house,
             distances,
             paths: Mutex::default(),
+            replays: ReplayMemo::new(kept_replays),
         }
     }
 
@@ -49,7 +54,7 @@ impl Placed {
     fn bytes(&self) -> usize {
         let n = self.house.containers.len() + 1;
         let cells = self.distances.grid().map_or(0, OccupancyGrid::cell_count);
-        cells * 2 + n * n * 8 + n * 64 + 64 * 1024 + (1 << 20)
+        cells * 2 + n * n * 8 + n * 64 + 64 * 1024 + (1 << 20) + self.replays.capacity() * 128
     }
 
     /// The path from `from` to `to` as `[x, y]` corners on the floor (empty without a grid).
@@ -193,6 +198,8 @@ fn check_shift(
 /// Built grids: the cache, the build permits, one gate per scene.
 pub(crate) struct Grids {
     params: GridParams,
+    /// Replay costs each placed scene keeps.
+    kept_replays: usize,
     cache: Mutex<GridCache>,
     builds: Permits,
     /// Whole grids built so far (each costs a search per container).
@@ -205,10 +212,16 @@ pub(crate) struct Grids {
 
 impl Grids {
     /// Grids on `params`, at most `budget` bytes of them cached, `concurrent_builds` built at
-    /// once.
-    pub(crate) fn new(params: GridParams, budget: usize, concurrent_builds: usize) -> Self {
+    /// once, each placed scene keeping up to `kept_replays` replay costs.
+    pub(crate) fn new(
+        params: GridParams,
+        budget: usize,
+        concurrent_builds: usize,
+        kept_replays: usize,
+    ) -> Self {
         Self {
             params,
+            kept_replays,
             cache: Mutex::new(GridCache {
                 budget,
                 used: 0,
@@ -288,7 +301,7 @@ impl Grids {
         if let Some(pose) = pose {
             check_shift(&grid, &house, pose, field)?;
         }
-        Ok(Arc::new(Placed::new(house, distances)))
+        Ok(Arc::new(Placed::new(house, distances, self.kept_replays)))
     }
 
     /// The scene `name` with the robot at `pose` (cached per pose), `load` reading the scene
@@ -407,7 +420,16 @@ impl Grids {
         };
         check_shift(&grid, &house, pose, "pose")?;
         let distances = base.distances.with_start(&house, &grid).map_err(invalid)?;
-        Ok(Arc::new(Placed::new(house, distances)))
+        Ok(Arc::new(Placed::new(house, distances, self.kept_replays)))
+    }
+
+    /// Replays answered from the replay costs of the placed scenes now cached.
+    pub(crate) fn replays_reused(&self) -> u64 {
+        self.lock_cache()
+            .entries
+            .values()
+            .map(|e| e.0.replays.hits())
+            .sum()
     }
 
     fn lock_cache(&self) -> MutexGuard<'_, GridCache> {

@@ -65,6 +65,10 @@ pub struct ServiceOptions {
     /// rebuilds every search from the store. An exact planner's table is up to 8 MiB (16
     /// containers), so this bounds that memory too.
     pub live_searches: usize,
+    /// Replay costs each placed scene (a scene seen from one pose) keeps for trials that end
+    /// the same way again (see [`ferret_plan::ReplayMemo`]); 0 replays every candidate at
+    /// every trial end.
+    pub kept_replays: usize,
 }
 
 impl Default for ServiceOptions {
@@ -76,6 +80,7 @@ impl Default for ServiceOptions {
             // every other scene's up.
             concurrent_builds: std::thread::available_parallelism().map_or(2, |n| n.get().max(2)),
             live_searches: 64,
+            kept_replays: 4096,
         }
     }
 }
@@ -101,6 +106,10 @@ pub struct Service {
     pub(crate) searches: crate::searches::Searches,
     /// Request ids being run on this replica now.
     pub(crate) in_flight: std::sync::Mutex<std::collections::HashSet<String>>,
+    /// Deployments' specs read so far: a spec never changes once stored, and every request of
+    /// a trial needs its deployment's.
+    pub(crate) specs:
+        std::sync::Mutex<std::collections::HashMap<i64, crate::model::DeploymentSpec>>,
 }
 
 impl std::fmt::Debug for Service {
@@ -180,10 +189,23 @@ impl Service {
                 fixed: BTreeMap::new(),
                 uploaded,
             }),
-            grids: Grids::new(grid, options.grid_cache_bytes, options.concurrent_builds),
+            grids: Grids::new(
+                grid,
+                options.grid_cache_bytes,
+                options.concurrent_builds,
+                options.kept_replays,
+            ),
             in_flight: std::sync::Mutex::default(),
+            specs: std::sync::Mutex::default(),
             searches: crate::searches::Searches::new(options.live_searches),
         })
+    }
+
+    /// Replays at trial ends answered from kept replay costs (see
+    /// [`ServiceOptions::kept_replays`]) instead of simulated, counted over the scenes whose
+    /// grids are still cached.
+    pub fn replays_reused(&self) -> u64 {
+        self.grids.replays_reused()
     }
 
     /// The limits it enforces.

@@ -321,7 +321,8 @@ impl Service {
             let replays = self
                 .deployment(spec, &trials, candidates.clone())?
                 .replays(
-                    &SearchProblem::new(house, &placed.distances, &t.trial),
+                    &SearchProblem::new(house, &placed.distances, &t.trial)
+                        .with_replay_memo(&placed.replays),
                     &truth,
                     c,
                     (row.chosen, cost),
@@ -343,11 +344,7 @@ impl Service {
             // the deployment's history, and one observation per sequence number is kept.
             w.lock_deployment(row.deployment)?;
             let r = w.reader();
-            let now = r.observations(id)?;
-            let still = r
-                .trial(id)?
-                .is_some_and(|t| t.status == TrialStatus::Searching);
-            if now.len() != observations.len() || !still {
+            if r.trial_progress(id)? != Some((TrialStatus::Searching, observations.len())) {
                 return Err(ApiError::new(
                     ErrorKind::Conflict,
                     "trial",

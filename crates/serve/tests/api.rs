@@ -19,6 +19,7 @@ struct Server {
     url: String,
     client: reqwest::Client,
     handle: tokio::task::JoinHandle<()>,
+    service: Arc<Service>,
 }
 
 impl Drop for Server {
@@ -63,7 +64,8 @@ async fn start_with(
         listen: Some(addr),
         ..HttpOptions::default()
     };
-    let app = ferret_serve::router(Arc::new(service), &options).unwrap();
+    let service = Arc::new(service);
+    let app = ferret_serve::router(service.clone(), &options).unwrap();
     let handle = tokio::spawn(async move {
         ferret_serve::serve(listener, app, serve_options, std::future::pending())
             .await
@@ -73,6 +75,7 @@ async fn start_with(
         url: format!("http://{addr}"),
         client: reqwest::Client::new(),
         handle,
+        service,
     }
 }
 
@@ -591,14 +594,17 @@ async fn a_restarted_service_resumes_every_open_trial() {
 }
 
 /// A search kept between requests answers exactly as one rebuilt from the store on every
-/// request: the same deployment driven twice, once with kept searches and once without, gets
-/// the same replies byte for byte.
+/// request, and replays kept from earlier trial ends as replaying again: the same deployment
+/// driven twice, once keeping both and once keeping neither, gets the same replies byte for
+/// byte, and the first run did answer replays from what it kept.
 #[tokio::test(flavor = "multi_thread")]
-async fn a_kept_search_answers_as_one_rebuilt_from_the_store() {
+async fn a_kept_search_and_kept_replays_answer_as_rebuilt_ones() {
     let mut runs = Vec::new();
+    let mut reused = Vec::new();
     for keep in [64, 0] {
         let options = ServiceOptions {
             live_searches: keep,
+            kept_replays: keep * 64,
             ..ServiceOptions::default()
         };
         let s = start_with(None, None, options, ServeOptions::default()).await;
@@ -639,7 +645,11 @@ async fn a_kept_search_answers_as_one_rebuilt_from_the_store() {
             }
         }
         runs.push(replies);
+        reused.push(s.service.replays_reused());
     }
     assert!(runs[0].len() > 20, "{}", runs[0].len());
     assert_eq!(runs[0], runs[1]);
+    // Every target comes twice, so each second ending reuses the other candidates' replays.
+    assert!(reused[0] >= TARGETS.len() as u64, "{reused:?}");
+    assert_eq!(reused[1], 0);
 }

@@ -64,6 +64,10 @@ pub struct ServeArgs {
     /// against the others.
     #[arg(long, value_name = "SECS")]
     kill_replica_after: Option<f64>,
+    /// Replay costs each server keeps per scene and pose (`ferret serve --kept-replays`); 0
+    /// replays every candidate at every trial end.
+    #[arg(long, value_name = "N", default_value_t = ferret_serve::ServiceOptions::default().kept_replays)]
+    kept_replays: usize,
     /// PostgreSQL connections per replica.
     #[arg(long, value_name = "N", default_value_t = ferret_serve::PostgresOptions::default().pool_size)]
     db_pool: usize,
@@ -127,6 +131,8 @@ enum Reply {
 struct ServeLine {
     replicas: usize,
     database: String,
+    /// Replay costs each server keeps per scene and pose.
+    kept_replays: usize,
     deployments: usize,
     trials: usize,
     requests: usize,
@@ -227,15 +233,21 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
     let mut server = None;
     if in_process {
         let store = ferret_serve::Store::open(std::path::Path::new(&db))?;
-        let service = ferret_serve::Service::new(store, args.grid.params(), {
+        let candidates = {
             let setup =
                 super::llm_setup::full_registry(&args.planning, &args.llm, &args.strategies)?;
             args.strategies
                 .iter()
                 .map(|s| setup.registry.build(s))
                 .collect::<Result<Vec<_>, _>>()?
-        })
-        .map_err(|e| anyhow::anyhow!("{}", e.message))?;
+        };
+        let options = ferret_serve::ServiceOptions {
+            kept_replays: args.kept_replays,
+            ..ferret_serve::ServiceOptions::default()
+        };
+        let service =
+            ferret_serve::Service::with_options(store, args.grid.params(), candidates, options)
+                .map_err(|e| anyhow::anyhow!("{}", e.message))?;
         let bar = crate::common::progress(loaded.scenes.len(), "scenes");
         for scene in loaded.scenes {
             let name = scene.house.name.clone();
@@ -365,6 +377,7 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
     let size = |p: &std::path::Path| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
     let line = ServeLine {
         replicas: args.replicas,
+        kept_replays: args.kept_replays,
         database: if ferret_serve::is_postgres_url(&db) {
             "postgres".into()
         } else {
@@ -396,9 +409,10 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
         println!("{}", serde_json::to_string_pretty(&line)?);
     } else {
         println!(
-            "{} replica(s) on {}, {} deployments × {} trials: {} requests in {:.1} s = {:.0} requests/s; next-container reply p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms; {} retries, {} errors",
+            "{} replica(s) on {} keeping {} replays per scene, {} deployments × {} trials: {} requests in {:.1} s = {:.0} requests/s; next-container reply p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms; {} retries, {} errors",
             line.replicas,
             line.database,
+            line.kept_replays,
             line.deployments,
             line.trials,
             line.requests,
@@ -482,6 +496,8 @@ fn spawn_replica(
         db,
         "--db-pool",
         &args.db_pool.to_string(),
+        "--kept-replays",
+        &args.kept_replays.to_string(),
         "--listen",
         "127.0.0.1:0",
     ]);

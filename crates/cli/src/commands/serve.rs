@@ -98,6 +98,11 @@ pub struct Args {
     /// dropped past it and built again when asked for.
     #[arg(long, value_name = "MIB", default_value_t = 256)]
     grid_cache_mib: usize,
+    /// Replay costs kept per scene and pose: a trial that ends as an earlier one did (same
+    /// scene, pose, target, container found in) reuses the other candidates' replays instead of
+    /// simulating them again; 0 replays every time. About 128 bytes each.
+    #[arg(long, value_name = "N", default_value_t = ServiceOptions::default().kept_replays)]
+    kept_replays: usize,
     /// Largest request body, KiB (413 past it).
     #[arg(long, value_name = "KIB", default_value_t = 1024)]
     max_body_kib: usize,
@@ -197,6 +202,7 @@ fn check(args: &Args) -> Result<Checked> {
                 max_vertices: args.max_scene_vertices,
             },
             grid_cache_bytes: args.grid_cache_mib.saturating_mul(1 << 20),
+            kept_replays: args.kept_replays,
             ..ServiceOptions::default()
         },
         serve: ServeOptions {

@@ -841,6 +841,29 @@ impl Reader<'_> {
         Ok(self.trials_where("id = $1", id)?.into_iter().next())
     }
 
+    /// A trial's status and how many observations it has, in one statement: what a write
+    /// checks to know nothing changed since it planned.
+    ///
+    /// # Errors
+    /// The database refuses, or the row does not parse.
+    pub fn trial_progress(&self, id: i64) -> Result<Option<(TrialStatus, usize)>, StoreError> {
+        let c = &self.conn;
+        let Some(row) = c.query_opt(
+            "SELECT status, (SELECT count(*) FROM observations WHERE trial = $1) FROM trials
+             WHERE id = $1",
+            &[id.into()],
+        )?
+        else {
+            return Ok(None);
+        };
+        let bad = |what: &str| c.corrupt(format!("trial {id}: {what}"));
+        let status = TrialStatus::parse(&c.some_text(&row, 0, "trial status")?)
+            .ok_or_else(|| bad("status"))?;
+        let seen = usize::try_from(c.int(&row, 1, "observation count")?)
+            .map_err(|_| bad("observation count"))?;
+        Ok(Some((status, seen)))
+    }
+
     /// A trial's observations, in order.
     ///
     /// # Errors

@@ -98,7 +98,7 @@ impl Service {
         req: CreateDeployment,
         body: &[u8],
     ) -> Result<ApiReply, ApiError> {
-        let _claim = match self.begin(req.request_id.as_deref(), "POST /deployments", body)? {
+        let claim = match self.begin(req.request_id.as_deref(), "POST /deployments", body)? {
             Begun::Replied(reply) => return Ok(reply),
             Begun::Fresh(claim) => claim,
         };
@@ -148,7 +148,7 @@ impl Service {
             sequential: req.sequential.unwrap_or(false),
         };
         self.candidates_of(&spec)?;
-        self.idempotent(req.request_id.as_deref(), "POST /deployments", body, |w| {
+        claim.complete("POST /deployments", body, |w| {
             let id = w.insert_deployment(&spec)?;
             let state = self.deployment_state(id, &spec, &w.reader().trials_of(id)?)?;
             json(Outcome::Created, &state)

@@ -99,26 +99,27 @@ impl Service {
             None => Ok(Begun::Fresh(claim)),
         }
     }
+}
 
-    /// Runs a write operation with request-id idempotency, under the claim [`begin`] took: a
-    /// stored reply for the same id and body is returned as it was (a claim lost with a
-    /// restarted database cannot make it run twice); the same id with another body is a 422.
-    ///
-    /// [`begin`]: Service::begin
-    pub(crate) fn idempotent(
+impl RequestClaim<'_> {
+    /// Runs a write operation with request-id idempotency, under this claim. [`Service::begin`]
+    /// found no reply stored, and the claim keeps every other run of the id out, so the reply
+    /// is not looked up again before the operation; storing it is what checks. Should the id
+    /// have a reply all the same (a claim lost with its database session while another
+    /// replica ran the id), the operation is rolled back and the stored reply returned as it
+    /// was, or a 422 when it answered another body.
+    pub(crate) fn complete(
         &self,
-        request_id: Option<&str>,
         route: &str,
         body: &[u8],
         op: impl FnOnce(&Writer<'_>) -> Result<ApiReply, ApiError>,
     ) -> Result<ApiReply, ApiError> {
-        self.store.write(|w| {
-            if let Some(reply) = stored_reply(&w.reader(), request_id, route, body)? {
-                return Ok(reply);
-            }
+        let request_id = self.id.as_deref();
+        let taken = std::cell::Cell::new(false);
+        let done = self.service.store.write(|w| {
             let reply = op(w)?;
             if let Some(id) = request_id {
-                w.insert_reply(
+                let stored = w.insert_reply(
                     id,
                     &StoredReply {
                         fingerprint: fingerprint(route, body),
@@ -126,11 +127,24 @@ impl Service {
                         body: reply.body.clone(),
                     },
                 )?;
+                if !stored {
+                    taken.set(true);
+                    // An error rolls the operation back.
+                    return Err(ApiError::internal("the request id has a reply already"));
+                }
             }
             Ok(reply)
-        })
+        });
+        if !taken.get() {
+            return done;
+        }
+        self.service
+            .store
+            .read(|r| Ok(stored_reply(r, request_id, route, body)))??
+            .ok_or_else(|| ApiError::internal("a request id's stored reply vanished"))
     }
 }
+
 /// What tells a retried request from another one under the same id: route and body.
 fn fingerprint(route: &str, body: &[u8]) -> String {
     let mut h = Sha256::new();
@@ -165,4 +179,69 @@ fn stored_reply(
         outcome: stored.outcome,
         body: stored.body,
     }))
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use ferret_plan::strategy::GreedyStrategy;
+    use ferret_world::GridParams;
+
+    use super::*;
+    use crate::model::Outcome;
+    use crate::store::Store;
+
+    fn service() -> Service {
+        let store = Store::in_memory().unwrap();
+        Service::new(store, GridParams::default(), vec![Arc::new(GreedyStrategy)]).unwrap()
+    }
+
+    /// A claim that finds its id answered when it stores its reply (another replica ran the id
+    /// after this one's claim was lost) rolls its own write back and answers as the stored
+    /// reply does: byte for byte for the same body, 422 for another.
+    #[test]
+    fn a_reply_stored_meanwhile_rolls_the_write_back_and_is_returned() {
+        let s = service();
+        let (route, body) = ("POST /scenes", br#"{"a":1}"#.as_slice());
+        let earlier = StoredReply {
+            fingerprint: fingerprint(route, body),
+            outcome: Outcome::Created,
+            body: "the first run's reply".into(),
+        };
+        s.store
+            .write(|w| w.insert_reply("r1", &earlier).map(drop))
+            .unwrap();
+        let claim = || RequestClaim {
+            service: &s,
+            id: Some("r1".into()),
+            _shared: None,
+        };
+        let write = |w: &Writer<'_>| -> Result<ApiReply, ApiError> {
+            w.insert_scene("written", "{}")?;
+            Ok(ApiReply {
+                outcome: Outcome::Created,
+                body: "a second run's reply".into(),
+            })
+        };
+        let reply = claim().complete(route, body, write).unwrap();
+        assert_eq!(reply.body, earlier.body);
+        assert_eq!(reply.outcome, Outcome::Created);
+        let err = claim().complete(route, b"{}", write).unwrap_err();
+        assert_eq!(err.kind, crate::error::ErrorKind::Invalid, "{err:?}");
+        assert_eq!(s.store.read(|r| r.scene("written")).unwrap(), None);
+        // A fresh id runs the write and stores its reply.
+        let fresh = RequestClaim {
+            service: &s,
+            id: Some("r2".into()),
+            _shared: None,
+        };
+        let reply = fresh.complete(route, body, write).unwrap();
+        assert_eq!(reply.body, "a second run's reply");
+        assert!(s.store.read(|r| r.scene("written")).unwrap().is_some());
+        assert_eq!(
+            s.store.read(|r| r.reply("r2")).unwrap().unwrap().body,
+            reply.body
+        );
+    }
 }

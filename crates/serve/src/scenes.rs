@@ -143,7 +143,7 @@ impl Service {
     pub fn upload_scene(&self, req: UploadScene, body: &[u8]) -> Result<ApiReply, ApiError> {
         const ROUTE: &str = "POST /scenes";
         let request_id = req.request_id.as_deref();
-        let _claim = match self.begin(request_id, ROUTE, body)? {
+        let claim = match self.begin(request_id, ROUTE, body)? {
             Begun::Replied(reply) => return Ok(reply),
             Begun::Fresh(claim) => claim,
         };
@@ -161,7 +161,7 @@ impl Service {
         match self.store.read(|r| r.scene(&name))? {
             Some(stored) if stored == text => {
                 let reply = self.get_scene(&name)?;
-                return self.idempotent(request_id, ROUTE, body, |_| Ok(reply));
+                return claim.complete(ROUTE, body, |_| Ok(reply));
             }
             Some(_) => return Err(taken(&name)),
             None => {}
@@ -169,7 +169,7 @@ impl Service {
         let placed = self.grids.build(&scene.house, None, "scene.containers")?;
         let detail = json(Outcome::Created, &scene_detail(&name, &scene, &placed)?)?;
         let max = self.options.limits.max_scenes;
-        let reply = self.idempotent(request_id, ROUTE, body, |w| {
+        let reply = claim.complete(ROUTE, body, |w| {
             match w.reader().scene(&name)? {
                 Some(stored) if stored == text => {
                     return Ok(ApiReply {

@@ -39,7 +39,7 @@ impl Service {
         body: &[u8],
     ) -> Result<ApiReply, ApiError> {
         let route = format!("POST /deployments/{deployment}/trials");
-        let _claim = match self.begin(req.request_id.as_deref(), &route, body)? {
+        let claim = match self.begin(req.request_id.as_deref(), &route, body)? {
             Begun::Replied(reply) => return Ok(reply),
             Begun::Fresh(claim) => claim,
         };
@@ -101,7 +101,7 @@ impl Service {
                 .map(|c| next_container(&placed, Place::Start, c));
             let mut created = None;
             let k = trials.len() as i64 + 1;
-            let started = self.idempotent(req.request_id.as_deref(), &route, body, |w| {
+            let started = claim.complete(&route, body, |w| {
                 w.lock_deployment(deployment)?;
                 if w.reader().trial_counts(deployment)? != snapshot {
                     return Err(stale());
@@ -220,7 +220,7 @@ impl Service {
         body: &[u8],
     ) -> Result<ApiReply, ApiError> {
         let route = format!("POST /trials/{id}/observations");
-        let _claim = match self.begin(req.request_id.as_deref(), &route, body)? {
+        let claim = match self.begin(req.request_id.as_deref(), &route, body)? {
             Begun::Replied(reply) => return Ok(reply),
             Begun::Fresh(claim) => claim,
         };
@@ -339,7 +339,7 @@ impl Service {
                 None => (TrialStatus::Exhausted, None, None),
             }
         };
-        let reply = self.idempotent(req.request_id.as_deref(), &route, body, |w| {
+        let reply = claim.complete(&route, body, |w| {
             // Every write of a deployment's trials holds its row: the order trials end in is
             // the deployment's history, and one observation per sequence number is kept.
             w.lock_deployment(row.deployment)?;

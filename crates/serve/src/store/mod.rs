@@ -560,13 +560,15 @@ impl Writer<'_> {
         Ok(())
     }
 
-    /// Stores the reply to a request id.
+    /// Stores the reply to a request id; false (and nothing stored) when the id has a reply
+    /// already.
     ///
     /// # Errors
-    /// The database refuses (a taken id).
-    pub fn insert_reply(&self, id: &str, reply: &StoredReply) -> Result<(), StoreError> {
-        self.conn.execute(
-            "INSERT INTO requests (id, fingerprint, status, body) VALUES ($1, $2, $3, $4)",
+    /// The database refuses.
+    pub fn insert_reply(&self, id: &str, reply: &StoredReply) -> Result<bool, StoreError> {
+        let stored = self.conn.execute(
+            "INSERT INTO requests (id, fingerprint, status, body) VALUES ($1, $2, $3, $4)
+             ON CONFLICT (id) DO NOTHING",
             &[
                 request_key(id).as_ref().into(),
                 reply.fingerprint.as_str().into(),
@@ -574,7 +576,7 @@ impl Writer<'_> {
                 reply.body.as_str().into(),
             ],
         )?;
-        Ok(())
+        Ok(stored == 1)
     }
 }
 

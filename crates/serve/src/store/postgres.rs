@@ -4,7 +4,7 @@
 //! deployment's row (`SELECT … FOR UPDATE`); request ids in flight are held as session
 //! advisory locks on one connection of the replica, so they vanish with a replica that dies.
 
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use bytes::BytesMut;
@@ -70,8 +70,17 @@ pub(super) struct Postgres {
     config: tokio_postgres::Config,
     pub(super) db: String,
     /// The session that holds this replica's request claims (advisory locks belong to a
-    /// session, so they cannot live on pooled connections).
-    claims: Mutex<Option<tokio_postgres::Client>>,
+    /// session, so they cannot live on pooled connections). The lock guards only reconnecting:
+    /// requests share the session, whose client pipelines their statements.
+    claims: Mutex<Option<Arc<ClaimSession>>>,
+}
+
+/// The claims session with its two statements prepared once: each request takes and releases
+/// a claim, and an unprepared statement costs a round trip of its own every time.
+struct ClaimSession {
+    client: tokio_postgres::Client,
+    lock: tokio_postgres::Statement,
+    unlock: tokio_postgres::Statement,
 }
 
 impl Drop for Postgres {
@@ -294,31 +303,16 @@ impl Postgres {
     /// Takes `key`'s advisory lock on the claims session; `None` when another session holds it.
     pub(super) fn claim(&self, key: &str) -> Result<Option<(i32, i32)>, StoreError> {
         let lock = Self::lock_key(key);
-        let mut session = self
-            .claims
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
         // One retry on a fresh session: the old one may have died with the server's restart.
         for attempt in 0..2 {
-            if session
-                .as_ref()
-                .is_none_or(tokio_postgres::Client::is_closed)
-            {
-                *session = Some(self.session()?);
-            }
-            let Some(client) = session.as_ref() else {
-                continue;
-            };
-            match self.block_on(
-                client.query_one("SELECT pg_try_advisory_lock($1, $2)", &[&lock.0, &lock.1]),
-            ) {
+            let session = self.claim_session()?;
+            match self.block_on(session.client.query_one(&session.lock, &[&lock.0, &lock.1])) {
                 Ok(row) => {
                     let took: bool = row.get(0);
                     return Ok(took.then_some(lock));
                 }
-                Err(e) if attempt == 0 && client.is_closed() => {
+                Err(e) if attempt == 0 && session.client.is_closed() => {
                     tracing::warn!("{}: the claims session closed ({e}); reconnecting", self.db);
-                    *session = None;
                 }
                 Err(e) => return Err(self.pg(e)),
             }
@@ -335,17 +329,36 @@ impl Postgres {
         let session = self
             .claims
             .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        if let Some(client) = session.as_ref()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone();
+        if let Some(session) = session
             && let Err(e) = self.block_on(
-                client.query_one("SELECT pg_advisory_unlock($1, $2)", &[&lock.0, &lock.1]),
+                session
+                    .client
+                    .query_one(&session.unlock, &[&lock.0, &lock.1]),
             )
         {
             tracing::warn!("{}: releasing a request claim: {e}", self.db);
         }
     }
 
-    fn session(&self) -> Result<tokio_postgres::Client, StoreError> {
+    /// The open claims session, opened (again) when there is none or it closed.
+    fn claim_session(&self) -> Result<Arc<ClaimSession>, StoreError> {
+        let mut slot = self
+            .claims
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some(s) = slot.as_ref()
+            && !s.client.is_closed()
+        {
+            return Ok(s.clone());
+        }
+        let session = Arc::new(self.session()?);
+        *slot = Some(session.clone());
+        Ok(session)
+    }
+
+    fn session(&self) -> Result<ClaimSession, StoreError> {
         let (client, connection) = self
             .block_on(self.config.connect(NoTls))
             .map_err(|e| self.pg(e))?;
@@ -357,7 +370,19 @@ impl Postgres {
                 }
             });
         });
-        Ok(client)
+        let (lock, unlock) = self
+            .block_on(async {
+                tokio::try_join!(
+                    client.prepare("SELECT pg_try_advisory_lock($1, $2)"),
+                    client.prepare("SELECT pg_advisory_unlock($1, $2)"),
+                )
+            })
+            .map_err(|e| self.pg(e))?;
+        Ok(ClaimSession {
+            client,
+            lock,
+            unlock,
+        })
     }
 }
 

@@ -50,7 +50,7 @@ impl TrialDraw<'_> {
     }
 
     /// Every house's targets, for the houses that have a map: what LLM strategies will be asked
-    /// about (see [`prefetch`]).
+    /// about (see [`prefetch`](crate::strategies::prefetch)).
     pub fn targets<'s>(
         &self,
         scenes: &'s [Scene],

@@ -162,7 +162,7 @@ pub fn default_scenes(count: usize, seed: u64) -> Result<Vec<Scene>> {
 /// caller can walk the houses one at a time instead of holding them all.
 ///
 /// # Errors
-/// [`WorldError::Range`](crate::WorldError::Range) for an index past [`MAX_HOUSES`]; those of
+/// [`WorldError::Range`] for an index past [`MAX_HOUSES`]; those of
 /// the reader.
 pub fn default_scene(index: usize, seed: u64) -> Result<Scene> {
     check_count(index.saturating_add(1))?;

@@ -11,9 +11,10 @@ use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::feedback::Feedback;
-use crate::houses::Mapped;
+use crate::houses::{HouseEvent, HouseStream, Mapped, OpenSource};
 use crate::runs::TrialRow;
-use crate::strategies::{LlmSettings, Strategies, prefetch};
+use crate::strategies::{LlmSettings, Strategies, add_summary, prefetch_outcome, prefetch_quiet};
+use ferret_llm::PrefetchSummary;
 
 /// How trials are drawn on each house: the same for every strategy.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -49,7 +50,7 @@ impl TrialDraw<'_> {
     }
 
     /// Every house's targets, for the houses that have a map: what LLM strategies will be asked
-    /// about (see [`prefetch`]).
+    /// about (see [`prefetch`](crate::strategies::prefetch)).
     pub fn targets<'s>(
         &self,
         scenes: &'s [Scene],
@@ -201,6 +202,12 @@ pub struct EvaluationTotals {
     pub houses_run: usize,
     /// Trials (house and target) drawn on those houses.
     pub trials_run: usize,
+    /// Indices of the houses evaluated (valid, whether mapped or not), in order: a report's
+    /// house list, 8 bytes a house.
+    pub houses: Vec<usize>,
+    /// Why each skipped house was skipped, in order (each also went to
+    /// [`Feedback::note`] as `skipped: …` when it was read).
+    pub skipped: Vec<String>,
 }
 
 /// Houses mapped and evaluated at once per worker thread: what bounds the maps in memory. A
@@ -208,14 +215,15 @@ pub struct EvaluationTotals {
 /// thread busy most of the time.
 const HOUSES_PER_THREAD_IN_FLIGHT: usize = 8;
 
+/// Houses read, mapped and run at once by [`evaluate_specs_each`] and [`evaluate_source_each`]
+/// on the current thread pool: a few per worker thread.
+pub fn default_batch() -> usize {
+    (rayon::current_num_threads() * HOUSES_PER_THREAD_IN_FLIGHT).max(1)
+}
+
 /// Evaluates the strategies `specs` of `setup` on `scenes` mapped on `grid`, as `ferret eval`
-/// does, handing each house's rows to `each` in house order as houses finish: the strategies
-/// built, every LLM question of the drawn trials asked before the trials run (through the
-/// response cache), then the houses mapped and run in parallel a batch at a time. Only a batch's
-/// maps and rows are in memory at once, so a caller that writes the rows out (a [`RunWriter`])
-/// runs any number of houses in the same memory.
-///
-/// [`RunWriter`]: crate::runs::RunWriter
+/// does, handing each house's rows to `each` in house order as houses finish:
+/// [`evaluate_source_each`] over houses already in memory, [`default_batch`] at a time.
 ///
 /// Errors: a spec the registry cannot build, the errors of prefetching LLM answers, and the
 /// first error of `each` (which stops the evaluation).
@@ -230,26 +238,173 @@ pub fn evaluate_specs_each(
     feedback: &dyn Feedback,
     each: &mut dyn FnMut(HouseOutcome<'_>) -> Result<()>,
 ) -> Result<EvaluationTotals> {
+    let open = || -> Result<HouseStream<'_>> {
+        Ok(Box::new(
+            scenes
+                .iter()
+                .map(|s| Ok(HouseEvent::Scene(Box::new(s.clone())))),
+        ))
+    };
+    let houses = Houses {
+        open: &open,
+        len_hint: scenes.len(),
+    };
+    evaluate_batches(
+        &houses,
+        setup,
+        specs,
+        draw,
+        grid,
+        llm,
+        default_batch(),
+        feedback,
+        each,
+    )
+}
+
+/// Evaluates the strategies `specs` of `setup` on the houses of `source` mapped on `grid`, as
+/// `ferret eval` does, handing each house's rows to `each` in house order as houses finish. The
+/// houses are read `batch` at a time (at least one): the batch's houses read, mapped, their LLM
+/// questions asked (through the response cache) and their trials run in parallel, then the batch
+/// is dropped. Memory thus holds one batch of houses, maps and rows however many houses there
+/// are, and a caller that writes the rows out (a [`RunWriter`]) runs any number of houses in the
+/// same memory. The rows do not depend on `batch`.
+///
+/// With `keep_going` and an LLM strategy, the questions of every house are asked first, in a
+/// pass of their own over the source (batch by batch as well), so that the strategies of an LLM
+/// that fails are left out of every house, not only of those after the failure. Skipped houses
+/// go to `feedback` as notes (`skipped: …`) as they are read.
+///
+/// [`RunWriter`]: crate::runs::RunWriter
+///
+/// Errors: a spec the registry cannot build, the errors of reading the houses (an invalid house
+/// without `skip_invalid` stops the run there), of prefetching LLM answers, and the first error
+/// of `each` (which stops the evaluation).
+#[allow(clippy::too_many_arguments)]
+pub fn evaluate_source_each(
+    source: &OpenSource<'_>,
+    setup: &Strategies,
+    specs: &[String],
+    draw: &TrialDraw<'_>,
+    grid: &GridParams,
+    llm: &LlmSettings,
+    batch: usize,
+    feedback: &dyn Feedback,
+    each: &mut dyn FnMut(HouseOutcome<'_>) -> Result<()>,
+) -> Result<EvaluationTotals> {
+    let open = || source.houses();
+    let houses = Houses {
+        open: &open,
+        len_hint: source.len_hint(),
+    };
+    evaluate_batches(
+        &houses, setup, specs, draw, grid, llm, batch, feedback, each,
+    )
+}
+
+/// Houses that can be read from the start as often as needed.
+struct Houses<'a, 'h> {
+    open: &'a dyn Fn() -> Result<HouseStream<'h>>,
+    /// What a progress bar's length starts at (0: unknown).
+    len_hint: usize,
+}
+
+/// Up to `n` houses of `stream` (fewer at its end), skipped ones handed to `skipped`.
+fn next_batch(
+    stream: &mut HouseStream<'_>,
+    n: usize,
+    skipped: &mut dyn FnMut(String),
+) -> Result<Vec<Scene>> {
+    let mut batch = Vec::with_capacity(n.min(1024));
+    while batch.len() < n {
+        match stream.next() {
+            Some(event) => match event? {
+                HouseEvent::Scene(scene) => batch.push(*scene),
+                HouseEvent::Skipped(why) => skipped(why),
+            },
+            None => break,
+        }
+    }
+    Ok(batch)
+}
+
+/// The maps of a batch, built in parallel, ticking `feedback` per house.
+fn batch_maps(scenes: &[Scene], grid: &GridParams, feedback: &dyn Feedback) -> Vec<Mapped> {
+    scenes
+        .par_iter()
+        .map(|scene| {
+            let map = ferret_world::distance::build(&scene.house, grid);
+            feedback.tick();
+            map
+        })
+        .collect()
+}
+
+/// Asks the LLM questions of a batch's mapped houses.
+fn prefetch_batch(
+    setup: &Strategies,
+    specs: &[String],
+    draw: &TrialDraw<'_>,
+    scenes: &[Scene],
+    maps: &[Mapped],
+) -> Result<PrefetchSummary> {
+    let targets = draw.targets(scenes, maps);
+    let pairs: Vec<(&House, &ObjectType)> = targets.iter().map(|(h, t)| (*h, t)).collect();
+    prefetch_quiet(&setup.service, specs, &pairs)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn evaluate_batches(
+    houses: &Houses<'_, '_>,
+    setup: &Strategies,
+    specs: &[String],
+    draw: &TrialDraw<'_>,
+    grid: &GridParams,
+    llm: &LlmSettings,
+    batch: usize,
+    feedback: &dyn Feedback,
+    each: &mut dyn FnMut(HouseOutcome<'_>) -> Result<()>,
+) -> Result<EvaluationTotals> {
+    let batch = batch.max(1);
     let built: Vec<Arc<dyn Strategy>> = specs
         .iter()
         .map(|s| setup.registry.build(s))
         .collect::<std::result::Result<_, _>>()?;
-    let dropped = if crate::strategies::asks_llm(specs) {
-        // The questions are asked for the houses that have a map, all at once; the maps are
-        // built again with their batch rather than all kept.
-        feedback.begin("maps", scenes.len());
-        let mapped: Vec<bool> = scenes
-            .par_iter()
-            .map(|s| {
-                let ok = ferret_world::distance::build(&s.house, grid).is_ok();
-                feedback.tick();
-                ok
-            })
-            .collect();
+    let asks = crate::strategies::asks_llm(specs);
+    let mut asked = PrefetchSummary::default();
+    // Under --keep-going a failed LLM's strategies leave every house, so every question is asked
+    // before the first trial; otherwise a failure stops the run and each batch asks its own.
+    let ask_first = asks && llm.keep_going;
+    let dropped = if ask_first {
+        feedback.begin("LLM questions", houses.len_hint);
+        let mut stream = (houses.open)()?;
+        let mut read = 0;
+        loop {
+            let scenes = match next_batch(&mut stream, batch, &mut |_| {}) {
+                Ok(s) => s,
+                Err(e) => {
+                    feedback.end();
+                    return Err(e);
+                }
+            };
+            if scenes.is_empty() {
+                break;
+            }
+            read += scenes.len();
+            feedback.set_len(houses.len_hint.max(read));
+            let maps = batch_maps(&scenes, grid, &crate::feedback::Silent);
+            let summary = prefetch_batch(setup, specs, draw, &scenes, &maps);
+            feedback.set_done(read);
+            match summary {
+                Ok(s) => add_summary(&mut asked, s),
+                Err(e) => {
+                    feedback.end();
+                    return Err(e);
+                }
+            }
+        }
         feedback.end();
-        let targets = draw.targets_where(scenes, &mapped);
-        let pairs: Vec<(&House, &ObjectType)> = targets.iter().map(|(h, t)| (*h, t)).collect();
-        prefetch(&setup.service, llm, specs, &pairs, feedback)?
+        prefetch_outcome(&setup.service, llm, specs, &asked, feedback)?
     } else {
         Vec::new()
     };
@@ -262,19 +417,90 @@ pub fn evaluate_specs_each(
         strategies: strategies.clone(),
         ..EvaluationTotals::default()
     };
-    let batch = (rayon::current_num_threads() * HOUSES_PER_THREAD_IN_FLIGHT).max(1);
-    feedback.begin("houses", scenes.len());
-    for chunk in scenes.chunks(batch) {
-        let done: Vec<(Mapped, HouseRun)> = chunk
-            .par_iter()
-            .map(|scene| {
-                let map = ferret_world::distance::build(&scene.house, grid);
-                let r = evaluate_house(scene, &map, &strategies, draw);
-                feedback.tick();
-                (map, r)
-            })
-            .collect();
-        for (scene, (map, (rows, errors, trials))) in chunk.iter().zip(done) {
+    feedback.begin("houses", houses.len_hint);
+    let result = run_batches(
+        houses,
+        setup,
+        specs,
+        draw,
+        grid,
+        llm,
+        batch,
+        feedback,
+        each,
+        &strategies,
+        &names,
+        (asks && !ask_first).then_some(&mut asked),
+        &mut totals,
+    );
+    feedback.end();
+    result?;
+    if asks && !ask_first {
+        prefetch_outcome(&setup.service, llm, specs, &asked, feedback)?;
+    }
+    Ok(totals)
+}
+
+/// The run proper: batch after batch, each read, mapped, asked (with `ask`, whose sum it adds
+/// to) and run, its houses handed to `each`.
+#[allow(clippy::too_many_arguments)]
+fn run_batches(
+    houses: &Houses<'_, '_>,
+    setup: &Strategies,
+    specs: &[String],
+    draw: &TrialDraw<'_>,
+    grid: &GridParams,
+    llm: &LlmSettings,
+    batch: usize,
+    feedback: &dyn Feedback,
+    each: &mut dyn FnMut(HouseOutcome<'_>) -> Result<()>,
+    strategies: &[Arc<dyn Strategy>],
+    names: &[String],
+    mut ask: Option<&mut PrefetchSummary>,
+    totals: &mut EvaluationTotals,
+) -> Result<()> {
+    let mut stream = (houses.open)()?;
+    loop {
+        let scenes = next_batch(&mut stream, batch, &mut |why| {
+            feedback.note(&format!("skipped: {why}"));
+            totals.skipped.push(why);
+        })?;
+        if scenes.is_empty() {
+            break;
+        }
+        let read = totals.houses.len() + scenes.len();
+        feedback.set_len(houses.len_hint.max(read));
+        totals.houses.extend(scenes.iter().map(|s| s.house.index));
+        let done: Vec<(Mapped, HouseRun)> = if let Some(sum) = ask.as_deref_mut() {
+            // The questions wait for the batch's maps (only mapped houses are asked about), so
+            // the maps are built first and the trials run after.
+            let maps = batch_maps(&scenes, grid, &crate::feedback::Silent);
+            add_summary(sum, prefetch_batch(setup, specs, draw, &scenes, &maps)?);
+            if !setup.service.failed_llms().is_empty() {
+                // Without --keep-going a failed LLM stops the run; the outcome says why.
+                prefetch_outcome(&setup.service, llm, specs, sum, feedback)?;
+            }
+            scenes
+                .par_iter()
+                .zip(maps)
+                .map(|(scene, map)| {
+                    let r = evaluate_house(scene, &map, strategies, draw);
+                    feedback.tick();
+                    (map, r)
+                })
+                .collect()
+        } else {
+            scenes
+                .par_iter()
+                .map(|scene| {
+                    let map = ferret_world::distance::build(&scene.house, grid);
+                    let r = evaluate_house(scene, &map, strategies, draw);
+                    feedback.tick();
+                    (map, r)
+                })
+                .collect()
+        };
+        for (scene, (map, (rows, errors, trials))) in scenes.iter().zip(done) {
             totals.houses_run += usize::from(trials > 0);
             totals.trials_run += trials;
             let r = each(HouseOutcome {
@@ -283,17 +509,13 @@ pub fn evaluate_specs_each(
                 rows,
                 errors: &errors,
                 trials,
-                strategies: &names,
+                strategies: names,
             });
             totals.errors.extend(errors);
-            if let Err(e) = r {
-                feedback.end();
-                return Err(e);
-            }
+            r?;
         }
     }
-    feedback.end();
-    Ok(totals)
+    Ok(())
 }
 
 /// One house's rows, failure messages and trials drawn.

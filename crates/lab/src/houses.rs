@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use ferret_world::procthor::{AssetDatabase, HouseRange, LoadOptions, load_scenes};
+use ferret_world::procthor::{AssetDatabase, HouseItem, HouseRange, HouseReader, LoadOptions};
 use ferret_world::{ContainerSet, Distances, GridParams, OccupancyGrid, Scene, WorldError};
 use rayon::prelude::*;
 
@@ -38,6 +38,28 @@ pub struct LoadedHouses {
     pub source: String,
 }
 
+/// One house of a source read house by house: a house, or why one was skipped.
+#[derive(Debug)]
+pub enum HouseEvent {
+    /// A valid house.
+    Scene(Box<Scene>),
+    /// Why an invalid house was skipped (only with [`HouseSource::skip_invalid`]).
+    Skipped(String),
+}
+
+/// The houses of a source in order, read as they are asked for.
+pub type HouseStream<'a> = Box<dyn Iterator<Item = Result<HouseEvent>> + Send + 'a>;
+
+/// A house source ready to be read house by house, as often as needed: what the readers
+/// borrow (the asset database) is loaded once.
+#[derive(Debug)]
+pub struct OpenSource<'s> {
+    source: &'s HouseSource,
+    containers: ContainerSet,
+    shard: Option<crate::shard::Shard>,
+    db: Option<AssetDatabase>,
+}
+
 impl HouseSource {
     /// Loads the houses, ProcTHOR files read with the container set `containers` (generated
     /// houses and scene files name their containers themselves).
@@ -52,58 +74,46 @@ impl HouseSource {
         containers: ContainerSet,
         shard: Option<crate::shard::Shard>,
     ) -> Result<LoadedHouses> {
-        let mut loaded = self.load_inner(containers, shard)?;
-        if let Some(sh) = shard {
-            loaded.scenes.retain(|s| sh.contains(s.house.index));
+        let open = self.open(containers, shard)?;
+        let mut loaded = LoadedHouses {
+            scenes: Vec::new(),
+            skipped: Vec::new(),
+            source: self.describe(),
+        };
+        for event in open.houses()? {
+            match event? {
+                HouseEvent::Scene(scene) => loaded.scenes.push(*scene),
+                HouseEvent::Skipped(why) => loaded.skipped.push(why),
+            }
         }
         Ok(loaded)
     }
 
-    fn load_inner(
+    /// Opens the source for reading house by house ([`OpenSource::houses`]), only the houses of
+    /// `shard` (all without one); ProcTHOR files are read with the container set `containers`.
+    ///
+    /// # Errors
+    /// An asset database that cannot be read; too many houses to generate.
+    pub fn open(
         &self,
         containers: ContainerSet,
         shard: Option<crate::shard::Shard>,
-    ) -> Result<LoadedHouses> {
-        let Some(path) = &self.houses else {
-            let scenes = ferret_world::generate::default_scenes(self.generate, self.house_seed)
+    ) -> Result<OpenSource<'_>> {
+        if self.houses.is_none() {
+            ferret_world::generate::check_count(self.generate)
                 .context_with(|| "generating the default houses".to_string())?;
-            let scenes = match &self.range {
-                Some(r) => scenes
-                    .into_iter()
-                    .filter(|s| r.contains(s.house.index))
-                    .collect(),
-                None => scenes,
-            };
-            return Ok(LoadedHouses {
-                scenes,
-                skipped: vec![],
-                source: self.describe(),
-            });
-        };
-        if ferret_world::scene::is_scene_file(path) {
-            let scene = ferret_world::SceneFile::load(path)?;
-            return Ok(LoadedHouses {
-                scenes: vec![scene],
-                skipped: vec![],
-                source: self.describe(),
-            });
         }
-        let db = match &self.asset_db {
-            Some(p) => Some(AssetDatabase::load(p)?),
-            None => None,
+        let db = match (&self.houses, &self.asset_db) {
+            (Some(path), Some(p)) if !ferret_world::scene::is_scene_file(path) => {
+                Some(AssetDatabase::load(p)?)
+            }
+            _ => None,
         };
-        let opts = LoadOptions {
-            shard: shard.map(|sh| (sh.index, sh.count)),
-            asset_db: db.as_ref(),
-            range: self.range.unwrap_or_default(),
-            skip_invalid: self.skip_invalid,
+        Ok(OpenSource {
+            source: self,
             containers,
-        };
-        let report = load_scenes(path, &opts)?;
-        Ok(LoadedHouses {
-            scenes: report.scenes,
-            skipped: report.skipped.iter().map(ToString::to_string).collect(),
-            source: self.describe(),
+            shard,
+            db,
         })
     }
 
@@ -121,6 +131,88 @@ impl HouseSource {
                 None => path.display().to_string(),
             },
         }
+    }
+}
+
+impl OpenSource<'_> {
+    /// The houses, in order, from the start: each call reads the source again.
+    ///
+    /// # Errors
+    /// A house file that cannot be opened (later errors of the file, and invalid houses without
+    /// `skip_invalid`, come out of the stream, after the houses before them).
+    pub fn houses(&self) -> Result<HouseStream<'_>> {
+        let src = self.source;
+        let shard = self.shard;
+        let in_shard = move |i: usize| shard.is_none_or(|sh| sh.contains(i));
+        let Some(path) = &src.houses else {
+            let range = src.range;
+            let seed = src.house_seed;
+            let houses = (0..src.generate)
+                .filter(move |&i| range.is_none_or(|r| r.contains(i)) && in_shard(i))
+                .map(move |i| {
+                    ferret_world::generate::default_scene(i, seed)
+                        .map(|s| HouseEvent::Scene(Box::new(s)))
+                        .context_with(|| "generating the default houses".to_string())
+                });
+            return Ok(Box::new(houses));
+        };
+        if ferret_world::scene::is_scene_file(path) {
+            let scene = ferret_world::SceneFile::load(path)?;
+            let keep = in_shard(scene.house.index);
+            return Ok(Box::new(
+                keep.then(|| Ok(HouseEvent::Scene(Box::new(scene))))
+                    .into_iter(),
+            ));
+        }
+        let opts = LoadOptions {
+            shard: shard.map(|sh| (sh.index, sh.count)),
+            asset_db: self.db.as_ref(),
+            range: src.range.unwrap_or_default(),
+            skip_invalid: src.skip_invalid,
+            containers: self.containers,
+        };
+        let reader = HouseReader::open(path, &opts)?;
+        Ok(Box::new(reader.map(|item| match item {
+            Ok(HouseItem::Scene(scene)) => Ok(HouseEvent::Scene(scene)),
+            Ok(HouseItem::Skipped(e)) => Ok(HouseEvent::Skipped(e.to_string())),
+            Err(e) => Err(e.into()),
+        })))
+    }
+
+    /// How many houses [`houses`](Self::houses) will yield, as far as is known without reading
+    /// the file: exact for generated houses and scene files; for a file, the houses of a range
+    /// with an end (fewer when houses are skipped or the file is shorter); 0 when unknown.
+    pub fn len_hint(&self) -> usize {
+        let src = self.source;
+        let shard = self.shard;
+        // Indices below `x` in the shard; by arithmetic, as a range's end may be huge.
+        let below = |x: usize| match shard {
+            Some(sh) if sh.count > 0 => {
+                if x <= sh.index {
+                    0
+                } else {
+                    (x - sh.index - 1) / sh.count + 1
+                }
+            }
+            _ => x,
+        };
+        let count = |start: usize, end: usize| below(end).saturating_sub(below(start));
+        match &src.houses {
+            None => {
+                let r = src.range.unwrap_or_default();
+                count(r.start, r.end.map_or(src.generate, |e| e.min(src.generate)))
+            }
+            Some(path) if ferret_world::scene::is_scene_file(path) => 1,
+            Some(_) => src
+                .range
+                .and_then(|r| r.end.map(|e| count(r.start, e)))
+                .unwrap_or(0),
+        }
+    }
+
+    /// Where the houses come from, as reports name it ([`HouseSource::describe`]).
+    pub fn describe(&self) -> String {
+        self.source.describe()
     }
 }
 

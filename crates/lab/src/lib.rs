@@ -30,12 +30,14 @@ pub mod summary;
 pub use deploy::{DeploySettings, DeployedTrial, deploy, house_order};
 pub use error::{LabError, Result};
 pub use evaluate::{
-    Evaluation, EvaluationTotals, HouseOutcome, SpecEvaluation, TrialDraw, evaluate,
-    evaluate_specs, evaluate_specs_each, trial_row,
+    Evaluation, EvaluationTotals, HouseOutcome, SpecEvaluation, TrialDraw, default_batch, evaluate,
+    evaluate_source_each, evaluate_specs, evaluate_specs_each, trial_row,
 };
 pub use feedback::{Feedback, Silent};
 pub use ferret_select::HouseOrder;
-pub use houses::{HouseSource, LoadedHouses, Mapped, build_maps};
+pub use houses::{
+    HouseEvent, HouseSource, HouseStream, LoadedHouses, Mapped, OpenSource, build_maps,
+};
 pub use runs::{CELL_M, EvalRun, RunInfo, RunWriter, TrialRow, WrittenRun, sha256_hex};
 pub use shard::{MergeError, MergedRun, Shard, ShardError, ShardSpec, merge_runs};
 pub use strategies::{

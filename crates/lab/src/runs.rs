@@ -210,26 +210,11 @@ impl EvalRun {
 
     /// Reads `dir/run.json` and `dir/trials.csv` and checks that they belong together.
     pub fn read(dir: &Path) -> Result<Self> {
-        let run_json = read_run_file(&dir.join("run.json"))
-            .map_err(LabError::from_io_plain)
-            .context_with(|| format!("{}: not a `ferret eval` output directory", dir.display()))?;
-        let info: RunInfo = serde_json::from_slice(&run_json).map_err(|source| LabError::Json {
-            context: "reading run.json".into(),
-            source,
-        })?;
+        let (info, run_json) = read_info(dir)?;
         let trials_path = dir.join("trials.csv");
         let trials_csv = read_run_file(&trials_path)
             .map_err(|e| LabError::io(format!("reading {}", trials_path.display()), e))?;
-        if let Some(expected) = &info.trials_sha256
-            && *expected != sha256_hex(&trials_csv)
-        {
-            return Err(LabError::invalid(format!(
-                "{}: trials.csv and run.json are from different runs (an eval was stopped between \
-                 writing them, or one file was copied from another run); run `ferret eval` into this \
-                 directory again",
-                dir.display()
-            )));
-        }
+        check_hash(dir, &info, &sha256_hex(&trials_csv))?;
         let rows = parse_csv(&trials_csv, &trials_path)?;
         Ok(Self {
             info,
@@ -238,6 +223,47 @@ impl EvalRun {
             trials_csv,
         })
     }
+}
+
+/// `dir/run.json`, parsed and as read.
+fn read_info(dir: &Path) -> Result<(RunInfo, Vec<u8>)> {
+    let run_json = read_run_file(&dir.join("run.json"))
+        .map_err(LabError::from_io_plain)
+        .context_with(|| format!("{}: not a `ferret eval` output directory", dir.display()))?;
+    let info: RunInfo = serde_json::from_slice(&run_json).map_err(|source| LabError::Json {
+        context: "reading run.json".into(),
+        source,
+    })?;
+    Ok((info, run_json))
+}
+
+/// Refuses a trials.csv whose hash is not the one run.json records.
+fn check_hash(dir: &Path, info: &RunInfo, actual: &str) -> Result<()> {
+    if let Some(expected) = &info.trials_sha256
+        && expected != actual
+    {
+        return Err(LabError::invalid(format!(
+            "{}: trials.csv and run.json are from different runs (an eval was stopped between \
+             writing them, or one file was copied from another run); run `ferret eval` into this \
+             directory again",
+            dir.display()
+        )));
+    }
+    Ok(())
+}
+
+/// `dir/run.json`, checked as [`EvalRun::read`] checks it against `dir/trials.csv`, whose hash
+/// is computed reading the file through rather than holding it.
+pub fn read_checked_info(dir: &Path) -> Result<RunInfo> {
+    use sha2::Digest;
+    let (info, _) = read_info(dir)?;
+    let trials_path = dir.join("trials.csv");
+    let io = |e| LabError::io(format!("reading {}", trials_path.display()), e);
+    let mut file = std::fs::File::open(&trials_path).map_err(io)?;
+    let mut hasher = sha2::Sha256::new();
+    std::io::copy(&mut file, &mut hasher).map_err(io)?;
+    check_hash(dir, &info, &format!("{:x}", hasher.finalize()))?;
+    Ok(info)
 }
 
 /// The report of a run described by `info` whose rows' costs are `costs`: the summary (the

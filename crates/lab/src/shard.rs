@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::runs::{EvalRun, ReportView, RunInfo, RunReport, TrialRow};
+use crate::runs::{EvalRun, ReportView, RunInfo, RunReport, TrialRow, WrittenRun};
 
 /// One shard of an evaluation: `index` of `count` (0-based).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -361,27 +361,90 @@ fn differing(
 /// shard's own order, which is one machine's). The merged run.json is a shard's without
 /// `shard`, with `merged_from` listing the shards.
 pub fn merge_runs(shards: &[(PathBuf, EvalRun)]) -> Result<MergedRun, MergeError> {
+    let infos: Vec<(&Path, &RunInfo)> =
+        shards.iter().map(|(d, r)| (d.as_path(), &r.info)).collect();
+    let records = check_shards(&infos)?;
+    for &(pos, rec) in &records {
+        let (dir, run) = &shards[pos];
+        let houses = sorted(&rec.houses);
+        if let Some(r) = run
+            .rows
+            .iter()
+            .find(|r| houses.binary_search(&r.house_index).is_err())
+        {
+            return Err(not_loaded(dir, r));
+        }
+    }
+    // Concatenated shard by shard, then a stable sort by house: a house's rows stay in its
+    // shard's order, which is the one-machine order within a house.
+    let mut rows: Vec<TrialRow> = records
+        .iter()
+        .flat_map(|&(pos, _)| shards[pos].1.rows.iter().cloned())
+        .collect();
+    rows.sort_by_key(|r| r.house_index);
+    let counts: Vec<usize> = records
+        .iter()
+        .map(|&(pos, _)| shards[pos].1.rows.len())
+        .collect();
+    let m = merged_parts(&infos, &records, &counts);
+    let first_dir = &shards[0].0;
+    Ok(MergedRun {
+        houses: m.houses,
+        houses_run: m.houses_run,
+        trials_run: m.trials_run,
+        failures: m.failures,
+        paired_against: m.paired_against,
+        cells: m.cells,
+        show_house: m.show_house,
+        run: EvalRun::new(m.info, rows).map_err(|e| MergeError::Inconsistent {
+            dir: first_dir.clone(),
+            message: e.to_string(),
+        })?,
+    })
+}
+
+fn sorted(houses: &[usize]) -> Vec<usize> {
+    let mut h = houses.to_vec();
+    h.sort_unstable();
+    h
+}
+
+fn not_loaded(dir: &Path, r: &TrialRow) -> MergeError {
+    MergeError::Inconsistent {
+        dir: dir.to_path_buf(),
+        message: format!(
+            "trials.csv has a trial of house {} ({}), which the shard did not load",
+            r.house_index, r.house
+        ),
+    }
+}
+
+/// Checks that `shards` (directory and run.json) are the shards of one run: the same settings,
+/// every shard `0..count` exactly once, every house in its shard by the rule and in one shard
+/// only. Returns each shard's position in `shards` with its record, in shard order.
+fn check_shards<'a>(
+    shards: &[(&'a Path, &'a RunInfo)],
+) -> Result<Vec<(usize, &'a ShardRecord)>, MergeError> {
     let (first_dir, first) = shards.first().ok_or(MergeError::Empty)?;
-    let base = settings(&first.info);
-    let mut records: Vec<(&Path, &EvalRun, &ShardRecord)> = Vec::new();
-    for (dir, run) in shards {
-        let rec = run
-            .info
-            .shard
-            .as_ref()
-            .ok_or_else(|| MergeError::NotShard { dir: dir.clone() })?;
-        let diff = differing(&base, &settings(&run.info));
+    let base = settings(first);
+    let mut records: Vec<(usize, &ShardRecord)> = Vec::new();
+    let dir_of = |pos: usize| shards[pos].0.to_path_buf();
+    for (pos, (dir, info)) in shards.iter().enumerate() {
+        let rec = info.shard.as_ref().ok_or_else(|| MergeError::NotShard {
+            dir: dir.to_path_buf(),
+        })?;
+        let diff = differing(&base, &settings(info));
         if !diff.is_empty() {
             return Err(MergeError::Settings {
-                first: first_dir.clone(),
-                other: dir.clone(),
+                first: first_dir.to_path_buf(),
+                other: dir.to_path_buf(),
                 fields: diff.join("; "),
             });
         }
-        if let Some((other, _, _)) = records.iter().find(|(_, _, r)| r.index == rec.index) {
+        if let Some((other, _)) = records.iter().find(|(_, r)| r.index == rec.index) {
             return Err(MergeError::Overlap {
-                first: other.to_path_buf(),
-                other: dir.clone(),
+                first: dir_of(*other),
+                other: dir.to_path_buf(),
                 what: format!("both are shard {}/{}", rec.index, rec.count),
             });
         }
@@ -391,40 +454,27 @@ pub fn merge_runs(shards: &[(PathBuf, EvalRun)]) -> Result<MergedRun, MergeError
         };
         if let Some(h) = rec.houses.iter().copied().find(|&h| !shard.contains(h)) {
             return Err(MergeError::Inconsistent {
-                dir: dir.clone(),
+                dir: dir.to_path_buf(),
                 message: format!(
                     "house {h} is not in shard {}/{} by the rule {SHARD_RULE}",
                     rec.index, rec.count
                 ),
             });
         }
-        if let Some(r) = run
-            .rows
-            .iter()
-            .find(|r| !rec.houses.contains(&r.house_index))
-        {
-            return Err(MergeError::Inconsistent {
-                dir: dir.clone(),
-                message: format!(
-                    "trials.csv has a trial of house {} ({}), which the shard did not load",
-                    r.house_index, r.house
-                ),
-            });
-        }
-        for (other, _, r) in &records {
+        for (other, r) in &records {
             if let Some(h) = rec.houses.iter().find(|h| r.houses.contains(h)) {
                 return Err(MergeError::Overlap {
-                    first: other.to_path_buf(),
-                    other: dir.clone(),
+                    first: dir_of(*other),
+                    other: dir.to_path_buf(),
                     what: format!("both ran house {h}"),
                 });
             }
         }
-        records.push((dir, run, rec));
+        records.push((pos, rec));
     }
-    let count = records[0].2.count;
+    let count = records[0].1.count;
     let missing: Vec<String> = (0..count)
-        .filter(|i| !records.iter().any(|(_, _, r)| r.index == *i))
+        .filter(|i| !records.iter().any(|(_, r)| r.index == *i))
         .map(|i| i.to_string())
         .collect();
     if !missing.is_empty() {
@@ -433,51 +483,256 @@ pub fn merge_runs(shards: &[(PathBuf, EvalRun)]) -> Result<MergedRun, MergeError
             count,
             given: records
                 .iter()
-                .map(|(d, _, r)| format!("{} = {}/{}", d.display(), r.index, r.count))
+                .map(|(pos, r)| format!("{} = {}/{}", shards[*pos].0.display(), r.index, r.count))
                 .collect::<Vec<_>>()
                 .join(", "),
         });
     }
-    records.sort_by_key(|(_, _, r)| r.index);
+    records.sort_by_key(|(_, r)| r.index);
+    Ok(records)
+}
+
+/// What a merged run says besides its rows.
+struct MergedParts {
+    info: RunInfo,
+    houses: Vec<usize>,
+    houses_run: usize,
+    trials_run: usize,
+    failures: usize,
+    paired_against: Vec<String>,
+    cells: bool,
+    show_house: Option<usize>,
+}
+
+/// The merged run.json (without the rows' hash) and totals of checked shards, `rows[i]` being
+/// the row count of `records[i]`'s trials.csv.
+fn merged_parts(
+    shards: &[(&Path, &RunInfo)],
+    records: &[(usize, &ShardRecord)],
+    rows: &[usize],
+) -> MergedParts {
     let mut houses: Vec<usize> = records
         .iter()
-        .flat_map(|(_, _, r)| r.houses.iter().copied())
+        .flat_map(|(_, r)| r.houses.iter().copied())
         .collect();
     houses.sort_unstable();
-    // Concatenated shard by shard, then a stable sort by house: a house's rows stay in its
-    // shard's order, which is the one-machine order within a house.
-    let mut rows: Vec<TrialRow> = records
-        .iter()
-        .flat_map(|(_, run, _)| run.rows.iter().cloned())
-        .collect();
-    rows.sort_by_key(|r| r.house_index);
-    let mut info = first.info.clone();
+    let mut info = shards[0].1.clone();
     info.shard = None;
+    info.trials_sha256 = None;
     info.merged_from = records
         .iter()
-        .map(|(dir, run, r)| MergedShard {
-            dir: dir.to_path_buf(),
+        .zip(rows)
+        .map(|(&(pos, r), &rows)| MergedShard {
+            dir: shards[pos].0.to_path_buf(),
             index: r.index,
             houses: r.houses.len(),
-            rows: run.rows.len(),
-            trials_sha256: run.info.trials_sha256.clone().unwrap_or_default(),
+            rows,
+            trials_sha256: shards[pos].1.trials_sha256.clone().unwrap_or_default(),
         })
         .collect();
-    let rec0 = records[0].2;
-    let merged = MergedRun {
+    let rec0 = records[0].1;
+    MergedParts {
+        info,
         houses,
-        houses_run: records.iter().map(|(_, _, r)| r.houses_run).sum(),
-        trials_run: records.iter().map(|(_, _, r)| r.trials_run).sum(),
-        failures: records.iter().map(|(_, _, r)| r.failures).sum(),
+        houses_run: records.iter().map(|(_, r)| r.houses_run).sum(),
+        trials_run: records.iter().map(|(_, r)| r.trials_run).sum(),
+        failures: records.iter().map(|(_, r)| r.failures).sum(),
         paired_against: rec0.paired_against.clone(),
         cells: rec0.cells,
         show_house: rec0.show_house,
-        run: EvalRun::new(info, rows).map_err(|e| MergeError::Inconsistent {
-            dir: first_dir.clone(),
-            message: e.to_string(),
-        })?,
-    };
-    Ok(merged)
+    }
+}
+
+/// The shards merged into a directory by [`merge_dirs`]: what was written, and what the
+/// pictures and the report need.
+#[derive(Clone, Debug)]
+pub struct MergedDir {
+    /// run.json, summary.csv, paired.csv and summary.md as written, and the rows' costs.
+    pub written: WrittenRun,
+    /// Rows of the merged trials.csv.
+    pub rows: usize,
+    /// File indices of every shard's houses, in order.
+    pub houses: Vec<usize>,
+    /// Houses with a trial, over all shards.
+    pub houses_run: usize,
+    /// Failures, over all shards.
+    pub failures: usize,
+    /// The shards' `--show-house`.
+    pub show_house: Option<usize>,
+    /// The strategies with a row, in the order of the run's strategies: a strategy one machine
+    /// dropped (its LLM failed under `--keep-going`) has no row in any shard.
+    pub ran: Vec<String>,
+    /// The houses, in order, where every strategy of [`ran`](Self::ran) finished a trial.
+    pub complete: Vec<usize>,
+}
+
+/// [`merge_runs`] of the shards in `dirs`, written into `out` (which must exist) as
+/// [`MergedRun::write_all`] writes it, byte for byte, without holding the rows: every shard's
+/// trials.csv is read row by row and the rows merged in house order into the merged trials.csv,
+/// only their costs kept (24 bytes a row, for the summary and the paired comparisons) and, per
+/// house, how many strategies finished there.
+///
+/// # Errors
+/// A shard directory that [`EvalRun::read`] refuses; the refusals of [`merge_runs`]; a shard's
+/// trials.csv not in house order; I/O errors writing `out` (which then keeps what it held).
+pub fn merge_dirs(dirs: &[PathBuf], out: &Path) -> crate::Result<MergedDir> {
+    let infos: Vec<RunInfo> = dirs
+        .iter()
+        .map(|d| crate::runs::read_checked_info(d))
+        .collect::<crate::Result<_>>()?;
+    let pairs: Vec<(&Path, &RunInfo)> = dirs.iter().map(PathBuf::as_path).zip(&infos).collect();
+    let records = check_shards(&pairs)?;
+    let mut readers = Vec::with_capacity(records.len());
+    for &(pos, rec) in &records {
+        readers.push(ShardRows::open(&dirs[pos], sorted(&rec.houses))?);
+    }
+    // The next row of every shard, smallest house first; equal houses (which the checks above
+    // rule out across shards) in shard order, as the stable sort of merge_runs has them.
+    let mut heads = std::collections::BinaryHeap::new();
+    for (k, r) in readers.iter_mut().enumerate() {
+        if let Some(row) = r.next_row()? {
+            heads.push(std::cmp::Reverse((row.house_index, k, HeadRow(row))));
+        }
+    }
+    let mut writer = crate::runs::RunWriter::create(out, false)?;
+    let mut names: Vec<String> = Vec::new();
+    let mut per_house: Vec<(usize, usize)> = Vec::new();
+    let mut in_house: Vec<usize> = Vec::new();
+    while let Some(std::cmp::Reverse((house, k, HeadRow(row)))) = heads.pop() {
+        writer.push(&row)?;
+        let s = match names.iter().position(|n| *n == row.strategy) {
+            Some(s) => s,
+            None => {
+                names.push(row.strategy.clone());
+                names.len() - 1
+            }
+        };
+        if per_house.last().is_none_or(|(h, _)| *h != house) {
+            per_house.push((house, 0));
+            in_house.clear();
+        }
+        if !in_house.contains(&s) {
+            in_house.push(s);
+            if let Some(last) = per_house.last_mut() {
+                last.1 += 1;
+            }
+        }
+        if let Some(next) = readers[k].next_row()? {
+            heads.push(std::cmp::Reverse((next.house_index, k, HeadRow(next))));
+        }
+    }
+    let counts: Vec<usize> = readers.iter().map(|r| r.rows).collect();
+    let m = merged_parts(&pairs, &records, &counts);
+    let source = m.info.house_source().describe();
+    let rows = writer.rows();
+    let written = writer.finish(
+        m.info,
+        &ReportView {
+            source: &source,
+            houses: &m.houses,
+            houses_run: m.houses_run,
+            trials_run: m.trials_run,
+            paired_against: &m.paired_against,
+            cells: m.cells,
+        },
+    )?;
+    let ran: Vec<String> = written
+        .info
+        .strategies
+        .iter()
+        .filter(|s| names.contains(s))
+        .cloned()
+        .collect();
+    let complete = per_house
+        .iter()
+        .filter(|(_, n)| *n == names.len())
+        .map(|(h, _)| *h)
+        .collect();
+    Ok(MergedDir {
+        written,
+        rows,
+        houses: m.houses,
+        houses_run: m.houses_run,
+        failures: m.failures,
+        show_house: m.show_house,
+        ran,
+        complete,
+    })
+}
+
+/// A row waiting in the merge's heap: ordered by the house and shard beside it only.
+struct HeadRow(TrialRow);
+
+impl PartialEq for HeadRow {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
+}
+impl Eq for HeadRow {}
+impl PartialOrd for HeadRow {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for HeadRow {
+    fn cmp(&self, _: &Self) -> std::cmp::Ordering {
+        std::cmp::Ordering::Equal
+    }
+}
+
+/// One shard's trials.csv read row by row, each row checked against the shard's houses and
+/// for house order.
+struct ShardRows {
+    dir: PathBuf,
+    path: PathBuf,
+    reader: csv::DeserializeRecordsIntoIter<std::fs::File, TrialRow>,
+    houses: Vec<usize>,
+    rows: usize,
+    last_house: usize,
+}
+
+impl ShardRows {
+    fn open(dir: &Path, houses: Vec<usize>) -> crate::Result<Self> {
+        let path = dir.join("trials.csv");
+        let file = std::fs::File::open(&path)
+            .map_err(|e| crate::LabError::io(format!("reading {}", path.display()), e))?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            reader: csv::Reader::from_reader(file).into_deserialize(),
+            path,
+            houses,
+            rows: 0,
+            last_house: 0,
+        })
+    }
+
+    fn next_row(&mut self) -> crate::Result<Option<TrialRow>> {
+        let Some(row) = self.reader.next() else {
+            return Ok(None);
+        };
+        let row = row.map_err(|source| crate::LabError::Csv {
+            context: format!("{}: row {}", self.path.display(), self.rows + 2),
+            source,
+        })?;
+        if self.houses.binary_search(&row.house_index).is_err() {
+            return Err(not_loaded(&self.dir, &row).into());
+        }
+        if row.house_index < self.last_house {
+            return Err(MergeError::Inconsistent {
+                dir: self.dir.clone(),
+                message: format!(
+                    "trials.csv row {} (house {}) comes after house {}: not in house order",
+                    self.rows + 2,
+                    row.house_index,
+                    self.last_house
+                ),
+            }
+            .into());
+        }
+        self.last_house = row.house_index;
+        self.rows += 1;
+        Ok(Some(row))
+    }
 }
 
 #[cfg(test)]

@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use ferret_llm::{
-    FailurePolicy, LlmConfig, LlmOptions, LlmService, TokenReport, prefetch_probabilities,
-    register_fused, register_strategies,
+    FailurePolicy, LlmConfig, LlmOptions, LlmService, PrefetchSummary, TokenReport,
+    prefetch_probabilities, register_fused, register_strategies,
 };
 use ferret_plan::{CandidateLimit, FusionFile, HoldOut, PlannerConfig, Prior, StrategyRegistry};
 use ferret_world::{House, ObjectType};
@@ -288,7 +288,43 @@ pub fn prefetch(
         feedback.set_done(done);
     });
     feedback.end();
-    let summary = summary?;
+    prefetch_outcome(service, llm, specs, &summary?, feedback)
+}
+
+/// The questions of some trials asked as [`prefetch`] asks them, without progress or remarks:
+/// for a caller that asks a batch of houses at a time and sums the summaries
+/// ([`add_summary`]) for one [`prefetch_outcome`].
+pub fn prefetch_quiet(
+    service: &Arc<LlmService>,
+    specs: &[String],
+    trials: &[(&House, &ObjectType)],
+) -> Result<PrefetchSummary> {
+    if !asks_llm(specs) {
+        return Ok(PrefetchSummary::default());
+    }
+    Ok(prefetch_probabilities(service, specs, trials, &|_, _| {})?)
+}
+
+/// Adds the counts and failures of `more` to `sum` (a question asked in two batches is counted
+/// in both).
+pub fn add_summary(sum: &mut PrefetchSummary, more: PrefetchSummary) {
+    sum.questions += more.questions;
+    sum.distinct += more.distinct;
+    sum.cached += more.cached;
+    sum.asked += more.asked;
+    sum.skipped += more.skipped;
+    sum.failures.extend(more.failures);
+}
+
+/// What prefetching came to: remarks on what was asked, then the run's error when an LLM failed
+/// without `keep_going`, or the strategies to drop with it (see [`prefetch`]).
+pub fn prefetch_outcome(
+    service: &Arc<LlmService>,
+    llm: &LlmSettings,
+    specs: &[String],
+    summary: &PrefetchSummary,
+    feedback: &dyn Feedback,
+) -> Result<Vec<String>> {
     feedback.note(&format!(
         "LLM questions: {} distinct ({} cached, {} asked now, {} skipped after a failure)",
         summary.distinct, summary.cached, summary.asked, summary.skipped

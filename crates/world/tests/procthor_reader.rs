@@ -8,7 +8,8 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use ferret_world::procthor::{
-    AssetDatabase, HouseRange, LoadOptions, load_scenes, parse_house, scene_from_raw,
+    AssetDatabase, HouseItem, HouseRange, HouseReader, LoadOptions, load_scenes, parse_house,
+    scene_from_raw,
 };
 use ferret_world::{HouseLocation, ObjectType, Point, Scene, WorldError};
 use serde_json::{Value, json};
@@ -629,4 +630,102 @@ fn a_shard_parses_only_its_own_lines() {
             report.skipped
         );
     }
+}
+
+/// What a reader yields, with each error's message (errors are not comparable).
+fn read_all(path: &Path, o: &LoadOptions<'_>) -> Vec<Result<Result<Scene, String>, String>> {
+    HouseReader::open(path, o)
+        .unwrap()
+        .map(|item| match item {
+            Ok(HouseItem::Scene(s)) => Ok(Ok(*s)),
+            Ok(HouseItem::Skipped(e)) => Ok(Err(e.to_string())),
+            Err(e) => Err(e.to_string()),
+        })
+        .collect()
+}
+
+/// Forty copies of the five lines: more than the reader parses at once, so that the order across
+/// its batches is checked too.
+fn many_lines() -> String {
+    five_lines().repeat(40)
+}
+
+#[test]
+fn the_streaming_reader_yields_what_load_scenes_returns() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = many_lines();
+    let path = write(dir.path(), "h.jsonl", text.as_bytes());
+    let gz = write(dir.path(), "h.jsonl.gz", &gzip(text.as_bytes()));
+    for path in [&path, &gz] {
+        for (range, shard) in [("..", None), ("7..113", None), ("..", Some((1, 3)))] {
+            let o = LoadOptions {
+                shard,
+                ..opts(range, true)
+            };
+            let report = load_scenes(path, &o).unwrap();
+            let streamed = read_all(path, &o);
+            let scenes: Vec<&Scene> = streamed
+                .iter()
+                .filter_map(|r| r.as_ref().ok()?.as_ref().ok())
+                .collect();
+            let skipped: Vec<&String> = streamed
+                .iter()
+                .filter_map(|r| r.as_ref().ok()?.as_ref().err())
+                .collect();
+            assert_eq!(scenes, report.scenes.iter().collect::<Vec<_>>());
+            let want: Vec<String> = report.skipped.iter().map(ToString::to_string).collect();
+            assert_eq!(skipped, want.iter().collect::<Vec<_>>());
+            // Independently of load_scenes: every line's house, in file order, parsed alone.
+            let mut expect_scenes = Vec::new();
+            let mut expect_skipped = Vec::new();
+            // Lines keep their newline, as the reader parses them (it shows in JSON error columns).
+            for (i, line) in text.split_inclusive('\n').enumerate() {
+                let keep = o.range.contains(i) && shard.is_none_or(|(k, n)| i % n == k);
+                if !keep || line.trim().is_empty() {
+                    continue;
+                }
+                let at = HouseLocation {
+                    file: path.clone(),
+                    index: i,
+                };
+                match parse_house(line, &at, None) {
+                    Ok(s) => expect_scenes.push(s),
+                    Err(e) => {
+                        let text = e.to_string();
+                        assert!(text.contains(&format!("house {i}:")), "{text}");
+                        expect_skipped.push(text);
+                    }
+                }
+            }
+            assert!(!expect_scenes.is_empty() && !expect_skipped.is_empty());
+            assert_eq!(scenes, expect_scenes.iter().collect::<Vec<_>>());
+            assert_eq!(skipped, expect_skipped.iter().collect::<Vec<_>>());
+            let name = path.file_name().unwrap().to_string_lossy().into_owned();
+            assert!(skipped[0].contains(&name), "{}", skipped[0]);
+        }
+    }
+}
+
+#[test]
+fn the_streaming_reader_stops_at_the_first_invalid_house_after_its_range() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(dir.path(), "h.jsonl", many_lines().as_bytes());
+    // House 0 comes first, then the invalid house 1 ends the reading.
+    let got = read_all(&path, &opts("..", false));
+    assert_eq!(got.len(), 2, "{got:?}");
+    assert!(matches!(&got[0], Ok(Ok(s)) if s.house.index == 0));
+    match &got[1] {
+        Err(e) => assert!(e.contains("house 1") && e.contains("doors[0].wall0"), "{e}"),
+        other => panic!("{other:?}"),
+    }
+    // A range past the end is the error, as load_scenes says, even after an invalid house.
+    let got = read_all(&path, &opts("..900", false));
+    match got.last() {
+        Some(Err(e)) => assert!(e.contains("reaches outside the file"), "{e}"),
+        other => panic!("{other:?}"),
+    }
+    assert!(matches!(
+        load_scenes(&path, &opts("..900", false)),
+        Err(WorldError::Range { .. })
+    ));
 }

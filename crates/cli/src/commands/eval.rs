@@ -7,7 +7,7 @@ use std::time::Instant;
 use anyhow::Result;
 use ferret_lab::runs::{ReportView, RunInfo, RunWriter, TrialRow};
 use ferret_lab::shard::{SHARD_RULE, ShardRecord};
-use ferret_lab::{CostTable, TrialDraw, evaluate_specs_each};
+use ferret_lab::{CostTable, HouseSource, TrialDraw, evaluate_source_each};
 use ferret_plan::{Protocol, TrialOutcome, TrialSpec, TrialsPerHouse};
 use ferret_report::{
     TrajectoryOptions, TrajectoryPanel, ViolinOptions, draw_trajectories, draw_violins,
@@ -113,37 +113,17 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
         anyhow::bail!("--paired-against {s}: not one of --strategies");
     }
     let protocol = args.protocol.resolve(Protocol::FERRET)?;
-    let loaded = args.houses.load_shard(protocol.containers, shard)?;
-    if let Some(sh) = shard {
-        eprintln!(
-            "shard {sh}: {} houses (file index mod {} = {})",
-            loaded.scenes.len(),
-            sh.count,
-            sh.index
-        );
-    }
-    for s in &loaded.skipped {
-        eprintln!("skipped: {s}");
-    }
-    if loaded.scenes.is_empty() {
-        match shard {
-            Some(sh) => anyhow::bail!(
-                "shard {sh}: no house of {} has a file index that is {} modulo {}; use fewer shards",
-                loaded.source,
-                sh.index,
-                sh.count
-            ),
-            None => anyhow::bail!("no houses to evaluate in {}", loaded.source),
-        }
-    }
-    // A shard draws no pictures and may not hold the house: the merge draws it.
+    let source = args.houses.source();
+    let open = source.open(protocol.containers, shard)?;
+    // A shard draws no pictures and may not hold the house: the merge draws it. Only that house
+    // is read here; the others are read once, by the run.
     if let Some(i) = args.show_house
         && shard.is_none()
-        && !loaded.scenes.iter().any(|s| s.house.index == i)
+        && !has_house(&source, protocol.containers, i)?
     {
         anyhow::bail!(
             "--show-house {i}: no house with that index in {}",
-            loaded.source
+            source.describe()
         );
     }
     let setup = super::llm_setup::full_registry(&args.planning, &args.llm, &args.strategies)?;
@@ -161,13 +141,14 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
     // only the shown house's is kept (a shard draws no pictures: the merge draws them once).
     let mut writer = RunWriter::create(&args.out, args.cells)?;
     let mut shown: Option<Shown> = None;
-    let totals = evaluate_specs_each(
-        &loaded.scenes,
+    let totals = evaluate_source_each(
+        &open,
         &setup,
         &args.strategies,
         &draw,
         &args.grid.params_for(protocol.access),
         &args.llm.settings(),
+        ferret_lab::default_batch(),
         &Bars::default(),
         &mut |h| {
             if shard.is_none()
@@ -188,6 +169,25 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
             Ok(())
         },
     )?;
+    if let Some(sh) = shard {
+        eprintln!(
+            "shard {sh}: {} houses (file index mod {} = {})",
+            totals.houses.len(),
+            sh.count,
+            sh.index
+        );
+    }
+    if totals.houses.is_empty() {
+        match shard {
+            Some(sh) => anyhow::bail!(
+                "shard {sh}: no house of {} has a file index that is {} modulo {}; use fewer shards",
+                source.describe(),
+                sh.index,
+                sh.count
+            ),
+            None => anyhow::bail!("no houses to evaluate in {}", source.describe()),
+        }
+    }
     for e in &totals.errors {
         eprintln!("error: {e}");
     }
@@ -220,7 +220,7 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
             index: sh.index,
             count: sh.count,
             rule: SHARD_RULE.into(),
-            houses: loaded.scenes.iter().map(|s| s.house.index).collect(),
+            houses: totals.houses.clone(),
             houses_run: totals.houses_run,
             trials_run: totals.trials_run,
             failures: totals.errors.len(),
@@ -230,13 +230,13 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
         }),
         merged_from: Vec::new(),
     };
-    let houses: Vec<usize> = loaded.scenes.iter().map(|s| s.house.index).collect();
+    let source_name = source.describe();
     let rows = writer.rows();
     let written = writer.finish(
         info,
         &ReportView {
-            source: &loaded.source,
-            houses: &houses,
+            source: &source_name,
+            houses: &totals.houses,
             houses_run: totals.houses_run,
             trials_run: totals.trials_run,
             paired_against: &args.paired_against,
@@ -256,7 +256,7 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
                 out: &args.out,
                 strategies: &args.strategies,
                 ran: &names,
-                houses: loaded.scenes.len(),
+                houses: totals.houses.len(),
                 seed: args.seed,
             },
             &written.costs,
@@ -286,6 +286,27 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
             totals.errors.len()
         );
         Ok(ExitCode::FAILURE)
+    }
+}
+
+/// Whether `source` holds a valid house of index `i` (inside its range), reading that house
+/// alone. Errors of the file other than the range are the file's.
+fn has_house(
+    source: &HouseSource,
+    containers: ferret_world::ContainerSet,
+    i: usize,
+) -> Result<bool> {
+    if source.range.is_some_and(|r| !r.contains(i)) {
+        return Ok(false);
+    }
+    let one = HouseSource {
+        range: Some(ferret_world::procthor::HouseRange::single(i)),
+        ..source.clone()
+    };
+    match one.load_for(containers) {
+        Ok(loaded) => Ok(loaded.scenes.iter().any(|s| s.house.index == i)),
+        Err(ferret_lab::LabError::World(ferret_world::WorldError::Range { .. })) => Ok(false),
+        Err(e) => Err(e.into()),
     }
 }
 

@@ -5,10 +5,10 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use std::collections::{BTreeMap, BTreeSet};
 
-use ferret_lab::runs::{EvalRun, RunInfo, TrialRow};
-use ferret_lab::{CostTable, HouseSource, MergedRun};
+use ferret_lab::HouseSource;
+use ferret_lab::runs::{RunInfo, TrialRow};
+use ferret_lab::shard::MergedDir;
 use ferret_llm::ResponseCache;
 use ferret_world::procthor::HouseRange;
 
@@ -65,21 +65,15 @@ pub fn run(args: Args) -> Result<ExitCode> {
     }
     let mut status = ExitCode::SUCCESS;
     if !args.runs.is_empty() {
-        let shards = args
-            .runs
-            .iter()
-            .map(|d| Ok((d.clone(), EvalRun::read(d)?)))
-            .collect::<Result<Vec<_>>>()?;
-        let merged = ferret_lab::merge_runs(&shards)?;
         let mut lock = ferret_lab::files::DirLock::acquire(&args.out)?;
+        let merged = ferret_lab::shard::merge_dirs(&args.runs, &args.out)?;
         lock.used();
-        let report = merged.write_all(&args.out)?;
         let pictures = draw_merged_pictures(&merged, &args.out)?;
-        println!("{}", report.markdown);
+        println!("{}", merged.written.report.markdown);
         println!(
             "merged {} shards: {} trials on {} houses; wrote {}/{{trials.csv,summary.csv,summary.md,paired.csv,run.json{}}}",
-            shards.len(),
-            merged.run.rows.len(),
+            args.runs.len(),
+            merged.rows,
             merged.houses_run,
             args.out.display(),
             pictures.iter().map(|p| format!(",{p}")).collect::<String>()
@@ -129,33 +123,17 @@ pub fn run(args: Args) -> Result<ExitCode> {
 /// none, so that the pictures are drawn once. The shown house is read again from the run's house
 /// source and mapped alone; when that source cannot be read here (shards run on other machines
 /// with other paths), trajectories.png is left out, saying why.
-fn draw_merged_pictures(merged: &MergedRun, out: &Path) -> Result<Vec<&'static str>> {
-    let info = &merged.run.info;
-    let rows = &merged.run.rows;
-    let costs = CostTable::from_rows(rows);
-    // The strategies that ran: a strategy one machine dropped (its LLM failed under
-    // --keep-going) has no row in any shard.
-    let ran: Vec<String> = info
-        .strategies
+fn draw_merged_pictures(merged: &MergedDir, out: &Path) -> Result<Vec<&'static str>> {
+    let info = &merged.written.info;
+    let pick = merged
+        .complete
         .iter()
-        .filter(|s| rows.iter().any(|r| &r.strategy == *s))
-        .cloned()
-        .collect();
-    let mut finished: BTreeMap<usize, BTreeSet<&str>> = BTreeMap::new();
-    for r in rows {
-        finished
-            .entry(r.house_index)
-            .or_default()
-            .insert(r.strategy.as_str());
-    }
-    let pick = merged.houses.iter().copied().find(|h| {
-        merged.show_house.is_none_or(|i| i == *h)
-            && finished
-                .get(h)
-                .is_some_and(|done| ran.iter().all(|s| done.contains(s.as_str())))
-    });
+        .copied()
+        .find(|h| merged.show_house.is_none_or(|i| i == *h));
     let shown = match pick {
-        Some(h) => match shown_house(info, h, rows) {
+        Some(h) => match house_rows(&out.join("trials.csv"), h)
+            .and_then(|rows| shown_house(info, h, &rows))
+        {
             Ok(shown) => Some(shown),
             Err(e) => {
                 eprintln!("house {h} could not be read again: {e:#}; trajectories.png not drawn");
@@ -171,13 +149,27 @@ fn draw_merged_pictures(merged: &MergedRun, out: &Path) -> Result<Vec<&'static s
         &Pictures {
             out,
             strategies: &info.strategies,
-            ran: &ran,
+            ran: &merged.ran,
             houses: merged.houses.len(),
             seed: info.seed,
         },
-        &costs,
+        &merged.written.costs,
         shown.as_ref(),
     )
+}
+
+/// The rows of house `index` in a trials.csv, read row by row.
+fn house_rows(path: &Path, index: usize) -> Result<Vec<TrialRow>> {
+    let mut rows = Vec::new();
+    let mut reader =
+        csv::Reader::from_path(path).with_context(|| format!("reading {}", path.display()))?;
+    for (i, row) in reader.deserialize::<TrialRow>().enumerate() {
+        let row = row.with_context(|| format!("{}: row {}", path.display(), i + 2))?;
+        if row.house_index == index {
+            rows.push(row);
+        }
+    }
+    Ok(rows)
 }
 
 /// House `index` of the run's source, mapped as the run mapped it, with its rows.

@@ -154,14 +154,30 @@ pub fn default_scenes(count: usize, seed: u64) -> Result<Vec<Scene>> {
     generate_houses(count, seed, &GeneratorOptions::default())
         .into_iter()
         .enumerate()
-        .map(|(index, raw)| {
-            let at = HouseLocation {
-                file: GENERATED_FILE.into(),
-                index,
-            };
-            crate::procthor::scene_from_raw(&raw, &at, None)
-        })
+        .map(|(index, raw)| scene_of(&raw, index))
         .collect()
+}
+
+/// House `index` of [`default_scenes`]`(_, seed)`, generated alone: the same scene, so that a
+/// caller can walk the houses one at a time instead of holding them all.
+///
+/// # Errors
+/// [`WorldError::Range`] for an index past [`MAX_HOUSES`]; those of
+/// the reader.
+pub fn default_scene(index: usize, seed: u64) -> Result<Scene> {
+    check_count(index.saturating_add(1))?;
+    scene_of(
+        &generate_house(seed, index, &GeneratorOptions::default()),
+        index,
+    )
+}
+
+fn scene_of(raw: &RawHouse, index: usize) -> Result<Scene> {
+    let at = HouseLocation {
+        file: GENERATED_FILE.into(),
+        index,
+    };
+    crate::procthor::scene_from_raw(raw, &at, None)
 }
 
 /// Writes houses as ProcTHOR files, chosen by extension: `.jsonl.gz` (or any `.gz`) gzip JSON

@@ -27,7 +27,7 @@ pub mod types;
 pub use assets::AssetDatabase;
 pub use range::{HouseRange, ParseRangeError};
 pub use reader::{
-    IGNORED_TYPES, LoadOptions, LoadReport, MAX_CONTAINERS, MAX_COORDINATE, MAX_LINE_BYTES,
-    ROOM_TOLERANCE, START_TOLERANCE, is_ignored_type, load_scenes, parse_house, parse_house_with,
-    scene_from_raw, scene_from_raw_with,
+    HouseItem, HouseReader, IGNORED_TYPES, LoadOptions, LoadReport, MAX_CONTAINERS, MAX_COORDINATE,
+    MAX_LINE_BYTES, ROOM_TOLERANCE, START_TOLERANCE, is_ignored_type, load_scenes, parse_house,
+    parse_house_with, scene_from_raw, scene_from_raw_with,
 };

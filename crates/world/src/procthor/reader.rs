@@ -1,6 +1,6 @@
 //! Reading ProcTHOR house files and turning each house into a validated [`Scene`].
 
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::io::{self, BufRead, BufReader, Read};
 use std::path::Path;
 
@@ -82,103 +82,250 @@ pub struct LoadReport {
 /// (one house per line) or either gzip-compressed (`.jsonl.gz`; compression is recognised by
 /// content). House `i` is line `i` (0-based); blank lines hold no house but keep their index.
 ///
-/// Lines are decompressed in order and only those inside `opts.range` (and `opts.shard`) are
-/// parsed, in parallel.
+/// Everything a [`HouseReader`] yields, collected: lines are decompressed in order and only those
+/// inside `opts.range` (and `opts.shard`) are parsed, in parallel.
 /// A range reaching outside the file is a [`WorldError::Range`]; an unreadable file is a
 /// [`WorldError::Io`]; a file holding no house at all (empty, or blank lines only) is
 /// [`WorldError::NoHouses`]; a line longer than [`MAX_LINE_BYTES`] is [`WorldError::Limit`]. An
 /// invalid house (including one with more than [`MAX_CONTAINERS`] containers) is returned as the
 /// error (the first in file order) unless `opts.skip_invalid` is set.
 pub fn load_scenes(path: &Path, opts: &LoadOptions<'_>) -> Result<LoadReport> {
-    let io_err = |source| WorldError::Io {
-        file: path.to_path_buf(),
-        source,
-    };
-    let mut file = BufReader::new(crate::input::open_file(path).map_err(io_err)?);
-    let gzip = file.fill_buf().map_err(io_err)?.starts_with(&[0x1f, 0x8b]);
-    let reader: Box<dyn BufRead + Send> = if gzip {
-        Box::new(BufReader::with_capacity(1 << 16, MultiGzDecoder::new(file)))
-    } else {
-        Box::new(file)
-    };
-    let at = |index| HouseLocation {
-        file: path.to_path_buf(),
-        index,
-    };
-    let db = opts.asset_db;
-    let rule = opts.containers;
-
-    let (mut results, total) = if is_single_house_file(path) {
-        let mut bytes = Vec::new();
-        reader
-            .take(MAX_LINE_BYTES as u64 + 1)
-            .read_to_end(&mut bytes)
-            .map_err(io_err)?;
-        if bytes.len() > MAX_LINE_BYTES {
-            return Err(line_too_long(at(0)));
-        }
-        if bytes.iter().all(u8::is_ascii_whitespace) {
-            return Err(WorldError::NoHouses {
-                file: path.to_path_buf(),
-            });
-        }
-        let results = if opts.range.contains(0) && in_shard(opts.shard, 0) {
-            vec![(0, house_from_bytes(bytes, &at(0), db, rule))]
-        } else {
-            Vec::new()
-        };
-        (results, 1)
-    } else {
-        let mut lines = Lines {
-            reader,
-            next: 0,
-            range: opts.range,
-            shard: opts.shard,
-            error: None,
-            buf: Vec::new(),
-            houses: 0,
-            at_end: false,
-        };
-        let results: Vec<(usize, Result<Scene>)> = (&mut lines)
-            .par_bridge()
-            .map(|(i, bytes)| (i, house_from_bytes(bytes, &at(i), db, rule)))
-            .collect();
-        match lines.error {
-            Some(LineError::Io(source)) => return Err(io_err(source)),
-            Some(LineError::TooLong(index)) => return Err(line_too_long(at(index))),
-            None => {}
-        }
-        if lines.at_end && lines.houses == 0 {
-            return Err(WorldError::NoHouses {
-                file: path.to_path_buf(),
-            });
-        }
-        (results, lines.next)
-    };
-
-    let range = opts.range;
-    if range.start >= total || range.end.is_some_and(|e| e > total) {
-        return Err(WorldError::Range {
-            file: path.to_path_buf(),
-            message: format!(
-                "range {range} reaches outside the file, which holds {total} house(s)"
-            ),
-        });
-    }
-
-    results.sort_unstable_by_key(|(i, _)| *i);
     let mut report = LoadReport::default();
-    for (_, r) in results {
-        match r {
-            Ok(scene) => report.scenes.push(scene),
-            Err(e) if opts.skip_invalid => {
-                tracing::warn!("skipping invalid house: {e}");
-                report.skipped.push(e);
-            }
-            Err(e) => return Err(e),
+    for item in HouseReader::open(path, opts)? {
+        match item? {
+            HouseItem::Scene(scene) => report.scenes.push(*scene),
+            HouseItem::Skipped(e) => report.skipped.push(e),
         }
     }
     Ok(report)
+}
+
+/// One house as a [`HouseReader`] yields it.
+#[derive(Debug)]
+pub enum HouseItem {
+    /// A valid house.
+    Scene(Box<Scene>),
+    /// Why an invalid house was skipped (only with [`LoadOptions::skip_invalid`]).
+    Skipped(WorldError),
+}
+
+/// Lines parsed at once, in parallel, per worker thread: enough to keep every thread busy
+/// without holding more than a few houses' text per thread.
+const PARSE_AHEAD_PER_THREAD: usize = 4;
+
+/// The houses of a ProcTHOR file, read a few at a time in file order: what [`load_scenes`]
+/// returns, without holding more than a handful of houses at once. Honours every
+/// [`LoadOptions`] field as [`load_scenes`] does.
+///
+/// Yields each valid house, and with [`LoadOptions::skip_invalid`] each invalid one as
+/// [`HouseItem::Skipped`]. Errors are yielded once, after which the reader ends: an error of the
+/// whole file ([`WorldError::Io`], [`WorldError::Limit`] for a too long line,
+/// [`WorldError::NoHouses`], [`WorldError::Range`]) when it is found, and without
+/// `skip_invalid` the first invalid house, at the end of the range: the rest of the range is read
+/// (not parsed) first, so that an error of the whole file takes precedence as in
+/// [`load_scenes`]. The houses before it have been yielded by then.
+pub struct HouseReader<'a> {
+    path: std::path::PathBuf,
+    opts: LoadOptions<'a>,
+    source: Source,
+    parsed: VecDeque<Result<Scene>>,
+    /// The first invalid house without `skip_invalid`, held until the range has been read.
+    invalid: Option<WorldError>,
+    finished: bool,
+}
+
+impl std::fmt::Debug for HouseReader<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("HouseReader")
+            .field("path", &self.path)
+            .field("range", &self.opts.range)
+            .field("shard", &self.opts.shard)
+            .field("finished", &self.finished)
+            .finish_non_exhaustive()
+    }
+}
+
+type BoxedRead = Box<dyn BufRead + Send>;
+
+enum Source {
+    /// A single-house file, not yet read.
+    Single(Option<BoxedRead>),
+    Lines(Lines<BoxedRead>),
+}
+
+impl<'a> HouseReader<'a> {
+    /// Opens `path` (see [`load_scenes`] for the formats).
+    ///
+    /// # Errors
+    /// [`WorldError::Io`] when the file cannot be opened or read.
+    pub fn open(path: &Path, opts: &LoadOptions<'a>) -> Result<Self> {
+        let io_err = |source| WorldError::Io {
+            file: path.to_path_buf(),
+            source,
+        };
+        let mut file = BufReader::new(crate::input::open_file(path).map_err(io_err)?);
+        let gzip = file.fill_buf().map_err(io_err)?.starts_with(&[0x1f, 0x8b]);
+        let reader: BoxedRead = if gzip {
+            Box::new(BufReader::with_capacity(1 << 16, MultiGzDecoder::new(file)))
+        } else {
+            Box::new(file)
+        };
+        let source = if is_single_house_file(path) {
+            Source::Single(Some(reader))
+        } else {
+            Source::Lines(Lines {
+                reader,
+                next: 0,
+                range: opts.range,
+                shard: opts.shard,
+                error: None,
+                buf: Vec::new(),
+                houses: 0,
+                at_end: false,
+            })
+        };
+        Ok(Self {
+            path: path.to_path_buf(),
+            opts: *opts,
+            source,
+            parsed: VecDeque::new(),
+            invalid: None,
+            finished: false,
+        })
+    }
+
+    fn at(&self, index: usize) -> HouseLocation {
+        HouseLocation {
+            file: self.path.clone(),
+            index,
+        }
+    }
+
+    fn io_err(&self, source: io::Error) -> WorldError {
+        WorldError::Io {
+            file: self.path.clone(),
+            source,
+        }
+    }
+
+    /// Reads and parses the next few houses into `parsed`; `Ok(false)` once the file (or the
+    /// range) has been read through and checked.
+    fn fill(&mut self) -> Result<bool> {
+        let parse_ahead = (rayon::current_num_threads() * PARSE_AHEAD_PER_THREAD).max(1);
+        let (db, rule) = (self.opts.asset_db, self.opts.containers);
+        let total = match &mut self.source {
+            Source::Single(reader) => {
+                let Some(reader) = reader.take() else {
+                    return Ok(false);
+                };
+                let mut bytes = Vec::new();
+                reader
+                    .take(MAX_LINE_BYTES as u64 + 1)
+                    .read_to_end(&mut bytes)
+                    .map_err(|e| self.io_err(e))?;
+                if bytes.len() > MAX_LINE_BYTES {
+                    return Err(line_too_long(self.at(0)));
+                }
+                if bytes.iter().all(u8::is_ascii_whitespace) {
+                    return Err(WorldError::NoHouses {
+                        file: self.path.clone(),
+                    });
+                }
+                self.check_range(1)?;
+                if self.opts.range.contains(0) && in_shard(self.opts.shard, 0) {
+                    let scene = house_from_bytes(bytes, &self.at(0), db, rule);
+                    self.parsed.push_back(scene);
+                }
+                return Ok(true);
+            }
+            Source::Lines(lines) => {
+                let batch: Vec<(usize, Vec<u8>)> = lines.by_ref().take(parse_ahead).collect();
+                if !batch.is_empty() {
+                    // Past an invalid house that stops the reading, lines are only read through.
+                    if self.invalid.is_none() {
+                        let path = &self.path;
+                        let scenes: Vec<Result<Scene>> = batch
+                            .into_par_iter()
+                            .map(|(i, bytes)| {
+                                let at = HouseLocation {
+                                    file: path.clone(),
+                                    index: i,
+                                };
+                                house_from_bytes(bytes, &at, db, rule)
+                            })
+                            .collect();
+                        self.parsed.extend(scenes);
+                    }
+                    return Ok(true);
+                }
+                match lines.error.take() {
+                    Some(LineError::Io(source)) => return Err(self.io_err(source)),
+                    Some(LineError::TooLong(index)) => return Err(line_too_long(self.at(index))),
+                    None => {}
+                }
+                if lines.at_end && lines.houses == 0 {
+                    return Err(WorldError::NoHouses {
+                        file: self.path.clone(),
+                    });
+                }
+                lines.next
+            }
+        };
+        self.check_range(total)?;
+        Ok(false)
+    }
+
+    /// Refuses a range reaching outside a file of `total` houses.
+    fn check_range(&self, total: usize) -> Result<()> {
+        let range = self.opts.range;
+        if range.start >= total || range.end.is_some_and(|e| e > total) {
+            return Err(WorldError::Range {
+                file: self.path.clone(),
+                message: format!(
+                    "range {range} reaches outside the file, which holds {total} house(s)"
+                ),
+            });
+        }
+        Ok(())
+    }
+}
+
+impl Iterator for HouseReader<'_> {
+    type Item = Result<HouseItem>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            if let Some(r) = self.parsed.pop_front() {
+                match r {
+                    Ok(scene) => return Some(Ok(HouseItem::Scene(Box::new(scene)))),
+                    Err(e) if self.opts.skip_invalid => {
+                        tracing::warn!("skipping invalid house: {e}");
+                        return Some(Ok(HouseItem::Skipped(e)));
+                    }
+                    Err(e) => {
+                        self.invalid = Some(e);
+                        self.parsed.clear();
+                        continue;
+                    }
+                }
+            }
+            if self.finished {
+                return None;
+            }
+            match self.fill() {
+                Ok(true) => {}
+                Ok(false) => {
+                    self.finished = true;
+                    return self.invalid.take().map(Err);
+                }
+                Err(e) => {
+                    self.finished = true;
+                    self.parsed.clear();
+                    return Some(Err(e));
+                }
+            }
+        }
+    }
 }
 
 /// Whether house `index` belongs to the shard `(i, n)` (every house without one).
@@ -213,7 +360,8 @@ enum LineError {
 }
 
 /// The lines of a JSON Lines stream inside a range, with their 0-based indices. Stops at the
-/// range's end; remembers a read error instead of yielding it, so that it can feed `par_bridge`.
+/// range's end; remembers a read error instead of yielding it, so that lines can be taken a batch
+/// at a time.
 /// Lines inside the range are buffered up to [`MAX_LINE_BYTES`]; lines outside it are skipped
 /// without being buffered.
 struct Lines<R> {
@@ -259,6 +407,10 @@ impl<R: BufRead> Iterator for Lines<R> {
     type Item = (usize, Vec<u8>);
 
     fn next(&mut self) -> Option<Self::Item> {
+        // Once stopped, stay stopped: a read error is not retried, and the end stays the end.
+        if self.error.is_some() || self.at_end {
+            return None;
+        }
         loop {
             if self.range.is_past(self.next) {
                 return None;

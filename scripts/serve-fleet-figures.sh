@@ -2,7 +2,8 @@
 # The figures of docs/serve.md's fleet section: `ferret bench serve` on val150 houses 0..40
 # (50 robots × 20 trials by default) as one server on SQLite, before and after (when
 # FERRET_BEFORE_BIN names an older ferret binary, alternating runs), and as two replicas on one
-# PostgreSQL, then two replicas with one killed (SIGKILL) mid-run. Each line of the output is one
+# PostgreSQL (and again keeping no replay costs, the control for kept replays), then two
+# replicas with one killed (SIGKILL) mid-run. Each line of the output is one
 # run's JSON from `ferret bench serve --json`, prefixed by its label.
 #
 #   FERRET_PROCTHOR_DIR=/abs/path/to/procthor scripts/serve-fleet-figures.sh > figures.jsonl
@@ -42,6 +43,10 @@ for ((i = 1; i <= RUNS; i++)); do
     run "sqlite" "$ferret" bench serve
     db="$("$ROOT/scripts/postgres.sh" new-db "fleet_$$_$i")"
     run "postgres-2-replicas" "$ferret" bench serve --replicas 2 --db "$db"
+    # The control: every trial end replays every other candidate again.
+    db="$("$ROOT/scripts/postgres.sh" new-db "fleet_$$_${i}_nokept")"
+    run "postgres-2-replicas-kept-replays-0" "$ferret" bench serve --replicas 2 --db "$db" \
+        --kept-replays 0
 done
 db="$("$ROOT/scripts/postgres.sh" new-db "fleet_$$_kill")"
 run "postgres-2-replicas-kill" "$ferret" bench serve --replicas 2 --db "$db" --kill-replica-after 5

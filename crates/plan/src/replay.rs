@@ -6,8 +6,8 @@
 //! so a replay cannot drift from a real run.
 
 use std::collections::HashMap;
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
 
 use ferret_world::{GroundTruth, House, ObjectType, SmallObject, TravelCost};
 
@@ -105,36 +105,57 @@ pub fn replay_costs(
     found: usize,
     deployed: (usize, f64),
 ) -> Result<Vec<f64>, PlanError> {
-    candidates
+    let replay = |s: &dyn Strategy| {
+        replay_outcome_with(mode, s, problem, truth, found)?.reported_cost(
+            problem.house,
+            problem.distances,
+            travel,
+        )
+    };
+    // A counterfactual replay also depends on the true world, which no key holds.
+    let memo = problem
+        .replay_memo()
+        .filter(|_| mode == ReplayMode::Pessimistic);
+    let Some(memo) = memo else {
+        return candidates
+            .iter()
+            .enumerate()
+            .map(|(j, s)| {
+                if j == deployed.0 {
+                    Ok(deployed.1)
+                } else {
+                    replay(s.as_ref())
+                }
+            })
+            .collect();
+    };
+    let key = |s: &dyn Strategy| ReplayKey {
+        strategy: s.name().to_string(),
+        target: problem.trial.target.clone(),
+        revealed: problem.trial.revealed.clone(),
+        found,
+        travel,
+    };
+    let mut missed = false;
+    let costs = candidates
         .iter()
         .enumerate()
         .map(|(j, s)| {
             if j == deployed.0 {
                 return Ok(deployed.1);
             }
-            let replay = || {
-                replay_outcome_with(mode, s.as_ref(), problem, truth, found)?.reported_cost(
-                    problem.house,
-                    problem.distances,
-                    travel,
-                )
-            };
-            match problem.replay_memo() {
-                // A counterfactual replay also depends on the true world, which no key holds.
-                Some(memo) if mode == ReplayMode::Pessimistic => {
-                    let key = ReplayKey {
-                        strategy: s.name().to_string(),
-                        target: problem.trial.target.clone(),
-                        revealed: problem.trial.revealed.clone(),
-                        found,
-                        travel,
-                    };
-                    memo.get_or_replay(key, replay)
-                }
-                _ => replay(),
-            }
+            let (cost, hit) = memo.get_or_replay(key(s.as_ref()), || replay(s.as_ref()))?;
+            missed |= !hit;
+            Ok(cost)
         })
-        .collect()
+        .collect::<Result<Vec<f64>, PlanError>>()?;
+    // A trial that ends as none before it did is replayed for the deployed candidate too (its
+    // own entry stays the cost it was deployed at): the next trial that ends this way, with
+    // another candidate deployed, then finds every replay it needs.
+    if missed && let Some(s) = candidates.get(deployed.0) {
+        memo.fill(key(s.as_ref()), || replay(s.as_ref()))?;
+    }
+    Ok(costs)
 }
 
 /// Pessimistic replay costs already computed in one house seen from one start.
@@ -154,9 +175,14 @@ pub fn replay_costs(
 #[derive(Debug)]
 pub struct ReplayMemo {
     capacity: usize,
-    costs: Mutex<HashMap<ReplayKey, f64>>,
+    /// One slot per key, filled by whichever end of that trial replays it first; the others
+    /// wait on the slot instead of replaying the same thing at once (a fleet's robots that set
+    /// out together end together).
+    slots: Mutex<HashMap<ReplayKey, Slot>>,
     hits: AtomicU64,
 }
+
+type Slot = Arc<Mutex<Option<f64>>>;
 
 #[derive(Debug, Hash, PartialEq, Eq)]
 struct ReplayKey {
@@ -172,7 +198,7 @@ impl ReplayMemo {
     pub fn new(capacity: usize) -> Self {
         Self {
             capacity,
-            costs: Mutex::default(),
+            slots: Mutex::default(),
             hits: AtomicU64::new(0),
         }
     }
@@ -184,7 +210,8 @@ impl ReplayMemo {
 
     /// Replay costs kept.
     pub fn len(&self) -> usize {
-        self.lock().len()
+        let slots: Vec<Slot> = self.lock().values().cloned().collect();
+        slots.iter().filter(|s| lock(s).is_some()).count()
     }
 
     /// True when no replay cost is kept.
@@ -197,29 +224,62 @@ impl ReplayMemo {
         self.hits.load(Ordering::Relaxed)
     }
 
-    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<ReplayKey, f64>> {
-        // A poisoned map still holds only complete entries: each is inserted in one call.
-        self.costs
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    fn lock(&self) -> MutexGuard<'_, HashMap<ReplayKey, Slot>> {
+        lock(&self.slots)
     }
 
-    /// The kept cost of `key`, else `replay`'s, kept when there is room. The replay runs
-    /// outside the lock: two ends of the same trial at once both compute it, and agree.
+    /// The kept cost of `key` (and true), else `replay`'s (and false), kept when there is
+    /// room. A replay of the same key under way elsewhere is waited for, not repeated; one
+    /// that fails leaves the slot empty for the next to try.
     fn get_or_replay(
         &self,
         key: ReplayKey,
         replay: impl FnOnce() -> Result<f64, PlanError>,
-    ) -> Result<f64, PlanError> {
-        if let Some(&cost) = self.lock().get(&key) {
+    ) -> Result<(f64, bool), PlanError> {
+        let Some(slot) = self.slot(key) else {
+            return Ok((replay()?, false));
+        };
+        let mut cost = lock(&slot);
+        if let Some(c) = *cost {
             self.hits.fetch_add(1, Ordering::Relaxed);
-            return Ok(cost);
+            return Ok((c, true));
         }
-        let cost = replay()?;
-        let mut costs = self.lock();
-        if costs.len() < self.capacity {
-            costs.insert(key, cost);
-        }
-        Ok(cost)
+        let c = replay()?;
+        *cost = Some(c);
+        Ok((c, false))
     }
+
+    /// Keeps `replay`'s cost for `key` unless one is kept already or there is no room.
+    fn fill(
+        &self,
+        key: ReplayKey,
+        replay: impl FnOnce() -> Result<f64, PlanError>,
+    ) -> Result<(), PlanError> {
+        if let Some(slot) = self.slot(key) {
+            let mut cost = lock(&slot);
+            if cost.is_none() {
+                *cost = Some(replay()?);
+            }
+        }
+        Ok(())
+    }
+
+    /// The slot of `key`, made when there is room; `None` when there is none.
+    fn slot(&self, key: ReplayKey) -> Option<Slot> {
+        let mut slots = self.lock();
+        if let Some(s) = slots.get(&key) {
+            return Some(s.clone());
+        }
+        if slots.len() >= self.capacity {
+            return None;
+        }
+        let s = Slot::default();
+        slots.insert(key, s.clone());
+        Some(s)
+    }
+}
+
+/// Locks `m`; a poisoned lock still guards whole values (each is written in one assignment).
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }

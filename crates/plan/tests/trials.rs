@@ -457,9 +457,10 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(48))]
 
     /// A replay memo shared by every trial of a house answers exactly what replaying again
-    /// answers, whatever the order the trials end in: same target and found container but other
-    /// containers revealed, other targets, other found containers are all told apart; a repeat
-    /// is answered from the memo; counterfactual replays are never kept.
+    /// answers, whatever the order the trials end in and whichever candidate each deploys: same
+    /// target and found container but other containers revealed, other targets, other found
+    /// containers are all told apart; a repeat is answered from the memo; counterfactual
+    /// replays are never kept.
     #[test]
     fn a_replay_memo_answers_exactly_what_replaying_again_answers(
         (pts, kinds, contents) in arb_house(),
@@ -489,16 +490,18 @@ proptest! {
         let settings = (ReplayMode::Pessimistic, TravelCost::Plain);
         let mut asked = std::collections::HashSet::new();
         let mut repeats = 0;
-        // Every trial twice, the second time in reverse order.
-        for trial in trials.iter().chain(trials.iter().rev()) {
+        // Every trial twice, the second time in reverse order, each time another candidate
+        // deployed.
+        for (k, trial) in trials.iter().chain(trials.iter().rev()).enumerate() {
+            let deployed = (k % candidates.len(), 1.0);
             let plain = SearchProblem::new(&house, &distances, trial);
             let found = truth
                 .goal_containers(&trial.target)
                 .into_iter()
                 .find(|g| !trial.revealed.contains(g))
                 .unwrap();
-            let fresh = replay_costs(settings, &candidates, &plain, &truth, found, (0, 1.0)).unwrap();
-            let kept = replay_costs(settings, &candidates, &plain.with_replay_memo(&memo), &truth, found, (0, 1.0)).unwrap();
+            let fresh = replay_costs(settings, &candidates, &plain, &truth, found, deployed).unwrap();
+            let kept = replay_costs(settings, &candidates, &plain.with_replay_memo(&memo), &truth, found, deployed).unwrap();
             prop_assert_eq!(
                 fresh.iter().map(|c| c.to_bits()).collect::<Vec<_>>(),
                 kept.iter().map(|c| c.to_bits()).collect::<Vec<_>>()
@@ -508,8 +511,10 @@ proptest! {
                 repeats += candidates.len() - 1;
             }
         }
+        // The first ending of each kind replays the deployed candidate too, so every repeat,
+        // whichever candidate it deploys, finds all it needs.
         prop_assert_eq!(memo.hits(), repeats as u64);
-        prop_assert_eq!(memo.len(), asked.len() * (candidates.len() - 1));
+        prop_assert_eq!(memo.len(), asked.len() * candidates.len());
         let before = memo.len();
         let trial = &trials[0];
         let found = truth.goal_containers(&trial.target)[0];
@@ -557,4 +562,69 @@ fn a_full_replay_memo_keeps_no_more_and_still_answers() {
     }
     // Only the first replay of the first trial was kept, so nothing repeated was found.
     assert_eq!(memo.hits(), 0);
+}
+
+/// A greedy strategy that counts its trials and takes its time starting each, so that
+/// replays of it overlap.
+struct SlowCounted(std::sync::atomic::AtomicUsize);
+
+impl ferret_plan::Strategy for SlowCounted {
+    fn name(&self) -> &str {
+        "slow-counted"
+    }
+
+    fn policy<'a>(
+        &'a self,
+        _ctx: &ferret_plan::TrialContext<'a>,
+    ) -> Result<Box<dyn ferret_plan::Policy + 'a>, ferret_plan::PlanError> {
+        self.0.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+        std::thread::sleep(std::time::Duration::from_millis(30));
+        Ok(Box::new(ferret_plan::Greedy))
+    }
+}
+
+/// Eight ends of the same trial at once replay each other candidate once between them: the
+/// rest wait for that replay and answer with its cost.
+#[test]
+fn ends_of_one_trial_at_once_replay_it_once() {
+    use ferret_plan::{ReplayMemo, ReplayMode, TravelCost, replay_costs};
+    let (house, truth, distances) = house(
+        &[(1.0, 0.0), (0.0, 4.0), (-3.0, 0.0)],
+        &[0, 1, 2],
+        &[vec![], vec![], vec![0]],
+    );
+    let slow = Arc::new(SlowCounted(std::sync::atomic::AtomicUsize::new(0)));
+    let candidates: Vec<Arc<dyn ferret_plan::Strategy>> = vec![
+        Arc::new(ferret_plan::strategy::GreedyStrategy),
+        slow.clone(),
+    ];
+    let memo = ReplayMemo::new(100);
+    let trial = TrialSpec {
+        target: ObjectType::new("Egg"),
+        revealed: vec![],
+    };
+    let problem = SearchProblem::new(&house, &distances, &trial).with_replay_memo(&memo);
+    let settings = (ReplayMode::Pessimistic, TravelCost::Plain);
+    let costs: Vec<Vec<f64>> = std::thread::scope(|scope| {
+        let ends: Vec<_> = (0..8)
+            .map(|_| {
+                scope.spawn(|| {
+                    replay_costs(settings, &candidates, &problem, &truth, 2, (0, 1.0)).unwrap()
+                })
+            })
+            .collect();
+        ends.into_iter().map(|e| e.join().unwrap()).collect()
+    });
+    assert_eq!(slow.0.load(std::sync::atomic::Ordering::SeqCst), 1);
+    assert_eq!(memo.hits(), 7);
+    let alone = replay_costs(
+        settings,
+        &candidates,
+        &SearchProblem::new(&house, &distances, &trial),
+        &truth,
+        2,
+        (0, 1.0),
+    )
+    .unwrap();
+    assert!(costs.iter().all(|c| *c == alone), "{costs:?} vs {alone:?}");
 }

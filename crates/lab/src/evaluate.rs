@@ -14,7 +14,7 @@ use crate::feedback::Feedback;
 use crate::houses::{HouseEvent, HouseStream, Mapped, OpenSource};
 use crate::runs::TrialRow;
 use crate::strategies::{LlmSettings, Strategies, add_summary, prefetch_outcome, prefetch_quiet};
-use ferret_llm::PrefetchSummary;
+use ferret_llm::{PrefetchSummary, Prefetched};
 
 /// How trials are drawn on each house: the same for every strategy.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -347,10 +347,11 @@ fn prefetch_batch(
     draw: &TrialDraw<'_>,
     scenes: &[Scene],
     maps: &[Mapped],
+    before: &mut Prefetched,
 ) -> Result<PrefetchSummary> {
     let targets = draw.targets(scenes, maps);
     let pairs: Vec<(&House, &ObjectType)> = targets.iter().map(|(h, t)| (*h, t)).collect();
-    prefetch_quiet(&setup.service, specs, &pairs)
+    prefetch_quiet(&setup.service, specs, &pairs, before)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -375,6 +376,8 @@ fn evaluate_batches(
     // Under --keep-going a failed LLM's strategies leave every house, so every question is asked
     // before the first trial; otherwise a failure stops the run and each batch asks its own.
     let ask_first = asks && llm.keep_going;
+    // Questions already asked by earlier batches, so that each is asked and counted once.
+    let mut prefetched = Prefetched::default();
     let dropped = if ask_first {
         feedback.begin("LLM questions", houses.len_hint);
         let mut stream = (houses.open)()?;
@@ -393,7 +396,7 @@ fn evaluate_batches(
             read += scenes.len();
             feedback.set_len(houses.len_hint.max(read));
             let maps = batch_maps(&scenes, grid, &crate::feedback::Silent);
-            let summary = prefetch_batch(setup, specs, draw, &scenes, &maps);
+            let summary = prefetch_batch(setup, specs, draw, &scenes, &maps, &mut prefetched);
             feedback.set_done(read);
             match summary {
                 Ok(s) => add_summary(&mut asked, s),
@@ -430,7 +433,7 @@ fn evaluate_batches(
         each,
         &strategies,
         &names,
-        (asks && !ask_first).then_some(&mut asked),
+        (asks && !ask_first).then_some((&mut asked, &mut prefetched)),
         &mut totals,
     );
     feedback.end();
@@ -441,8 +444,8 @@ fn evaluate_batches(
     Ok(totals)
 }
 
-/// The run proper: batch after batch, each read, mapped, asked (with `ask`, whose sum it adds
-/// to) and run, its houses handed to `each`.
+/// The run proper: batch after batch, each read, mapped, asked (with `ask`: the sum it adds
+/// to and the questions earlier batches asked) and run, its houses handed to `each`.
 #[allow(clippy::too_many_arguments)]
 fn run_batches(
     houses: &Houses<'_, '_>,
@@ -456,7 +459,7 @@ fn run_batches(
     each: &mut dyn FnMut(HouseOutcome<'_>) -> Result<()>,
     strategies: &[Arc<dyn Strategy>],
     names: &[String],
-    mut ask: Option<&mut PrefetchSummary>,
+    mut ask: Option<(&mut PrefetchSummary, &mut Prefetched)>,
     totals: &mut EvaluationTotals,
 ) -> Result<()> {
     let mut stream = (houses.open)()?;
@@ -471,11 +474,14 @@ fn run_batches(
         let read = totals.houses.len() + scenes.len();
         feedback.set_len(houses.len_hint.max(read));
         totals.houses.extend(scenes.iter().map(|s| s.house.index));
-        let done: Vec<(Mapped, HouseRun)> = if let Some(sum) = ask.as_deref_mut() {
+        let done: Vec<(Mapped, HouseRun)> = if let Some((sum, before)) = ask.as_mut() {
             // The questions wait for the batch's maps (only mapped houses are asked about), so
             // the maps are built first and the trials run after.
             let maps = batch_maps(&scenes, grid, &crate::feedback::Silent);
-            add_summary(sum, prefetch_batch(setup, specs, draw, &scenes, &maps)?);
+            add_summary(
+                sum,
+                prefetch_batch(setup, specs, draw, &scenes, &maps, before)?,
+            );
             if !setup.service.failed_llms().is_empty() {
                 // Without --keep-going a failed LLM stops the run; the outcome says why.
                 prefetch_outcome(&setup.service, llm, specs, sum, feedback)?;

@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use ferret_llm::{
-    FailurePolicy, LlmConfig, LlmOptions, LlmService, PrefetchSummary, TokenReport,
-    prefetch_probabilities, register_fused, register_strategies,
+    FailurePolicy, LlmConfig, LlmOptions, LlmService, PrefetchSummary, Prefetched, TokenReport,
+    prefetch_probabilities, prefetch_probabilities_after, register_fused, register_strategies,
 };
 use ferret_plan::{CandidateLimit, FusionFile, HoldOut, PlannerConfig, Prior, StrategyRegistry};
 use ferret_world::{House, ObjectType};
@@ -292,21 +292,29 @@ pub fn prefetch(
 }
 
 /// The questions of some trials asked as [`prefetch`] asks them, without progress or remarks:
-/// for a caller that asks a batch of houses at a time and sums the summaries
-/// ([`add_summary`]) for one [`prefetch_outcome`].
+/// for a caller that asks a batch of houses at a time, passing every batch the same `before`
+/// (questions of earlier batches are skipped), and sums the summaries ([`add_summary`]) for one
+/// [`prefetch_outcome`].
 pub fn prefetch_quiet(
     service: &Arc<LlmService>,
     specs: &[String],
     trials: &[(&House, &ObjectType)],
+    before: &mut Prefetched,
 ) -> Result<PrefetchSummary> {
     if !asks_llm(specs) {
         return Ok(PrefetchSummary::default());
     }
-    Ok(prefetch_probabilities(service, specs, trials, &|_, _| {})?)
+    Ok(prefetch_probabilities_after(
+        service,
+        specs,
+        trials,
+        before,
+        &|_, _| {},
+    )?)
 }
 
-/// Adds the counts and failures of `more` to `sum` (a question asked in two batches is counted
-/// in both).
+/// Adds the counts and failures of `more` to `sum`: the run's counts when the batches shared
+/// one [`Prefetched`].
 pub fn add_summary(sum: &mut PrefetchSummary, more: PrefetchSummary) {
     sum.questions += more.questions;
     sum.distinct += more.distinct;

@@ -203,3 +203,107 @@ fn shards_merged_row_by_row_are_one_machine() {
         runs.iter().map(|(_, r)| r.rows.len()).sum::<usize>()
     );
 }
+
+/// Notes of a run, kept.
+#[derive(Default)]
+struct Notes(std::sync::Mutex<Vec<String>>);
+
+impl ferret_lab::Feedback for Notes {
+    fn note(&self, message: &str) {
+        self.0.lock().unwrap().push(message.to_string());
+    }
+}
+
+/// An LLM that answers every question "Yes", counting the requests.
+struct Yes(std::sync::Arc<std::sync::atomic::AtomicUsize>);
+
+impl wiremock::Respond for Yes {
+    fn respond(&self, _req: &wiremock::Request) -> wiremock::ResponseTemplate {
+        self.0.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+        wiremock::ResponseTemplate::new(200).set_body_json(serde_json::json!({
+            "id": "x", "object": "chat.completion", "created": 1, "model": "mock-model",
+            "choices": [{"index": 0, "message": {"role": "assistant", "content": "Yes"},
+                         "finish_reason": "stop"}],
+            "usage": {"prompt_tokens": 10, "completion_tokens": 1, "total_tokens": 11}
+        }))
+    }
+}
+
+/// P-YESNO asks one question per target, container type and room type, so houses share
+/// questions: asked a house at a time or all at once, a run sends and reports the same
+/// questions, each once.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn questions_shared_by_batches_are_asked_and_counted_once() {
+    use wiremock::matchers::{method, path};
+    let server = wiremock::MockServer::start().await;
+    let requests = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    wiremock::Mock::given(method("POST"))
+        .and(path("/v1/chat/completions"))
+        .respond_with(Yes(requests.clone()))
+        .mount(&server)
+        .await;
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("ferret.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[llm.mock]\nbase_url = \"{}/v1\"\nmodel = \"mock-model\"\nretry_base_ms = 10\n",
+            server.uri()
+        ),
+    )
+    .unwrap();
+    let specs = vec!["llm+model/p-yesno/mock".to_string()];
+    let mut runs = Vec::new();
+    for batch in [1, usize::MAX] {
+        let llm = LlmSettings {
+            config: Some(config.clone()),
+            llm_cache: dir.path().join(format!("cache-{batch}.sqlite")),
+            ..LlmSettings::default()
+        };
+        let draw = TrialDraw {
+            seed: 1,
+            reveal_fraction: 0.0,
+            per_house: TrialsPerHouse::Count(2),
+            protocol: &Protocol::FERRET,
+            holdout: None,
+        };
+        let notes = Notes::default();
+        let before = requests.load(std::sync::atomic::Ordering::SeqCst);
+        let totals = tokio::task::block_in_place(|| {
+            let setup = full_registry(&PlanningSettings::default(), &llm, &specs).unwrap();
+            let src = source();
+            let open = src.open(ContainerSet::Receptacles, None).unwrap();
+            evaluate_source_each(
+                &open,
+                &setup,
+                &specs,
+                &draw,
+                &GridParams::default(),
+                &llm,
+                batch,
+                &notes,
+                &mut |_| Ok(()),
+            )
+            .unwrap()
+        });
+        assert!(totals.trials_run > 0);
+        let sent = requests.load(std::sync::atomic::Ordering::SeqCst) - before;
+        let note = notes
+            .0
+            .lock()
+            .unwrap()
+            .iter()
+            .find(|n| n.starts_with("LLM questions:"))
+            .cloned()
+            .unwrap();
+        runs.push((note, sent));
+    }
+    assert_eq!(runs[0], runs[1]);
+    let (note, sent) = &runs[0];
+    assert_eq!(
+        note,
+        &format!(
+            "LLM questions: {sent} distinct (0 cached, {sent} asked now, 0 skipped after a failure)"
+        )
+    );
+}

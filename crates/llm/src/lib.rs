@@ -81,6 +81,6 @@ pub use question::{Expect, Question, Request};
 pub use service::{Answer, FailurePolicy, Llm, LlmOptions, LlmService};
 pub use strategy::{
     FUSED, LLM_DIRECT, LLM_MODEL, LlmDirectPolicy, LlmDirectStrategy, LlmSpec, PrefetchProgress,
-    PrefetchSummary, asks_probabilities, control_source, prefetch_probabilities, register_fused,
-    register_strategies,
+    PrefetchSummary, Prefetched, asks_probabilities, control_source, prefetch_probabilities,
+    prefetch_probabilities_after, register_fused, register_strategies,
 };

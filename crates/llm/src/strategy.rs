@@ -437,6 +437,33 @@ pub struct PrefetchSummary {
     pub skipped: usize,
 }
 
+/// The questions a run has prefetched so far, for a run that prefetches a batch of houses at a
+/// time: a question met in an earlier batch (P-YESNO's, one per target, container type and room
+/// type, recur in every house) is neither counted as distinct again nor looked up again. Keeps
+/// 32 bytes per distinct question (a digest of its cache key).
+#[derive(Debug, Default)]
+pub struct Prefetched {
+    keys: HashSet<[u8; 32]>,
+}
+
+impl Prefetched {
+    /// Distinct questions met so far.
+    pub fn len(&self) -> usize {
+        self.keys.len()
+    }
+
+    /// True before any question.
+    pub fn is_empty(&self) -> bool {
+        self.keys.is_empty()
+    }
+
+    /// Records `key`; false when it was met before.
+    fn insert(&mut self, key: &str) -> bool {
+        use sha2::{Digest, Sha256};
+        self.keys.insert(Sha256::digest(key.as_bytes()).into())
+    }
+}
+
 /// Reports prefetch progress: called with (questions finished, questions in all) as answers
 /// arrive. The library prints nothing; the CLI draws a progress bar from this.
 pub type PrefetchProgress<'a> = &'a (dyn Fn(usize, usize) + Send + Sync);
@@ -453,12 +480,24 @@ pub fn prefetch_probabilities(
     trials: &[(&House, &ObjectType)],
     progress: PrefetchProgress<'_>,
 ) -> Result<PrefetchSummary> {
+    prefetch_probabilities_after(service, specs, trials, &mut Prefetched::default(), progress)
+}
+
+/// [`prefetch_probabilities`] for one batch of a run's trials: questions in `before` (met in
+/// earlier batches) are skipped, and this batch's are added to it, so that the batches'
+/// summaries add up to one run's.
+pub fn prefetch_probabilities_after(
+    service: &Arc<LlmService>,
+    specs: &[String],
+    trials: &[(&House, &ObjectType)],
+    before: &mut Prefetched,
+    progress: PrefetchProgress<'_>,
+) -> Result<PrefetchSummary> {
     // Distinct requests (the cache key says everything that decides an answer, so endpoints that
     // send the same request share it), in the order the trials would ask them: house by house,
     // so that consecutive requests share the long prefix a house's context prompts have in
     // common, which servers with prefix caching (llama.cpp, vLLM, OpenAI) then skip.
     let mut work: Vec<Job> = Vec::new();
-    let mut seen_keys: HashSet<String> = HashSet::new();
     let mut summary = PrefetchSummary::default();
     let mut seen_sources = HashSet::new();
     let mut sources = Vec::new();
@@ -496,7 +535,7 @@ pub fn prefetch_probabilities(
             for (house, target) in &trials[i..end] {
                 for (question, asked) in source.questions(house, target)?.questions {
                     summary.questions += 1;
-                    if seen_keys.insert(source.llm().key(&question)) {
+                    if before.insert(&source.llm().key(&question)) {
                         jobs.push(Job {
                             source: source.clone(),
                             question,

@@ -251,9 +251,14 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
         let bar = crate::common::progress(loaded.scenes.len(), "scenes");
         for scene in loaded.scenes {
             let name = scene.house.name.clone();
-            service
-                .add_scene(&name, scene)
-                .map_err(|e| anyhow::anyhow!("{name}: {}", e.message))?;
+            service.add_scene(&name, scene).map_err(|e| {
+                // Most scene errors name the house already.
+                if e.message.starts_with(&name) {
+                    anyhow::anyhow!("{}", e.message)
+                } else {
+                    anyhow::anyhow!("{name}: {}", e.message)
+                }
+            })?;
             bar.inc(1);
         }
         bar.finish_and_clear();

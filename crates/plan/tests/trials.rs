@@ -628,3 +628,69 @@ fn ends_of_one_trial_at_once_replay_it_once() {
     .unwrap();
     assert!(costs.iter().all(|c| *c == alone), "{costs:?} vs {alone:?}");
 }
+
+/// A strategy that cannot plan (an LLM endpoint down).
+struct Down;
+
+impl ferret_plan::Strategy for Down {
+    fn name(&self) -> &str {
+        "down"
+    }
+
+    fn policy<'a>(
+        &'a self,
+        _ctx: &ferret_plan::TrialContext<'a>,
+    ) -> Result<Box<dyn ferret_plan::Policy + 'a>, ferret_plan::PlanError> {
+        Err(ferret_plan::PlanError::Policy {
+            policy: "down".into(),
+            error: "the endpoint is down".into(),
+        })
+    }
+}
+
+/// The deployed candidate is replayed for later ends only on the side: when it cannot be
+/// replayed, the end still gets the replays it needs, and nothing is kept for it.
+#[test]
+fn a_deployed_candidate_that_cannot_be_replayed_fails_no_end() {
+    use ferret_plan::{ReplayMemo, ReplayMode, TravelCost, replay_costs};
+    let (house, truth, distances) = house(
+        &[(1.0, 0.0), (0.0, 4.0), (-3.0, 0.0)],
+        &[0, 1, 2],
+        &[vec![], vec![], vec![0]],
+    );
+    let candidates: Vec<Arc<dyn ferret_plan::Strategy>> = vec![
+        Arc::new(Down),
+        Arc::new(ferret_plan::strategy::GreedyStrategy),
+    ];
+    let memo = ReplayMemo::new(100);
+    let trial = TrialSpec {
+        target: ObjectType::new("Egg"),
+        revealed: vec![],
+    };
+    let problem = SearchProblem::new(&house, &distances, &trial);
+    let settings = (ReplayMode::Pessimistic, TravelCost::Plain);
+    let kept = replay_costs(
+        settings,
+        &candidates,
+        &problem.with_replay_memo(&memo),
+        &truth,
+        2,
+        (0, 7.0),
+    )
+    .unwrap();
+    let alone = replay_costs(settings, &candidates, &problem, &truth, 2, (0, 7.0)).unwrap();
+    assert_eq!(kept, alone);
+    assert_eq!(memo.len(), 1);
+    // Deployed elsewhere, the candidate that cannot be replayed fails the end, as without a memo.
+    assert!(
+        replay_costs(
+            settings,
+            &candidates,
+            &problem.with_replay_memo(&memo),
+            &truth,
+            2,
+            (1, 7.0)
+        )
+        .is_err()
+    );
+}

@@ -11,7 +11,7 @@ use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::feedback::Feedback;
-use crate::houses::{HouseEvent, HouseStream, Mapped, OpenSource};
+use crate::houses::{HouseEvent, HouseStream, Mapped, OpenSource, build_maps};
 use crate::runs::TrialRow;
 use crate::strategies::{LlmSettings, Strategies, add_summary, prefetch_outcome, prefetch_quiet};
 use ferret_llm::{PrefetchSummary, Prefetched};
@@ -328,18 +328,6 @@ fn next_batch(
     Ok(batch)
 }
 
-/// The maps of a batch, built in parallel, ticking `feedback` per house.
-fn batch_maps(scenes: &[Scene], grid: &GridParams, feedback: &dyn Feedback) -> Vec<Mapped> {
-    scenes
-        .par_iter()
-        .map(|scene| {
-            let map = ferret_world::distance::build(&scene.house, grid);
-            feedback.tick();
-            map
-        })
-        .collect()
-}
-
 /// Asks the LLM questions of a batch's mapped houses.
 fn prefetch_batch(
     setup: &Strategies,
@@ -376,37 +364,13 @@ fn evaluate_batches(
     // Under --keep-going a failed LLM's strategies leave every house, so every question is asked
     // before the first trial; otherwise a failure stops the run and each batch asks its own.
     let ask_first = asks && llm.keep_going;
-    // Questions already asked by earlier batches, so that each is asked and counted once.
-    let mut prefetched = Prefetched::default();
     let dropped = if ask_first {
         feedback.begin("LLM questions", houses.len_hint);
-        let mut stream = (houses.open)()?;
-        let mut read = 0;
-        loop {
-            let scenes = match next_batch(&mut stream, batch, &mut |_| {}) {
-                Ok(s) => s,
-                Err(e) => {
-                    feedback.end();
-                    return Err(e);
-                }
-            };
-            if scenes.is_empty() {
-                break;
-            }
-            read += scenes.len();
-            feedback.set_len(houses.len_hint.max(read));
-            let maps = batch_maps(&scenes, grid, &crate::feedback::Silent);
-            let summary = prefetch_batch(setup, specs, draw, &scenes, &maps, &mut prefetched);
-            feedback.set_done(read);
-            match summary {
-                Ok(s) => add_summary(&mut asked, s),
-                Err(e) => {
-                    feedback.end();
-                    return Err(e);
-                }
-            }
-        }
+        let all = ask_every_batch(
+            houses, setup, specs, draw, grid, batch, feedback, &mut asked,
+        );
         feedback.end();
+        all?;
         prefetch_outcome(&setup.service, llm, specs, &asked, feedback)?
     } else {
         Vec::new()
@@ -420,6 +384,8 @@ fn evaluate_batches(
         strategies: strategies.clone(),
         ..EvaluationTotals::default()
     };
+    // Questions already asked by earlier batches, so that each is asked and counted once.
+    let mut prefetched = Prefetched::default();
     feedback.begin("houses", houses.len_hint);
     let result = run_batches(
         houses,
@@ -442,6 +408,36 @@ fn evaluate_batches(
         prefetch_outcome(&setup.service, llm, specs, &asked, feedback)?;
     }
     Ok(totals)
+}
+
+/// Asks the questions of every house, batch by batch, adding to `asked`, before any trial runs.
+#[allow(clippy::too_many_arguments)]
+fn ask_every_batch(
+    houses: &Houses<'_, '_>,
+    setup: &Strategies,
+    specs: &[String],
+    draw: &TrialDraw<'_>,
+    grid: &GridParams,
+    batch: usize,
+    feedback: &dyn Feedback,
+    asked: &mut PrefetchSummary,
+) -> Result<()> {
+    // Questions already asked by earlier batches, so that each is asked and counted once.
+    let mut prefetched = Prefetched::default();
+    let mut stream = (houses.open)()?;
+    let mut read = 0;
+    loop {
+        let scenes = next_batch(&mut stream, batch, &mut |_| {})?;
+        if scenes.is_empty() {
+            return Ok(());
+        }
+        read += scenes.len();
+        feedback.set_len(houses.len_hint.max(read));
+        let maps = build_maps(&scenes, grid, &crate::feedback::Silent);
+        let summary = prefetch_batch(setup, specs, draw, &scenes, &maps, &mut prefetched);
+        feedback.set_done(read);
+        add_summary(asked, summary?);
+    }
 }
 
 /// The run proper: batch after batch, each read, mapped, asked (with `ask`: the sum it adds
@@ -477,7 +473,7 @@ fn run_batches(
         let done: Vec<(Mapped, HouseRun)> = if let Some((sum, before)) = ask.as_mut() {
             // The questions wait for the batch's maps (only mapped houses are asked about), so
             // the maps are built first and the trials run after.
-            let maps = batch_maps(&scenes, grid, &crate::feedback::Silent);
+            let maps = build_maps(&scenes, grid, &crate::feedback::Silent);
             add_summary(
                 sum,
                 prefetch_batch(setup, specs, draw, &scenes, &maps, before)?,

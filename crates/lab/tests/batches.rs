@@ -35,6 +35,17 @@ fn specs() -> Vec<String> {
         .to_vec()
 }
 
+/// Two targets per house, seed 1, ferret's protocol.
+fn draw() -> TrialDraw<'static> {
+    TrialDraw {
+        seed: 1,
+        reveal_fraction: 0.0,
+        per_house: TrialsPerHouse::Count(2),
+        protocol: &Protocol::FERRET,
+        holdout: None,
+    }
+}
+
 fn info(shard: Option<ShardRecord>) -> RunInfo {
     let grid = GridParams::default();
     RunInfo {
@@ -65,13 +76,7 @@ fn eval(out: &Path, shard: Option<Shard>, batch: usize) -> Vec<usize> {
         ..LlmSettings::default()
     };
     let setup = full_registry(&PlanningSettings::default(), &llm, &specs()).unwrap();
-    let draw = TrialDraw {
-        seed: 1,
-        reveal_fraction: 0.0,
-        per_house: TrialsPerHouse::Count(2),
-        protocol: &Protocol::FERRET,
-        holdout: None,
-    };
+    let draw = draw();
     let src = source();
     let open = src.open(ContainerSet::Receptacles, shard).unwrap();
     let mut writer = RunWriter::create(out, false).unwrap();
@@ -260,13 +265,7 @@ async fn questions_shared_by_batches_are_asked_and_counted_once() {
             llm_cache: dir.path().join(format!("cache-{batch}.sqlite")),
             ..LlmSettings::default()
         };
-        let draw = TrialDraw {
-            seed: 1,
-            reveal_fraction: 0.0,
-            per_house: TrialsPerHouse::Count(2),
-            protocol: &Protocol::FERRET,
-            holdout: None,
-        };
+        let draw = draw();
         let notes = Notes::default();
         let before = requests.load(std::sync::atomic::Ordering::SeqCst);
         let totals = tokio::task::block_in_place(|| {

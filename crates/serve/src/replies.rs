@@ -25,6 +25,9 @@ pub(crate) struct RequestClaim<'a> {
     service: &'a Service,
     id: Option<String>,
     _shared: Option<Claim<'a>>,
+    /// Set when [`complete`](RequestClaim::complete) rolled its write back for a reply stored
+    /// meanwhile.
+    rolled_back: std::cell::Cell<bool>,
 }
 
 impl Drop for RequestClaim<'_> {
@@ -57,6 +60,7 @@ impl Service {
                 service: self,
                 id: None,
                 _shared: None,
+                rolled_back: Default::default(),
             }));
         };
         if id.is_empty() || id.chars().count() > MAX_REQUEST_ID {
@@ -86,6 +90,7 @@ impl Service {
             service: self,
             id: Some(id.to_string()),
             _shared: None,
+            rolled_back: Default::default(),
         };
         match self.store.claim(id)? {
             Some(shared) => claim._shared = Some(shared),
@@ -102,6 +107,13 @@ impl Service {
 }
 
 impl RequestClaim<'_> {
+    /// Whether the last [`complete`](Self::complete) committed its own write (false when it
+    /// answered with a reply stored meanwhile, its write rolled back): what it wrote may be
+    /// remembered only then.
+    pub(crate) fn wrote(&self) -> bool {
+        !self.rolled_back.get()
+    }
+
     /// Runs a write operation with request-id idempotency, under this claim. [`Service::begin`]
     /// found no reply stored, and the claim keeps every other run of the id out, so the reply
     /// is not looked up again before the operation; storing it is what checks. Should the id
@@ -115,7 +127,8 @@ impl RequestClaim<'_> {
         op: impl FnOnce(&Writer<'_>) -> Result<ApiReply, ApiError>,
     ) -> Result<ApiReply, ApiError> {
         let request_id = self.id.as_deref();
-        let taken = std::cell::Cell::new(false);
+        let taken = &self.rolled_back;
+        taken.set(false);
         let done = self.service.store.write(|w| {
             let reply = op(w)?;
             if let Some(id) = request_id {
@@ -216,6 +229,7 @@ mod tests {
             service: &s,
             id: Some("r1".into()),
             _shared: None,
+            rolled_back: Default::default(),
         };
         let write = |w: &Writer<'_>| -> Result<ApiReply, ApiError> {
             w.insert_scene("written", "{}")?;
@@ -224,7 +238,9 @@ mod tests {
                 body: "a second run's reply".into(),
             })
         };
-        let reply = claim().complete(route, body, write).unwrap();
+        let answered = claim();
+        let reply = answered.complete(route, body, write).unwrap();
+        assert!(!answered.wrote());
         assert_eq!(reply.body, earlier.body);
         assert_eq!(reply.outcome, Outcome::Created);
         let err = claim().complete(route, b"{}", write).unwrap_err();
@@ -235,8 +251,10 @@ mod tests {
             service: &s,
             id: Some("r2".into()),
             _shared: None,
+            rolled_back: Default::default(),
         };
         let reply = fresh.complete(route, body, write).unwrap();
+        assert!(fresh.wrote());
         assert_eq!(reply.body, "a second run's reply");
         assert!(s.store.read(|r| r.scene("written")).unwrap().is_some());
         assert_eq!(

@@ -141,7 +141,10 @@ impl Service {
                     },
                 )
             });
-            if let (Ok(_), Some(id)) = (&started, created) {
+            // A reply stored meanwhile by another run of the request id rolled the insert back.
+            if let (Ok(_), Some(id)) = (&started, created)
+                && claim.wrote()
+            {
                 self.searches.keep(id, 0, live);
             }
             match started {

@@ -183,6 +183,11 @@ pub struct PlanningArgs {
     /// run.json.
     #[arg(long, value_name = "K/N|N")]
     pub holdout_types: Option<ferret_plan::HoldOut>,
+    /// Word embeddings (a folder; `scripts/embeddings.sh install` prints one) for the names a
+    /// learned prior's file lacks: furniture, rooms or objects its training houses never had.
+    /// Opened only when such a name comes up.
+    #[arg(long, value_name = "DIR", env = "FERRET_EMBEDDINGS")]
+    pub embeddings: Option<PathBuf>,
 }
 
 impl PlanningArgs {
@@ -194,6 +199,7 @@ impl PlanningArgs {
             exact_max: self.exact_max,
             search_cost: self.search_cost,
             holdout: self.holdout_types,
+            embeddings: self.embeddings.clone(),
         }
     }
 

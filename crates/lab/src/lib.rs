@@ -5,7 +5,8 @@
 //! where houses come from and their maps ([`houses`]), strategy setup without a command line
 //! ([`strategies`]), evaluation of strategies on the same trials ([`evaluate`](mod@evaluate)), the run files
 //! `trials.csv` and `run.json` ([`runs`]), summaries ([`summary`]) and the paired statistics behind them ([`paired`]),
-//! calibration of likelihood sources ([`calibrate`]), the replay table behind selection with its
+//! calibration of likelihood sources ([`calibrate`]), word vectors for the learned likelihood
+//! ([`language`]), the replay table behind selection with its
 //! resumable cache ([`replay`]), selection over an evaluation run ([`selection`]), sharded evaluation and its merge
 //! ([`shard`]), batch
 //! deployments in simulation with their house order ([`deploy`](mod@deploy)), atomic
@@ -19,6 +20,7 @@ pub mod evaluate;
 pub mod feedback;
 pub mod files;
 pub mod houses;
+pub mod language;
 pub mod paired;
 pub mod replay;
 pub mod runs;

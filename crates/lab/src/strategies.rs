@@ -37,9 +37,9 @@ pub fn default_prior(count: usize, seed: u64) -> Result<Prior> {
 /// `fused/...`), so that a face can supply a prior it already holds instead of loading or
 /// training one per call.
 pub fn needs_prior(specs: &[String]) -> bool {
-    specs
-        .iter()
-        .any(|s| s.starts_with("model/prior") || s.starts_with("fused/"))
+    specs.iter().any(|s| {
+        s.starts_with("model/prior") || s.starts_with("model/learned") || s.starts_with("fused/")
+    })
 }
 
 /// Refuses a list option naming the same value twice (`--strategies a,b,a`): its results would
@@ -68,6 +68,12 @@ pub struct PlanningSettings {
     /// target is one without the types of its fold.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub holdout: Option<HoldOut>,
+    /// Word embeddings for names a learned prior's file lacks (`--embeddings`; without it,
+    /// `FERRET_EMBEDDINGS`), opened only when such a name is asked. Not recorded in run.json:
+    /// the vectors of a name are the embeddings' (whose id the prior file checks), wherever the
+    /// folder is; a later step (`select`) finds it again through `FERRET_EMBEDDINGS`.
+    #[serde(skip)]
+    pub embeddings: Option<PathBuf>,
 }
 
 impl Default for PlanningSettings {
@@ -78,6 +84,7 @@ impl Default for PlanningSettings {
             exact_max: 16,
             search_cost: 0.0,
             holdout: None,
+            embeddings: None,
         }
     }
 }
@@ -217,7 +224,8 @@ pub fn full_registry_over(
     let prior = match (prior, planning.holdout) {
         (Some(p), Some(h)) if p.holdout() != Some(h) => Some(Arc::new(p.holding_out(h))),
         (p, _) => p,
-    };
+    }
+    .map(|p| crate::language::with_embeddings(p, planning.embeddings.as_deref()));
     let mut registry = planning.registry_with(prior.clone());
     let fusion = match &llm.fusion {
         Some(path) => Some((

@@ -66,6 +66,12 @@ pub enum PlanError {
         /// What is wrong.
         message: String,
     },
+    /// A learned likelihood could not be trained.
+    #[error("learned likelihood: {message}")]
+    Learned {
+        /// What went wrong.
+        message: String,
+    },
     /// A prior file could not be read or written.
     #[error("prior {path}: {message}")]
     Prior {

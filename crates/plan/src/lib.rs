@@ -69,6 +69,7 @@ pub mod calibration;
 pub mod error;
 pub mod fusion;
 pub mod holdout;
+pub mod learned;
 pub mod likelihood;
 pub mod logistic;
 pub mod planner;
@@ -88,9 +89,10 @@ pub use fusion::{
     Fused, FusionFile, FusionFit, FusionSample, FusionWeights, TrainingScore, prior_fingerprint,
 };
 pub use holdout::HoldOut;
+pub use learned::{Embedder, Learned, LearnedKind, LearnedSettings, LearnedSource, NameVectors};
 pub use likelihood::{
-    CALIBRATION_FOLDS, LikelihoodSource, Noise, OracleLikelihood, Prior, PriorCalibration,
-    RawPrior, Uniform,
+    CALIBRATION_FOLDS, Evidence, LikelihoodSource, Noise, OracleLikelihood, Prior,
+    PriorCalibration, RawPrior, Uniform,
 };
 pub use planner::{Plan, TourProblem, solve_brute_force, solve_exact};
 pub use policy::{CandidateLimit, CostModel, Greedy, Oracle, Planner, PlannerConfig, Policy};

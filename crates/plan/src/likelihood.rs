@@ -248,6 +248,20 @@ impl Counts {
     }
 }
 
+/// The evidence gaps of one question ([`Prior::evidence`]), each in (0, 1]: 1 where the training
+/// houses showed nothing, near 0 where they showed much.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Evidence {
+    /// Of the target type.
+    pub target: f64,
+    /// Of the container type.
+    pub container: f64,
+    /// Of the room type.
+    pub room: f64,
+    /// Of the target in containers of this type.
+    pub pair: f64,
+}
+
 /// The Platt scaling of the prior's estimates: `logit P = a·logit P_counts + c`, fitted by
 /// cross-fitting on the training houses (each fold's houses scored by a prior counted on the
 /// others), so that its probabilities mean what they say on houses it never saw.
@@ -305,6 +319,12 @@ pub struct Prior {
     /// The Platt scaling, when it could be fitted (enough training houses with both classes).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibration: Option<PriorCalibration>,
+    /// The learned likelihood (`model/learned`), when the prior was trained with word vectors.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    learned: Option<Arc<crate::learned::Learned>>,
+    /// Where the learned part finds vectors of names the file lacks.
+    #[serde(skip)]
+    embedder: Option<crate::learned::Embedder>,
     /// Held-out target types: priors that never saw them, asked in their stead.
     #[serde(skip)]
     hidden: Option<Arc<Hidden>>,
@@ -342,6 +362,17 @@ impl Prior {
 
     /// The counts alone, without a calibration.
     pub fn count<'a>(scenes: impl IntoIterator<Item = &'a Scene>, smoothing: f64) -> Self {
+        Self::count_where(scenes, smoothing, &|_, _| true)
+    }
+
+    /// The counts of the containers `keep` accepts (by container type and room type), as if
+    /// the others had not stood in the training houses: the prior of a world without some
+    /// kinds of furniture or rooms, which is what a learned source is cross-fitted against.
+    pub fn count_where<'a>(
+        scenes: impl IntoIterator<Item = &'a Scene>,
+        smoothing: f64,
+        keep: &dyn Fn(&ObjectType, &str) -> bool,
+    ) -> Self {
         let mut prior = Prior {
             ferret_prior: PRIOR_FORMAT,
             smoothing,
@@ -362,6 +393,9 @@ impl Prior {
                     .container_room(c)
                     .map(|r| r.room_type.as_str())
                     .unwrap_or("");
+                if !keep(&container.object_type, room) {
+                    continue;
+                }
                 prior
                     .by_pair
                     .entry(format!("{}@{}", container.object_type, room))
@@ -416,6 +450,57 @@ impl Prior {
             pairs: rows.len() as u64,
             positives: rows.iter().filter(|r| r.1).count() as u64,
         })
+    }
+
+    /// The learned part, if the prior was trained with word vectors.
+    pub fn learned(&self) -> Option<&crate::learned::Learned> {
+        self.learned.as_deref()
+    }
+
+    /// The prior with `learned` as its learned part.
+    pub fn with_learned(&self, learned: crate::learned::Learned) -> Prior {
+        Prior {
+            learned: Some(Arc::new(learned)),
+            ..self.clone()
+        }
+    }
+
+    /// The prior whose learned part also has `vectors` (names of houses its training houses
+    /// never had, embedded with the same embeddings); names it has keep their vectors. Unchanged
+    /// without a learned part.
+    pub fn with_vectors(&self, vectors: BTreeMap<String, Vec<f32>>) -> Prior {
+        let Some(learned) = &self.learned else {
+            return self.clone();
+        };
+        let mut learned = (**learned).clone();
+        for (name, v) in vectors {
+            learned.vectors.entry(name).or_insert(v);
+        }
+        Prior {
+            learned: Some(Arc::new(learned)),
+            ..self.clone()
+        }
+    }
+
+    /// The prior whose learned part looks up names its file lacks in `embedder`.
+    pub fn with_embedder(&self, embedder: crate::learned::Embedder) -> Prior {
+        Prior {
+            embedder: Some(embedder),
+            ..self.clone()
+        }
+    }
+
+    /// Where the learned part looks up names its file lacks, if anywhere.
+    pub fn embedder(&self) -> Option<&crate::learned::Embedder> {
+        self.embedder.as_ref()
+    }
+
+    /// The same counts with another calibration.
+    pub fn with_calibration(self, calibration: Option<PriorCalibration>) -> Prior {
+        Prior {
+            calibration,
+            ..self
+        }
     }
 
     /// The prior that asks about each target one that never saw the target types `holdout`
@@ -581,6 +666,32 @@ impl Prior {
         s / (f64::from(n) + s)
     }
 
+    /// How little the training houses (after any hold-out) say about each part of a question,
+    /// each as `s / (n + s)` like [`evidence_gap`](Self::evidence_gap): of the target type
+    /// (containers that stood in a house holding it), of the container type (containers of it
+    /// seen), of the room type (containers seen in such rooms) and of the pair (containers of
+    /// the type in a house holding the target). One gap cannot tell a pairing never seen from
+    /// furniture never seen; these can.
+    pub fn evidence(&self, target: &ObjectType, container: &ObjectType, room: &str) -> Evidence {
+        let counts = self.counts_for(target);
+        let s = self.smoothing.max(1.0);
+        let gap = |n: u32| s / (f64::from(n) + s);
+        let by_type = counts.by_container.get(container);
+        let suffix = format!("@{room}");
+        let in_room: u32 = counts
+            .by_pair
+            .iter()
+            .filter(|(k, _)| k.ends_with(&suffix))
+            .map(|(_, c)| c.containers)
+            .sum();
+        Evidence {
+            target: gap(counts.overall.present(target)),
+            container: gap(by_type.map_or(0, |c| c.containers)),
+            room: gap(in_room),
+            pair: gap(by_type.map_or(0, |c| c.present(target))),
+        }
+    }
+
     /// [`evidence_gap`](Self::evidence_gap) of every container of `house`.
     pub fn evidence_gaps(&self, house: &House, target: &ObjectType) -> Vec<f64> {
         house
@@ -631,6 +742,11 @@ impl Prior {
             && !(c.a.is_finite() && c.c.is_finite())
         {
             return Err(err("calibration weights are not finite numbers".into()));
+        }
+        if let Some(learned) = &prior.learned {
+            learned
+                .check()
+                .map_err(|m| err(format!("learned part: {m}")))?;
         }
         Ok(prior)
     }

@@ -33,14 +33,31 @@ pub fn sigmoid(z: f64) -> f64 {
 /// `RIDGE · (w − start)²` on the weights where `penalised` is true (the penalty pulls toward the
 /// starting weights, so an input that carries no information keeps its neutral weight). `None`
 /// without both classes, or when the fit does not settle.
-#[allow(clippy::needless_range_loop)] // gradient and Hessian by index, as written on paper
 pub fn fit<const N: usize>(
     rows: &[([f64; N], bool)],
     start: [f64; N],
     penalised: [bool; N],
 ) -> Option<[f64; N]> {
-    let positives = rows.iter().filter(|r| r.1).count();
-    if positives == 0 || positives == rows.len() {
+    let counted: Vec<([f64; N], f64, f64)> = rows
+        .iter()
+        .map(|(x, y)| (*x, f64::from(u8::from(*y)), 1.0))
+        .collect();
+    fit_counts(&counted, start, penalised)
+}
+
+/// [`fit`] over grouped rows: each row's inputs with how many of its `total` cases were
+/// positive. Many questions share their inputs (every house asks the same target about the same
+/// kind of container), and one row per group is what keeps a fit over hundreds of thousands of
+/// questions quick.
+#[allow(clippy::needless_range_loop)] // gradient and Hessian by index, as written on paper
+pub fn fit_counts<const N: usize>(
+    rows: &[([f64; N], f64, f64)],
+    start: [f64; N],
+    penalised: [bool; N],
+) -> Option<[f64; N]> {
+    let positives: f64 = rows.iter().map(|r| r.1).sum();
+    let total: f64 = rows.iter().map(|r| r.2).sum();
+    if positives <= 0.0 || positives >= total {
         return None;
     }
     let mut w = start;
@@ -53,19 +70,30 @@ pub fn fit<const N: usize>(
                 hess[i][i] = RIDGE;
             }
         }
-        for (x, y) in rows {
+        for (x, k, n) in rows {
             let z: f64 = (0..N).map(|i| x[i] * w[i]).sum();
             let p = sigmoid(z);
-            let weight = p * (1.0 - p);
-            let y = f64::from(u8::from(*y));
+            let weight = n * p * (1.0 - p);
             for i in 0..N {
-                grad[i] += (y - p) * x[i];
+                grad[i] += (k - n * p) * x[i];
                 for j in 0..N {
                     hess[i][j] += weight * x[i] * x[j];
                 }
             }
         }
-        let step = solve(hess, grad)?;
+        let mut step = solve(hess, grad)?;
+        // Newton's full step settles a well-started fit; from a poor start (inputs with a wide
+        // range, like a network's logits) it can overshoot into a worse fit and diverge, so a
+        // step that raises the loss clearly is halved until it does not.
+        let before = loss(rows, &w, &start, &penalised);
+        for _ in 0..40 {
+            let tried: [f64; N] = std::array::from_fn(|i| w[i] + step[i]);
+            let after = loss(rows, &tried, &start, &penalised);
+            if after.is_finite() && after <= before + 1e-6 * (1.0 + before.abs()) {
+                break;
+            }
+            step.iter_mut().for_each(|s| *s *= 0.5);
+        }
         for i in 0..N {
             w[i] += step[i];
         }
@@ -77,6 +105,33 @@ pub fn fit<const N: usize>(
         }
     }
     Some(w)
+}
+
+/// The penalised negative log-likelihood [`fit_counts`] minimises.
+fn loss<const N: usize>(
+    rows: &[([f64; N], f64, f64)],
+    w: &[f64; N],
+    start: &[f64; N],
+    penalised: &[bool; N],
+) -> f64 {
+    let softplus = |z: f64| {
+        if z > 0.0 {
+            z + (-z).exp().ln_1p()
+        } else {
+            z.exp().ln_1p()
+        }
+    };
+    let mut total = 0.0;
+    for (x, k, n) in rows {
+        let z: f64 = (0..N).map(|i| x[i] * w[i]).sum();
+        total += k * softplus(-z) + (n - k) * softplus(z);
+    }
+    for i in 0..N {
+        if penalised[i] {
+            total += 0.5 * RIDGE * (w[i] - start[i]).powi(2);
+        }
+    }
+    total
 }
 
 /// Solves `m · x = v` by Gaussian elimination with partial pivoting; `None` when singular.

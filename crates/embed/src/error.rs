@@ -107,6 +107,27 @@ pub enum EmbedError {
         /// What is wrong.
         what: String,
     },
+    /// The folder holds a sentence-embedding model (`model.safetensors` with `tokenizer.json` and
+    /// `config.json`), but this build cannot run it: the `minilm` feature is off. The variant
+    /// exists in every build, so that callers can match on it.
+    #[error(
+        "{path}: this is a sentence-embedding model (model.safetensors, tokenizer.json, \
+         config.json), which this build of ferret-embed cannot run: build with `--features minilm` \
+         (`--features ferret-embed/minilm` from a crate that depends on it)"
+    )]
+    NeedsFeature {
+        /// The model's folder.
+        path: PathBuf,
+    },
+    /// A sentence-embedding model's files could not be loaded (a malformed config, tokenizer or
+    /// weights file, or a model that is not a BERT model). Only the `minilm` feature makes it.
+    #[error("{path}: {what}")]
+    Model {
+        /// The file at fault (or the model's folder).
+        path: PathBuf,
+        /// What is wrong.
+        what: String,
+    },
     /// Words given to [`Embeddings::from_words`](crate::Embeddings::from_words) do not form a
     /// table.
     #[error("table {id:?}: {what}")]

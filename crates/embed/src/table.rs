@@ -3,19 +3,36 @@
 use std::collections::HashMap;
 use std::collections::hash_map::Entry;
 use std::path::{Path, PathBuf};
+#[cfg(feature = "minilm")]
+use std::sync::Arc;
 
 use crate::{EMBEDDINGS_ENV, EmbedError, Matrix, split_name};
 
-/// A word-embedding table: an id, a dimension and one vector per word.
+/// Embeddings of names: an id, a dimension, and either a word table (one vector per word, a
+/// name's vector the mean of its words') or, with the `minilm` feature, a sentence-embedding
+/// model run on the name's words.
 ///
-/// Vectors are stored row-major in one allocation (400 000 × 50 floats for GloVe 6B 50d, 80 MB)
-/// so that a lookup is a hash plus a slice.
+/// A table's vectors are stored row-major in one allocation (400 000 × 50 floats for GloVe 6B
+/// 50d, 80 MB) so that a lookup is a hash plus a slice. A model is shared between clones, and so
+/// is the cache of the names it has embedded.
 #[derive(Clone)]
 pub struct Embeddings {
     id: String,
     dim: usize,
-    rows: HashMap<String, usize>,
-    data: Vec<f32>,
+    backend: Backend,
+}
+
+/// Where the vectors come from.
+#[derive(Clone)]
+enum Backend {
+    /// One vector per word: the word's row in `data` (`dim` floats from `row × dim`).
+    Table {
+        rows: HashMap<String, usize>,
+        data: Vec<f32>,
+    },
+    /// A sentence-embedding model (all-MiniLM-L6-v2 or another BERT model).
+    #[cfg(feature = "minilm")]
+    Sentence(Arc<crate::minilm::SentenceModel>),
 }
 
 impl std::fmt::Debug for Embeddings {
@@ -37,18 +54,27 @@ impl Embeddings {
     ///   little-endian float32, C or Fortran order) beside a word index `NAME_index.parquet`
     ///   (one string column; row i is the word of matrix row i). The id is the matrix file's
     ///   stem without `_emb`, lowercase, with `-` for `_` (`glove-6b-50d`);
+    /// - a sentence-embedding model such as all-MiniLM-L6-v2 (`scripts/embeddings.sh install
+    ///   minilm`): `model.safetensors` (float32 BERT weights) beside `tokenizer.json` and a BERT
+    ///   `config.json`. Reading it needs the `minilm` feature; without it the result is
+    ///   [`EmbedError::NeedsFeature`]. The id is `all-minilm-l6-v2` when the three files are
+    ///   those of that model (checked by their SHA-256), else `bert-` and 16 hex digits of a
+    ///   hash of the three files, so that another model never passes for it;
     /// - a text table `vectors.txt` directly in the folder (see the crate's text format: `word
     ///   v1 … vd` per line, optional first line `# id: NAME`). Its id is the header's, else the
-    ///   file stem. A `vectors.txt` takes precedence over a package in the same folder.
+    ///   file stem. A `vectors.txt` takes precedence over a package or model in the same folder.
     ///
-    /// `dir` may also be the path of a text table itself. Errors name the file and what is wrong;
-    /// a folder with neither names what was looked for and [`INSTALL_HINT`](crate::INSTALL_HINT).
+    /// A folder holding more than one package or model is [`EmbedError::Ambiguous`]. `dir` may
+    /// also be the path of a text table itself, or of a `model.safetensors`. Errors name the file
+    /// and what is wrong; a folder with none of these names what was looked for and
+    /// [`INSTALL_HINT`](crate::INSTALL_HINT).
     pub fn open(dir: &Path) -> Result<Self, EmbedError> {
         let started = std::time::Instant::now();
         let table = crate::open::open(dir)?;
         tracing::info!(
             id = %table.id,
             words = table.len(),
+            model = table.is_model(),
             dim = table.dim,
             folder = %dir.display(),
             seconds = started.elapsed().as_secs_f64(),
@@ -119,8 +145,7 @@ impl Embeddings {
         Ok(Self {
             id: id.to_owned(),
             dim: dim.unwrap_or(0),
-            rows,
-            data,
+            backend: Backend::Table { rows, data },
         })
     }
 
@@ -156,13 +181,34 @@ impl Embeddings {
         Ok(Self {
             id,
             dim: matrix.cols,
-            rows,
-            data: matrix.data,
+            backend: Backend::Table {
+                rows,
+                data: matrix.data,
+            },
         })
     }
 
-    /// The table's id, e.g. `glove-6b-50d` for the GloVe package, or a text table's header id
-    /// or file stem; meant for fingerprints and reports.
+    /// Embeddings computed by a sentence-embedding model.
+    #[cfg(feature = "minilm")]
+    pub(crate) fn from_model(id: String, model: crate::minilm::SentenceModel) -> Self {
+        Self {
+            id,
+            dim: model.dim(),
+            backend: Backend::Sentence(Arc::new(model)),
+        }
+    }
+
+    /// Whether the vectors come from a sentence-embedding model rather than a word table.
+    pub fn is_model(&self) -> bool {
+        match &self.backend {
+            Backend::Table { .. } => false,
+            #[cfg(feature = "minilm")]
+            Backend::Sentence(_) => true,
+        }
+    }
+
+    /// The table's id, e.g. `glove-6b-50d` for the GloVe package, `all-minilm-l6-v2` for that
+    /// model, or a text table's header id or file stem; meant for fingerprints and reports.
     pub fn id(&self) -> &str {
         &self.id
     }
@@ -172,20 +218,34 @@ impl Embeddings {
         self.dim
     }
 
-    /// The number of distinct words.
+    /// The number of distinct words; for a model, the size of its tokenizer's vocabulary (word
+    /// pieces, 30 522 for all-MiniLM-L6-v2), although any word can be embedded.
     pub fn len(&self) -> usize {
-        self.rows.len()
+        match &self.backend {
+            Backend::Table { rows, .. } => rows.len(),
+            #[cfg(feature = "minilm")]
+            Backend::Sentence(model) => model.vocab_size(),
+        }
     }
 
     /// Whether the table holds no word (only possible through [`Self::from_words`]).
     pub fn is_empty(&self) -> bool {
-        self.rows.is_empty()
+        self.len() == 0
     }
 
     /// The vector of a word, exactly as spelt (GloVe's words are lowercase).
+    ///
+    /// Always `None` for a sentence-embedding model: it has no stored vector per word (its
+    /// vectors are computed, and a word alone is embedded by [`Self::embed_name`]).
     pub fn word(&self, w: &str) -> Option<&[f32]> {
-        let row = *self.rows.get(w)?;
-        self.data.get(row * self.dim..(row + 1) * self.dim)
+        match &self.backend {
+            Backend::Table { rows, data } => {
+                let row = *rows.get(w)?;
+                data.get(row * self.dim..(row + 1) * self.dim)
+            }
+            #[cfg(feature = "minilm")]
+            Backend::Sentence(_) => None,
+        }
     }
 
     /// The vector of a word, trying simple English plural/singular variants when the word itself
@@ -223,13 +283,25 @@ impl Embeddings {
         })
     }
 
-    /// The vector of a type name: its words ([`split_name`]), each looked up in lowercase (with
-    /// a plural/singular variant when the word itself is missing), averaged and L2-normalised.
+    /// The vector of a type name, of length [`Self::dim`] and unit L2 norm.
     ///
+    /// For a word table: its words ([`split_name`]), each looked up in lowercase (with a
+    /// plural/singular variant when the word itself is missing), averaged and L2-normalised.
     /// Unknown words are skipped (logged at debug level), so `FooLamp` is `lamp`'s direction.
     /// `None` when no word is known, or when the known words' vectors cancel out exactly (a zero
     /// vector has no direction).
+    ///
+    /// For a sentence-embedding model: its words joined by spaces (`CounterTop` → `counter
+    /// top`), tokenized without padding, run through the model, mean-pooled over the tokens and
+    /// L2-normalised, as sentence-transformers does for all-MiniLM-L6-v2. Every word has a vector
+    /// (unknown words are split into word pieces); `None` only when the name has no words, or if
+    /// the model fails (logged as a warning). The same name always gives the same vector: vectors
+    /// are cached per text, and the computation does not depend on the number of threads.
     pub fn embed_name(&self, name: &str) -> Option<Vec<f32>> {
+        #[cfg(feature = "minilm")]
+        if let Backend::Sentence(model) = &self.backend {
+            return model.embed_name(name);
+        }
         let mut sum = vec![0f64; self.dim];
         let mut known = 0usize;
         for word in split_name(name) {

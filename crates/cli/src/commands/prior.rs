@@ -49,6 +49,12 @@ pub struct TrainArgs {
     /// Passes over the training questions per head.
     #[arg(long, value_name = "N", default_value_t = LearnedSettings::default().head.epochs)]
     learned_epochs: usize,
+    /// Widths of the heads' hidden layers, comma separated.
+    #[arg(long, value_name = "N,N", value_delimiter = ',', default_values_t = LearnedSettings::default().head.hidden)]
+    learned_hidden: Vec<usize>,
+    /// Weight decay of the heads' training (AdamW).
+    #[arg(long, value_name = "X", default_value_t = LearnedSettings::default().head.weight_decay)]
+    learned_weight_decay: f64,
     /// Seed of the learned likelihood's heads.
     #[arg(long, value_name = "N", default_value_t = 0)]
     learned_seed: u64,
@@ -88,6 +94,12 @@ fn train(args: TrainArgs) -> Result<ExitCode> {
     if args.learned_seeds == 0 || args.learned_epochs == 0 {
         anyhow::bail!("--learned-seeds and --learned-epochs must be at least 1");
     }
+    if args.learned_hidden.contains(&0) || args.learned_hidden.iter().sum::<usize>() > 4096 {
+        anyhow::bail!("--learned-hidden: every width at least 1, 4096 in all at most");
+    }
+    if !(args.learned_weight_decay.is_finite() && (0.0..1.0).contains(&args.learned_weight_decay)) {
+        anyhow::bail!("--learned-weight-decay: a number in [0, 1)");
+    }
     let started = std::time::Instant::now();
     let mut prior = Prior::train_with(&loaded.scenes, args.smoothing, args.calibration_folds);
     let mut learned_line = String::new();
@@ -98,6 +110,8 @@ fn train(args: TrainArgs) -> Result<ExitCode> {
             seed: args.learned_seed,
             head: ferret_plan::learned::HeadSettings {
                 epochs: args.learned_epochs,
+                hidden: args.learned_hidden.clone(),
+                weight_decay: args.learned_weight_decay,
                 ..Default::default()
             },
             ..LearnedSettings::default()

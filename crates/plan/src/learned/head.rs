@@ -144,6 +144,11 @@ impl Layer {
 
     fn forward(&self, x: &[f32], out: &mut Vec<f32>) {
         out.clear();
+        if self.inputs == 0 {
+            // `chunks_exact(0)` would panic; a layer without inputs gives its biases.
+            out.extend_from_slice(&self.b);
+            return;
+        }
         out.extend(
             self.w
                 .chunks_exact(self.inputs)

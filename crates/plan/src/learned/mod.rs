@@ -302,6 +302,22 @@ fn house_questions(scene: &Scene, index: &BTreeMap<&str, usize>) -> Tally {
     tally
 }
 
+/// The folds of the container types and of the room types of `scenes`: dealt round the folds in
+/// name order.
+fn kind_folds(
+    scenes: &[&Scene],
+    folds: usize,
+) -> (BTreeMap<String, usize>, BTreeMap<String, usize>) {
+    let (containers, rooms) = kinds_of_names(scenes);
+    let deal = |kind: BTreeSet<String>| -> BTreeMap<String, usize> {
+        kind.into_iter()
+            .enumerate()
+            .map(|(i, n)| (n, i % folds))
+            .collect()
+    };
+    (deal(containers), deal(rooms))
+}
+
 /// The container type names and the room type names of `scenes` (no `""`).
 fn kinds_of_names(scenes: &[&Scene]) -> (BTreeSet<String>, BTreeSet<String>) {
     let (mut containers, mut rooms) = (BTreeSet::new(), BTreeSet::new());
@@ -409,15 +425,7 @@ pub fn train(
     // the heads that never saw them. Container and room types are dealt round the folds in name
     // order instead: ProcTHOR has four room types, and a hash put two of them in one fold,
     // whose heads then never saw a kitchen or a bedroom.
-    let (containers, rooms) = kinds_of_names(scenes);
-    let dealt = |kind: &BTreeSet<String>, offset: usize| -> BTreeMap<String, usize> {
-        kind.iter()
-            .enumerate()
-            .map(|(i, n)| (n.clone(), (i + offset) % folds))
-            .collect()
-    };
-    let container_fold = dealt(&containers, 0);
-    let room_fold = dealt(&rooms, 0);
+    let (container_fold, room_fold) = kind_folds(scenes, folds);
     let target_fold: Vec<usize> = names.iter().map(|n| fold_of(n, folds)).collect();
     let fold_in =
         |map: &BTreeMap<String, usize>, name: &str| map.get(name).copied().unwrap_or(usize::MAX);
@@ -465,6 +473,12 @@ pub fn train(
         }
     }
 
+    if let Some(k) = (0..folds).find(|&k| learn[k].is_empty() || blind[k].is_empty()) {
+        return Err(learned_error(format!(
+            "fold {} of {folds} has no question to learn from or none to be scored on: too few training houses or types for {folds} folds",
+            k + 1
+        )));
+    }
     let examples = |tally: &Tally, table: &[Vec<f32>]| -> Vec<Example> {
         tally
             .iter()

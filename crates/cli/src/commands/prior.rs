@@ -42,6 +42,10 @@ pub struct TrainArgs {
     /// had.
     #[arg(long, value_name = "DIR", env = "FERRET_EMBEDDINGS")]
     embeddings: Option<PathBuf>,
+    /// Folds of held-out types and houses while training the learned likelihood: at least 2,
+    /// and at most half the training houses. `--holdout-types N` runs need N here.
+    #[arg(long, value_name = "N", default_value_t = LearnedSettings::default().folds)]
+    learned_folds: usize,
     /// Heads per fold of the learned likelihood, each from its own seed (their logits are
     /// averaged: a single head depends on its seed).
     #[arg(long, value_name = "N", default_value_t = LearnedSettings::default().seeds)]
@@ -94,6 +98,18 @@ fn train(args: TrainArgs) -> Result<ExitCode> {
     if args.learned_seeds == 0 || args.learned_epochs == 0 {
         anyhow::bail!("--learned-seeds and --learned-epochs must be at least 1");
     }
+    if args.embeddings.is_some() && !(2..=loaded.scenes.len() / 2).contains(&args.learned_folds) {
+        anyhow::bail!(
+            "--learned-folds {}: between 2 and half the training houses ({} houses here{})",
+            args.learned_folds,
+            loaded.scenes.len(),
+            if loaded.scenes.len() >= 4 {
+                ", try --learned-folds 2"
+            } else {
+                ": too few to learn from"
+            }
+        );
+    }
     if args.learned_hidden.contains(&0) || args.learned_hidden.iter().sum::<usize>() > 4096 {
         anyhow::bail!("--learned-hidden: every width at least 1, 4096 in all at most");
     }
@@ -106,6 +122,7 @@ fn train(args: TrainArgs) -> Result<ExitCode> {
     if let Some(dir) = &args.embeddings {
         let embeddings = ferret_lab::language::open_embeddings(dir)?;
         let settings = LearnedSettings {
+            folds: args.learned_folds,
             seeds: args.learned_seeds,
             seed: args.learned_seed,
             head: ferret_plan::learned::HeadSettings {

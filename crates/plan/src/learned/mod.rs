@@ -822,13 +822,25 @@ impl LearnedSource {
         }
         let lp = logit(self.prior.probability(target, container, Some(room)).get());
         let e = self.prior.evidence(target, container, room);
-        let z: f64 = fusion_features(lp, lh, &e)
+        let fused: f64 = fusion_features(lp, lh, &e)
             .iter()
             .zip(&model.fusion)
             .map(|(x, w)| x * w)
             .sum();
-        Ok(sigmoid(z))
+        // The counts where they have evidence, the fusion where they have none: its weights
+        // were fitted where the counts came from fewer houses and types than the prior's own,
+        // so where the prior has seen the target, the furniture and the room, it is the prior
+        // that knows best.
+        let g = evidence_weight(&e);
+        Ok(sigmoid((1.0 - g) * lp + g * fused))
     }
+}
+
+/// How much of a learned answer the fusion gives (the rest is the prior's): the largest of the
+/// evidence gaps of the target, container and room types, so a question with any part the
+/// counts never saw is the fusion's.
+pub fn evidence_weight(e: &Evidence) -> f64 {
+    e.target.max(e.container).max(e.room).clamp(0.0, 1.0)
 }
 
 impl LikelihoodSource for LearnedSource {

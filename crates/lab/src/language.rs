@@ -76,7 +76,7 @@ pub fn train_learned(
     }
     let (vectors, unknown) = embed_names(embeddings, names.iter().map(String::as_str));
     if !unknown.is_empty() {
-        tracing::warn!(
+        tracing::debug!(
             "{} name(s) have no known word in {}: {}",
             unknown.len(),
             embeddings.id(),

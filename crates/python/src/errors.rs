@@ -107,7 +107,7 @@ fn lab_kind(e: &LabError) -> Kind {
 fn plan_kind(e: &PlanError) -> Kind {
     match e {
         PlanError::UnknownStrategy { .. } => Kind::Strategy,
-        PlanError::Prior { .. } => Kind::Prior,
+        PlanError::Prior { .. } | PlanError::Learned { .. } => Kind::Prior,
         PlanError::Fusion { .. } => Kind::Config,
         // An LLM-backed source or policy fails with the LLM's error inside.
         PlanError::Likelihood { error, .. } | PlanError::Policy { error, .. }

@@ -23,10 +23,20 @@ pub struct PyPrior {
 impl PyPrior {
     /// Learns a prior from training houses (their contents are what training reads), as
     /// `ferret prior train`. `smoothing` is the weight (pseudo-containers) toward the back-off
-    /// estimate. Releases the GIL while it trains.
+    /// estimate. With `embeddings` (a folder, as `--embeddings`: `scripts/embeddings.sh install`
+    /// prints one), also the learned likelihood that `model/learned` plans over, with
+    /// `learned_folds` folds of held-out types and `learned_seed` its heads' seed. Releases the
+    /// GIL while it trains.
     #[staticmethod]
-    #[pyo3(signature = (houses, smoothing = 2.0))]
-    fn train(py: Python<'_>, houses: Vec<Py<House>>, smoothing: f64) -> PyResult<Self> {
+    #[pyo3(signature = (houses, smoothing = 2.0, embeddings = None, learned_folds = 5, learned_seed = 0))]
+    fn train(
+        py: Python<'_>,
+        houses: Vec<Py<House>>,
+        smoothing: f64,
+        embeddings: Option<PathBuf>,
+        learned_folds: usize,
+        learned_seed: u64,
+    ) -> PyResult<Self> {
         if !(smoothing.is_finite() && smoothing >= 0.0) {
             return Err(errors::config(format!(
                 "smoothing={smoothing}: must be a finite number ≥ 0"
@@ -35,7 +45,21 @@ impl PyPrior {
         let scenes = scenes_of(&houses);
         let prior = py.allow_threads(|| {
             errors::guarded("Prior.train", || {
-                Ok(Prior::train(scenes.iter().map(|s| s.as_ref()), smoothing))
+                let prior = Prior::train(scenes.iter().map(|s| s.as_ref()), smoothing);
+                let Some(dir) = &embeddings else {
+                    return Ok(prior);
+                };
+                let table = ferret_lab::language::open_embeddings(dir).map_err(errors::lab)?;
+                let owned: Vec<ferret_world::Scene> =
+                    scenes.iter().map(|s| s.as_ref().clone()).collect();
+                let settings = ferret_plan::LearnedSettings {
+                    folds: learned_folds,
+                    seed: learned_seed,
+                    ..Default::default()
+                };
+                ferret_lab::language::train_learned(&owned, &prior, &table, &settings)
+                    .map(|(p, _)| p)
+                    .map_err(errors::lab)
             })
         })?;
         Ok(Self {
@@ -64,6 +88,13 @@ impl PyPrior {
             })
         })?;
         Ok(Self { inner })
+    }
+
+    /// The embeddings the learned likelihood was trained with (e.g. `glove-6b-50d`), or None
+    /// for a prior of counts only.
+    #[getter]
+    fn learned(&self) -> Option<String> {
+        self.inner.learned().map(|l| l.embedding.clone())
     }
 
     /// Writes the prior as JSON (the file `ferret eval --prior` reads).

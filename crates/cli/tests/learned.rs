@@ -1,0 +1,428 @@
+//! The learned likelihood end to end through the `ferret` binary: training it into a prior file,
+//! planning with it in every command (eval, calibrate, select, deploy, shards, hold-outs), the
+//! embeddings opened only for names the file lacks, clear errors; and on real ProcTHOR houses
+//! with real GloVe vectors, language that reaches the planner where counts have nothing.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use common::{data_dir, read_csv, s, text};
+
+/// Runs ferret with `args`, without `FERRET_EMBEDDINGS` unless `embeddings` gives it.
+fn run(args: &[&str], embeddings: Option<&Path>) -> Output {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_ferret"));
+    c.args(args).env_remove("FERRET_EMBEDDINGS");
+    if let Some(e) = embeddings {
+        c.env("FERRET_EMBEDDINGS", e);
+    }
+    c.output().expect("the ferret binary runs")
+}
+
+fn ok(args: &[&str], embeddings: Option<&Path>) -> String {
+    let o = run(args, embeddings);
+    assert!(o.status.success(), "ferret {args:?}: {}", text(&o));
+    text(&o)
+}
+
+/// A word table of a few kitchen, bedroom and bathroom words: enough for names of generated
+/// houses to differ in meaning (names none of whose words it has get a zero vector).
+fn table(dir: &Path) -> PathBuf {
+    let folder = dir.join("table");
+    std::fs::create_dir_all(&folder).unwrap();
+    let words = [
+        ("kitchen", [1.0, 0.0, 0.0, 0.1]),
+        ("fridge", [0.9, 0.1, 0.0, 0.0]),
+        ("counter", [0.8, 0.0, 0.1, 0.2]),
+        ("cabinet", [0.6, 0.3, 0.2, 0.0]),
+        ("bedroom", [0.0, 1.0, 0.0, 0.1]),
+        ("bed", [0.1, 0.9, 0.0, 0.0]),
+        ("dresser", [0.0, 0.8, 0.1, 0.2]),
+        ("bathroom", [0.0, 0.0, 1.0, 0.1]),
+        ("toilet", [0.1, 0.0, 0.9, 0.0]),
+        ("sink", [0.4, 0.0, 0.7, 0.0]),
+        ("living", [0.2, 0.2, 0.0, 1.0]),
+        ("sofa", [0.0, 0.3, 0.0, 0.9]),
+        ("table", [0.5, 0.1, 0.0, 0.6]),
+    ];
+    let lines: Vec<String> = words
+        .iter()
+        .map(|(w, v)| format!("{w} {} {} {} {}", v[0], v[1], v[2], v[3]))
+        .collect();
+    std::fs::write(
+        folder.join("vectors.txt"),
+        format!("# id: tiny\n{}\n", lines.join("\n")),
+    )
+    .unwrap();
+    folder
+}
+
+fn costs(run: &Path, strategy: &str) -> Vec<f64> {
+    read_csv(&run.join("trials.csv"))
+        .iter()
+        .filter(|r| r["strategy"] == strategy)
+        .map(|r| r["cost_m"].parse().unwrap())
+        .collect()
+}
+
+fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len() as f64
+}
+
+#[test]
+fn a_learned_prior_is_trained_the_same_twice_and_plans_in_every_command() {
+    let dir = tempfile::tempdir().unwrap();
+    let table = table(dir.path());
+    let (a, b) = (dir.path().join("a.json"), dir.path().join("b.json"));
+    let train = |out: &Path| {
+        ok(
+            &[
+                "prior",
+                "train",
+                "--generate",
+                "30",
+                "--house-seed",
+                "9",
+                "--embeddings",
+                s(&table),
+                "--learned-folds",
+                "3",
+                "--learned-epochs",
+                "10",
+                "--out",
+                s(out),
+            ],
+            None,
+        )
+    };
+    let said = train(&a);
+    assert!(said.contains("learned likelihood over tiny"), "{said}");
+    train(&b);
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+
+    let specs = "model/prior,model/learned,model/learned-head,model/learned-random,model/learned-head-random,model/learned/exact";
+    let eval = dir.path().join("eval");
+    ok(
+        &[
+            "eval",
+            "--generate",
+            "12",
+            "--prior",
+            s(&a),
+            "--strategies",
+            specs,
+            "--out",
+            s(&eval),
+        ],
+        None,
+    );
+    let rows = read_csv(&eval.join("trials.csv"));
+    assert_eq!(rows.len(), 6 * 12);
+    // The heads over the names' vectors and over random ones plan differently somewhere (where
+    // the prior has seen everything, as here, model/learned is the prior's and so is its
+    // control).
+    let searched = |st: &str| -> Vec<String> {
+        rows.iter()
+            .filter(|r| r["strategy"] == st)
+            .map(|r| r["searched"].clone())
+            .collect()
+    };
+    assert_ne!(
+        searched("model/learned-head"),
+        searched("model/learned-head-random")
+    );
+
+    // Shards merged are one machine, with learned strategies too.
+    let one = dir.path().join("one");
+    let base = [
+        "eval",
+        "--generate",
+        "8",
+        "--prior",
+        s(&a),
+        "--strategies",
+        "model/learned,model/learned-random",
+    ];
+    let with = |extra: &[&str], out: &Path| {
+        let mut args = base.to_vec();
+        args.extend_from_slice(extra);
+        args.extend(["--out", s(out)]);
+        ok(&args, None);
+    };
+    with(&[], &one);
+    let shards: Vec<PathBuf> = (0..2).map(|i| dir.path().join(format!("sh{i}"))).collect();
+    for (i, d) in shards.iter().enumerate() {
+        with(&["--shard", &format!("{i}/2")], d);
+    }
+    let merged = dir.path().join("merged");
+    ok(
+        &["merge", "--out", s(&merged), s(&shards[0]), s(&shards[1])],
+        None,
+    );
+    assert_eq!(
+        std::fs::read(one.join("trials.csv")).unwrap(),
+        std::fs::read(merged.join("trials.csv")).unwrap()
+    );
+
+    // Held-out types answered by the heads of the same folds; other fold counts refused.
+    let held = dir.path().join("held");
+    ok(
+        &[
+            "eval",
+            "--generate",
+            "12",
+            "--prior",
+            s(&a),
+            "--holdout-types",
+            "3",
+            "--strategies",
+            "model/prior,model/learned",
+            "--out",
+            s(&held),
+        ],
+        None,
+    );
+    assert_eq!(costs(&held, "model/learned").len(), 12);
+    let o = run(
+        &[
+            "eval",
+            "--generate",
+            "4",
+            "--prior",
+            s(&a),
+            "--holdout-types",
+            "5",
+            "--strategies",
+            "model/learned",
+            "--out",
+            s(&dir.path().join("h5")),
+        ],
+        None,
+    );
+    assert!(
+        !o.status.success() && text(&o).contains("3 folds"),
+        "{}",
+        text(&o)
+    );
+
+    // calibrate, select and deploy take the learned sources as they take the prior.
+    let cal = dir.path().join("cal");
+    let said = ok(
+        &[
+            "calibrate",
+            "--generate",
+            "10",
+            "--prior",
+            s(&a),
+            "--sources",
+            "model/prior,model/learned,model/learned-random",
+            "--out",
+            s(&cal),
+        ],
+        None,
+    );
+    assert!(said.contains("model/learned-random"), "{said}");
+    let sel = dir.path().join("sel");
+    ok(
+        &[
+            "select",
+            "--trials",
+            s(&eval),
+            "--deployments",
+            "5",
+            "--trials-per-deployment",
+            "6",
+            "--out",
+            s(&sel),
+        ],
+        None,
+    );
+    let said = ok(
+        &[
+            "deploy",
+            "--generate",
+            "6",
+            "--prior",
+            s(&a),
+            "--strategies",
+            "model/prior,model/learned",
+            "--trials",
+            "6",
+            "--out",
+            s(&dir.path().join("dep")),
+        ],
+        None,
+    );
+    assert!(said.contains("model/learned"), "{said}");
+}
+
+#[test]
+fn training_and_planning_say_what_is_missing() {
+    let dir = tempfile::tempdir().unwrap();
+    let nowhere = dir.path().join("nowhere");
+    let o = run(
+        &[
+            "prior",
+            "train",
+            "--generate",
+            "10",
+            "--embeddings",
+            s(&nowhere),
+            "--out",
+            s(&dir.path().join("p.json")),
+        ],
+        None,
+    );
+    assert!(!o.status.success());
+    let said = text(&o);
+    assert!(
+        said.contains("nowhere") && said.contains("scripts/embeddings.sh install"),
+        "{said}"
+    );
+    assert!(!dir.path().join("p.json").exists());
+
+    // A prior of counts only cannot plan model/learned, and says how to get one that can.
+    let plain = dir.path().join("plain.json");
+    ok(
+        &["prior", "train", "--generate", "10", "--out", s(&plain)],
+        None,
+    );
+    let o = run(
+        &[
+            "eval",
+            "--generate",
+            "3",
+            "--prior",
+            s(&plain),
+            "--strategies",
+            "model/learned",
+            "--out",
+            s(&dir.path().join("e")),
+        ],
+        None,
+    );
+    assert!(
+        !o.status.success() && text(&o).contains("--embeddings"),
+        "{}",
+        text(&o)
+    );
+}
+
+/// The embeddings `FERRET_EMBEDDINGS` names (real GloVe from `scripts/embeddings.sh install`),
+/// or `None` with a message saying how to run the test.
+fn glove() -> Option<PathBuf> {
+    match std::env::var_os("FERRET_EMBEDDINGS") {
+        Some(d) if !d.is_empty() => Some(PathBuf::from(d)),
+        _ => {
+            eprintln!(
+                "skipped: set FERRET_EMBEDDINGS=$(scripts/embeddings.sh install) to run the real-embedding tests"
+            );
+            None
+        }
+    }
+}
+
+#[test]
+fn on_real_houses_language_plans_unseen_targets_cheaper_than_counts_and_random_vectors_do_not() {
+    let (Some(data), Some(glove)) = (data_dir(), glove()) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let prior = dir.path().join("prior.json");
+    let asset = data.join("databases/asset-database.json");
+    ok(
+        &[
+            "prior",
+            "train",
+            "--houses",
+            s(&data.join("smallhouse-train1000.jsonl.gz")),
+            "--asset-db",
+            s(&asset),
+            "--also",
+            s(&data.join("oneroom-train500.jsonl.gz")),
+            "--embeddings",
+            s(&glove),
+            "--out",
+            s(&prior),
+        ],
+        None,
+    );
+    // Every name of val150 is in the file: an embeddings folder that does not exist is never
+    // opened.
+    let unseen = dir.path().join("unseen");
+    ok(
+        &[
+            "eval",
+            "--houses",
+            s(&data.join("multiroom-val150.jsonl.gz")),
+            "--asset-db",
+            s(&asset),
+            "--prior",
+            s(&prior),
+            "--holdout-types",
+            "5",
+            "--embeddings",
+            s(&dir.path().join("absent")),
+            "--strategies",
+            "model/prior,model/learned,model/learned-random",
+            "--out",
+            s(&unseen),
+        ],
+        None,
+    );
+    let (counts, language, control) = (
+        mean(&costs(&unseen, "model/prior")),
+        mean(&costs(&unseen, "model/learned")),
+        mean(&costs(&unseen, "model/learned-random")),
+    );
+    assert!(
+        language < 0.9 * counts,
+        "model/learned {language:.2} m against the prior's {counts:.2} m on unseen target types"
+    );
+    assert!(
+        language < control,
+        "model/learned {language:.2} m against its random-vector control's {control:.2} m"
+    );
+
+    // Furniture and rooms no training house had: without the embeddings, a clear error for the
+    // learned rows (the others are written); with them, every row.
+    let workshop = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/workshop/scene.yaml");
+    let args = |out: &Path| -> Vec<String> {
+        [
+            "eval",
+            "--houses",
+            s(&workshop),
+            "--prior",
+            s(&prior),
+            "--trials-per-house",
+            "all",
+            "--strategies",
+            "model/prior,model/learned",
+            "--out",
+            s(out),
+        ]
+        .iter()
+        .map(|a| a.to_string())
+        .collect()
+    };
+    let without = dir.path().join("ws-without");
+    let a = args(&without);
+    let o = run(&a.iter().map(String::as_str).collect::<Vec<_>>(), None);
+    let said = text(&o);
+    assert!(
+        !o.status.success() && said.contains("FERRET_EMBEDDINGS"),
+        "{said}"
+    );
+    assert!(!costs(&without, "model/prior").is_empty());
+    let with = dir.path().join("ws-with");
+    let a = args(&with);
+    ok(
+        &a.iter().map(String::as_str).collect::<Vec<_>>(),
+        Some(&glove),
+    );
+    assert_eq!(
+        costs(&with, "model/learned").len(),
+        costs(&with, "model/prior").len()
+    );
+}

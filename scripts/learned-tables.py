@@ -1,0 +1,144 @@
+#!/usr/bin/env python3
+"""Markdown tables from the runs of scripts/learned-benchmarks.sh (standard library only).
+
+    scripts/learned-tables.py OUT_DIR
+
+Reads each run's summary.csv, paired.csv and calibration.csv under OUT_DIR and prints the tables
+of docs/learned.md: mean cost per strategy with the paired difference against the reference
+(strategy - reference, metres; negative is cheaper) and its 95 % bootstrap interval.
+"""
+
+import csv
+import json
+import sys
+from pathlib import Path
+
+
+def rows(path):
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def planning(out, title, runs, reference="model/prior"):
+    """One table: a row per (run label, strategy)."""
+    print(f"### {title}\n")
+    print(f"| run | strategy | trials | mean (m) | vs {reference} (m, 95 % CI; w/t/l) |")
+    print("|---|---|---:|---:|---|")
+    for label, name in runs:
+        run = out / name
+        if not (run / "summary.csv").exists():
+            print(f"| {label} | (no run: {name}) | | | |")
+            continue
+        paired = {
+            r["strategy"]: r
+            for r in rows(run / "paired.csv")
+            if r["reference"] == reference
+        }
+        for s in rows(run / "summary.csv"):
+            p = paired.get(s["strategy"])
+            diff = (
+                f"{float(p['mean_diff_m']):+.2f} [{float(p['ci95_low_m']):+.2f}, "
+                f"{float(p['ci95_high_m']):+.2f}] ({p['wins']}/{p['ties']}/{p['losses']})"
+                if p
+                else ""
+            )
+            print(
+                f"| {label} | {s['strategy']} | {s['trials']} | "
+                f"{float(s['mean_m']):.2f} | {diff} |"
+            )
+    print()
+
+
+def calibration(out, title, runs):
+    print(f"### {title}\n")
+    print("| run | source | pairs | Brier | log loss | AUROC | mean p (holders) | mean p (others) |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|")
+    for label, name in runs:
+        path = out / name / "calibration.csv"
+        if not path.exists():
+            print(f"| {label} | (no run: {name}) | | | | | | |")
+            continue
+        for r in rows(path):
+            print(
+                f"| {label} | {r['source']} | {r['pairs']} | {float(r['brier']):.4f} | "
+                f"{float(r['log_loss']):.4f} | {float(r['auroc']):.3f} | "
+                f"{float(r['mean_p_pos']):.3f} | {float(r['mean_p_neg']):.3f} |"
+            )
+    print()
+
+
+def costs(out):
+    path = out / "costs.json"
+    if not path.exists():
+        return
+    print("### Costs\n")
+    print("| what | figure |")
+    print("|---|---|")
+    for k, v in json.loads(path.read_text()).items():
+        print(f"| {k} | {v} |")
+    print()
+
+
+def main():
+    if len(sys.argv) != 2:
+        sys.exit(__doc__)
+    out = Path(sys.argv[1])
+    costs(out)
+    calibration(
+        out,
+        "Calibration on val150 (every target present, every container)",
+        [
+            ("seen types, GloVe", "cal-seen-glove"),
+            ("unseen types (5 folds), GloVe", "cal-unseen-glove"),
+            ("seen types, MiniLM", "cal-seen-minilm"),
+            ("unseen types (5 folds), MiniLM", "cal-unseen-minilm"),
+        ],
+    )
+    planning(
+        out,
+        "Unseen target types (`--holdout-types 5`), val150",
+        [
+            ("one target, GloVe", "unseen-glove-1"),
+            ("every target, GloVe", "unseen-glove-all"),
+            ("one target, MiniLM", "unseen-minilm-1"),
+            ("one target, GloVe, head seed 100", "unseen-glove-seed100"),
+            ("one target, GloVe, head seed 200", "unseen-glove-seed200"),
+        ],
+    )
+    planning(
+        out,
+        "Seen target types, val150",
+        [
+            ("one target, GloVe", "seen-glove-1"),
+            ("every target, GloVe", "seen-glove-all"),
+            ("one target, MiniLM", "seen-minilm-1"),
+        ],
+    )
+    planning(
+        out,
+        "Furniture and rooms ProcTHOR never had (examples/workshop, every target)",
+        [("GloVe", "workshop-glove"), ("MiniLM", "workshop-minilm")],
+    )
+    planning(
+        out,
+        "Few training houses (val150, one target)",
+        [
+            ("5 houses", "few-5"),
+            ("20 houses", "few-20"),
+            ("100 houses", "few-100"),
+            ("1 500 houses", "seen-glove-1"),
+        ],
+    )
+    planning(
+        out,
+        "Other house sets and protocols",
+        [
+            ("`--protocol paper`, val150", "paper-val150"),
+            ("generated houses (100)", "generated-1"),
+            ("generated houses, every target", "generated-all"),
+        ],
+    )
+
+
+if __name__ == "__main__":
+    main()

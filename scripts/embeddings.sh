@@ -28,7 +28,9 @@
 # The folders are $FERRET_EMBED_CACHE/glove-6b-50d and $FERRET_EMBED_CACHE/all-minilm-l6-v2
 # (default ~/.cache/ferret-embeddings). The last line on stdout is the folder to give as
 # --embeddings or FERRET_EMBEDDINGS, e.g.
-#   FERRET_EMBEDDINGS=$(scripts/embeddings.sh install) cargo test -p ferret-embed --release
+#   ferret prior train --houses train.jsonl.gz --embeddings "$(scripts/embeddings.sh install)" --out prior.json
+# and the tests on the real files read FERRET_GLOVE and FERRET_MINILM:
+#   FERRET_GLOVE=$(scripts/embeddings.sh install) cargo test -p ferret-embed --release
 #   FERRET_MINILM=$(scripts/embeddings.sh install minilm) \
 #       cargo test -p ferret-embed --release --features minilm
 # All logging goes to stderr. A second install only prints the folder; an interrupted one (no
@@ -82,7 +84,11 @@ Installs embeddings for ferret-embed under
 
 The last line on stdout is the folder to pass as --embeddings or in FERRET_EMBEDDINGS:
 
-  FERRET_EMBEDDINGS=\$(scripts/embeddings.sh install) cargo test -p ferret-embed --release
+  ferret prior train --houses train.jsonl.gz --embeddings "\$(scripts/embeddings.sh install)" --out prior.json
+
+The tests on the real files read FERRET_GLOVE and FERRET_MINILM:
+
+  FERRET_GLOVE=\$(scripts/embeddings.sh install) cargo test -p ferret-embed --release
   FERRET_MINILM=\$(scripts/embeddings.sh install minilm) \\
       cargo test -p ferret-embed --release --features minilm
 

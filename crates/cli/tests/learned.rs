@@ -309,14 +309,15 @@ fn training_and_planning_say_what_is_missing() {
     );
 }
 
-/// The embeddings `FERRET_EMBEDDINGS` names (real GloVe from `scripts/embeddings.sh install`),
-/// or `None` with a message saying how to run the test.
+/// The embeddings `FERRET_GLOVE` names (real GloVe from `scripts/embeddings.sh install`; the
+/// tests' own variable, so that the other tests' `prior train` stay counts only), or `None` with
+/// a message saying how to run the test.
 fn glove() -> Option<PathBuf> {
-    match std::env::var_os("FERRET_EMBEDDINGS") {
+    match std::env::var_os("FERRET_GLOVE") {
         Some(d) if !d.is_empty() => Some(PathBuf::from(d)),
         _ => {
             eprintln!(
-                "skipped: set FERRET_EMBEDDINGS=$(scripts/embeddings.sh install) to run the real-embedding tests"
+                "skipped: set FERRET_GLOVE=$(scripts/embeddings.sh install) to run the real-embedding tests"
             );
             None
         }

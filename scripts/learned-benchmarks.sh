@@ -87,6 +87,8 @@ for e in "${embeddings[@]}"; do
         --strategies "$strategies" "${pairs[@]}" --out "unseen-$e-1"
     quiet "$ferret" eval "${val[@]}" --prior "prior-$e.json" --strategies "$strategies" "${pairs[@]}" \
         --out "seen-$e-1"
+    quiet "$ferret" calibrate --houses "$ROOT/examples/workshop/scene.yaml" --prior "prior-$e.json" \
+        --embeddings "$dir" --sources "$sources" --out "cal-workshop-$e"
     quiet "$ferret" eval --houses "$ROOT/examples/workshop/scene.yaml" --prior "prior-$e.json" \
         --embeddings "$dir" --trials-per-house all --strategies "$strategies" "${pairs[@]}" \
         --out "workshop-$e"

@@ -86,12 +86,14 @@ def main():
     costs(out)
     calibration(
         out,
-        "Calibration on val150 (every target present, every container)",
+        "Calibration on val150 and the workshop scene (every target present, every container)",
         [
             ("seen types, GloVe", "cal-seen-glove"),
             ("unseen types (5 folds), GloVe", "cal-unseen-glove"),
             ("seen types, MiniLM", "cal-seen-minilm"),
             ("unseen types (5 folds), MiniLM", "cal-unseen-minilm"),
+            ("workshop, GloVe", "cal-workshop-glove"),
+            ("workshop, MiniLM", "cal-workshop-minilm"),
         ],
     )
     planning(

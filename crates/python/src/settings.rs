@@ -167,6 +167,8 @@ impl Planning {
             exact_max,
             search_cost,
             holdout: None,
+            // A learned prior finds vectors of names its file lacks through FERRET_EMBEDDINGS.
+            embeddings: None,
         };
         // The command line names its options; here they are keywords.
         settings.validate().map_err(|e| {

@@ -131,7 +131,6 @@ fn train(args: TrainArgs) -> Result<ExitCode> {
                 weight_decay: args.learned_weight_decay,
                 ..Default::default()
             },
-            ..LearnedSettings::default()
         };
         let (trained, report) =
             ferret_lab::language::train_learned(&loaded.scenes, &prior, &embeddings, &settings)?;

@@ -758,8 +758,11 @@ pub struct LearnedSource {
     /// Answers by (target, container type, room type): a run asks the same few thousand
     /// questions again and again (every strategy's trials, every replay), and twenty heads per
     /// question made planning over the learned source four times as slow as over the prior.
-    answers: Arc<std::sync::RwLock<std::collections::HashMap<(String, String, String), f64>>>,
+    answers: Arc<std::sync::RwLock<Answers>>,
 }
+
+/// P(holds) by (target, container type, room type).
+type Answers = std::collections::HashMap<(String, String, String), f64>;
 
 /// Answers a [`LearnedSource`] keeps; past this it computes them again (the names a service
 /// meets are few, but it runs for months).

@@ -20,6 +20,16 @@ fn run(args: &[&str], embeddings: Option<&Path>) -> Output {
     c.output().expect("the ferret binary runs")
 }
 
+/// Runs ferret with `args` (without embeddings), expecting it to fail saying `needle`.
+fn fails_with(args: &[&str], needle: &str) {
+    let o = run(args, None);
+    let said = text(&o);
+    assert!(
+        !o.status.success() && said.contains(needle),
+        "ferret {args:?} should fail saying {needle:?}: {said}"
+    );
+}
+
 fn ok(args: &[&str], embeddings: Option<&Path>) -> String {
     let o = run(args, embeddings);
     assert!(o.status.success(), "ferret {args:?}: {}", text(&o));
@@ -184,7 +194,7 @@ fn a_learned_prior_is_trained_the_same_twice_and_plans_in_every_command() {
         None,
     );
     assert_eq!(costs(&held, "model/learned").len(), 12);
-    let o = run(
+    fails_with(
         &[
             "eval",
             "--generate",
@@ -198,12 +208,7 @@ fn a_learned_prior_is_trained_the_same_twice_and_plans_in_every_command() {
             "--out",
             s(&dir.path().join("h5")),
         ],
-        None,
-    );
-    assert!(
-        !o.status.success() && text(&o).contains("3 folds"),
-        "{}",
-        text(&o)
+        "3 folds",
     );
 
     // calibrate, select and deploy take the learned sources as they take the prior.
@@ -288,7 +293,7 @@ fn training_and_planning_say_what_is_missing() {
         &["prior", "train", "--generate", "10", "--out", s(&plain)],
         None,
     );
-    let o = run(
+    fails_with(
         &[
             "eval",
             "--generate",
@@ -300,12 +305,7 @@ fn training_and_planning_say_what_is_missing() {
             "--out",
             s(&dir.path().join("e")),
         ],
-        None,
-    );
-    assert!(
-        !o.status.success() && text(&o).contains("--embeddings"),
-        "{}",
-        text(&o)
+        "--embeddings",
     );
 }
 
@@ -426,4 +426,123 @@ fn on_real_houses_language_plans_unseen_targets_cheaper_than_counts_and_random_v
         costs(&with, "model/learned").len(),
         costs(&with, "model/prior").len()
     );
+}
+
+const TARGETS: &str = "Blanket,CellPhone,RemoteControl,Pillow,Wallet";
+
+/// `ferret deploy` on the apartment and the same deployment driven through `ferret serve` by the
+/// Python robot client choose the same strategies at the same costs, `model/learned` among them
+/// (the apartment's names the prior file lacks come from `FERRET_EMBEDDINGS` in both).
+#[test]
+fn serve_plans_model_learned_as_deploy_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let table = table(dir.path());
+    let prior = dir.path().join("prior.json");
+    ok(
+        &[
+            "prior",
+            "train",
+            "--generate",
+            "30",
+            "--house-seed",
+            "9",
+            "--embeddings",
+            s(&table),
+            "--learned-folds",
+            "3",
+            "--learned-epochs",
+            "10",
+            "--out",
+            s(&prior),
+        ],
+        None,
+    );
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/apartment/scene.yaml");
+    let strategies = "model/prior,model/learned,model/learned-head";
+    let out = dir.path().join("deploy");
+    ok(
+        &[
+            "deploy",
+            "--houses",
+            s(&scene),
+            "--find",
+            TARGETS,
+            "--strategies",
+            strategies,
+            "--prior",
+            s(&prior),
+            "--seed",
+            "4",
+            "--out",
+            s(&out),
+        ],
+        Some(&table),
+    );
+    let deployed: Vec<(String, f64)> = read_csv(&out.join("deploy.csv"))
+        .iter()
+        .map(|r| (r["chosen"].clone(), r["cost_m"].parse().unwrap()))
+        .collect();
+    assert_eq!(deployed.len(), 5);
+    assert!(deployed.iter().any(|(s, _)| s.starts_with("model/learned")));
+
+    let mut server = Command::new(env!("CARGO_BIN_EXE_ferret"))
+        .args([
+            "serve",
+            "--scene",
+            s(&scene),
+            "--strategies",
+            strategies,
+            "--prior",
+            s(&prior),
+            "--listen",
+            "127.0.0.1:0",
+            "--db",
+            s(&dir.path().join("serve.sqlite")),
+        ])
+        .env("FERRET_EMBEDDINGS", &table)
+        .env_remove("FERRET_SERVE_TOKEN")
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("ferret serve starts");
+    let mut line = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(server.stdout.take().expect("piped")),
+        &mut line,
+    )
+    .expect("the server prints its address");
+    let url = line
+        .split_whitespace()
+        .find(|w| w.starts_with("http://"))
+        .unwrap_or_else(|| panic!("no address in {line:?}"))
+        .to_string();
+    let o = Command::new("python3")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/robot_client.py"))
+        .args(["--url", &url, "--scene", "apartment", "--targets", TARGETS])
+        .args(["--strategies", strategies, "--seed", "4", "--json"])
+        .env_remove("FERRET_SERVE_TOKEN")
+        .output()
+        .expect("python3 runs");
+    let _ = server.kill();
+    let _ = server.wait();
+    assert!(o.status.success(), "{}", text(&o));
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let served: Vec<(String, f64)> = report["trials"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| {
+            (
+                t["strategy"].as_str().unwrap().to_string(),
+                t["cost_m"].as_f64().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(served.len(), deployed.len());
+    for (k, ((a, x), (b, y))) in served.iter().zip(&deployed).enumerate() {
+        assert_eq!(a, b, "trial {k}");
+        assert!(
+            (x - y).abs() < 0.005,
+            "trial {k}: served {x} m, deployed {y} m"
+        );
+    }
 }

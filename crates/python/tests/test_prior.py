@@ -72,7 +72,7 @@ def test_a_learned_prior_plans_as_ferret_eval_does_with_its_file(tmp_path, house
     assert ferret.Prior.train(training).learned is None
     path = tmp_path / "prior.json"
     prior.save(path)
-    specs = ["model/learned", "model/learned-random"]
+    specs = ["model/learned", "model/learned-head", "model/learned-head-random"]
     ev = ferret.evaluate(houses, specs, prior=prior, seed=2)
     out = tmp_path / "out"
     run_cli(ferret_bin, "eval", "--generate", "12", "--house-seed", "3", "--seed", "2",
@@ -80,12 +80,13 @@ def test_a_learned_prior_plans_as_ferret_eval_does_with_its_file(tmp_path, house
     import csv
     with open(out / "trials.csv", newline="") as f:
         cli = {(r["house_index"], r["strategy"]): float(r["cost_m"]) for r in csv.DictReader(f)}
-    assert len(cli) == len(ev.rows) == 2 * len(houses)
+    assert len(cli) == len(ev.rows) == 3 * len(houses)
     for r in ev.rows:
         assert r["cost_m"] == pytest.approx(cli[(str(r["house_index"]), r["strategy"])], abs=1e-9)
-    # The language and its control plan differently somewhere: the vectors are really used.
+    # The heads over the names' vectors and over random ones plan differently somewhere: the
+    # vectors are really used (model/learned is the prior here, where every name was seen).
     by = lambda s: [r["searched"] for r in ev.rows if r["strategy"] == s]
-    assert by("model/learned") != by("model/learned-random")
+    assert by("model/learned-head") != by("model/learned-head-random")
 
 
 def test_learned_training_errors_name_the_folder(tmp_path):

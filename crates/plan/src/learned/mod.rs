@@ -289,10 +289,19 @@ fn house_questions(scene: &Scene, index: &BTreeMap<&str, usize>) -> Tally {
             .map(|r| r.room_type.as_str())
             .unwrap_or("");
         for t in &targets {
+            // The table holds every name of these houses (`scene_names`); a name it lacked
+            // would only drop that question.
+            let (Some(&target), Some(&kind), Some(&in_room)) = (
+                index.get(t.as_str()),
+                index.get(container.object_type.as_str()),
+                index.get(room),
+            ) else {
+                continue;
+            };
             let q = Question {
-                target: index[t.as_str()],
-                container: index[container.object_type.as_str()],
-                room: index[room],
+                target,
+                container: kind,
+                room: in_room,
             };
             let e = tally.entry(q).or_insert((0.0, 0.0));
             e.0 += f64::from(u8::from(scene.truth.holds(c, t)));

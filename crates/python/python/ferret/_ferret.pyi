@@ -137,8 +137,15 @@ class Prior:
     """A likelihood prior: P(container holds target | container type, room type)."""
 
     @staticmethod
-    def train(houses: Sequence[House], smoothing: float = 2.0) -> "Prior":
-        """Learns a prior from training houses, as ``ferret prior train``."""
+    def train(
+        houses: Sequence[House],
+        smoothing: float = 2.0,
+        embeddings: Optional[_Path] = None,
+        learned_folds: int = 5,
+        learned_seed: int = 0,
+    ) -> "Prior":
+        """Learns a prior from training houses, as ``ferret prior train``; with ``embeddings``
+        (a folder, as ``--embeddings``) also the learned likelihood of ``model/learned``."""
     @staticmethod
     def load(path: _Path) -> "Prior":
         """Reads a prior written by ``Prior.save`` or ``ferret prior train``."""
@@ -159,6 +166,9 @@ class Prior:
     @property
     def smoothing(self) -> float:
         """The smoothing weight it was trained with."""
+    @property
+    def learned(self) -> Optional[str]:
+        """The embeddings of its learned likelihood (e.g. ``glove-6b-50d``), or None."""
 
 class Search:
     """One trial in progress, driven step by step by a robot loop."""

@@ -379,7 +379,11 @@ async fn fusion_is_fitted_by_calibrate_and_planned_over_by_eval() {
     );
     let o = run(fit);
     assert!(o.status.success(), "{}", text(&o));
-    assert!(text(&o).contains("Fusion with the prior"), "{}", text(&o));
+    assert!(
+        text(&o).contains("Fusion with the prior or the learned likelihood"),
+        "{}",
+        text(&o)
+    );
     let file: Value = serde_json::from_str(&std::fs::read_to_string(&fusion).unwrap()).unwrap();
     let fits = file["fits"].as_array().unwrap();
     let sources: Vec<&str> = fits.iter().map(|f| f["source"].as_str().unwrap()).collect();
@@ -491,6 +495,180 @@ async fn fusion_is_fitted_by_calibrate_and_planned_over_by_eval() {
     assert!(!o.status.success());
     assert!(text(&o).contains("names no llm+model"), "{}", text(&o));
     assert!(!dir.path().join("f2.json").exists());
+}
+
+/// With a prior that has a learned part, `calibrate --fit-fusion` also fuses each LLM source (and
+/// the control) with `model/learned`, and `fused-learned/...` plans over those fits in eval and
+/// select from the same cached answers; with a prior of counts only it is refused, saying why.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_llm_is_fused_with_the_learned_likelihood_as_with_the_prior() {
+    let requests = Arc::new(AtomicUsize::new(0));
+    let srv = server(Knowing {
+        requests: requests.clone(),
+    })
+    .await;
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = config(dir.path(), &srv, "");
+    let cache = dir.path().join("c.sqlite");
+    let table = common::word_table(dir.path());
+    let (learned, counts) = (
+        dir.path().join("learned.json"),
+        dir.path().join("counts.json"),
+    );
+    let fusion = dir.path().join("fusion.json");
+    let run = |args: &[&str]| tokio::task::block_in_place(|| ferret(args));
+    let ok = |args: &[&str]| {
+        let o = run(args);
+        assert!(o.status.success(), "ferret {args:?}: {}", text(&o));
+        text(&o)
+    };
+    let train = ["prior", "train", "--generate", "30", "--house-seed", "9"];
+    ok(&[
+        &train[..],
+        &["--embeddings", s(&table), "--learned-folds", "3"],
+        &["--learned-epochs", "10", "--out", s(&learned)],
+    ]
+    .concat());
+    ok(&[&train[..], &["--out", s(&counts)]].concat());
+    let llm = ["--config", s(&cfg), "--llm-cache", s(&cache)];
+    // Fitted on other houses, the prior's unseen view with 5 folds; the learned one with its 3.
+    let said = ok(&[
+        &["calibrate", "--generate", "16", "--house-seed", "11"][..],
+        &llm,
+        &["--prior", s(&learned), "--fit-fusion", s(&fusion)],
+        &["--sources", "llm+model/p-yesno/mock,model/noise"],
+        &["--out", s(&dir.path().join("fit"))],
+    ]
+    .concat());
+    assert!(said.contains("| fused-learned/p-yesno/mock |"), "{said}");
+    let file: Value = serde_json::from_str(&std::fs::read_to_string(&fusion).unwrap()).unwrap();
+    let fits = file["fits"].as_array().unwrap();
+    let named: Vec<(&str, &str)> = fits
+        .iter()
+        .map(|f| {
+            (
+                f["base"].as_str().unwrap_or("prior"),
+                f["source"].as_str().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        named,
+        [
+            ("prior", "p-yesno/mock"),
+            ("prior", "noise"),
+            ("learned", "p-yesno/mock"),
+            ("learned", "noise")
+        ]
+    );
+    assert!(
+        fits[0]["trained_on"]
+            .as_str()
+            .unwrap()
+            .ends_with("fold of 5")
+    );
+    assert!(
+        fits[2]["trained_on"]
+            .as_str()
+            .unwrap()
+            .ends_with("fold of 3")
+    );
+    // Fused with another base, the same answers get other weights.
+    assert_ne!(fits[0]["weights"], fits[2]["weights"], "{file}");
+    // Where the prior has no evidence, the model that knows gets more weight than noise.
+    let d = |i: usize| fits[i]["weights"]["d"].as_f64().unwrap();
+    assert!(d(2) > d(3), "{file}");
+
+    let eval = |strategies: &str, prior: &Path, out: &str| {
+        run(&[
+            &["eval", "--generate", "6", "--house-seed", "12"][..],
+            &llm,
+            &["--prior", s(prior), "--fusion", s(&fusion)],
+            &[
+                "--strategies",
+                strategies,
+                "--out",
+                s(&dir.path().join(out)),
+            ],
+        ]
+        .concat())
+    };
+    let o = eval(
+        "fused/p-yesno/mock,fused-learned/p-yesno/mock,fused-learned/noise/exact",
+        &learned,
+        "eval",
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let trials = std::fs::read_to_string(dir.path().join("eval/trials.csv")).unwrap();
+    for strategy in ["fused-learned/p-yesno/mock", "fused-learned/noise/exact"] {
+        assert_eq!(
+            trials
+                .lines()
+                .filter(|l| l.contains(&format!(",{strategy},")))
+                .count(),
+            6,
+            "{trials}"
+        );
+    }
+    // fused-learned asks the LLM what fused asks: alone, it finds every answer in the cache.
+    let asked = requests.load(Ordering::SeqCst);
+    let o = eval("fused-learned/p-yesno/mock", &learned, "again");
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(requests.load(Ordering::SeqCst), asked);
+    let o = run(&[
+        &["select", "--trials", s(&dir.path().join("eval"))][..],
+        &llm,
+        &["--fusion", s(&fusion), "--deployments", "10"],
+        &[
+            "--trials-per-deployment",
+            "4",
+            "--out",
+            s(&dir.path().join("sel")),
+        ],
+    ]
+    .concat());
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(
+        text(&o).contains("fused-learned/p-yesno/mock"),
+        "{}",
+        text(&o)
+    );
+    assert_eq!(requests.load(Ordering::SeqCst), asked);
+
+    // A prior of counts only: its fit (another prior's) is refused, and a file fitted with it
+    // holds no learned fits, which eval names.
+    let o = eval("fused-learned/p-yesno/mock", &counts, "counts");
+    assert!(!o.status.success());
+    assert!(text(&o).contains("made with another prior"), "{}", text(&o));
+    let counts_fusion = dir.path().join("counts-fusion.json");
+    ok(&[
+        &["calibrate", "--generate", "16", "--house-seed", "11"][..],
+        &llm,
+        &["--prior", s(&counts), "--fit-fusion", s(&counts_fusion)],
+        &[
+            "--sources",
+            "llm+model/p-yesno/mock",
+            "--out",
+            s(&dir.path().join("fit2")),
+        ],
+    ]
+    .concat());
+    let o = run(&[
+        &["eval", "--generate", "2", "--house-seed", "12"][..],
+        &llm,
+        &["--prior", s(&counts), "--fusion", s(&counts_fusion)],
+        &["--strategies", "fused-learned/p-yesno/mock"],
+        &["--out", s(&dir.path().join("counts2"))],
+    ]
+    .concat());
+    assert!(!o.status.success());
+    let said = text(&o);
+    assert!(
+        said.contains("no fit for fused-learned/p-yesno/mock")
+            && said.contains("fused/p-yesno/mock")
+            && said.contains("prior train --embeddings"),
+        "{said}"
+    );
 }
 
 /// The real-model lane's configuration (written by `scripts/real-llm.sh config`) is one ferret

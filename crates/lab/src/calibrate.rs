@@ -1,13 +1,14 @@
 //! Calibration of likelihood sources: every (house, target, container) of the houses is a pair
 //! (P_S, whether the container holds the target); each source gets a Brier score, log loss,
-//! AUROC and reliability bins, and an LLM source can be fused with the prior by a logistic fit on
-//! the same pairs.
+//! AUROC and reliability bins, and an LLM source can be fused with the prior (and, when the prior
+//! has a learned part, with the learned likelihood) by a logistic fit on the same pairs.
 
 use std::sync::Arc;
 
 use ferret_plan::{
-    Calibration, FusionFile, FusionFit, FusionSample, FusionWeights, HoldOut, LikelihoodSource,
-    Prior, TrainingScore, draw_trial, prior_fingerprint,
+    Calibration, FusionBase, FusionFile, FusionFit, FusionSample, FusionWeights, HoldOut,
+    LearnedKind, LearnedSource, LikelihoodSource, Prior, TrainingScore, draw_trial,
+    prior_fingerprint,
 };
 use ferret_world::{House, ObjectType, Scene};
 use rand::SeedableRng;
@@ -320,51 +321,64 @@ pub fn calibrate(
         if let Some(h) = HoldOut::every_fold(settings.fit_unseen_folds) {
             priors.push(Arc::new(prior.holding_out(h)));
         }
-        let prior_views: Vec<PriorView> = priors
-            .iter()
-            .map(|p| PriorView {
-                probabilities: source_probabilities(
-                    "model/prior",
-                    p.as_ref(),
+        let mut views = vec![(
+            FusionBase::Prior,
+            (priors.len() > 1).then_some(settings.fit_unseen_folds),
+            prior_views(&priors, None, &trials, &mut errors, feedback),
+        )];
+        // With a learned part, the LLM sources are also fused with the learned likelihood
+        // (`fused-learned/...`). Its heads answer for an unseen fold only in the folds they
+        // were trained with, so its unseen view holds out those.
+        if let Some(learned) = prior.learned() {
+            let mut priors = vec![prior.clone()];
+            if settings.fit_unseen_folds > 1
+                && let Some(h) = HoldOut::every_fold(learned.settings.folds)
+            {
+                priors.push(Arc::new(prior.holding_out(h)));
+            }
+            views.push((
+                FusionBase::Learned,
+                (priors.len() > 1).then_some(learned.settings.folds),
+                prior_views(
+                    &priors,
+                    Some(LearnedKind::Fused),
                     &trials,
                     &mut errors,
                     feedback,
                 ),
-                gaps: trials
-                    .iter()
-                    .map(|(house, target, _)| p.evidence_gaps(house, target))
-                    .collect(),
-            })
-            .collect();
-        let unseen = if priors.len() > 1 {
+            ));
+        }
+        let trained_on = |unseen_folds: Option<usize>| {
+            let unseen = unseen_folds.map_or(String::new(), |k| {
+                format!("; every question also asked of the prior without its target's fold of {k}")
+            });
             format!(
-                "; every question also asked of the prior without its target's fold of {}",
-                settings.fit_unseen_folds
+                "{} houses from {}, {} ({} house–target pairs){unseen}",
+                loaded.scenes.len(),
+                loaded.source,
+                settings
+                    .targets_per_house
+                    .per_house("target types per house"),
+                trials.len()
             )
-        } else {
-            String::new()
         };
-        let trained_on = format!(
-            "{} houses from {}, {} ({} house–target pairs){unseen}",
-            loaded.scenes.len(),
-            loaded.source,
-            settings
-                .targets_per_house
-                .per_house("target types per house"),
-            trials.len()
-        );
         let mut fits = Vec::new();
-        for (spec, probabilities) in per_source.iter().filter(|(s, _)| fitted.contains(s)) {
-            match fit_fusion(
-                spec,
-                &prior,
-                &prior_views,
-                probabilities,
-                &holds,
-                &trained_on,
-            ) {
-                Ok(f) => fits.push(f),
-                Err(e) => errors.push(format!("--fit-fusion: {spec}: {e}")),
+        for (base, unseen_folds, views) in &views {
+            // A base some view could not give is not fitted (the error says why).
+            let Some(views) = views else { continue };
+            for (spec, probabilities) in per_source.iter().filter(|(s, _)| fitted.contains(s)) {
+                match fit_fusion(
+                    spec,
+                    *base,
+                    &prior,
+                    views,
+                    probabilities,
+                    &holds,
+                    &trained_on(*unseen_folds),
+                ) {
+                    Ok(f) => fits.push(f),
+                    Err(e) => errors.push(format!("--fit-fusion: {}: {spec}: {e}", base.kind())),
+                }
             }
         }
         Some(FusionFile::new(fits))
@@ -415,16 +429,56 @@ fn source_probabilities(
         .collect()
 }
 
-/// A prior's probabilities and evidence gaps on every trial of a calibration.
+/// What a view of the prior gives on every trial of a calibration: a fusion base's
+/// probabilities, and the prior's evidence gaps.
 struct PriorView {
     probabilities: Vec<Option<Vec<f64>>>,
     gaps: Vec<Vec<f64>>,
 }
 
-/// The fusion of the prior with the source `spec`, fitted on every trial both answered, under
+/// The views of a fusion base over each of `priors`: the prior itself, or (with `learned`) the
+/// learned likelihood over it; `None`, with the reason in `errors`, when a prior cannot give it.
+fn prior_views(
+    priors: &[Arc<Prior>],
+    learned: Option<LearnedKind>,
+    trials: &[(&House, ObjectType, &Scene)],
+    errors: &mut Vec<String>,
+    feedback: &dyn Feedback,
+) -> Option<Vec<PriorView>> {
+    let mut views = Vec::new();
+    for p in priors {
+        let probabilities = match learned {
+            None => source_probabilities("model/prior", p.as_ref(), trials, errors, feedback),
+            Some(kind) => match LearnedSource::new(p.clone(), kind) {
+                Ok(source) => source_probabilities(
+                    &format!("model/{}", kind.name()),
+                    &source,
+                    trials,
+                    errors,
+                    feedback,
+                ),
+                Err(e) => {
+                    errors.push(format!("--fit-fusion: fused-learned: {e}"));
+                    return None;
+                }
+            },
+        };
+        views.push(PriorView {
+            probabilities,
+            gaps: trials
+                .iter()
+                .map(|(house, target, _)| p.evidence_gaps(house, target))
+                .collect(),
+        });
+    }
+    Some(views)
+}
+
+/// The fusion of `base` with the source `spec`, fitted on every trial both answered, under
 /// every view of the prior.
 fn fit_fusion(
     spec: &str,
+    base: FusionBase,
     prior: &Prior,
     views: &[PriorView],
     other_p: &[Option<Vec<f64>>],
@@ -472,6 +526,7 @@ fn fit_fusion(
         fusion_name(spec).ok_or_else(|| LabError::invalid("not an LLM source nor a control"))?;
     Ok(FusionFit {
         source,
+        base,
         weights,
         prior: prior_fingerprint(prior),
         trained_on: trained_on.to_string(),
@@ -486,12 +541,13 @@ fn fit_fusion(
 /// The fitted fusions as Markdown.
 pub fn fusion_markdown(file: &FusionFile) -> String {
     let mut md = String::from(
-        "## Fusion with the prior (logit P = a·logit P_prior + b·logit P_llm + c + g·(d·logit P_llm + e), g the prior's evidence gap)\n\n| source | a | b | c | d | e | pairs | Brier prior / LLM / fused | AUROC prior / LLM / fused |\n|---|---:|---:|---:|---:|---:|---:|---|---|\n",
+        "## Fusion with the prior or the learned likelihood (logit P = a·logit P_base + b·logit P_llm + c + g·(d·logit P_llm + e), g the prior's evidence gap)\n\n| strategy | a | b | c | d | e | pairs | Brier base / LLM / fused | AUROC base / LLM / fused |\n|---|---:|---:|---:|---:|---:|---:|---|---|\n",
     );
     let auroc = |a: Option<f64>| a.map_or_else(|| "–".into(), |a| format!("{a:.3}"));
     for f in &file.fits {
         md.push_str(&format!(
-            "| {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {} | {:.4} / {:.4} / {:.4} | {} / {} / {} |\n",
+            "| {}/{} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {} | {:.4} / {:.4} / {:.4} | {} / {} / {} |\n",
+            f.base.kind(),
             f.source,
             f.weights.a,
             f.weights.b,

@@ -38,7 +38,7 @@ pub fn default_prior(count: usize, seed: u64) -> Result<Prior> {
 /// training one per call.
 pub fn needs_prior(specs: &[String]) -> bool {
     specs.iter().any(|s| {
-        s.starts_with("model/prior") || s.starts_with("model/learned") || s.starts_with("fused/")
+        s.starts_with("model/prior") || s.starts_with("model/learned") || s.starts_with("fused")
     })
 }
 

@@ -80,7 +80,7 @@ pub use prompts::{
 pub use question::{Expect, Question, Request};
 pub use service::{Answer, FailurePolicy, Llm, LlmOptions, LlmService};
 pub use strategy::{
-    FUSED, LLM_DIRECT, LLM_MODEL, LlmDirectPolicy, LlmDirectStrategy, LlmSpec, PrefetchProgress,
-    PrefetchSummary, Prefetched, asks_probabilities, control_source, prefetch_probabilities,
-    prefetch_probabilities_after, register_fused, register_strategies,
+    FUSED, FUSED_LEARNED, LLM_DIRECT, LLM_MODEL, LlmDirectPolicy, LlmDirectStrategy, LlmSpec,
+    PrefetchProgress, PrefetchSummary, Prefetched, asks_probabilities, control_source, fusion_base,
+    prefetch_probabilities, prefetch_probabilities_after, register_fused, register_strategies,
 };

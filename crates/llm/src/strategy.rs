@@ -1,6 +1,7 @@
 //! LLMs in the plan crate's terms: the planner over an LLM's likelihoods
 //! (`llm+model/<prompt>/<llm>[/k<N>|/exact]`, see [`LlmLikelihood`]), the same fused with the
-//! prior (`fused/<prompt>/<llm>`, see [`ferret_plan::Fused`]; `fused/noise` is its control), a policy ([`LlmDirectPolicy`],
+//! prior (`fused/<prompt>/<llm>`, see [`ferret_plan::Fused`]; `fused/noise` is its control) or
+//! with the learned likelihood (`fused-learned/<prompt>/<llm>`), a policy ([`LlmDirectPolicy`],
 //! behind `llm-direct/<prompt>/<llm>`), their registration in a [`StrategyRegistry`], and
 //! [`prefetch_probabilities`], which asks every probability question of a set of trials
 //! concurrently before the trials run so that they find every answer in the cache.
@@ -14,8 +15,9 @@ use std::sync::Arc;
 use ferret_plan::policy::nearest;
 use ferret_plan::strategy::{CONTROL_SOURCES, builtin_source, parse_limit, planner_config_from};
 use ferret_plan::{
-    Belief, Fused, FusionFile, LikelihoodSource, ModelStrategy, PlanError, PlannerConfig, Policy,
-    Prior, Strategy, StrategyRegistry, StrategySpec, TrialContext, prior_fingerprint,
+    Belief, Fused, FusionBase, FusionFile, LikelihoodSource, ModelStrategy, PlanError,
+    PlannerConfig, Policy, Prior, Strategy, StrategyRegistry, StrategySpec, TrialContext,
+    prior_fingerprint,
 };
 use ferret_world::{House, ObjectType};
 use futures::future::join_all;
@@ -37,11 +39,22 @@ pub const LLM_MODEL: &str = "llm+model";
 pub const LLM_DIRECT: &str = "llm-direct";
 /// The strategy kind of the planner over the prior fused with an LLM's likelihoods.
 pub const FUSED: &str = "fused";
+/// The strategy kind of the planner over the learned likelihood (`model/learned`) fused with an
+/// LLM's likelihoods.
+pub const FUSED_LEARNED: &str = "fused-learned";
 
-/// True for the kinds that plan over an LLM's likelihoods (`llm+model`, `fused`): the ones whose
-/// probability questions are asked before trials run.
+/// True for the kinds that plan over an LLM's likelihoods (`llm+model`, `fused`,
+/// `fused-learned`): the ones whose probability questions are asked before trials run.
 pub fn asks_probabilities(kind: &str) -> bool {
-    kind == LLM_MODEL || kind == FUSED
+    kind == LLM_MODEL || fusion_base(kind).is_some()
+}
+
+/// What a fused kind fuses the LLM's likelihoods with: the prior (`fused`), the learned
+/// likelihood (`fused-learned`); `None` for kinds that are not fused.
+pub fn fusion_base(kind: &str) -> Option<FusionBase> {
+    [FusionBase::Prior, FusionBase::Learned]
+        .into_iter()
+        .find(|b| b.kind() == kind)
 }
 
 /// A parsed LLM strategy spec.
@@ -298,9 +311,11 @@ fn limit_config(
 /// Registers `fused/<prompt>/<llm>[/<limit>]`: the planner over `prior` fused with the LLM's
 /// likelihoods by the weights `fusion` holds for `<prompt>/<llm>` (see [`ferret_plan::fusion`]),
 /// and `fused/<control>[/<limit>]`, the same with a control that knows nothing
-/// ([`CONTROL_SOURCES`]: `noise`, `uniform`) in the LLM's place, fitted the same way. Without a
-/// fusion file, or without a fit for the source, or with a fit made against another prior,
-/// building the strategy fails and says which.
+/// ([`CONTROL_SOURCES`]: `noise`, `uniform`) in the LLM's place, fitted the same way. Registers
+/// `fused-learned/...` alike, fused with the learned likelihood (`model/learned`) instead of the
+/// prior, by the fits whose base is the learned one. Without a fusion file, or without a fit for
+/// the source, or with a fit made against another prior, building the strategy fails and says
+/// which.
 pub fn register_fused(
     registry: &mut StrategyRegistry,
     service: Arc<LlmService>,
@@ -310,75 +325,103 @@ pub fn register_fused(
     exact_max: usize,
 ) {
     let fingerprint = prior.as_deref().map(prior_fingerprint);
-    registry.register(
-        FUSED,
-        "fused/<prompt>/<llm>[/k<N>|/exact], fused/<noise|uniform>[/k<N>|/exact]",
-        move |spec| {
-            let bad = |reason: String| PlanError::UnknownStrategy {
-                spec: spec.raw.clone(),
-                reason,
-            };
-            let (source, config): (Arc<dyn LikelihoodSource>, PlannerConfig) =
-                match control_source(spec) {
-                    Some(name) => (
-                        builtin_source(name, None).map_err(bad)?,
-                        planner_config_from(spec, 1, planner, exact_max)?,
-                    ),
-                    None => {
-                        let parsed = LlmSpec::parse(spec).unwrap_or_else(|| Err(not_llm(spec)))?;
-                        let source = LlmLikelihood::new(
-                            service.clone(),
-                            &parsed.prompt,
-                            &parsed.llm,
-                            &spec.raw,
-                        )
-                        .map_err(|e| build_error(spec, e, false))?;
-                        (
-                            Arc::new(source),
-                            limit_config(spec, &parsed, planner, exact_max)?,
-                        )
-                    }
+    for base in [FusionBase::Prior, FusionBase::Learned] {
+        let (service, prior, fusion, fingerprint) = (
+            service.clone(),
+            prior.clone(),
+            fusion.clone(),
+            fingerprint.clone(),
+        );
+        let kind = base.kind();
+        registry.register(
+            kind,
+            &format!(
+                "{kind}/<prompt>/<llm>[/k<N>|/exact], {kind}/<noise|uniform>[/k<N>|/exact]"
+            ),
+            move |spec| {
+                let bad = |reason: String| PlanError::UnknownStrategy {
+                    spec: spec.raw.clone(),
+                    reason,
                 };
-            let (Some(prior), Some(fingerprint)) = (&prior, &fingerprint) else {
-                return Err(bad("fused sources need the prior (pass --prior)".into()));
-            };
-            let Some((path, file)) = &fusion else {
-                return Err(bad(
-                    "no fusion weights: fit them with `ferret calibrate --fit-fusion FILE` on training houses and pass --fusion FILE".into(),
-                ));
-            };
-            let name = source.name().to_string();
-            let fit = file.fit(&name).ok_or_else(|| {
-                bad(format!(
-                    "{path} holds no fit for {name} (it has: {})",
-                    file.fits
+                let (source, config): (Arc<dyn LikelihoodSource>, PlannerConfig) =
+                    match control_source(spec) {
+                        Some(name) => (
+                            builtin_source(name, None).map_err(bad)?,
+                            planner_config_from(spec, 1, planner, exact_max)?,
+                        ),
+                        None => {
+                            let parsed =
+                                LlmSpec::parse(spec).unwrap_or_else(|| Err(not_llm(spec)))?;
+                            let source = LlmLikelihood::new(
+                                service.clone(),
+                                &parsed.prompt,
+                                &parsed.llm,
+                                &spec.raw,
+                            )
+                            .map_err(|e| build_error(spec, e, false))?;
+                            (
+                                Arc::new(source),
+                                limit_config(spec, &parsed, planner, exact_max)?,
+                            )
+                        }
+                    };
+                let (Some(prior), Some(fingerprint)) = (&prior, &fingerprint) else {
+                    return Err(bad("fused sources need the prior (pass --prior)".into()));
+                };
+                let Some((path, file)) = &fusion else {
+                    return Err(bad(
+                        "no fusion weights: fit them with `ferret calibrate --fit-fusion FILE` on training houses and pass --fusion FILE".into(),
+                    ));
+                };
+                let name = source.name().to_string();
+                let fit = file.fit(base, &name).ok_or_else(|| {
+                    let have: Vec<String> = file
+                        .fits
                         .iter()
-                        .map(|f| f.source.as_str())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ))
-            })?;
-            if fit.prior != *fingerprint {
-                return Err(bad(format!(
-                    "{path}: the fit for {name} was made with another prior; fit it again with this one"
-                )));
-            }
-            let fused = Fused::new(&format!("fused/{name}"), prior.clone(), source, fit.weights);
-            Ok(Arc::new(ModelStrategy::new(
-                &spec.raw,
-                Arc::new(fused),
-                config,
-            )))
-        },
-    );
+                        .map(|f| format!("{}/{}", f.base.kind(), f.source))
+                        .collect();
+                    let hint = match base {
+                        FusionBase::Prior => "",
+                        FusionBase::Learned => {
+                            "; `calibrate --fit-fusion` fits the learned base when the prior has a learned part (`ferret prior train --embeddings DIR`)"
+                        }
+                    };
+                    bad(format!(
+                        "{path} holds no fit for {kind}/{name} (it has: {}){hint}",
+                        have.join(", ")
+                    ))
+                })?;
+                if fit.prior != *fingerprint {
+                    return Err(bad(format!(
+                        "{path}: the fit for {kind}/{name} was made with another prior; fit it again with this one"
+                    )));
+                }
+                let base_source = builtin_source(
+                    base.source_spec().trim_start_matches("model/"),
+                    Some(prior),
+                )
+                .map_err(bad)?;
+                let fused = Fused::over(
+                    &format!("{kind}/{name}"),
+                    base_source,
+                    prior.clone(),
+                    source,
+                    fit.weights,
+                );
+                Ok(Arc::new(ModelStrategy::new(
+                    &spec.raw,
+                    Arc::new(fused),
+                    config,
+                )))
+            },
+        );
+    }
 }
 
 /// The control a `fused/...` spec fuses with the prior instead of an LLM (`fused/noise`), if it
 /// names one.
 pub fn control_source(spec: &StrategySpec) -> Option<&'static str> {
-    if spec.kind != FUSED {
-        return None;
-    }
+    fusion_base(&spec.kind)?;
     let first = spec.args.first()?;
     CONTROL_SOURCES.iter().copied().find(|c| c == first)
 }

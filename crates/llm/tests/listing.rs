@@ -11,8 +11,8 @@ use ferret_llm::{
     AnswerFormat, LlmLikelihood, LlmOptions, LlmService, register_fused, register_strategies,
 };
 use ferret_plan::{
-    FusionFile, FusionFit, FusionWeights, LikelihoodSource, PlannerConfig, Prior, StrategyRegistry,
-    TrainingScore, prior_fingerprint,
+    FusionBase, FusionFile, FusionFit, FusionWeights, LikelihoodSource, PlannerConfig, Prior,
+    StrategyRegistry, TrainingScore, prior_fingerprint,
 };
 use ferret_world::{House, ObjectType, Scene};
 use serde_json::{Value, json};
@@ -348,6 +348,7 @@ fn fusion_for(prior: &Prior, source: &str, weights: FusionWeights) -> FusionFile
     };
     FusionFile::new(vec![FusionFit {
         source: source.into(),
+        base: FusionBase::Prior,
         weights,
         prior: prior_fingerprint(prior),
         trained_on: "test houses".into(),
@@ -435,7 +436,7 @@ fn fused_sources_combine_the_prior_and_the_llm_by_the_fitted_weights() {
         .map(|e| e.to_string())
         .unwrap_or_default();
     assert!(
-        e.contains("no fit for p-choice/mock") && e.contains("p-yesno/mock"),
+        e.contains("no fit for fused/p-choice/mock") && e.contains("fused/p-yesno/mock"),
         "{e}"
     );
     let other = Arc::new(Prior::train(
@@ -502,7 +503,7 @@ fn the_noise_control_is_fused_like_an_llm_without_asking_one() {
     .err()
     .map(|e| e.to_string())
     .unwrap_or_default();
-    assert!(e.contains("no fit for noise"), "{e}");
+    assert!(e.contains("no fit for fused/noise"), "{e}");
 }
 
 #[test]

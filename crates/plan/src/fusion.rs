@@ -122,11 +122,52 @@ pub struct TrainingScore {
     pub auroc: Option<f64>,
 }
 
+/// What a fusion's weights `a` and `c` apply to: the prior's probability (`fused/...`), or the
+/// learned likelihood over the prior file's word vectors (`fused-learned/...`, the prior where it
+/// has evidence and its language head where it has none). Either way the evidence gap `g` is the
+/// prior's.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FusionBase {
+    /// The prior (`model/prior`).
+    #[default]
+    Prior,
+    /// The learned likelihood (`model/learned`).
+    Learned,
+}
+
+impl FusionBase {
+    /// True for [`FusionBase::Prior`] (files written before fusions had a base say nothing).
+    pub fn is_prior(&self) -> bool {
+        *self == Self::Prior
+    }
+
+    /// The strategy kind that plans over this base fused with another source: `fused` or
+    /// `fused-learned`.
+    pub fn kind(self) -> &'static str {
+        match self {
+            Self::Prior => "fused",
+            Self::Learned => "fused-learned",
+        }
+    }
+
+    /// The base's source as a strategy spec: `model/prior` or `model/learned`.
+    pub fn source_spec(self) -> &'static str {
+        match self {
+            Self::Prior => "model/prior",
+            Self::Learned => "model/learned",
+        }
+    }
+}
+
 /// One fitted fusion: the weights for a source, and how they were obtained.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FusionFit {
-    /// The source fused with the prior, as `<prompt>/<llm>` (`p-yesno/qwen`).
+    /// The source fused with the base, as `<prompt>/<llm>` (`p-yesno/qwen`).
     pub source: String,
+    /// What the source is fused with (the prior unless the file says otherwise).
+    #[serde(default, skip_serializing_if = "FusionBase::is_prior")]
+    pub base: FusionBase,
     /// The fitted weights.
     pub weights: FusionWeights,
     /// [`prior_fingerprint`] of the prior it was fitted with.
@@ -137,7 +178,7 @@ pub struct FusionFit {
     pub pairs: u64,
     /// Of them, containers holding the target.
     pub positives: u64,
-    /// The prior alone on those pairs.
+    /// The base alone on those pairs (the prior, or the learned likelihood).
     pub prior_score: TrainingScore,
     /// The source alone.
     pub source_score: TrainingScore,
@@ -166,9 +207,11 @@ impl FusionFile {
         }
     }
 
-    /// The fit for `source` (`<prompt>/<llm>`).
-    pub fn fit(&self, source: &str) -> Option<&FusionFit> {
-        self.fits.iter().find(|f| f.source == source)
+    /// The fit for `source` (`<prompt>/<llm>`) fused with `base`.
+    pub fn fit(&self, base: FusionBase, source: &str) -> Option<&FusionFit> {
+        self.fits
+            .iter()
+            .find(|f| f.base == base && f.source == source)
     }
 
     /// Reads a fusion file.
@@ -203,9 +246,11 @@ impl FusionFile {
     }
 }
 
-/// The fused likelihood source: the prior and another source combined by [`FusionWeights`].
+/// The fused likelihood source: a base (the prior, or the learned likelihood over it) and
+/// another source combined by [`FusionWeights`], with the prior's evidence gaps.
 pub struct Fused {
     name: String,
+    base: Arc<dyn LikelihoodSource>,
     prior: Arc<Prior>,
     other: Arc<dyn LikelihoodSource>,
     weights: FusionWeights,
@@ -228,8 +273,20 @@ impl Fused {
         other: Arc<dyn LikelihoodSource>,
         weights: FusionWeights,
     ) -> Self {
+        Self::over(name, prior.clone(), prior, other, weights)
+    }
+
+    /// `base` and `other` fused with `weights`, named `name`; `prior` gives the evidence gaps.
+    pub fn over(
+        name: &str,
+        base: Arc<dyn LikelihoodSource>,
+        prior: Arc<Prior>,
+        other: Arc<dyn LikelihoodSource>,
+        weights: FusionWeights,
+    ) -> Self {
         Self {
             name: name.to_string(),
+            base,
             prior,
             other,
             weights,
@@ -257,15 +314,17 @@ impl LikelihoodSource for Fused {
         house: &House,
         target: &ObjectType,
     ) -> Result<Vec<Probability>, PlanError> {
-        let prior = self.prior.likelihoods(house, target)?;
+        let prior = self.base.likelihoods(house, target)?;
         let gaps = self.prior.evidence_gaps(house, target);
         let other = self.other.likelihoods(house, target)?;
-        if prior.len() != other.len() {
-            return Err(PlanError::LikelihoodCount {
-                source_name: self.other.name().to_string(),
-                expected: prior.len(),
-                got: other.len(),
-            });
+        for (source, got) in [(&self.base, prior.len()), (&self.other, other.len())] {
+            if got != gaps.len() {
+                return Err(PlanError::LikelihoodCount {
+                    source_name: source.name().to_string(),
+                    expected: gaps.len(),
+                    got,
+                });
+            }
         }
         Ok(prior
             .iter()
@@ -381,6 +440,7 @@ mod tests {
         };
         let file = FusionFile::new(vec![FusionFit {
             source: "p-yesno/qwen".into(),
+            base: FusionBase::Learned,
             weights: FusionWeights {
                 a: 0.8,
                 b: 0.4,
@@ -399,6 +459,18 @@ mod tests {
         let path = dir.path().join("fusion.json");
         std::fs::write(&path, file.to_json()).unwrap();
         assert_eq!(FusionFile::load(&path).unwrap(), file);
+        assert!(file.fit(FusionBase::Learned, "p-yesno/qwen").is_some());
+        assert!(file.fit(FusionBase::Prior, "p-yesno/qwen").is_none());
+        // A file written before fusions had a base: every fit is the prior's.
+        let json = file.to_json();
+        assert!(json.contains("\"base\": \"learned\""), "{json}");
+        std::fs::write(&path, json.replace("\"base\": \"learned\",", "")).unwrap();
+        let read = FusionFile::load(&path).unwrap();
+        assert_eq!(read.fits[0].base, FusionBase::Prior);
+        assert!(
+            !read.to_json().contains("base"),
+            "the prior's base is not written"
+        );
         // A file written before the evidence weights existed: d = e = 0, the fusion it was.
         let old = file
             .to_json()

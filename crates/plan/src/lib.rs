@@ -86,7 +86,8 @@ pub use belief::Belief;
 pub use calibration::{Calibration, ReliabilityBin};
 pub use error::{BoxError, PlanError};
 pub use fusion::{
-    Fused, FusionFile, FusionFit, FusionSample, FusionWeights, TrainingScore, prior_fingerprint,
+    Fused, FusionBase, FusionFile, FusionFit, FusionSample, FusionWeights, TrainingScore,
+    prior_fingerprint,
 };
 pub use holdout::HoldOut;
 pub use learned::{Embedder, Learned, LearnedKind, LearnedSettings, LearnedSource, NameVectors};

@@ -45,7 +45,10 @@ pub struct Args {
     /// logistic regression on these houses, which should be training houses) and write the
     /// weights to FILE; `--fusion FILE` then makes `fused/<prompt>/<llm>` available to eval,
     /// calibrate, select, deploy and serve. model/noise among the sources fits the control
-    /// `fused/noise` the same way: what the fit gives with a source that knows nothing.
+    /// `fused/noise` the same way: what the fit gives with a source that knows nothing. When the
+    /// prior has a learned part (`prior train --embeddings`), each source is also fused with
+    /// `model/learned` instead of the prior: `fused-learned/<prompt>/<llm>`, `fused-learned/noise`
+    /// (its unseen view holds out the folds the learned heads were trained with).
     #[arg(long, value_name = "FILE")]
     pub fit_fusion: Option<PathBuf>,
     /// With --fit-fusion: every question is also scored by a prior that never saw its target's

@@ -62,3 +62,35 @@ pub fn data_dir() -> Option<PathBuf> {
         }
     }
 }
+
+/// A word table of a few kitchen, bedroom and bathroom words: enough for names of generated
+/// houses to differ in meaning (names none of whose words it has get a zero vector).
+pub fn word_table(dir: &Path) -> PathBuf {
+    let folder = dir.join("table");
+    std::fs::create_dir_all(&folder).unwrap();
+    let words = [
+        ("kitchen", [1.0, 0.0, 0.0, 0.1]),
+        ("fridge", [0.9, 0.1, 0.0, 0.0]),
+        ("counter", [0.8, 0.0, 0.1, 0.2]),
+        ("cabinet", [0.6, 0.3, 0.2, 0.0]),
+        ("bedroom", [0.0, 1.0, 0.0, 0.1]),
+        ("bed", [0.1, 0.9, 0.0, 0.0]),
+        ("dresser", [0.0, 0.8, 0.1, 0.2]),
+        ("bathroom", [0.0, 0.0, 1.0, 0.1]),
+        ("toilet", [0.1, 0.0, 0.9, 0.0]),
+        ("sink", [0.4, 0.0, 0.7, 0.0]),
+        ("living", [0.2, 0.2, 0.0, 1.0]),
+        ("sofa", [0.0, 0.3, 0.0, 0.9]),
+        ("table", [0.5, 0.1, 0.0, 0.6]),
+    ];
+    let lines: Vec<String> = words
+        .iter()
+        .map(|(w, v)| format!("{w} {} {} {} {}", v[0], v[1], v[2], v[3]))
+        .collect();
+    std::fs::write(
+        folder.join("vectors.txt"),
+        format!("# id: tiny\n{}\n", lines.join("\n")),
+    )
+    .unwrap();
+    folder
+}

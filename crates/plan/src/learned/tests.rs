@@ -263,6 +263,59 @@ fn under_a_hold_out_only_the_heads_that_never_saw_the_target_answer() {
     assert_ne!(answers(own), before);
 }
 
+/// A fusion whose base is the learned likelihood fuses the learned answers with the other
+/// source, by the prior's evidence gaps; it is the prior's fusion only where the two agree.
+#[test]
+fn a_fusion_over_the_learned_base_fuses_the_learned_answers() {
+    use crate::fusion::{Fused, FusionWeights};
+    use crate::likelihood::Noise;
+    let scenes = scenes(9);
+    let names = every_name(&scenes);
+    let s = settings();
+    let learned = trained(&scenes, vectors(&names, "", &|_| false), &s);
+    // Under a hold-out the learned answers differ from the prior's wherever the target's fold
+    // has gaps.
+    let prior = Arc::new(
+        Prior::train(&scenes, 2.0)
+            .with_learned(learned)
+            .holding_out(HoldOut::every_fold(s.folds).unwrap()),
+    );
+    let base: Arc<dyn LikelihoodSource> =
+        Arc::new(LearnedSource::new(prior.clone(), LearnedKind::Fused).unwrap());
+    let other: Arc<dyn LikelihoodSource> = Arc::new(Noise::default());
+    let w = FusionWeights {
+        a: 0.9,
+        b: 0.4,
+        c: -0.2,
+        d: 0.7,
+        e: 0.3,
+    };
+    let over_learned = Fused::over("l", base.clone(), prior.clone(), other.clone(), w);
+    let over_prior = Fused::new("p", prior.clone(), other.clone(), w);
+    let mut differ = 0;
+    for scene in &scenes {
+        for target in scene.truth.target_types() {
+            let house = &scene.house;
+            let l = base.likelihoods(house, &target).unwrap();
+            let o = other.likelihoods(house, &target).unwrap();
+            let g = prior.evidence_gaps(house, &target);
+            let got = over_learned.likelihoods(house, &target).unwrap();
+            for c in 0..got.len() {
+                let want = w.fuse(l[c].get(), o[c].get(), g[c]);
+                assert!(
+                    (got[c].get() - want).abs() < 1e-12,
+                    "{} vs {want}",
+                    got[c].get()
+                );
+            }
+            if got != over_prior.likelihoods(house, &target).unwrap() {
+                differ += 1;
+            }
+        }
+    }
+    assert!(differ > 0, "the learned base changed no answer");
+}
+
 #[test]
 fn the_auroc_of_grouped_rows_is_that_of_the_rows_spelled_out() {
     // Scores 0.1 (1 holder of 3), 0.5 (1 of 2), 0.9 (2 of 2): holders above others in

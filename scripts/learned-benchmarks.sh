@@ -66,6 +66,12 @@ for seed in 100 200; do
     "$ferret" prior train "${train[@]}" --also "$DATA/oneroom-train500.jsonl.gz" \
         --embeddings "$glove" --learned-seed "$seed" --out "prior-glove-seed$seed.json" >/dev/null
 done
+# Counts built into the head against the fusion, both fitted on all folds but one and scored on
+# that one: the line prior train prints, into costs.json.
+compared="$("$ferret" prior train "${train[@]}" --also "$DATA/oneroom-train500.jsonl.gz" \
+    --embeddings "$glove" --learned-compare-counts-in-head --out prior-glove-compared.json |
+    grep '^counts and language' || true)"
+printf '  "counts and language, GloVe": "%s",\n' "${compared#counts and language, }" >>costs.part
 "$ferret" prior train "${train[@]}" --also "$DATA/oneroom-train500.jsonl.gz" --containers furniture \
     --embeddings "$glove" --out prior-glove-furniture.json >/dev/null
 embeddings=(glove)

@@ -2,10 +2,13 @@
 """Markdown tables from the runs of scripts/learned-benchmarks.sh (standard library only).
 
     scripts/learned-tables.py OUT_DIR
+    scripts/learned-tables.py --lane LANE_OUT
 
 Reads each run's summary.csv, paired.csv and calibration.csv under OUT_DIR and prints the tables
 of docs/learned.md: mean cost per strategy with the paired difference against the reference
-(strategy - reference, metres; negative is cheaper) and its 95 % bootstrap interval.
+(strategy - reference, metres; negative is cheaper) and its 95 % bootstrap interval. With
+--lane, the tables of `scripts/real-llm.sh learned` (the learned likelihood with P-YESNO) from its
+output folder: each strategy against the prior, the learned likelihood and the fused controls.
 """
 
 import csv
@@ -79,7 +82,90 @@ def costs(out):
     print()
 
 
+def diff(p):
+    return (
+        f"{float(p['mean_diff_m']):+.2f} [{float(p['ci95_low_m']):+.2f}, "
+        f"{float(p['ci95_high_m']):+.2f}]"
+        if p
+        else ""
+    )
+
+
+def against(out, title, runs, references):
+    """One table: a row per (run label, strategy), a column per reference."""
+    print(f"### {title}\n")
+    print(
+        "| run | strategy | trials | mean (m) | "
+        + " | ".join(f"vs {r} (m, 95 % CI)" for r in references)
+        + " |"
+    )
+    print("|---|---|---:|---:|" + "---|" * len(references))
+    for label, name in runs:
+        run = out / name
+        if not (run / "summary.csv").exists():
+            print(f"| {label} | (no run: {name}) | | |" + " |" * len(references))
+            continue
+        paired = {(r["reference"], r["strategy"]): r for r in rows(run / "paired.csv")}
+        for s in rows(run / "summary.csv"):
+            cells = [diff(paired.get((r, s["strategy"]))) for r in references]
+            print(
+                f"| {label} | {s['strategy']} | {s['trials']} | "
+                f"{float(s['mean_m']):.2f} | " + " | ".join(cells) + " |"
+            )
+    print()
+
+
+def fusions(out, title, files):
+    print(f"### {title}\n")
+    print("| prior | strategy | a | b | c | d | e | AUROC base / LLM / fused (training houses) |")
+    print("|---|---|---:|---:|---:|---:|---:|---|")
+    for label, name in files:
+        path = out / name
+        if not path.exists():
+            print(f"| {label} | (no file: {name}) | | | | | | |")
+            continue
+        for f in json.loads(path.read_text())["fits"]:
+            kind = "fused-learned" if f.get("base") == "learned" else "fused"
+            w = f["weights"]
+            a = [f[k]["auroc"] for k in ("prior_score", "source_score", "fused_score")]
+            print(
+                f"| {label} | {kind}/{f['source']} | {w['a']:.3f} | {w['b']:.3f} | {w['c']:.3f} "
+                f"| {w['d']:.3f} | {w['e']:.3f} | {a[0]:.3f} / {a[1]:.3f} / {a[2]:.3f} |"
+            )
+    print()
+
+
+def lane(out):
+    fusions(
+        out,
+        "P-YESNO fused with the prior and with the learned likelihood (fitted on training houses)",
+        [("GloVe", "fusion-glove.json"), ("MiniLM", "fusion-minilm.json")],
+    )
+    refs = ["model/prior", "model/learned", "fused/noise", "fused-learned/noise"]
+    against(
+        out,
+        "With the LLM: unseen target types (`--holdout-types 5`), val150",
+        [("GloVe", "learned-unseen-glove")],
+        refs,
+    )
+    against(
+        out,
+        "With the LLM: seen target types, val150",
+        [("GloVe", "learned-seen-glove")],
+        refs,
+    )
+    against(
+        out,
+        "With the LLM: furniture and rooms ProcTHOR never had (examples/workshop, every target)",
+        [("GloVe", "learned-workshop-glove"), ("MiniLM", "learned-workshop-minilm")],
+        refs,
+    )
+
+
 def main():
+    if len(sys.argv) == 3 and sys.argv[1] == "--lane":
+        lane(Path(sys.argv[2]))
+        return
     if len(sys.argv) != 2:
         sys.exit(__doc__)
     out = Path(sys.argv[1])

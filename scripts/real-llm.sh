@@ -15,6 +15,7 @@
 #   scripts/real-llm.sh install    # only build/fetch into the cache
 #   scripts/real-llm.sh config     # only write $FERRET_LANE_OUT/ferret.toml (tested in CI)
 #   scripts/real-llm.sh unseen     # install, serve, and run the unseen-types benchmark only
+#   scripts/real-llm.sh learned    # install, serve, and run the learned likelihood with P-YESNO
 #
 # FERRET_LANE_BIN runs a given ferret binary instead of building this checkout's.
 # Everything downloaded or built lives in $FERRET_LANE_CACHE (default ~/.cache/ferret-real-llm):
@@ -394,6 +395,70 @@ run_unseen() {
     log "done in $((SECONDS - t0)) s ($online s with the server); outputs in $OUT"
 }
 
+# Language and the model together: the learned likelihood (word vectors + a head trained on the
+# training houses, no request at run time) fused with P-YESNO, beside the prior's fusion with it
+# and both controls (fused-learned/noise: the same fit with noise for the model;
+# model/learned-random: the heads over one random vector per name). Unseen target types on
+# val150 (every trial's target held out, FOLDS folds), the same trials with every type seen, and
+# the workshop scene (furniture and rooms ProcTHOR never had). With FERRET_LANE_MINILM=1 the
+# workshop also runs with all-MiniLM-L6-v2 vectors (builds ferret with `--features minilm`).
+run_learned() {
+    local ferret features=()
+    [ "${FERRET_LANE_MINILM:-0}" = 1 ] && features=(--features minilm)
+    if [ -n "${FERRET_LANE_BIN:-}" ]; then
+        ferret="$FERRET_LANE_BIN"
+    else
+        (cd "$ROOT" && cargo build --release -q -p ferret-cli "${features[@]}") >&2
+        ferret="${CARGO_TARGET_DIR:-$ROOT/target}/release/ferret"
+    fi
+    local embeddings=(glove)
+    [ "${FERRET_LANE_MINILM:-0}" = 1 ] && embeddings+=(minilm)
+    local asset=(--asset-db "$DATA/databases/asset-database.json")
+    local val=(--houses "$DATA/multiroom-val150.jsonl.gz" "${asset[@]}" --range "$ALL_RANGE")
+    local llm=(--config "$OUT/ferret.toml" --llm-cache "$OUT/llm-cache.sqlite")
+    local strategies="model/prior,model/learned,model/learned-random,llm+model/p-yesno/qwen"
+    strategies+=",fused/p-yesno/qwen,fused/noise,fused-learned/p-yesno/qwen,fused-learned/noise"
+    local pairs=(--paired-against model/prior,model/learned,fused/noise,fused-learned/noise)
+    cd "$OUT"
+    local t0=$SECONDS
+    "$ferret" llm ping qwen --config ferret.toml
+    for e in "${embeddings[@]}"; do
+        local folder
+        folder="$("$ROOT/scripts/embeddings.sh" install "$e" | tail -1)"
+        log "$e: a prior with a learned part from training houses $PRIOR_RANGE (and oneroom-train500)"
+        "$ferret" prior train --houses "$DATA/smallhouse-train1000.jsonl.gz" --range "$PRIOR_RANGE" \
+            --also "$DATA/oneroom-train500.jsonl.gz" "${asset[@]}" --embeddings "$folder" \
+            --learned-folds "$FOLDS" --out "prior-$e.json"
+        local common=("${llm[@]}" --prior "prior-$e.json" --fusion "fusion-$e.json")
+        log "$e: P-YESNO fused with the prior and with the learned likelihood, fitted on training houses $FIT_RANGE"
+        "$ferret" calibrate --houses "$DATA/smallhouse-train1000.jsonl.gz" --range "$FIT_RANGE" \
+            "${asset[@]}" "${llm[@]}" --prior "prior-$e.json" --targets-per-house 1 \
+            --max-fallback-share "$MAX_FALLBACK" --sources llm+model/p-yesno/qwen,model/noise \
+            --fit-fusion "fusion-$e.json" --fit-unseen-folds "$FOLDS" --out "learned-fit-$e"
+        if [ "$e" = glove ]; then
+            log "$e: unseen types, val150 $ALL_RANGE, each trial's target held out ($FOLDS folds)"
+            "$ferret" eval "${val[@]}" "${common[@]}" --holdout-types "$FOLDS" \
+                --strategies "$strategies" "${pairs[@]}" --max-fallback-share "$MAX_FALLBACK" \
+                --out "learned-unseen-$e"
+            log "$e: seen types, the same trials"
+            "$ferret" eval "${val[@]}" "${common[@]}" --strategies "$strategies" "${pairs[@]}" \
+                --max-fallback-share "$MAX_FALLBACK" --out "learned-seen-$e"
+        fi
+        log "$e: the workshop scene"
+        "$ferret" eval --houses "$ROOT/examples/workshop/scene.yaml" "${common[@]}" \
+            --embeddings "$folder" --trials-per-house all --strategies "$strategies" "${pairs[@]}" \
+            --max-fallback-share "$MAX_FALLBACK" --out "learned-workshop-$e"
+    done
+    local online=$((SECONDS - t0))
+    stop_server
+    log "unseen types again --offline with the server stopped: it must be identical"
+    "$ferret" eval "${val[@]}" "${llm[@]}" --prior prior-glove.json --fusion fusion-glove.json \
+        --holdout-types "$FOLDS" --strategies "$strategies" "${pairs[@]}" --offline \
+        --out learned-unseen-offline >/dev/null
+    cmp learned-unseen-glove/trials.csv learned-unseen-offline/trials.csv
+    log "done in $((SECONDS - t0)) s ($online s with the server); outputs in $OUT"
+}
+
 case "${1:-all}" in
     install) install ;;
     config)
@@ -419,5 +484,14 @@ case "${1:-all}" in
         serve
         run_unseen
         ;;
-    *) echo "usage: $0 [install|config|all|unseen]" >&2; exit 2 ;;
+    learned)
+        need_data
+        install
+        mkdir -p "$OUT"
+        OUT="$(cd "$OUT" && pwd)"
+        write_config
+        serve
+        run_learned
+        ;;
+    *) echo "usage: $0 [install|config|all|unseen|learned]" >&2; exit 2 ;;
 esac

@@ -86,8 +86,11 @@ class InProcessPlanner:
                     strategies, method=method, c=c, seed=seed, **self.options
                 )
             else:
-                # Fails now, not at the first goal, for a spec that names no strategy.
-                ferret.Search(self.house, "_", strategies[0], **self.options)
+                # Fails now, not at the first goal, for a spec that names no strategy or a
+                # likelihood source that cannot answer for this scene (a learned prior without the
+                # embeddings for its names): planned once for one of its own targets.
+                targets = self.house.target_types()
+                ferret.Search(self.house, targets[0] if targets else "_", strategies[0], **self.options)
         except ferret.FerretError as e:
             raise PlannerError(str(e)) from e
         self._places = [

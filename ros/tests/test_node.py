@@ -237,6 +237,71 @@ def deploy_rows(tmp_path, targets):
         return list(csv.DictReader(f))
 
 
+# A word table small enough to write here: kitchen, bedroom and bathroom words pointing different
+# ways, so the learned heads have meaning to learn from (names with no word get a zero vector).
+WORDS = {
+    "kitchen": (1.0, 0.0, 0.0, 0.1), "fridge": (0.9, 0.1, 0.0, 0.0),
+    "counter": (0.8, 0.0, 0.1, 0.2), "cabinet": (0.6, 0.3, 0.2, 0.0),
+    "bedroom": (0.0, 1.0, 0.0, 0.1), "bed": (0.1, 0.9, 0.0, 0.0),
+    "dresser": (0.0, 0.8, 0.1, 0.2), "bathroom": (0.0, 0.0, 1.0, 0.1),
+    "toilet": (0.1, 0.0, 0.9, 0.0), "sink": (0.4, 0.0, 0.7, 0.0),
+    "living": (0.2, 0.2, 0.0, 1.0), "sofa": (0.0, 0.3, 0.0, 0.9),
+    "table": (0.5, 0.1, 0.0, 0.6), "desk": (0.3, 0.6, 0.0, 0.4),
+}
+
+
+def test_learned_likelihood_reaches_the_node(start_node, robot, house, tmp_path, monkeypatch):
+    """A prior with a learned part (`ferret prior train --embeddings`: word vectors and heads)
+    as the node's `prior`: its searches with model/learned are those of `ferret deploy` with the
+    same file, the names the file lacks (the apartment's, never in its training houses) embedded
+    through FERRET_EMBEDDINGS in the node as in the binary."""
+    nav, _, _ = robot
+    table = tmp_path / "words"
+    table.mkdir()
+    lines = [f"{w} {' '.join(map(str, v))}" for w, v in WORDS.items()]
+    (table / "vectors.txt").write_text("# id: tiny\n" + "\n".join(lines) + "\n")
+    prior = tmp_path / "learned.json"
+    run_ferret(
+        "prior", "train", "--generate", "30", "--house-seed", "9", "--embeddings", str(table),
+        "--learned-folds", "3", "--learned-epochs", "10", "--out", str(prior),
+    )
+    strategies = ["model/learned", "model/prior"]
+    targets = house.target_types()[:4]
+    # Without the embeddings the node cannot answer for the apartment's names: it stops at once,
+    # saying which name and what to give.
+    from conftest import FerretProcess
+
+    monkeypatch.delenv("FERRET_EMBEDDINGS", raising=False)
+    p = FerretProcess(
+        tmp_path, "ferret_learned_blind",
+        {"scene": str(SCENE), "strategies": ["model/learned"], "prior": str(prior)},
+    )
+    try:
+        assert p.proc.wait(30) == 1
+    finally:
+        p.stop()
+    said = p.text()
+    assert "[FATAL]" in said and "FERRET_EMBEDDINGS" in said and "no word vector for" in said, said
+    monkeypatch.setenv("FERRET_EMBEDDINGS", str(table))
+    run_ferret(
+        "deploy", "--houses", str(SCENE), "--find", ",".join(targets), "--prior", str(prior),
+        "--strategies", ",".join(strategies), "--seed", "0", "--out", str(tmp_path / "deploy"),
+    )
+    with open(tmp_path / "deploy" / "deploy.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert "model/learned" in {r["chosen"] for r in rows}
+    _, client = start_node(
+        "ferret_learned", strategies=strategies, prior=str(prior), seed=0,
+        plan_from_robot_pose=False,
+    )
+    for row in rows:
+        nav.reset()
+        _, result, _ = client.send(row["target"])
+        assert result.status == Status.FOUND, result.message
+        assert (result.strategy, result.container) == (row["chosen"], row["found_container"])
+        assert math.isclose(result.cost_m, float(row["cost_m"]), abs_tol=1e-9)
+
+
 def test_without_nav2_goals_go_to_goal_pose(start_node, robot, house, tmp_path):
     """No NavigateToPose server: the node publishes /goal_pose and waits for /amcl_pose to get
     there; the search is the same one."""

@@ -56,6 +56,10 @@ pub struct LearnedSettings {
     pub seed: u64,
     /// The heads' shape and training.
     pub head: HeadSettings,
+    /// Also measure counts built into the head against the fusion ([`CountsInHead`]): more
+    /// heads to train, nothing of it used for answers.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub compare_counts_in_head: bool,
 }
 
 impl Default for LearnedSettings {
@@ -65,8 +69,35 @@ impl Default for LearnedSettings {
             seeds: 4,
             seed: 0,
             head: HeadSettings::default(),
+            compare_counts_in_head: false,
         }
     }
+}
+
+/// Two ways of joining counts and language, compared on the same cross-fitted questions: the
+/// fusion ([`fusion_features`]: the counted prior's logit, the head's logit and the evidence
+/// gaps, 15 weights) and one head whose inputs are the names' vectors together with the
+/// counted prior's logit and the four evidence gaps. Each is fitted on the held-out answers of
+/// all folds but one and scored on that one (the head never seeing that fold's types), so both
+/// are scored where they were not fitted.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct CountsInHead {
+    /// AUROC of the fusion, every question.
+    pub fusion_auroc: f64,
+    /// AUROC of counts built into the head, every question.
+    pub head_auroc: f64,
+    /// Log loss (nats per container) of the fusion, every question.
+    pub fusion_log_loss: f64,
+    /// Log loss of counts built into the head, every question.
+    pub head_log_loss: f64,
+    /// AUROC of the fusion where the target type was never seen.
+    pub fusion_auroc_unseen: f64,
+    /// AUROC of counts built into the head where the target type was never seen.
+    pub head_auroc_unseen: f64,
+    /// Log loss of the fusion where the target type was never seen.
+    pub fusion_log_loss_unseen: f64,
+    /// Log loss of counts built into the head where the target type was never seen.
+    pub head_log_loss_unseen: f64,
 }
 
 /// How well a model's answers ranked the holders on the questions its heads never saw
@@ -98,6 +129,9 @@ pub struct LearnedModel {
     pub score: HeldOutScore,
     /// Scores on the questions whose target type the heads and the prior never saw.
     pub unseen_score: HeldOutScore,
+    /// Counts built into the head against the fusion, when training was asked to measure it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub counts_in_head: Option<CountsInHead>,
 }
 
 /// The learned part of a prior file: vectors of every name it embedded and two models, one over
@@ -549,10 +583,13 @@ pub fn train(
         .collect();
 
     let fit_model = |heads: Vec<Vec<Head>>,
-                     table: &[Vec<f32>]|
+                     table: &[Vec<f32>],
+                     compare: bool|
      -> Result<LearnedModel, PlanError> {
-        // (prior logit, head logit, evidence, holders, asked, target unseen) per blind question.
+        // (prior logit, head logit, evidence, holders, asked, target unseen) per blind question,
+        // and its fold and question.
         let mut rows = Vec::new();
+        let mut asked = Vec::new();
         for (k, tally) in blind.iter().enumerate() {
             for (q, &(pos, n)) in tally {
                 let x = head_input(&table[q.target], &table[q.container], &table[q.room]);
@@ -563,6 +600,7 @@ pub fn train(
                 let p = fold_priors[k].probability(&target, &container, Some(room));
                 let e = fold_priors[k].evidence(&target, &container, room);
                 rows.push((logit(p.get()), lh, e, pos, n, target_fold[q.target] == k));
+                asked.push((k, *q));
             }
         }
         let head_rows: Vec<([f64; 2], f64, f64)> =
@@ -603,16 +641,44 @@ pub fn train(
                 fused_auroc: score(&|i| pick[i].1.0.iter().zip(&fusion).map(|(x, w)| x * w).sum()),
             }
         };
+        let counts_in_head = compare.then(|| {
+            let joint: Vec<JointRow> = rows
+                .iter()
+                .zip(&fusion_rows)
+                .zip(&asked)
+                .map(|((r, f), &(k, q))| {
+                    let mut x = head_input(&table[q.target], &table[q.container], &table[q.room]);
+                    x.extend(
+                        [r.0, r.2.target, r.2.container, r.2.room, r.2.pair].map(|v| v as f32),
+                    );
+                    JointRow {
+                        fold: k,
+                        features: f.0,
+                        x,
+                        positives: r.3,
+                        total: r.4,
+                        unseen: r.5,
+                    }
+                })
+                .collect();
+            let held = |i: usize, k: usize| held_out(&asked[i].1, k);
+            compare_counts_in_head(&joint, folds, &held, settings)
+        });
         Ok(LearnedModel {
             heads,
             head_fit,
             fusion: fusion.to_vec(),
             score: scored(false),
             unseen_score: scored(true),
+            counts_in_head,
         })
     };
-    let language = fit_model(language_heads, &language_vectors)?;
-    let control = fit_model(control_heads, &control_vectors)?;
+    let language = fit_model(
+        language_heads,
+        &language_vectors,
+        settings.compare_counts_in_head,
+    )?;
+    let control = fit_model(control_heads, &control_vectors, false)?;
     Ok(Learned {
         ferret_learned: LEARNED_FORMAT,
         embedding: embedding.to_string(),
@@ -622,6 +688,113 @@ pub fn train(
         language,
         control,
     })
+}
+
+/// One cross-fitted question for [`compare_counts_in_head`].
+struct JointRow {
+    /// The fold whose heads and prior answered it blind.
+    fold: usize,
+    /// The fusion's inputs ([`fusion_features`]).
+    features: [f64; FUSION_WEIGHTS],
+    /// The joint head's inputs: [`head_input`], then the prior's logit and the four gaps.
+    x: Vec<f32>,
+    positives: f64,
+    total: f64,
+    /// Whether the target type was never seen by that fold.
+    unseen: bool,
+}
+
+/// [`CountsInHead`] over cross-fitted rows: for each fold j, the fusion and a joint head are
+/// fitted on the other folds' rows that hold none of fold j's types (`held(i, j)`), and score
+/// fold j's rows.
+fn compare_counts_in_head(
+    rows: &[JointRow],
+    folds: usize,
+    held: &(dyn Fn(usize, usize) -> bool + Sync),
+    settings: &LearnedSettings,
+) -> CountsInHead {
+    let scores: Vec<Vec<(usize, f64, f64)>> = (0..folds)
+        .into_par_iter()
+        .map(|j| {
+            let train: Vec<usize> = (0..rows.len())
+                .filter(|&i| rows[i].fold != j && !held(i, j))
+                .collect();
+            let fusion_rows: Vec<([f64; FUSION_WEIGHTS], f64, f64)> = train
+                .iter()
+                .map(|&i| (rows[i].features, rows[i].positives, rows[i].total))
+                .collect();
+            let mut start = [0.0; FUSION_WEIGHTS];
+            start[0] = 1.0;
+            let mut penalised = [true; FUSION_WEIGHTS];
+            penalised[2] = false;
+            let w = fit_counts(&fusion_rows, start, penalised).unwrap_or(start);
+            let examples: Vec<Example> = train
+                .iter()
+                .map(|&i| Example {
+                    x: rows[i].x.clone(),
+                    positives: rows[i].positives,
+                    total: rows[i].total,
+                })
+                .collect();
+            let heads: Vec<Head> = (0..settings.seeds.max(1))
+                .map(|s| {
+                    let seed = settings
+                        .seed
+                        .wrapping_add((j * settings.seeds.max(1) + s) as u64)
+                        .wrapping_add(2 << 32);
+                    Head::train(&examples, &settings.head, seed)
+                })
+                .collect();
+            (0..rows.len())
+                .filter(|&i| rows[i].fold == j)
+                .map(|i| {
+                    let fused: f64 = rows[i].features.iter().zip(&w).map(|(x, w)| x * w).sum();
+                    (i, fused, mean_logit(&heads, &rows[i].x))
+                })
+                .collect()
+        })
+        .collect();
+    let scored: Vec<(usize, f64, f64)> = scores.into_iter().flatten().collect();
+    let measure = |only_unseen: bool, pick: &dyn Fn(&(usize, f64, f64)) -> f64| {
+        let chosen: Vec<(f64, f64, f64)> = scored
+            .iter()
+            .filter(|s| !only_unseen || rows[s.0].unseen)
+            .map(|s| (pick(s), rows[s.0].positives, rows[s.0].total))
+            .collect();
+        (weighted_auroc(&chosen), grouped_log_loss(&chosen))
+    };
+    let (fusion_auroc, fusion_log_loss) = measure(false, &|s| s.1);
+    let (head_auroc, head_log_loss) = measure(false, &|s| s.2);
+    let (fusion_auroc_unseen, fusion_log_loss_unseen) = measure(true, &|s| s.1);
+    let (head_auroc_unseen, head_log_loss_unseen) = measure(true, &|s| s.2);
+    CountsInHead {
+        fusion_auroc,
+        head_auroc,
+        fusion_log_loss,
+        head_log_loss,
+        fusion_auroc_unseen,
+        head_auroc_unseen,
+        fusion_log_loss_unseen,
+        head_log_loss_unseen,
+    }
+}
+
+/// Mean cross-entropy (nats per container) of logits over grouped rows (logit, positives,
+/// total).
+fn grouped_log_loss(rows: &[(f64, f64, f64)]) -> f64 {
+    let (loss, n) = rows.iter().fold((0.0, 0.0), |(loss, n), &(z, pos, total)| {
+        // −log σ(z) = softplus(−z) and −log(1 − σ(z)) = softplus(z), without overflow.
+        (
+            loss + pos * softplus(-z) + (total - pos) * softplus(z),
+            n + total,
+        )
+    });
+    if n > 0.0 { loss / n } else { 0.0 }
+}
+
+/// ln(1 + e^x), exact for large |x|.
+fn softplus(x: f64) -> f64 {
+    if x > 30.0 { x } else { x.exp().ln_1p() }
 }
 
 /// The mean of the heads' logits for `x`.

@@ -47,6 +47,7 @@ fn settings() -> LearnedSettings {
             epochs: 3,
             ..HeadSettings::default()
         },
+        compare_counts_in_head: false,
     }
 }
 
@@ -121,6 +122,54 @@ fn the_same_inputs_give_the_same_file_and_another_seed_another() {
         &LearnedSettings { seed: 6, ..s },
     );
     assert_ne!(json(&a), json(&other));
+}
+
+/// Measuring counts built into the head changes no answer and nothing of a file trained
+/// without it; both ways are scored out of fold, where the counts and the names carry signal.
+#[test]
+fn comparing_counts_in_the_head_measures_both_ways_and_changes_no_answer() {
+    let scenes = scenes(15);
+    let names = every_name(&scenes);
+    let s = LearnedSettings {
+        head: HeadSettings {
+            hidden: vec![8],
+            epochs: 40,
+            ..HeadSettings::default()
+        },
+        ..settings()
+    };
+    let plain = trained(&scenes, vectors(&names, "", &|_| false), &s);
+    let json = serde_json::to_string(&plain).unwrap();
+    assert!(
+        !json.contains("counts_in_head"),
+        "a file without the comparison is as before"
+    );
+    let compared = trained(
+        &scenes,
+        vectors(&names, "", &|_| false),
+        &LearnedSettings {
+            compare_counts_in_head: true,
+            ..s.clone()
+        },
+    );
+    assert_eq!(compared.language.heads, plain.language.heads);
+    assert_eq!(compared.language.fusion, plain.language.fusion);
+    assert_eq!(compared.control, plain.control);
+    assert!(plain.language.counts_in_head.is_none());
+    let j = compared.language.counts_in_head.clone().unwrap();
+    // Out of fold, the fusion ranks about as the in-sample fit does, and far above chance: the
+    // counted prior is in it. The joint head has the same inputs and must beat chance too.
+    assert!(
+        (j.fusion_auroc - compared.language.score.fused_auroc).abs() < 0.05,
+        "{j:?}"
+    );
+    assert!(j.fusion_auroc > 0.7 && j.head_auroc > 0.6, "{j:?}");
+    for loss in [j.fusion_log_loss, j.head_log_loss] {
+        assert!(
+            loss.is_finite() && loss > 0.0 && loss < std::f64::consts::LN_2,
+            "{j:?}"
+        );
+    }
 }
 
 #[test]

@@ -459,6 +459,17 @@ run_learned() {
     log "done in $((SECONDS - t0)) s ($online s with the server); outputs in $OUT"
 }
 
+# Everything a run needs before it starts: the data, the cached install, the output folder and
+# its configuration, the server.
+start_lane() {
+    need_data
+    install
+    mkdir -p "$OUT"
+    OUT="$(cd "$OUT" && pwd)"
+    write_config
+    serve
+}
+
 case "${1:-all}" in
     install) install ;;
     config)
@@ -467,30 +478,15 @@ case "${1:-all}" in
         echo "$OUT/ferret.toml"
         ;;
     all)
-        need_data
-        install
-        mkdir -p "$OUT"
-        OUT="$(cd "$OUT" && pwd)"
-        write_config
-        serve
+        start_lane
         run
         ;;
     unseen)
-        need_data
-        install
-        mkdir -p "$OUT"
-        OUT="$(cd "$OUT" && pwd)"
-        write_config
-        serve
+        start_lane
         run_unseen
         ;;
     learned)
-        need_data
-        install
-        mkdir -p "$OUT"
-        OUT="$(cd "$OUT" && pwd)"
-        write_config
-        serve
+        start_lane
         run_learned
         ;;
     *) echo "usage: $0 [install|config|all|unseen|learned]" >&2; exit 2 ;;

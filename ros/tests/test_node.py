@@ -228,6 +228,17 @@ def test_unknown_scene_and_empty_target_are_refused(start_node, robot):
     assert r.status == Status.REFUSED and "another-house" in r.message, r.message
 
 
+def searches_as_deployed(client, nav, rows):
+    """Each row's target searched through the node: the strategy chosen, the container it was
+    found in and the cost are those of `ferret deploy`'s row."""
+    for row in rows:
+        nav.reset()
+        _, result, _ = client.send(row["target"])
+        assert result.status == Status.FOUND, result.message
+        assert (result.strategy, result.container) == (row["chosen"], row["found_container"])
+        assert math.isclose(result.cost_m, float(row["cost_m"]), abs_tol=1e-9)
+
+
 def deploy_rows(tmp_path, targets):
     run_ferret(
         "deploy", "--houses", str(SCENE), "--find", ",".join(targets),
@@ -294,12 +305,7 @@ def test_learned_likelihood_reaches_the_node(start_node, robot, house, tmp_path,
         "ferret_learned", strategies=strategies, prior=str(prior), seed=0,
         plan_from_robot_pose=False,
     )
-    for row in rows:
-        nav.reset()
-        _, result, _ = client.send(row["target"])
-        assert result.status == Status.FOUND, result.message
-        assert (result.strategy, result.container) == (row["chosen"], row["found_container"])
-        assert math.isclose(result.cost_m, float(row["cost_m"]), abs_tol=1e-9)
+    searches_as_deployed(client, nav, rows)
 
 
 def test_without_nav2_goals_go_to_goal_pose(start_node, robot, house, tmp_path):
@@ -378,12 +384,7 @@ def test_serve_backend_makes_the_same_searches(start_node, robot, house, ferret_
         "ferret_serve_backend", backend="serve", serve_url=ferret_serve, serve_scene="apartment",
         strategies=STRATEGIES, seed=0, plan_from_robot_pose=False,
     )
-    for row in rows:
-        nav.reset()
-        _, result, _ = client.send(row["target"])
-        assert result.status == Status.FOUND, result.message
-        assert (result.strategy, result.container) == (row["chosen"], row["found_container"])
-        assert math.isclose(result.cost_m, float(row["cost_m"]), abs_tol=1e-9)
+    searches_as_deployed(client, nav, rows)
     with urllib.request.urlopen(ferret_serve + "/deployments/1", timeout=5) as r:
         state = json.loads(r.read())
     assert [t["target"] for t in state["trials"]] == targets

@@ -908,3 +908,40 @@ fn a_procthor_10k_style_house_runs_under_the_paper_protocol() {
     let md = std::fs::read_to_string(soft_out.join("summary.md")).unwrap();
     assert!(md.contains("As the reference code averages"), "{md}");
 }
+
+/// Sizes no machine holds are refused with the bounds before anything is allocated (they
+/// panicked with "capacity overflow" or aborted after gigabytes).
+#[test]
+fn bench_serve_and_hold_outs_refuse_sizes_past_their_bounds() {
+    for args in [
+        &["--deployments", "18446744073709551615"][..],
+        &["--trials", "18446744073709551615"],
+        &["--deployments", "100000000"],
+        &["--deployments", "5000", "--trials", "5000"],
+        &["--replicas", "100000"],
+    ] {
+        let mut all = vec!["bench", "serve"];
+        all.extend_from_slice(args);
+        let o = ferret(&all);
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {t}");
+        assert!(t.contains("at most"), "{args:?}: {t}");
+    }
+    let dir = tempfile::tempdir().unwrap();
+    for h in ["18446744073709551615", "1/100000", "1001"] {
+        let o = ferret(&[
+            "eval",
+            "--generate",
+            "2",
+            "--strategies",
+            "model/prior",
+            "--holdout-types",
+            h,
+            "--out",
+            s(&dir.path().join("e")),
+        ]);
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(2), "{h}: {t}");
+        assert!(t.contains("--holdout-types"), "{h}: {t}");
+    }
+}

@@ -294,3 +294,42 @@ fn on_real_houses_the_calibrated_prior_beats_the_raw_one_and_a_fused_control() {
     // Fusing noise into the calibrated prior buys nothing worth a request.
     assert!((mean("fused/noise") - mean("model/prior")).abs() < 1.0);
 }
+
+/// A calibration fold count that cannot calibrate is refused, not trained into an uncalibrated
+/// prior with exit 0.
+#[test]
+fn prior_train_refuses_calibration_folds_it_cannot_use() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("p.json");
+    let train = |folds: &str| {
+        ferret(&[
+            "prior",
+            "train",
+            "--generate",
+            "10",
+            "--calibration-folds",
+            folds,
+            "--out",
+            s(&out),
+        ])
+    };
+    for bad in ["1", "6", "18446744073709551615"] {
+        let o = train(bad);
+        let t = text(&o);
+        assert!(!o.status.success(), "{bad}: {t}");
+        assert!(t.contains(&format!("--calibration-folds {bad}")), "{t}");
+        assert!(!out.exists(), "{bad}: a prior was written");
+    }
+    let o = train("0");
+    assert!(
+        o.status.success() && text(&o).contains("not calibrated"),
+        "{}",
+        text(&o)
+    );
+    let o = train("5");
+    assert!(
+        o.status.success() && text(&o).contains("5-fold"),
+        "{}",
+        text(&o)
+    );
+}

@@ -306,3 +306,59 @@ fn val150_three_shards_merged_are_one_machine() {
     let db = data.join("databases/asset-database.json");
     shards_equal_one_machine(&["--houses", s(&houses), "--asset-db", s(&db)], 3);
 }
+
+/// `merge --out` into one of its own shards (or inside one, or a folder holding one) would
+/// replace what it reads: refused before anything is written, the shards as they were.
+#[test]
+fn merge_refuses_an_out_that_is_or_holds_a_shard() {
+    let dir = tempfile::tempdir().unwrap();
+    let runs = dir.path().join("runs");
+    let shards: Vec<_> = (0..2).map(|i| runs.join(format!("sh{i}"))).collect();
+    for (i, d) in shards.iter().enumerate() {
+        eval(&["--generate", "4"], d, Some(&format!("{i}/2")));
+    }
+    // Every file of every shard, with its bytes.
+    let contents = || -> Vec<Vec<(std::ffi::OsString, Vec<u8>)>> {
+        shards
+            .iter()
+            .map(|d| {
+                let mut files: Vec<_> = std::fs::read_dir(d)
+                    .unwrap()
+                    .map(|e| {
+                        let e = e.unwrap();
+                        let bytes = std::fs::read(e.path()).unwrap_or_default();
+                        (e.file_name(), bytes)
+                    })
+                    .collect();
+                files.sort();
+                files
+            })
+            .collect()
+    };
+    let before = contents();
+    let through_dots = shards[1].join("..").join("sh0");
+    for (out, says) in [
+        (shards[0].clone(), "is the shard"),
+        (through_dots, "is the shard"),
+        (shards[1].join("merged"), "is inside or contains"),
+        (runs.clone(), "is inside or contains"),
+    ] {
+        let o = ferret(&["merge", "--out", s(&out), s(&shards[0]), s(&shards[1])]);
+        let t = text(&o);
+        assert!(
+            !o.status.success() && t.contains(says),
+            "--out {out:?}: {t}"
+        );
+        assert!(!shards[1].join("merged").exists());
+    }
+    assert!(contents() == before, "a refused merge changed a shard");
+    // A folder of its own beside them is fine.
+    let o = ferret(&[
+        "merge",
+        "--out",
+        s(&dir.path().join("merged")),
+        s(&shards[0]),
+        s(&shards[1]),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+}

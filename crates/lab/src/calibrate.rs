@@ -163,6 +163,13 @@ impl CalibrationSettings {
                 self.bins
             )));
         }
+        if self.fit_unseen_folds > ferret_plan::holdout::MAX_FOLDS {
+            return Err(LabError::invalid(format!(
+                "--fit-unseen-folds {}: at most {} folds",
+                self.fit_unseen_folds,
+                ferret_plan::holdout::MAX_FOLDS
+            )));
+        }
         let mut needed = self.sources.clone();
         if self.fit_fusion {
             if self.fitted().is_empty() {

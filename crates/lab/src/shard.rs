@@ -65,10 +65,20 @@ impl std::str::FromStr for Shard {
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         let bad = || ShardError::Syntax(s.to_string());
         let (i, n) = s.trim().split_once('/').ok_or_else(bad)?;
-        let i: usize = i.trim().parse().map_err(|_| bad())?;
-        let n: usize = n.trim().parse().map_err(|_| bad())?;
+        let i = digits(i).ok_or_else(bad)?;
+        let n = digits(n).ok_or_else(bad)?;
         Self::new(i, n)
     }
+}
+
+/// A number written as decimal digits only: `+1`, ` 1` and `1 ` (which `usize`'s own parsing or
+/// a trim would take) are refused, since a batch system never writes them and a mistyped
+/// variable should not run a shard.
+fn digits(s: &str) -> Option<usize> {
+    if s.is_empty() || !s.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    s.parse().ok()
 }
 
 /// `--shard` as given: a fixed shard, or `auto` (from the batch system's environment).
@@ -110,13 +120,19 @@ impl ShardSpec {
         let num = |name: &str| -> Result<Option<usize>, ShardError> {
             match var(name) {
                 None => Ok(None),
-                Some(v) => v
-                    .trim()
-                    .parse()
-                    .map(Some)
-                    .map_err(|_| ShardError::Env(format!("{name}={v:?} is not a number"))),
+                Some(v) => digits(&v).map(Some).ok_or_else(|| {
+                    ShardError::Env(format!("{name}={v:?} is not a number (digits only)"))
+                }),
             }
         };
+        if var("SLURM_ARRAY_TASK_ID").is_some() && var("JOB_COMPLETION_INDEX").is_some() {
+            return Err(ShardError::Env(
+                "--shard auto: both a Slurm array task (SLURM_ARRAY_TASK_ID) and a Kubernetes \
+                 Indexed Job (JOB_COMPLETION_INDEX) are in the environment, so the shard is \
+                 ambiguous: unset one, or give --shard i/n"
+                    .into(),
+            ));
+        }
         if let Some(id) = num("SLURM_ARRAY_TASK_ID")? {
             let count = num("SLURM_ARRAY_TASK_COUNT")?.ok_or_else(|| {
                 ShardError::Env(
@@ -566,6 +582,24 @@ pub struct MergedDir {
     pub complete: Vec<usize>,
 }
 
+/// Refuses a merge's `out` that is one of the shard folders `dirs`, inside one, or holds one:
+/// writing there would replace what the merge reads (and a rerun could not be made).
+pub fn check_out(dirs: &[PathBuf], out: &Path) -> crate::Result<()> {
+    match dirs.iter().find(|d| crate::files::nested(d, out)) {
+        None => Ok(()),
+        Some(d) => Err(crate::LabError::invalid(format!(
+            "--out {} {} the shard {}: write the merge to a folder of its own",
+            out.display(),
+            if crate::files::resolved(out) == crate::files::resolved(d) {
+                "is"
+            } else {
+                "is inside or contains"
+            },
+            d.display()
+        ))),
+    }
+}
+
 /// [`merge_runs`] of the shards in `dirs`, written into `out` (which must exist) as
 /// [`MergedRun::write_all`] writes it, byte for byte, without holding the rows: every shard's
 /// trials.csv is read row by row and the rows merged in house order into the merged trials.csv,
@@ -576,6 +610,7 @@ pub struct MergedDir {
 /// A shard directory that [`EvalRun::read`] refuses; the refusals of [`merge_runs`]; a shard's
 /// trials.csv not in house order; I/O errors writing `out` (which then keeps what it held).
 pub fn merge_dirs(dirs: &[PathBuf], out: &Path) -> crate::Result<MergedDir> {
+    check_out(dirs, out)?;
     let infos: Vec<RunInfo> = dirs
         .iter()
         .map(|d| crate::runs::read_checked_info(d))
@@ -822,5 +857,34 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains(SHARD_COUNT_VAR), "{e}");
+    }
+
+    #[test]
+    fn auto_refuses_two_batch_systems_and_numbers_that_are_not_plain_digits() {
+        let both = [
+            ("SLURM_ARRAY_TASK_ID", "1"),
+            ("SLURM_ARRAY_TASK_COUNT", "3"),
+            ("JOB_COMPLETION_INDEX", "1"),
+            (SHARD_COUNT_VAR, "3"),
+        ];
+        let e = ShardSpec::Auto.resolve(env(&both)).unwrap_err().to_string();
+        assert!(e.contains("ambiguous"), "{e}");
+        for bad in [" 1", "+1", "1 ", "", "-1", "1_0"] {
+            let vars = [
+                ("SLURM_ARRAY_TASK_ID", bad),
+                ("SLURM_ARRAY_TASK_COUNT", "3"),
+            ];
+            let e = ShardSpec::Auto.resolve(env(&vars)).unwrap_err().to_string();
+            assert!(e.contains("not a number"), "{bad:?}: {e}");
+            let vars = [("JOB_COMPLETION_INDEX", "0"), (SHARD_COUNT_VAR, bad)];
+            assert!(ShardSpec::Auto.resolve(env(&vars)).is_err(), "{bad:?}");
+        }
+        for bad in ["+1/3", "1/+3", "1 / 3", "0x1/3"] {
+            assert!(
+                matches!(bad.parse::<Shard>(), Err(ShardError::Syntax(_))),
+                "{bad}"
+            );
+        }
+        assert_eq!(" 1/3 ".parse::<Shard>(), Ok(Shard { index: 1, count: 3 }));
     }
 }

@@ -23,15 +23,21 @@ pub struct HoldOut {
     fold: Option<usize>,
 }
 
+/// The most folds a hold-out may have: ProcTHOR's houses hold about a hundred target types, so
+/// more folds than this leave nearly every fold empty (and each fold is a prior to build).
+pub const MAX_FOLDS: usize = 1_000;
+
 impl HoldOut {
-    /// Every fold of `folds` in turn; `None` for fewer than 2 folds.
+    /// Every fold of `folds` in turn; `None` for fewer than 2 folds or more than [`MAX_FOLDS`].
     pub fn every_fold(folds: usize) -> Option<Self> {
-        (folds >= 2).then_some(Self { folds, fold: None })
+        (2..=MAX_FOLDS)
+            .contains(&folds)
+            .then_some(Self { folds, fold: None })
     }
 
-    /// Fold `fold` (from 0) of `folds`; `None` when out of range.
+    /// Fold `fold` (from 0) of `folds`; `None` when out of range or more than [`MAX_FOLDS`].
     pub fn one_fold(fold: usize, folds: usize) -> Option<Self> {
-        (folds >= 2 && fold < folds).then_some(Self {
+        ((2..=MAX_FOLDS).contains(&folds) && fold < folds).then_some(Self {
             folds,
             fold: Some(fold),
         })
@@ -81,16 +87,24 @@ impl FromStr for HoldOut {
                 .parse::<usize>()
                 .map_err(|_| format!("`{s}`: expected N (every fold of N) or K/N (fold K of N)"))
         };
+        let count = |n: usize| {
+            if n < 2 {
+                Err(format!("`{s}`: at least 2 folds"))
+            } else if n > MAX_FOLDS {
+                Err(format!(
+                    "`{s}`: at most {MAX_FOLDS} folds (the houses hold about a hundred target types; more folds leave them empty)"
+                ))
+            } else {
+                Ok(n)
+            }
+        };
         match s.split_once('/') {
             None => {
-                let n = number(s)?;
-                Self::every_fold(n).ok_or_else(|| format!("`{s}`: at least 2 folds"))
+                let n = count(number(s)?)?;
+                Self::every_fold(n).ok_or_else(|| format!("`{s}`: no such hold-out"))
             }
             Some((k, n)) => {
-                let (k, n) = (number(k)?, number(n)?);
-                if n < 2 {
-                    return Err(format!("`{s}`: at least 2 folds"));
-                }
+                let (k, n) = (number(k)?, count(number(n)?)?);
                 if k == 0 || k > n {
                     return Err(format!("`{s}`: the fold is counted from 1 to {n}"));
                 }
@@ -125,9 +139,19 @@ mod tests {
         assert_eq!(one.to_string(), "2/5");
         let every: HoldOut = "5".parse().unwrap();
         assert_eq!(every.to_string(), "5");
-        for bad in ["0/5", "6/5", "1", "x/5", "1/1", ""] {
+        for bad in ["0/5", "6/5", "1", "x/5", "1/1", "", "1001", "1/100000"] {
             assert!(bad.parse::<HoldOut>().is_err(), "{bad}");
         }
+        // Numbers past usize are refused as numbers, not counted into a capacity.
+        for bad in [
+            "18446744073709551615",
+            "18446744073709551616",
+            "1/18446744073709551615",
+        ] {
+            assert!(bad.parse::<HoldOut>().is_err(), "{bad}");
+        }
+        assert_eq!("1000".parse::<HoldOut>().unwrap().folds(), MAX_FOLDS);
+        assert!(HoldOut::every_fold(MAX_FOLDS + 1).is_none());
         let json = serde_json::to_string(&one).unwrap();
         assert_eq!(json, "\"2/5\"");
         assert_eq!(serde_json::from_str::<HoldOut>(&json).unwrap(), one);

@@ -330,11 +330,23 @@ pub struct Prior {
     hidden: Option<Arc<Hidden>>,
 }
 
-/// The priors of a [`HoldOut`]: one per fold, each without that fold's types.
-#[derive(Clone, Debug, PartialEq)]
+/// The priors of a [`HoldOut`]: one per fold, each without that fold's types, made when a
+/// question first needs it (a run holding out fold 1 of 1 000 needs one of them, and each is a
+/// copy of the prior).
+#[derive(Debug)]
 struct Hidden {
     holdout: HoldOut,
-    priors: Vec<Prior>,
+    /// The prior the folds forget from.
+    base: Prior,
+    priors: Vec<std::sync::OnceLock<Prior>>,
+}
+
+impl PartialEq for Hidden {
+    /// The fold priors are the base's, made on demand: equal bases and hold-outs are equal
+    /// whatever was asked so far.
+    fn eq(&self, other: &Self) -> bool {
+        self.holdout == other.holdout && self.base == other.base
+    }
 }
 
 impl Prior {
@@ -507,14 +519,17 @@ impl Prior {
     /// holds out for it (its calibration is kept: two numbers fitted over all types, which
     /// carry no one type's counts).
     pub fn holding_out(&self, holdout: HoldOut) -> Prior {
+        let base = self.without_hidden();
         let priors = (0..holdout.folds())
-            .map(|f| {
-                self.without_types(&|t: &ObjectType| HoldOut::fold_of(t, holdout.folds()) == f)
-            })
+            .map(|_| std::sync::OnceLock::new())
             .collect();
         Prior {
-            hidden: Some(Arc::new(Hidden { holdout, priors })),
-            ..self.without_hidden()
+            hidden: Some(Arc::new(Hidden {
+                holdout,
+                base: base.clone(),
+                priors,
+            })),
+            ..base
         }
     }
 
@@ -548,7 +563,16 @@ impl Prior {
     /// The prior whose counts answer questions about `target`.
     fn counts_for(&self, target: &ObjectType) -> &Prior {
         match &self.hidden {
-            Some(h) => h.priors.get(h.holdout.prior_fold(target)).unwrap_or(self),
+            Some(h) => {
+                let k = h.holdout.prior_fold(target);
+                let folds = h.holdout.folds();
+                h.priors.get(k).map_or(self, |cell| {
+                    cell.get_or_init(|| {
+                        h.base
+                            .without_types(&|t: &ObjectType| HoldOut::fold_of(t, folds) == k)
+                    })
+                })
+            }
             None => self,
         }
     }
@@ -799,5 +823,41 @@ impl LikelihoodSource for RawPrior {
         Ok(per_container(house, |container, room| {
             self.0.raw_probability(target, container, room)
         }))
+    }
+}
+
+#[cfg(test)]
+mod hold_out_tests {
+    use super::*;
+
+    /// A hold-out of a thousand folds builds only the fold priors its questions need: before,
+    /// it copied the prior a thousand times up front (and `1/100000` ran out of memory).
+    #[test]
+    fn a_hold_out_builds_only_the_folds_it_is_asked_about() {
+        let scenes = ferret_world::generate::default_scenes(6, 3).unwrap();
+        let prior = Prior::count(&scenes, 2.0);
+        let held = prior.holding_out(HoldOut::every_fold(crate::holdout::MAX_FOLDS).unwrap());
+        let built = |p: &Prior| {
+            p.hidden
+                .as_ref()
+                .map_or(0, |h| h.priors.iter().filter(|c| c.get().is_some()).count())
+        };
+        assert_eq!(built(&held), 0);
+        let house = &scenes[0].house;
+        let targets = scenes[0].truth.target_types();
+        for t in &targets {
+            held.likelihoods(house, t).unwrap();
+        }
+        let folds: std::collections::BTreeSet<usize> = targets
+            .iter()
+            .map(|t| HoldOut::fold_of(t, crate::holdout::MAX_FOLDS))
+            .collect();
+        assert_eq!(built(&held), folds.len());
+        // Asking again builds nothing more; a clone shares what was built.
+        let again = held.clone();
+        again
+            .likelihoods(house, targets.iter().next().unwrap())
+            .unwrap();
+        assert_eq!(built(&again), folds.len());
     }
 }

@@ -114,6 +114,13 @@ pub fn scene_schema(limits: &crate::service::SceneLimits) -> serde_json::Value {
     })
 }
 
+/// A write request that may carry a request id, in its `request_id` field or (as the IETF
+/// Idempotency-Key draft has it) in an `Idempotency-Key` header, with the same meaning.
+pub trait WithRequestId {
+    /// The request's id.
+    fn request_id_mut(&mut self) -> &mut Option<String>;
+}
+
 /// `POST /scenes`.
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
@@ -460,4 +467,28 @@ pub struct ErrorDetail {
     pub field: String,
     /// What is wrong.
     pub message: String,
+}
+
+impl WithRequestId for UploadScene {
+    fn request_id_mut(&mut self) -> &mut Option<String> {
+        &mut self.request_id
+    }
+}
+
+impl WithRequestId for CreateDeployment {
+    fn request_id_mut(&mut self) -> &mut Option<String> {
+        &mut self.request_id
+    }
+}
+
+impl WithRequestId for StartTrial {
+    fn request_id_mut(&mut self) -> &mut Option<String> {
+        &mut self.request_id
+    }
+}
+
+impl WithRequestId for Observe {
+    fn request_id_mut(&mut self) -> &mut Option<String> {
+        &mut self.request_id
+    }
 }

@@ -33,7 +33,7 @@ use utoipa_axum::routes;
 
 use crate::api::{
     CreateDeployment, DeploymentState, ErrorBody, ErrorDetail, Observe, SceneDetail, SceneSummary,
-    StartTrial, TrialState, UploadScene,
+    StartTrial, TrialState, UploadScene, WithRequestId,
 };
 use crate::error::{ApiError, ErrorKind};
 use crate::model::{ApiReply, Outcome};
@@ -244,16 +244,54 @@ struct JsonBody<T> {
     raw: Bytes,
 }
 
-impl<S: Send + Sync, T: DeserializeOwned> FromRequest<S> for JsonBody<T> {
+impl<S: Send + Sync, T: DeserializeOwned + WithRequestId> FromRequest<S> for JsonBody<T> {
     type Rejection = ApiError;
 
     async fn from_request(req: Request, state: &S) -> Result<Self, ApiError> {
         let headers = req.headers().clone();
         let raw = body(&headers, Bytes::from_request(req, state).await)?;
-        let value = parse(&raw)?;
+        let mut value: T = parse(&raw)?;
+        if let Some(key) = idempotency_key(&headers)? {
+            let id = value.request_id_mut();
+            match id {
+                Some(given) if *given != key => {
+                    return Err(ApiError::new(
+                        ErrorKind::Malformed,
+                        "request_id",
+                        "the body's request_id and the Idempotency-Key header differ; give one, or both the same",
+                    ));
+                }
+                _ => *id = Some(key),
+            }
+        }
         Ok(Self { value, raw })
     }
 }
+
+/// The `Idempotency-Key` header's key: a structured-field string (`"abc"`, the draft's form) or a
+/// bare value, taken as written. Two such headers, or one that is not text, are refused.
+fn idempotency_key(headers: &HeaderMap) -> Result<Option<String>, ApiError> {
+    let mut all = headers.get_all(IDEMPOTENCY_KEY).iter();
+    let Some(value) = all.next() else {
+        return Ok(None);
+    };
+    let bad = |message: &str| ApiError::new(ErrorKind::Malformed, IDEMPOTENCY_KEY, message);
+    if all.next().is_some() {
+        return Err(bad("given twice"));
+    }
+    let text = value
+        .to_str()
+        .map_err(|_| bad("not visible ASCII text"))?
+        .trim();
+    let key = match text.strip_prefix('"').and_then(|t| t.strip_suffix('"')) {
+        Some(inner) => inner.replace("\\\"", "\"").replace("\\\\", "\\"),
+        None => text.to_string(),
+    };
+    Ok(Some(key))
+}
+
+/// The header of the IETF Idempotency-Key draft.
+const IDEMPOTENCY_KEY: &str = "idempotency-key";
 
 /// A path segment, or 404 for one that is not valid UTF-8 once decoded.
 struct Segment<K>(String, PhantomData<K>);
@@ -340,7 +378,7 @@ async fn get_scene(
     blocking(move || s.get_scene(&name)).await
 }
 
-#[utoipa::path(post, path = "/scenes", request_body = UploadScene, responses(
+#[utoipa::path(post, path = "/scenes", request_body = UploadScene, params(("Idempotency-Key" = Option<String>, Header, description = "The request id, as the request_id field (either, or both the same)")), responses(
     (status = 200, description = "The same scene was uploaded before", body = SceneDetail),
     (status = 201, body = SceneDetail),
     (status = 413, description = "The body, or the store of uploaded scenes, is over its limit", body = ErrorBody)))]
@@ -348,7 +386,7 @@ async fn upload_scene(State(s): State<Arc<Service>>, b: JsonBody<UploadScene>) -
     blocking(move || s.upload_scene(b.value, &b.raw)).await
 }
 
-#[utoipa::path(post, path = "/deployments", request_body = CreateDeployment,
+#[utoipa::path(post, path = "/deployments", request_body = CreateDeployment, params(("Idempotency-Key" = Option<String>, Header, description = "The request id, as the request_id field (either, or both the same)")),
     responses((status = 201, body = DeploymentState)))]
 async fn create_deployment(
     State(s): State<Arc<Service>>,
@@ -365,7 +403,7 @@ async fn get_deployment(State(s): State<Arc<Service>>, Id(id, _): Id<DeploymentI
 }
 
 #[utoipa::path(post, path = "/deployments/{id}/trials", request_body = StartTrial,
-    params(("id" = i64, Path, description = "Deployment id", minimum = 1)),
+    params(("id" = i64, Path, description = "Deployment id", minimum = 1), ("Idempotency-Key" = Option<String>, Header, description = "The request id, as the request_id field (either, or both the same)")),
     responses((status = 201, body = TrialState),
         (status = 404, description = "No such deployment", body = ErrorBody),
         (status = 503, description = "A strategy could not plan (an LLM endpoint is down); retry later", body = ErrorBody)))]
@@ -387,7 +425,7 @@ async fn get_trial(State(s): State<Arc<Service>>, Id(trial, _): Id<TrialId>) -> 
 
 #[utoipa::path(post, path = "/trials/{id}/observations", request_body = Observe,
     operation_id = "observe",
-    params(("id" = i64, Path, description = "Trial id", minimum = 1)),
+    params(("id" = i64, Path, description = "Trial id", minimum = 1), ("Idempotency-Key" = Option<String>, Header, description = "The request id, as the request_id field (either, or both the same)")),
     responses((status = 200, body = TrialState),
         (status = 404, description = "No such trial", body = ErrorBody),
         (status = 503, description = "A strategy could not plan (an LLM endpoint is down); retry later", body = ErrorBody)))]
@@ -685,13 +723,51 @@ struct Guards {
     token: Option<Arc<str>>,
     origins: Vec<String>,
     hosts: Option<Hosts>,
+    max_body_bytes: usize,
 }
 
 impl Guards {
     fn check(&self, req: &Request) -> Result<(), ApiError> {
         let headers: &HeaderMap = req.headers();
+        // RFC 9112 §3.2: an HTTP/1.1 request has exactly one Host; a target in absolute form
+        // names the host itself, which must then be the one the Host header names.
+        let mut hosts_given = headers.get_all(header::HOST).iter();
+        let host = hosts_given.next();
+        let bad_host = |message: &str| Err(ApiError::new(ErrorKind::Malformed, "host", message));
+        if hosts_given.next().is_some() {
+            return bad_host("more than one Host header");
+        }
+        if host.is_none() && req.version() == axum::http::Version::HTTP_11 {
+            return bad_host("an HTTP/1.1 request needs a Host header");
+        }
+        if let Some(target) = req.uri().authority()
+            && req.version() <= axum::http::Version::HTTP_11
+            && !host.is_some_and(|h| {
+                h.as_bytes()
+                    .eq_ignore_ascii_case(target.as_str().as_bytes())
+            })
+        {
+            return bad_host("the request target names another host than the Host header");
+        }
+        // A declared body past the limit is refused before it is waited for.
+        if let Some(length) = headers.get(header::CONTENT_LENGTH)
+            && length
+                .to_str()
+                .ok()
+                .and_then(|l| l.parse::<u64>().ok())
+                .is_some_and(|l| l > self.max_body_bytes as u64)
+        {
+            return Err(ApiError::new(
+                ErrorKind::TooLarge,
+                "",
+                format!(
+                    "the body is declared larger than the server's limit of {} bytes",
+                    self.max_body_bytes
+                ),
+            ));
+        }
         if let Some(hosts) = &self.hosts
-            && let Some(host) = headers.get(header::HOST)
+            && let Some(host) = host
             && !host.to_str().is_ok_and(|h| hosts.allows(h))
         {
             return Err(ApiError::new(
@@ -754,6 +830,7 @@ pub fn router(service: Arc<Service>, options: &HttpOptions) -> Result<Router, Ap
         token: options.token.as_deref().map(Arc::from),
         origins: options.cors_origins.clone(),
         hosts,
+        max_body_bytes: options.max_body_bytes,
     });
     let doc: Arc<str> = Arc::from(
         document(
@@ -783,7 +860,11 @@ pub fn router(service: Arc<Service>, options: &HttpOptions) -> Result<Router, Ap
             CorsLayer::new()
                 .allow_origin(AllowOrigin::list(origins))
                 .allow_methods([Method::GET, Method::POST])
-                .allow_headers([header::AUTHORIZATION, header::CONTENT_TYPE]),
+                .allow_headers([
+                    header::AUTHORIZATION,
+                    header::CONTENT_TYPE,
+                    header::HeaderName::from_static(IDEMPOTENCY_KEY),
+                ]),
         );
     }
     Ok(app)

@@ -939,3 +939,131 @@ fn a_yaw_is_within_a_turn_and_c_and_host_are_read_as_they_mean() {
         assert_eq!(raw(s.addr, &req).0, status, "{host}");
     }
 }
+
+/// RFC 9112 §3.2: no Host on HTTP/1.1, two Host headers, or a target in absolute form naming
+/// another host are refused 400 (they were served); HTTP/1.0 may omit Host.
+#[test]
+fn requests_without_one_host_of_their_own_are_refused() {
+    let s = start(Setup::default());
+    let port = s.addr.port();
+    let refused = [
+        "GET /scenes HTTP/1.1\r\nConnection: close\r\n\r\n".to_string(),
+        format!(
+            "GET /scenes HTTP/1.1\r\nHost: {}\r\nHost: {}\r\nConnection: close\r\n\r\n",
+            s.addr, s.addr
+        ),
+        format!(
+            "GET http://evil.example:{port}/scenes HTTP/1.1\r\nHost: {}\r\nConnection: close\r\n\r\n",
+            s.addr
+        ),
+    ];
+    for req in &refused {
+        let (status, body) = raw(s.addr, req);
+        assert_eq!(status, 400, "{req:?}: {}", String::from_utf8_lossy(&body));
+        let v: Value = serde_json::from_slice(&body).unwrap();
+        assert_eq!(v["error"]["field"], "host", "{v}");
+    }
+    let served = [
+        format!(
+            "GET /scenes HTTP/1.1\r\nHost: {}\r\nConnection: close\r\n\r\n",
+            s.addr
+        ),
+        format!(
+            "GET http://{}/scenes HTTP/1.1\r\nHost: {}\r\nConnection: close\r\n\r\n",
+            s.addr, s.addr
+        ),
+        "GET /scenes HTTP/1.0\r\n\r\n".to_string(),
+    ];
+    for req in &served {
+        assert_eq!(raw(s.addr, req).0, 200, "{req:?}");
+    }
+}
+
+/// A body declared past the limit is answered 413 at once (it waited for the body deadline and
+/// answered 408), and nothing is created.
+#[test]
+fn a_body_declared_too_large_is_refused_at_once() {
+    let s = start(Setup {
+        serve: ServeOptions {
+            body_timeout: Duration::from_secs(30),
+            ..ServeOptions::default()
+        },
+        ..Setup::default()
+    });
+    let mut c = std::net::TcpStream::connect(s.addr).unwrap();
+    c.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    write!(
+        c,
+        "POST /deployments HTTP/1.1\r\nHost: {}\r\nContent-Type: application/json\r\nContent-Length: 1000000000000\r\n\r\n{{",
+        s.addr
+    )
+    .unwrap();
+    let started = std::time::Instant::now();
+    let mut reply = [0u8; 512];
+    let n = c.read(&mut reply).unwrap();
+    let text = String::from_utf8_lossy(&reply[..n]);
+    assert!(text.starts_with("HTTP/1.1 413"), "{text}");
+    // Not the 30 s body deadline: answered as soon as the headers were read.
+    assert!(started.elapsed() < Duration::from_secs(10));
+    let (_, listed) = get(&s, "/deployments/1", &[]);
+    assert!(
+        String::from_utf8_lossy(&listed).contains("no deployment"),
+        "{}",
+        String::from_utf8_lossy(&listed)
+    );
+}
+
+/// The IETF draft's `Idempotency-Key` header means what the `request_id` field means (it was
+/// ignored: two identical POSTs made two deployments); both given and different is a 400.
+#[test]
+fn the_idempotency_key_header_is_a_request_id() {
+    let s = start(Setup::default());
+    let json = "Content-Type: application/json";
+    let (st, first) = post(
+        &s,
+        "/deployments",
+        &[json, "Idempotency-Key: \"k-1\""],
+        "{}",
+    );
+    assert_eq!(st, 201, "{first}");
+    for key in ["Idempotency-Key: \"k-1\"", "idempotency-key: \"k-1\""] {
+        let (st, again) = post(&s, "/deployments", &[json, key], "{}");
+        assert_eq!((st, &again), (201, &first), "{key}");
+    }
+    // A bare value, and the same id in the body: one request, as with the field alone.
+    let (_, bare) = post(&s, "/deployments", &[json, "Idempotency-Key: k-2"], "{}");
+    let (_, field) = post(&s, "/deployments", &[json], r#"{"request_id":"k-2"}"#);
+    assert_ne!(bare["id"], first["id"]);
+    assert_eq!(
+        field["id"],
+        json!(null),
+        "the field's body differs: 422, not a new deployment"
+    );
+    let (st, both) = post(
+        &s,
+        "/deployments",
+        &[json, "Idempotency-Key: k-2"],
+        r#"{"request_id":"k-2"}"#,
+    );
+    assert_eq!(st, 422, "the same id for another body: {both}");
+    let (st, differ) = post(
+        &s,
+        "/deployments",
+        &[json, "Idempotency-Key: k-3"],
+        r#"{"request_id":"k-4"}"#,
+    );
+    assert_eq!(st, 400, "{differ}");
+    assert_eq!(differ["error"]["field"], "request_id");
+    let (st, twice) = post(
+        &s,
+        "/deployments",
+        &[json, "Idempotency-Key: a", "Idempotency-Key: b"],
+        "{}",
+    );
+    assert_eq!(st, 400, "{twice}");
+    let (st, _) = post(&s, "/deployments", &[json, "Idempotency-Key: \"\""], "{}");
+    assert_eq!(st, 400, "an empty key");
+    // Two deployments in all: k-1 and k-2.
+    let (_, third) = post(&s, "/deployments", &[json], "{}");
+    assert_eq!(third["id"].as_i64(), Some(3), "{third}");
+}

@@ -161,6 +161,13 @@ struct ServeLine {
     mismatched_deployments: usize,
 }
 
+/// The most robots `bench serve` runs (one thread each).
+const MAX_BENCH_DEPLOYMENTS: usize = 10_000;
+/// The most trials in all (each planned up front).
+const MAX_BENCH_TRIALS: usize = 1_000_000;
+/// The most `ferret serve` processes it starts.
+const MAX_BENCH_REPLICAS: usize = 64;
+
 fn serve(args: ServeArgs) -> Result<ExitCode> {
     use std::sync::Arc;
 
@@ -168,6 +175,19 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
 
     if args.deployments == 0 || args.trials == 0 || args.replicas == 0 {
         anyhow::bail!("--deployments, --trials and --replicas must be at least 1");
+    }
+    // Every trial is planned up front and every deployment is a robot thread: bounds that a
+    // machine can hold, refused before anything is allocated.
+    if args.deployments > MAX_BENCH_DEPLOYMENTS
+        || args.replicas > MAX_BENCH_REPLICAS
+        || args.deployments.saturating_mul(args.trials) > MAX_BENCH_TRIALS
+    {
+        anyhow::bail!(
+            "--deployments {} × --trials {} on --replicas {}: at most {MAX_BENCH_DEPLOYMENTS} deployments, {MAX_BENCH_TRIALS} trials in all and {MAX_BENCH_REPLICAS} replicas",
+            args.deployments,
+            args.trials,
+            args.replicas
+        );
     }
     let in_process = args.replicas == 1
         && args.kill_replica_after.is_none()

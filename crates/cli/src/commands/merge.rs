@@ -65,6 +65,8 @@ pub fn run(args: Args) -> Result<ExitCode> {
     }
     let mut status = ExitCode::SUCCESS;
     if !args.runs.is_empty() {
+        // Before the lock, which would leave its file in a shard given as --out.
+        ferret_lab::shard::check_out(&args.runs, &args.out)?;
         let mut lock = ferret_lab::files::DirLock::acquire(&args.out)?;
         let merged = ferret_lab::shard::merge_dirs(&args.runs, &args.out)?;
         lock.used();

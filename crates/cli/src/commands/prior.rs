@@ -32,10 +32,11 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = 2.0)]
     smoothing: f64,
     /// Folds of the cross-fitting that calibrates the prior's probabilities on its own training
-    /// houses (Platt scaling, recorded in the file); 0 leaves them as counted. Fewer than two
-    /// houses per fold also leaves them as counted.
-    #[arg(long, value_name = "N", default_value_t = ferret_plan::CALIBRATION_FOLDS)]
-    calibration_folds: usize,
+    /// houses (Platt scaling, recorded in the file); 0 leaves them as counted. Given, it must
+    /// be 0 or between 2 and half the training houses; by default 5, or none (and said so) when
+    /// there are fewer than ten houses.
+    #[arg(long, value_name = "N")]
+    calibration_folds: Option<usize>,
     /// Also train the learned likelihood (`model/learned`) over these word embeddings (a
     /// folder; `scripts/embeddings.sh install` prints one). The file keeps the vector of every
     /// name it embedded, so runs need the folder only for names their training houses never
@@ -122,8 +123,22 @@ fn train(args: TrainArgs) -> Result<ExitCode> {
     if !(args.learned_weight_decay.is_finite() && (0.0..1.0).contains(&args.learned_weight_decay)) {
         anyhow::bail!("--learned-weight-decay: a number in [0, 1)");
     }
+    let houses = loaded.scenes.len();
+    let calibration_folds = match args.calibration_folds {
+        None => ferret_plan::CALIBRATION_FOLDS,
+        Some(0) => 0,
+        Some(k) if (2..=houses / 2).contains(&k) => k,
+        Some(k) => anyhow::bail!(
+            "--calibration-folds {k}: 0 (no calibration) or between 2 and half the training houses ({houses} here{})",
+            if houses >= 4 {
+                ""
+            } else {
+                ": too few to calibrate, give 0"
+            }
+        ),
+    };
     let started = std::time::Instant::now();
-    let mut prior = Prior::train_with(&loaded.scenes, args.smoothing, args.calibration_folds);
+    let mut prior = Prior::train_with(&loaded.scenes, args.smoothing, calibration_folds);
     let mut learned_line = String::new();
     if let Some(dir) = &args.embeddings {
         let embeddings = ferret_lab::language::open_embeddings(dir)?;

@@ -136,6 +136,16 @@ def fusions(out, title, files):
 
 
 def lane(out):
+    calibration(
+        out,
+        "With the LLM: calibration (a target per house; the workshop every target)",
+        [
+            ("val150, unseen types (5 folds), GloVe", "learned-cal-unseen-glove"),
+            ("val150, seen types, GloVe", "learned-cal-seen-glove"),
+            ("workshop, GloVe", "learned-cal-workshop-glove"),
+            ("workshop, MiniLM", "learned-cal-workshop-minilm"),
+        ],
+    )
     fusions(
         out,
         "P-YESNO fused with the prior and with the learned likelihood (fitted on training houses)",

@@ -419,6 +419,8 @@ run_learned() {
     local strategies="model/prior,model/learned,model/learned-random,llm+model/p-yesno/qwen"
     strategies+=",fused/p-yesno/qwen,fused/noise,fused-learned/p-yesno/qwen,fused-learned/noise"
     local pairs=(--paired-against model/prior,model/learned,fused/noise,fused-learned/noise)
+    local sources="model/uniform,model/prior,model/learned,model/learned-random"
+    sources+=",llm+model/p-yesno/qwen,fused/p-yesno/qwen,fused/noise,fused-learned/p-yesno/qwen,fused-learned/noise"
     cd "$OUT"
     local t0=$SECONDS
     "$ferret" llm ping qwen --config ferret.toml
@@ -436,6 +438,12 @@ run_learned() {
             --max-fallback-share "$MAX_FALLBACK" --sources llm+model/p-yesno/qwen,model/noise \
             --fit-fusion "fusion-$e.json" --fit-unseen-folds "$FOLDS" --out "learned-fit-$e"
         if [ "$e" = glove ]; then
+            log "$e: calibration on val150 $ALL_RANGE (a target per house), unseen and seen types"
+            "$ferret" calibrate "${val[@]}" "${common[@]}" --holdout-types "$FOLDS" \
+                --targets-per-house 1 --sources "$sources" --max-fallback-share "$MAX_FALLBACK" \
+                --out "learned-cal-unseen-$e"
+            "$ferret" calibrate "${val[@]}" "${common[@]}" --targets-per-house 1 \
+                --sources "$sources" --max-fallback-share "$MAX_FALLBACK" --out "learned-cal-seen-$e"
             log "$e: unseen types, val150 $ALL_RANGE, each trial's target held out ($FOLDS folds)"
             "$ferret" eval "${val[@]}" "${common[@]}" --holdout-types "$FOLDS" \
                 --strategies "$strategies" "${pairs[@]}" --max-fallback-share "$MAX_FALLBACK" \
@@ -445,6 +453,9 @@ run_learned() {
                 --max-fallback-share "$MAX_FALLBACK" --out "learned-seen-$e"
         fi
         log "$e: the workshop scene"
+        "$ferret" calibrate --houses "$ROOT/examples/workshop/scene.yaml" "${common[@]}" \
+            --embeddings "$folder" --sources "$sources" --max-fallback-share "$MAX_FALLBACK" \
+            --out "learned-cal-workshop-$e"
         "$ferret" eval --houses "$ROOT/examples/workshop/scene.yaml" "${common[@]}" \
             --embeddings "$folder" --trials-per-house all --strategies "$strategies" "${pairs[@]}" \
             --max-fallback-share "$MAX_FALLBACK" --out "learned-workshop-$e"

@@ -447,25 +447,88 @@ fn counts_of_generated_houses_are_bounded() {
     }
 }
 
-/// Two evals into one directory both reported success while only the later one's files
-/// remained: a run claims its output directory, and a second one is refused while it runs.
-#[test]
-fn a_second_run_into_a_busy_output_directory_is_refused() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("e");
-    std::fs::create_dir_all(&out).unwrap();
-    // As a running eval holds it.
+/// `dir`'s lock file, held as a running ferret run holds it (until dropped).
+fn hold_lock(dir: &Path) -> std::fs::File {
+    std::fs::create_dir_all(dir).unwrap();
     let lock = std::fs::OpenOptions::new()
         .create(true)
         .truncate(false)
         .write(true)
-        .open(out.join(".ferret-lock"))
+        .open(dir.join(".ferret-lock"))
         .unwrap();
     {
         use std::os::fd::AsRawFd;
         // SAFETY: flock on a descriptor this test owns.
         assert_eq!(unsafe { libc::flock(lock.as_raw_fd(), libc::LOCK_EX) }, 0);
     }
+    lock
+}
+
+/// `select`, `deploy` and `calibrate` took no lock: two into one directory both wrote. Each
+/// now claims its output directory as `eval` does, and is refused while another holds it.
+#[test]
+fn select_deploy_and_calibrate_refuse_a_busy_output_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    assert!(eval(&run, "0", "6").status.success());
+    let busy = dir.path().join("busy");
+    let lock = hold_lock(&busy);
+    let commands: [(&[&str], &str); 3] = [
+        (
+            &[
+                "select",
+                "--trials",
+                s(&run),
+                "--deployments",
+                "3",
+                "--trials-per-deployment",
+                "3",
+            ],
+            "selection.csv",
+        ),
+        (
+            &[
+                "deploy",
+                "--generate",
+                "4",
+                "--trials",
+                "4",
+                "--strategies",
+                STRATEGIES,
+            ],
+            "deploy.csv",
+        ),
+        (
+            &["calibrate", "--generate", "3", "--sources", "model/uniform"],
+            "calibration.csv",
+        ),
+    ];
+    for (args, file) in commands {
+        let mut all = args.to_vec();
+        all.extend_from_slice(&["--out", s(&busy)]);
+        let o = ferret(&all);
+        assert!(!o.status.success(), "{args:?}: {}", text(&o));
+        assert!(stderr(&o).contains("another ferret run"), "{}", stderr(&o));
+        assert!(!busy.join(file).exists(), "{args:?} wrote {file}");
+    }
+    drop(lock);
+    for (args, file) in commands {
+        let mut all = args.to_vec();
+        all.extend_from_slice(&["--out", s(&busy)]);
+        let o = ferret(&all);
+        assert!(o.status.success(), "{args:?}: {}", text(&o));
+        assert!(busy.join(file).exists(), "{args:?}");
+    }
+}
+
+/// Two evals into one directory both reported success while only the later one's files
+/// remained: a run claims its output directory, and a second one is refused while it runs.
+#[test]
+fn a_second_run_into_a_busy_output_directory_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("e");
+    // As a running eval holds it.
+    let lock = hold_lock(&out);
     let o = eval(&out, "0", "2");
     assert!(!o.status.success());
     assert!(stderr(&o).contains("another ferret run"), "{}", stderr(&o));

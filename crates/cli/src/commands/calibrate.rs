@@ -112,8 +112,10 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
     if loaded.scenes.is_empty() {
         anyhow::bail!("no houses to score in {}", loaded.source);
     }
-    let setup =
-        super::llm_setup::full_registry(&args.planning, &args.llm, &settings.specs_to_build()?)?;
+    let specs = settings.specs_to_build()?;
+    // Claimed before the work, so that a second run into the same directory stops at once.
+    let mut out_lock = ferret_lab::files::DirLock::acquire(&args.out)?;
+    let setup = super::llm_setup::full_registry(&args.planning, &args.llm, &specs)?;
     let done = calibrate(
         &loaded,
         &setup,
@@ -121,6 +123,7 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
         &settings,
         &Bars::default(),
     )?;
+    out_lock.used();
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     for e in &done.errors {

@@ -102,6 +102,8 @@ pub fn run(args: Args) -> Result<ExitCode> {
     for s in &loaded.skipped {
         eprintln!("skipped: {s}");
     }
+    // Claimed before the work, so that a second run into the same directory stops at once.
+    let mut out_lock = ferret_lab::files::DirLock::acquire(&args.out)?;
     let setup = full_registry(&args.planning, &args.llm, &args.strategies)?;
     let candidates: Vec<Arc<dyn Strategy>> = args
         .strategies
@@ -181,6 +183,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
             rows.push(row);
         },
     )?;
+    out_lock.used();
     std::fs::create_dir_all(&args.out)?;
     write_csv(&args.out.join("deploy.csv"), &rows)?;
     super::llm_setup::write_token_report(&setup.service, &args.out)?;

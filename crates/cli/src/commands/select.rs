@@ -67,6 +67,8 @@ pub fn run(args: Args) -> Result<ExitCode> {
     };
     // Options are checked before the run is read, so a typo is reported first.
     validate(&options)?;
+    // Claimed first, so that a second run into the same directory stops at once.
+    let mut out_lock = ferret_lab::files::DirLock::acquire(&args.out)?;
     let run = EvalRun::read(&args.trials)?;
     let protocol = args.protocol.resolve(run.info.protocol)?;
     let done = select(
@@ -77,6 +79,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         &options,
         &Bars::default(),
     )?;
+    out_lock.used();
     if let Some(service) = &done.replay.service {
         super::llm_setup::write_token_report(service, &args.out)?;
     }

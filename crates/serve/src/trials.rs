@@ -68,24 +68,11 @@ impl Service {
             target: ObjectType::new(req.target.clone()),
             revealed: Vec::new(),
         };
-        for _ in 0..START_ATTEMPTS {
-            let trials = self.store.read(|r| r.trials_of(deployment))?;
-            if spec.sequential
-                && let Some(open) = trials.iter().find(|t| t.status == TrialStatus::Searching)
-            {
-                return Err(ApiError::new(
-                    ErrorKind::Conflict,
-                    "deployment",
-                    format!(
-                        "trial {} of deployment {deployment} is still searching and the deployment is sequential; finish it first",
-                        open.id
-                    ),
-                ));
-            }
-            let snapshot = snapshot(&trials);
-            let chosen = self
-                .deployment(&spec, &trials, candidates.clone())?
-                .choose_overlapping();
+        let trials = self.store.read(|r| r.trials_of(deployment))?;
+        check_sequential(&spec, deployment, &trials)?;
+        let snapshot = snapshot(&trials);
+        // The first container's plan for a choice, made without holding the deployment.
+        let plan_for = |chosen: usize| -> Result<Planned, ApiError> {
             let owner = Owner {
                 placed: placed.clone(),
                 trial: trial.clone(),
@@ -99,71 +86,70 @@ impl Service {
                 .with_dependent_mut(|_, search| search.next_container())
                 .map_err(plan_error)?
                 .map(|c| next_container(&placed, Place::Start, c));
-            let mut created = None;
-            let k = trials.len() as i64 + 1;
-            let started = claim.complete(&route, body, |w| {
-                w.lock_deployment(deployment)?;
-                if w.reader().trial_counts(deployment)? != snapshot {
-                    return Err(stale());
+            Ok(Planned { chosen, live, next })
+        };
+        let chosen = self
+            .deployment(&spec, &trials, candidates.clone())?
+            .choose_overlapping();
+        let mut planned = Some(plan_for(chosen)?);
+        let mut created = None;
+        let started = claim.complete(&route, body, |w| {
+            w.lock_deployment(deployment)?;
+            // Under the deployment's lock, the choice from the trials as they are now: another
+            // robot's start or end since the plan above rarely changes it, and when it does the
+            // new choice is planned here, so a start is never refused for being overtaken.
+            let (now, k) = if w.reader().trial_counts(deployment)? == snapshot {
+                (snapshot, trials.len() as i64 + 1)
+            } else {
+                let fresh = w.reader().trials_of(deployment)?;
+                check_sequential(&spec, deployment, &fresh)?;
+                let again = self
+                    .deployment(&spec, &fresh, candidates.clone())?
+                    .choose_overlapping();
+                if planned.as_ref().is_none_or(|p| p.chosen != again) {
+                    tracing::debug!(deployment, "the choice changed while the trial was planned");
+                    planned = Some(plan_for(again)?);
                 }
-                if spec.sequential && snapshot.open > 0 {
-                    return Err(ApiError::new(
-                        ErrorKind::Conflict,
-                        "deployment",
-                        "another trial was started at the same time and the deployment is sequential",
-                    ));
-                }
-                let id = w.insert_trial(&NewTrial {
+                (self::snapshot(&fresh), fresh.len() as i64 + 1)
+            };
+            let Some(p) = planned.as_ref() else {
+                return Err(ApiError::internal("no plan for the trial"));
+            };
+            let id = w.insert_trial(&NewTrial {
+                deployment,
+                k,
+                scene: &req.scene,
+                target: &req.target,
+                pose: req.pose,
+                chosen: p.chosen,
+                started_after: now.ended as i64,
+            })?;
+            created = Some(id);
+            json(
+                Outcome::Created,
+                &TrialState {
+                    trial: id,
                     deployment,
                     k,
-                    scene: &req.scene,
-                    target: &req.target,
-                    pose: req.pose,
-                    chosen,
-                    started_after: snapshot.ended as i64,
-                })?;
-                created = Some(id);
-                json(
-                    Outcome::Created,
-                    &TrialState {
-                        trial: id,
-                        deployment,
-                        k,
-                        scene: req.scene.clone(),
-                        target: req.target.clone(),
-                        strategy: spec.strategies[chosen].clone(),
-                        status: TrialStatus::Searching,
-                        searched: Vec::new(),
-                        cost_m: 0.0,
-                        travelled_m: None,
-                        next: next.clone(),
-                        replays_m: None,
-                    },
-                )
-            });
-            // A reply stored meanwhile by another run of the request id rolled the insert back.
-            if let (Ok(_), Some(id)) = (&started, created)
-                && claim.wrote()
-            {
-                self.searches.keep(id, 0, live);
-            }
-            match started {
-                Err(e) if is_stale(&e) => {
-                    tracing::debug!(
-                        deployment,
-                        "deployment changed while a trial was planned; planning again"
-                    );
-                }
-                other => return other,
-            }
+                    scene: req.scene.clone(),
+                    target: req.target.clone(),
+                    strategy: spec.strategies[p.chosen].clone(),
+                    status: TrialStatus::Searching,
+                    searched: Vec::new(),
+                    cost_m: 0.0,
+                    travelled_m: None,
+                    next: p.next.clone(),
+                    replays_m: None,
+                },
+            )
+        });
+        // A reply stored meanwhile by another run of the request id rolled the insert back.
+        if let (Ok(_), Some(id), Some(p)) = (&started, created, planned)
+            && claim.wrote()
+        {
+            self.searches.keep(id, 0, p.live);
         }
-        Err(ApiError::new(
-            ErrorKind::Conflict,
-            "deployment",
-            format!(
-                "deployment {deployment} changed {START_ATTEMPTS} times while this trial was planned; retry"
-            ),
-        ))
+        started
     }
 
     fn trial_row(&self, id: i64) -> Result<StoredTrial, ApiError> {
@@ -381,8 +367,31 @@ impl Service {
         reply
     }
 }
-/// How often a trial's start is planned again when its deployment keeps changing under it.
-const START_ATTEMPTS: usize = 8;
+/// A trial's first step, planned for the strategy `chosen`.
+struct Planned {
+    chosen: usize,
+    live: LiveSearch,
+    next: Option<NextContainer>,
+}
+
+/// 409 while a sequential deployment has a trial searching.
+fn check_sequential(
+    spec: &DeploymentSpec,
+    deployment: i64,
+    trials: &[StoredTrial],
+) -> Result<(), ApiError> {
+    match trials.iter().find(|t| t.status == TrialStatus::Searching) {
+        Some(open) if spec.sequential => Err(ApiError::new(
+            ErrorKind::Conflict,
+            "deployment",
+            format!(
+                "trial {} of deployment {deployment} is still searching and the deployment is sequential; finish it first",
+                open.id
+            ),
+        )),
+        _ => Ok(()),
+    }
+}
 
 /// What a trial's choice depends on: how many trials started and how many ended.
 fn snapshot(trials: &[StoredTrial]) -> TrialCounts {
@@ -394,16 +403,6 @@ fn snapshot(trials: &[StoredTrial]) -> TrialCounts {
             .filter(|t| t.status == TrialStatus::Searching)
             .count(),
     }
-}
-
-const STALE: &str = "the deployment changed while this trial was planned";
-
-fn stale() -> ApiError {
-    ApiError::new(ErrorKind::Conflict, "deployment", STALE)
-}
-
-fn is_stale(e: &ApiError) -> bool {
-    e.kind == ErrorKind::Conflict && e.message == STALE
 }
 
 /// A stored trial with what it needs to plan its next step.

@@ -10,7 +10,10 @@
 #
 # Needs Debian's PostgreSQL: a throwaway cluster is started (scripts/postgres.sh) unless
 # FERRET_TEST_POSTGRES names a server. FERRET_BIN runs a given ferret instead of building this
-# checkout's; FERRET_FIG_RUNS sets how many runs of each (default 2).
+# checkout's; FERRET_FIG_RUNS sets how many runs of each (default 2). Then robots sharing one
+# deployment (`--shared-deployment`), the servers of FERRET_BEFORE_BIN and of this checkout under
+# the same robots (`--serve-bin`), on SQLite and on two replicas with PostgreSQL;
+# FERRET_FIG_SHARED_ONLY=1 runs only those.
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
@@ -24,7 +27,7 @@ fi
 log() { printf '[fleet-figures %s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }
 if [ -z "${FERRET_TEST_POSTGRES:-}" ]; then
     eval "$("$ROOT/scripts/postgres.sh" start)"
-    trap '"$ROOT/scripts/postgres.sh" stop "$FERRET_PG_DIR"' EXIT
+    pg_started="$FERRET_PG_DIR"
 fi
 houses=(--houses "$DATA/multiroom-val150.jsonl.gz" --asset-db "$DATA/databases/asset-database.json"
     --range 0..40)
@@ -36,7 +39,10 @@ run() {
     "$@" "${houses[@]}" --json | tr -d '\n '
     echo
 }
+tmp="$(mktemp -d)"
+trap 'rm -rf "$tmp"; if [ -n "${pg_started:-}" ]; then "$ROOT/scripts/postgres.sh" stop "$pg_started"; fi' EXIT
 for ((i = 1; i <= RUNS; i++)); do
+    [ "${FERRET_FIG_SHARED_ONLY:-0}" = 1 ] && break
     if [ -n "${FERRET_BEFORE_BIN:-}" ]; then
         run "sqlite-before" "$FERRET_BEFORE_BIN" bench serve
     fi
@@ -48,5 +54,23 @@ for ((i = 1; i <= RUNS; i++)); do
     run "postgres-2-replicas-kept-replays-0" "$ferret" bench serve --replicas 2 --db "$db" \
         --kept-replays 0
 done
-db="$("$ROOT/scripts/postgres.sh" new-db "fleet_$$_kill")"
-run "postgres-2-replicas-kill" "$ferret" bench serve --replicas 2 --db "$db" --kill-replica-after 5
+if [ "${FERRET_FIG_SHARED_ONLY:-0}" != 1 ]; then
+    db="$("$ROOT/scripts/postgres.sh" new-db "fleet_$$_kill")"
+    run "postgres-2-replicas-kill" "$ferret" bench serve --replicas 2 --db "$db" --kill-replica-after 5
+fi
+# A fleet sharing one deployment: every server a process of its own (`--serve-bin`), so that the
+# version before and this one run under the same robots.
+for ((i = 1; i <= RUNS; i++)); do
+    for who in before this; do
+        bin="$ferret"
+        if [ "$who" = before ]; then
+            [ -n "${FERRET_BEFORE_BIN:-}" ] || continue
+            bin="$FERRET_BEFORE_BIN"
+        fi
+        run "shared-sqlite-$who" "$ferret" bench serve --shared-deployment --serve-bin "$bin" \
+            --db "$tmp/shared-$who-$i.sqlite"
+        db="$("$ROOT/scripts/postgres.sh" new-db "fleet_$$_shared_${who}_$i")"
+        run "shared-postgres-2-replicas-$who" "$ferret" bench serve --shared-deployment \
+            --serve-bin "$bin" --replicas 2 --db "$db"
+    done
+done

@@ -714,6 +714,22 @@ fn health_reports_a_database_that_cannot_be_read() {
     assert_eq!(st, 503, "{}", String::from_utf8_lossy(&body));
     let body: Value = serde_json::from_slice(&body).unwrap();
     assert_eq!(body["error"]["status"], 503);
+    // A 503 says when to try again, so a robot tells it from a refusal.
+    let mut c = std::net::TcpStream::connect(s.addr).unwrap();
+    write!(
+        c,
+        "GET /health HTTP/1.1\r\nHost: {}\r\nConnection: close\r\n\r\n",
+        s.addr
+    )
+    .unwrap();
+    let mut reply = String::new();
+    c.read_to_string(&mut reply).unwrap();
+    assert!(
+        reply
+            .to_ascii_lowercase()
+            .contains("\r\nretry-after: 1\r\n"),
+        "{reply}"
+    );
 }
 
 /// The document was looser than the server: `selector` a free string, `strategies: []` and

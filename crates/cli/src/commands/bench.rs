@@ -64,6 +64,14 @@ pub struct ServeArgs {
     /// against the others.
     #[arg(long, value_name = "SECS")]
     kill_replica_after: Option<f64>,
+    /// The robots (one per `--deployments`) share one deployment, as a fleet does: its trials
+    /// overlap and each start's choice depends on the others'. Starts refused (409) are counted.
+    #[arg(long)]
+    shared_deployment: bool,
+    /// Run the servers as processes of this `ferret` binary (another version's, to compare
+    /// servers under the same robots in one run) instead of this one.
+    #[arg(long, value_name = "PATH")]
+    serve_bin: Option<std::path::PathBuf>,
     /// Replay costs each server keeps per scene and pose (`ferret serve --kept-replays`); 0
     /// replays every candidate at every trial end.
     #[arg(long, value_name = "N", default_value_t = ferret_serve::ServiceOptions::default().kept_replays)]
@@ -130,6 +138,8 @@ enum Reply {
 #[derive(Serialize)]
 struct ServeLine {
     replicas: usize,
+    /// Whether every robot ran its trials in one shared deployment.
+    shared_deployment: bool,
     database: String,
     /// Replay costs each server keeps per scene and pose.
     kept_replays: usize,
@@ -138,6 +148,8 @@ struct ServeLine {
     requests: usize,
     /// Attempts beyond the first of a request (a replica down, a request id in flight).
     retries: usize,
+    /// Trial starts answered 409 (then retried).
+    refused_starts: usize,
     errors: usize,
     seconds: f64,
     requests_per_second: f64,
@@ -190,6 +202,7 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
         );
     }
     let in_process = args.replicas == 1
+        && args.serve_bin.is_none()
         && args.kill_replica_after.is_none()
         && !args
             .db
@@ -197,7 +210,7 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
             .is_some_and(ferret_serve::is_postgres_url);
     if !in_process && args.houses.houses.is_none() {
         anyhow::bail!(
-            "--replicas, --kill-replica-after and a PostgreSQL --db run `ferret serve` processes, which load --houses: give a house file (`ferret generate --out FILE` writes one)"
+            "--replicas, --kill-replica-after, --serve-bin and a PostgreSQL --db run `ferret serve` processes, which load --houses: give a house file (`ferret generate --out FILE` writes one)"
         );
     }
     if let Some(k) = args.kill_replica_after
@@ -316,6 +329,17 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
             .timeout(std::time::Duration::from_secs(60))
             .build()?;
         let urls = Arc::new(urls.clone());
+        let shared = if args.shared_deployment {
+            let mut creator = Robot::new(client.clone(), urls.clone(), usize::MAX);
+            let created = creator.post("/deployments", serde_json::json!({})).await;
+            Some(
+                created
+                    .and_then(|d| d["id"].as_i64())
+                    .ok_or_else(|| anyhow::anyhow!("the shared deployment was not created"))?,
+            )
+        } else {
+            None
+        };
         let started = Instant::now();
         let tasks: Vec<_> = plans
             .into_iter()
@@ -324,7 +348,7 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
                 let (client, urls, bar) = (client.clone(), urls.clone(), bar.clone());
                 tokio::spawn(async move {
                     let mut robot = Robot::new(client, urls, r);
-                    robot.run(trials, &bar).await;
+                    robot.run(trials, &bar, shared).await;
                     robot
                 })
             })
@@ -349,7 +373,7 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
         let check = Robot::new(client.clone(), Arc::new(urls[alive..].to_vec()), 0);
         let mut verified = Verified::default();
         for robot in &robots {
-            check.verify(robot, &mut verified).await;
+            check.verify(robot, shared.is_some(), &mut verified).await;
         }
         anyhow::Ok((robots, seconds, killed, verified))
     });
@@ -398,10 +422,12 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
     })
     .collect();
     let requests: usize = robots.iter().map(|r| r.requests).sum();
+    let refused_starts: usize = robots.iter().map(|r| r.refused_starts).sum();
     let errors: usize = robots.iter().map(|r| r.errors).sum::<usize>() + verified.errors;
     let size = |p: &std::path::Path| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
     let line = ServeLine {
         replicas: args.replicas,
+        shared_deployment: args.shared_deployment,
         kept_replays: args.kept_replays,
         database: if ferret_serve::is_postgres_url(&db) {
             "postgres".into()
@@ -412,6 +438,7 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
         trials: args.trials,
         requests,
         retries: robots.iter().map(|r| r.retries).sum(),
+        refused_starts,
         errors,
         seconds,
         requests_per_second: requests as f64 / seconds,
@@ -434,11 +461,16 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
         println!("{}", serde_json::to_string_pretty(&line)?);
     } else {
         println!(
-            "{} replica(s) on {} keeping {} replays per scene, {} deployments × {} trials: {} requests in {:.1} s = {:.0} requests/s; next-container reply p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms; {} retries, {} errors",
+            "{} replica(s) on {} keeping {} replays per scene, {} {} × {} trials: {} requests in {:.1} s = {:.0} requests/s; next-container reply p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms; {} retries ({} refused starts), {} errors",
             line.replicas,
             line.database,
             line.kept_replays,
             line.deployments,
+            if line.shared_deployment {
+                "robots sharing one deployment"
+            } else {
+                "deployments"
+            },
             line.trials,
             line.requests,
             line.seconds,
@@ -447,6 +479,7 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
             line.next_p99_ms,
             line.next_max_ms,
             line.retries,
+            line.refused_starts,
             line.errors,
         );
         for k in &line.by_reply {
@@ -486,7 +519,10 @@ fn spawn_replica(
     log: &std::path::Path,
 ) -> Result<(std::process::Child, String)> {
     use std::io::BufRead;
-    let exe = std::env::current_exe().context("finding the ferret executable")?;
+    let exe = match &args.serve_bin {
+        Some(bin) => bin.clone(),
+        None => std::env::current_exe().context("finding the ferret executable")?,
+    };
     let mut cmd = std::process::Command::new(exe);
     cmd.arg("serve");
     if let Some(h) = &args.houses.houses {
@@ -578,6 +614,8 @@ struct Robot {
     latencies: Vec<(Reply, std::time::Duration)>,
     requests: usize,
     retries: usize,
+    /// Starts answered 409.
+    refused_starts: usize,
     errors: usize,
     deployment: Option<i64>,
     /// Per trial started: its id and the containers whose observation was acknowledged.
@@ -610,6 +648,7 @@ impl Robot {
             latencies: Vec::new(),
             requests: 0,
             retries: 0,
+            refused_starts: 0,
             errors: 0,
             deployment: None,
             acked: Vec::new(),
@@ -660,6 +699,9 @@ impl Robot {
             // 409: the same request in flight (on a replica that may have died) or the
             // deployment busy; 5xx: the replica or its database in trouble. Both pass.
             if status.as_u16() == 409 || status.is_server_error() {
+                if status.as_u16() == 409 && path.ends_with("/trials") {
+                    self.refused_starts += 1;
+                }
                 continue;
             }
             tracing::warn!(%path, reply = %value, "request refused");
@@ -669,17 +711,28 @@ impl Robot {
         None
     }
 
-    async fn run(&mut self, trials: Vec<RobotTrial>, bar: &indicatif::ProgressBar) {
+    /// Runs `trials` in a deployment of its own, or in `shared`.
+    async fn run(
+        &mut self,
+        trials: Vec<RobotTrial>,
+        bar: &indicatif::ProgressBar,
+        shared: Option<i64>,
+    ) {
         use serde_json::json;
-        let Some(dep) = self.post("/deployments", json!({})).await else {
-            self.errors += 1;
-            return;
-        };
-        // The latencies that count are those of replies carrying a next container.
-        self.latencies.clear();
-        let Some(id) = dep["id"].as_i64() else {
-            self.errors += 1;
-            return;
+        let id = match shared {
+            Some(id) => id,
+            None => {
+                let created = self.post("/deployments", json!({})).await;
+                // The latencies that count are those of replies carrying a next container.
+                self.latencies.clear();
+                match created.and_then(|d| d["id"].as_i64()) {
+                    Some(id) => id,
+                    None => {
+                        self.errors += 1;
+                        return;
+                    }
+                }
+            }
         };
         self.deployment = Some(id);
         for (scene, target, contents) in trials {
@@ -743,7 +796,7 @@ impl Robot {
 
     /// Reads `robot`'s deployment and trials back: its trials exactly, each acknowledged
     /// observation once.
-    async fn verify(&self, robot: &Robot, out: &mut Verified) {
+    async fn verify(&self, robot: &Robot, shared: bool, out: &mut Verified) {
         let Some(id) = robot.deployment else { return };
         match self.get(&format!("/deployments/{id}")).await {
             Some(dep) => {
@@ -752,7 +805,19 @@ impl Robot {
                     .map(|t| t.iter().filter_map(|t| t["trial"].as_i64()).collect())
                     .unwrap_or_default();
                 let started: Vec<i64> = robot.acked.iter().map(|(t, _)| *t).collect();
-                if stored != started {
+                // A shared deployment holds every robot's trials: this robot's must be among
+                // them, in its order.
+                let mismatched = if shared {
+                    let mine: Vec<i64> = stored
+                        .iter()
+                        .copied()
+                        .filter(|t| started.contains(t))
+                        .collect();
+                    mine != started
+                } else {
+                    stored != started
+                };
+                if mismatched {
                     out.mismatched += 1;
                 }
             }

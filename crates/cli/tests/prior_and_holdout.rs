@@ -333,3 +333,34 @@ fn prior_train_refuses_calibration_folds_it_cannot_use() {
         text(&o)
     );
 }
+
+/// One held-out fold without any trial of these houses is refused before anything runs (it ran
+/// every house and then failed with "no trial finished"); every fold of the same count runs.
+#[test]
+fn a_held_out_fold_without_trials_is_refused_up_front() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("e");
+    let eval = |holdout: &str| {
+        ferret(&[
+            "eval",
+            "--generate",
+            "2",
+            "--strategies",
+            "model/prior",
+            "--holdout-types",
+            holdout,
+            "--out",
+            s(&out),
+        ])
+    };
+    let o = eval("1/1000");
+    let t = text(&o);
+    assert!(!o.status.success(), "{t}");
+    assert!(
+        t.contains("--holdout-types 1/1000") && t.contains("nothing would run"),
+        "{t}"
+    );
+    assert!(!out.exists(), "a refused run left {out:?}");
+    let o = eval("1000");
+    assert!(o.status.success(), "{}", text(&o));
+}

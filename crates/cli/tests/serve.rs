@@ -528,3 +528,47 @@ fn a_replica_killed_mid_burst_loses_and_doubles_no_acknowledged_observation() {
         assert_eq!(line[field], 0, "{field}: {line}");
     }
 }
+
+/// Robots sharing one deployment (`bench serve --shared-deployment`): every start answered
+/// (none refused while other robots' starts and ends change the deployment), every robot's
+/// trials stored in the one deployment in its order, every acknowledged observation once.
+#[test]
+fn bench_serve_runs_robots_sharing_one_deployment_without_refusals() {
+    let out = ferret(&[
+        "bench",
+        "serve",
+        "--generate",
+        "6",
+        "--strategies",
+        STRATEGIES,
+        "--deployments",
+        "12",
+        "--trials",
+        "4",
+        "--shared-deployment",
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    let line: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(line["shared_deployment"], true, "{line}");
+    let starts = line["by_reply"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|k| k["reply"] == "start")
+        .map(|k| k["count"].as_u64().unwrap());
+    assert_eq!(starts, Some(48), "{line}");
+    for field in [
+        "refused_starts",
+        "errors",
+        "lost_observations",
+        "duplicated_observations",
+        "mismatched_deployments",
+    ] {
+        assert_eq!(line[field], 0, "{field}: {line}");
+    }
+    assert!(
+        line["verified_observations"].as_u64().unwrap() >= 48,
+        "{line}"
+    );
+}

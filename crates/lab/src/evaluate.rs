@@ -302,6 +302,26 @@ pub fn evaluate_source_each(
     )
 }
 
+/// With one held-out fold (`--holdout-types K/N`), refuses a run none of whose trials has a
+/// target of that fold: it would plan nothing and fail at its end. The houses are read once
+/// more for it (as far as the first such trial); with every fold, or none, nothing is read.
+pub fn check_holdout_has_trials(source: &OpenSource<'_>, draw: &TrialDraw<'_>) -> Result<()> {
+    let Some(holdout) = draw.holdout.filter(|h| h.fold().is_some()) else {
+        return Ok(());
+    };
+    for event in source.houses()? {
+        if let HouseEvent::Scene(scene) = event?
+            && draw.trials(&scene).is_ok_and(|t| !t.is_empty())
+        {
+            return Ok(());
+        }
+    }
+    Err(crate::LabError::invalid(format!(
+        "--holdout-types {holdout}: no trial of these houses has a target of that fold's types, so nothing would run; take another fold, or every fold (`--holdout-types {}`)",
+        holdout.folds()
+    )))
+}
+
 /// Houses that can be read from the start as often as needed.
 struct Houses<'a, 'h> {
     open: &'a dyn Fn() -> Result<HouseStream<'h>>,

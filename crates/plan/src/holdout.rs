@@ -48,6 +48,11 @@ impl HoldOut {
         self.folds
     }
 
+    /// The held-out fold (from 0), or `None` for every fold in turn.
+    pub fn fold(&self) -> Option<usize> {
+        self.fold
+    }
+
     /// The fold of `t` among `folds`: the first eight bytes of the SHA-256 of its name, modulo
     /// `folds`. The same on every machine and in every version, and independent of the houses.
     pub fn fold_of(t: &ObjectType, folds: usize) -> usize {

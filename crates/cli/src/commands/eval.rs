@@ -134,6 +134,7 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
         protocol: &protocol,
         holdout: args.planning.holdout_types,
     };
+    ferret_lab::evaluate::check_holdout_has_trials(&open, &draw)?;
     // Claimed before the evaluation, so that a second run into the same directory stops at
     // once rather than after its work, its files then replacing this one's.
     let mut out_lock = ferret_lab::files::DirLock::acquire(&args.out)?;

@@ -1083,3 +1083,44 @@ fn the_idempotency_key_header_is_a_request_id() {
     let (_, third) = post(&s, "/deployments", &[json], "{}");
     assert_eq!(third["id"].as_i64(), Some(3), "{third}");
 }
+
+/// An SQLite file emptied (`truncate -s 0`) or replaced while the server runs: `/health` stayed
+/// 200 and writes were acknowledged and then lost. Now `/health` is 503 and writes are refused
+/// (503, to be retried once the database is back), nothing acknowledged that cannot be kept.
+#[test]
+fn a_database_file_emptied_or_replaced_underneath_is_not_written_to() {
+    for (how, says) in [("emptied", "emptied"), ("replaced", "put in its place")] {
+        let dir = tempfile::tempdir().unwrap();
+        let db = dir.path().join("s.sqlite");
+        let s = start(Setup {
+            db: Some(db.clone()),
+            ..Setup::default()
+        });
+        let (st, _) = post_json(&s, "/deployments", &json!({}));
+        assert_eq!(st, 201);
+        assert_eq!(get(&s, "/health", &[]).0, 200, "{how}: before");
+        match how {
+            "emptied" => std::fs::OpenOptions::new()
+                .write(true)
+                .open(&db)
+                .unwrap()
+                .set_len(0)
+                .unwrap(),
+            _ => {
+                let other = dir.path().join("other.sqlite");
+                std::fs::copy(&db, &other).unwrap();
+                std::fs::rename(&other, &db).unwrap();
+            }
+        }
+        let (st, body) = get(&s, "/health", &[]);
+        assert_eq!(st, 503, "{how}: {}", String::from_utf8_lossy(&body));
+        for _ in 0..3 {
+            let (st, reply) = post_json(&s, "/deployments", &json!({}));
+            assert_eq!(st, 503, "{how}: {reply}");
+            assert!(
+                reply["error"]["message"].as_str().unwrap().contains(says),
+                "{how}: {reply}"
+            );
+        }
+    }
+}

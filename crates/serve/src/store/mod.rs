@@ -75,6 +75,15 @@ pub enum StoreError {
         /// What is wrong.
         what: String,
     },
+    /// The SQLite file the server opened was emptied, removed or replaced underneath it: what
+    /// it would write now could not be kept.
+    #[error("database {file}: {what}; restart the server on a good copy")]
+    Lost {
+        /// The database file.
+        file: String,
+        /// What happened to it.
+        what: String,
+    },
     /// The database's schema is one this build cannot use.
     #[error("database {db}: {what}")]
     Schema {
@@ -90,7 +99,7 @@ impl StoreError {
     /// a fault in its data: a request may be retried, here or on another replica.
     pub fn is_unavailable(&self) -> bool {
         match self {
-            StoreError::Unreachable { .. } => true,
+            StoreError::Unreachable { .. } | StoreError::Lost { .. } => true,
             StoreError::Postgres { source, .. } => {
                 use tokio_postgres::error::SqlState;
                 source.is_closed()

@@ -47,6 +47,22 @@ pub(super) struct Sqlite {
     /// The last whole-file check: when it started and what it found. Held while a check runs,
     /// so checks asked for meanwhile wait and take its answer instead of reading the file again.
     last_check: Mutex<Option<(Instant, Result<(), String>)>>,
+    /// The file as opened (device and inode): one put in its place is not this database.
+    identity: Option<(u64, u64)>,
+}
+
+/// The device and inode of a file (`None` where the platform has none).
+fn identity_of(meta: &std::fs::Metadata) -> Option<(u64, u64)> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        Some((meta.dev(), meta.ino()))
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = meta;
+        None
+    }
 }
 
 impl rusqlite::ToSql for Value {
@@ -127,6 +143,7 @@ impl Sqlite {
         })?;
         let mut store = Self::init(conn, file)?;
         store.path = Some(path.to_path_buf());
+        store.identity = std::fs::metadata(path).ok().as_ref().and_then(identity_of);
         Ok(store)
     }
 
@@ -166,6 +183,7 @@ impl Sqlite {
             file,
             path: None,
             last_check: Mutex::new(None),
+            identity: None,
         })
     }
 
@@ -175,7 +193,39 @@ impl Sqlite {
             .map_err(|e| self.sql(e))
     }
 
+    /// Whether the file is still the database the server opened: there, the same file, and
+    /// beginning with SQLite's header. A file emptied (`truncate`), removed or replaced while the
+    /// server runs is still served from the connection's cache and its log, and what is written
+    /// then is lost; a stat and a 16-byte read per write see it.
+    pub(super) fn check_in_place(&self) -> Result<(), StoreError> {
+        let Some(path) = &self.path else {
+            return Ok(());
+        };
+        let lost = |what: String| {
+            Err(StoreError::Lost {
+                file: self.file.clone(),
+                what,
+            })
+        };
+        let meta = match std::fs::metadata(path) {
+            Ok(m) => m,
+            Err(e) => return lost(format!("the file is gone ({e})")),
+        };
+        if self.identity.is_some() && identity_of(&meta) != self.identity {
+            return lost("another file was put in its place".into());
+        }
+        let mut header = [0u8; 16];
+        let read = std::fs::File::open(path)
+            .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut header));
+        match read {
+            Ok(()) if &header == b"SQLite format 3\0" => Ok(()),
+            Ok(()) => lost("its header is not SQLite's any more".into()),
+            Err(_) => lost(format!("it was emptied ({} bytes left)", meta.len())),
+        }
+    }
+
     pub(super) fn check_file(&self) -> Result<(), StoreError> {
+        self.check_in_place()?;
         let Some(path) = &self.path else {
             return Ok(());
         };
@@ -219,6 +269,7 @@ impl Sqlite {
         &self,
         f: impl FnOnce(super::Conn<'_>) -> Result<T, E>,
     ) -> Result<T, E> {
+        self.check_in_place()?;
         let mut conn = self.lock();
         // IMMEDIATE: a second process on the same file waits for the write lock (busy timeout)
         // instead of failing when a read turns into a write.

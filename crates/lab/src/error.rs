@@ -34,6 +34,9 @@ pub enum LabError {
     /// A step of the deployment loop failed.
     #[error(transparent)]
     Deployment(#[from] ferret_select::DeploymentError),
+    /// The caller asked to stop ([`Feedback::cancelled`](crate::Feedback::cancelled)).
+    #[error("cancelled")]
+    Cancelled,
     /// A selection needs at least two candidates besides the oracle.
     #[error("selection needs at least two non-oracle strategies")]
     TooFewCandidates,

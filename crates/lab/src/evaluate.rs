@@ -480,6 +480,9 @@ fn run_batches(
 ) -> Result<()> {
     let mut stream = (houses.open)()?;
     loop {
+        if feedback.cancelled() {
+            return Err(crate::LabError::Cancelled);
+        }
         let scenes = next_batch(&mut stream, batch, &mut |why| {
             feedback.note(&format!("skipped: {why}"));
             totals.skipped.push(why);

@@ -16,6 +16,11 @@ pub trait Feedback: Sync {
     fn end(&self) {}
     /// Something the user should read: a skipped house, a dropped cache row, a failure kept.
     fn note(&self, _message: &str) {}
+    /// Whether the user asked to stop (Ctrl-C in Python): long work asks between batches, on
+    /// the thread that called it, and stops with [`LabError::Cancelled`](crate::LabError).
+    fn cancelled(&self) -> bool {
+        false
+    }
 }
 
 /// Shows nothing.

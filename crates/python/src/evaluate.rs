@@ -302,7 +302,7 @@ pub fn evaluate(
     let scenes: Vec<Scene> = scenes_of(&houses).iter().map(|s| Scene::clone(s)).collect();
     let house_indices: Vec<usize> = scenes.iter().map(|s| s.house.index).collect();
     let params = grid.params(&protocol);
-    let feedback = progress::feedback(progress);
+    let feedback = progress::Interruptible::new(progress);
     let outcome = py.allow_threads(|| {
         errors::guarded("evaluate", || {
             let setup = settings::registry(&planning, &llm, &specs, FailurePolicy::StopForRun)
@@ -320,12 +320,17 @@ pub fn evaluate(
                 },
                 &params,
                 &llm,
-                feedback.as_ref(),
+                &feedback,
             )
             .map_err(errors::lab)?;
             Ok(run.evaluation)
         })
-    })?;
+    });
+    // Ctrl-C: the interrupt, not the stop it caused.
+    if let Some(interrupt) = feedback.take() {
+        return Err(interrupt);
+    }
+    let outcome = outcome?;
     if outcome.rows.is_empty() {
         return Err(errors::FerretError::new_err(format!(
             "no trial finished{}",

@@ -106,3 +106,67 @@ pub fn feedback(progress: bool) -> Box<dyn Feedback + Send> {
         Box::new(ferret_lab::Silent)
     }
 }
+
+/// Progress as [`feedback`] shows it, and Ctrl-C: between batches of houses long work asks
+/// [`Feedback::cancelled`] from the thread that called it, and this lets Python run its signal
+/// handlers there (with the GIL, which the work released; only the main thread runs them),
+/// keeping the exception (`KeyboardInterrupt`) to raise once the work has stopped.
+pub struct Interruptible {
+    inner: Box<dyn Feedback + Send>,
+    raised: Mutex<Option<pyo3::PyErr>>,
+}
+
+impl Interruptible {
+    /// Progress on stderr when `progress`.
+    pub fn new(progress: bool) -> Self {
+        Self {
+            inner: feedback(progress),
+            raised: Mutex::new(None),
+        }
+    }
+
+    /// The exception a signal handler raised, if the work was stopped by one.
+    pub fn take(&self) -> Option<pyo3::PyErr> {
+        self.raised.lock().unwrap_or_else(|p| p.into_inner()).take()
+    }
+}
+
+impl Feedback for Interruptible {
+    fn begin(&self, what: &str, len: usize) {
+        self.inner.begin(what, len);
+    }
+
+    fn set_len(&self, len: usize) {
+        self.inner.set_len(len);
+    }
+
+    fn set_done(&self, done: usize) {
+        self.inner.set_done(done);
+    }
+
+    fn tick(&self) {
+        self.inner.tick();
+    }
+
+    fn end(&self) {
+        self.inner.end();
+    }
+
+    fn note(&self, message: &str) {
+        self.inner.note(message);
+    }
+
+    fn cancelled(&self) -> bool {
+        let mut raised = self.raised.lock().unwrap_or_else(|p| p.into_inner());
+        if raised.is_some() {
+            return true;
+        }
+        match pyo3::Python::with_gil(|py| py.check_signals()) {
+            Ok(()) => false,
+            Err(e) => {
+                *raised = Some(e);
+                true
+            }
+        }
+    }
+}

@@ -138,3 +138,23 @@ def test_evaluate_releases_the_gil(houses):
         ticks += 1
     t.join()
     assert ticks > 1_000_000
+
+
+def test_ctrl_c_stops_a_long_evaluation_between_batches():
+    """Ctrl-C (here `_thread.interrupt_main`, what SIGINT does) raises KeyboardInterrupt at the
+    next batch of houses: before, it was seen only when every house had run. The run is sized
+    to take minutes; the interrupt must come back in seconds."""
+    import _thread
+    import threading
+    import time
+
+    houses = ferret.generate_houses(4000, 11)
+    timer = threading.Timer(1.0, _thread.interrupt_main)
+    started = time.monotonic()
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            ferret.evaluate(houses, ["model/uniform/exact"], seed=0)
+    finally:
+        timer.cancel()
+    assert time.monotonic() - started < 15

@@ -8,7 +8,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use common::{data_dir, read_csv, s, text, word_table as table};
+use common::{Server, data_dir, read_csv, s, text, word_table as table};
 
 /// Runs ferret with `args`, without `FERRET_EMBEDDINGS` unless `embeddings` gives it.
 fn run(args: &[&str], embeddings: Option<&Path>) -> Output {
@@ -453,9 +453,9 @@ fn serve_plans_model_learned_as_deploy_does() {
     assert_eq!(deployed.len(), 5);
     assert!(deployed.iter().any(|(s, _)| s.starts_with("model/learned")));
 
-    let mut server = Command::new(env!("CARGO_BIN_EXE_ferret"))
-        .args([
-            "serve",
+    let db = dir.path().join("serve.sqlite");
+    let server = Server::spawn(
+        &[
             "--scene",
             s(&scene),
             "--strategies",
@@ -465,24 +465,11 @@ fn serve_plans_model_learned_as_deploy_does() {
             "--listen",
             "127.0.0.1:0",
             "--db",
-            s(&dir.path().join("serve.sqlite")),
-        ])
-        .env("FERRET_EMBEDDINGS", &table)
-        .env_remove("FERRET_SERVE_TOKEN")
-        .stdout(std::process::Stdio::piped())
-        .spawn()
-        .expect("ferret serve starts");
-    let mut line = String::new();
-    std::io::BufRead::read_line(
-        &mut std::io::BufReader::new(server.stdout.take().expect("piped")),
-        &mut line,
-    )
-    .expect("the server prints its address");
-    let url = line
-        .split_whitespace()
-        .find(|w| w.starts_with("http://"))
-        .unwrap_or_else(|| panic!("no address in {line:?}"))
-        .to_string();
+            s(&db),
+        ],
+        &[("FERRET_EMBEDDINGS", &table)],
+    );
+    let url = server.url.clone();
     let o = Command::new("python3")
         .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/robot_client.py"))
         .args(["--url", &url, "--scene", "apartment", "--targets", TARGETS])
@@ -490,8 +477,7 @@ fn serve_plans_model_learned_as_deploy_does() {
         .env_remove("FERRET_SERVE_TOKEN")
         .output()
         .expect("python3 runs");
-    let _ = server.kill();
-    let _ = server.wait();
+    server.kill();
     assert!(o.status.success(), "{}", text(&o));
     let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let served: Vec<(String, f64)> = report["trials"]

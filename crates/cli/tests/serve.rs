@@ -3,11 +3,10 @@
 
 mod common;
 
-use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 
-use common::{ferret, s, text};
+use common::{Server, ferret, s, text};
 use serde_json::{Value, json};
 
 const TARGETS: &str = "Blanket,CellPhone,RemoteControl,Pillow,Wallet";
@@ -22,11 +21,6 @@ fn apartment() -> PathBuf {
 }
 
 /// A running `ferret serve`; killed (SIGKILL) when dropped.
-struct Server {
-    child: Child,
-    url: String,
-}
-
 impl Server {
     fn start(db: &Path) -> Server {
         Self::start_with(db, STRATEGIES, &[])
@@ -34,47 +28,19 @@ impl Server {
 
     /// `ferret serve` on the apartment with these strategies and further arguments.
     fn start_with(db: &Path, strategies: &str, extra: &[&str]) -> Server {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_ferret"))
-            .args([
-                "serve",
-                "--scene",
-                s(&apartment()),
-                "--strategies",
-                strategies,
-                "--listen",
-                "127.0.0.1:0",
-                "--db",
-                s(db),
-            ])
-            .args(extra)
-            .env_remove("FERRET_SERVE_TOKEN")
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("ferret serve starts");
-        let stdout = child.stdout.take().expect("piped stdout");
-        let mut line = String::new();
-        BufReader::new(stdout)
-            .read_line(&mut line)
-            .expect("the server prints its address");
-        let url = line
-            .split_whitespace()
-            .find(|w| w.starts_with("http://"))
-            .unwrap_or_else(|| panic!("no address in {line:?}"))
-            .to_string();
-        Server { child, url }
-    }
-
-    fn kill(mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-impl Drop for Server {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+        let scene = apartment();
+        let mut args = vec![
+            "--scene",
+            s(&scene),
+            "--strategies",
+            strategies,
+            "--listen",
+            "127.0.0.1:0",
+            "--db",
+            s(db),
+        ];
+        args.extend_from_slice(extra);
+        Server::spawn(&args, &[])
     }
 }
 

@@ -3,7 +3,7 @@
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::{Child, Command, Output, Stdio};
 
 /// Runs the `ferret` binary built for these tests with `args`.
 pub fn ferret(args: &[&str]) -> Output {
@@ -93,4 +93,52 @@ pub fn word_table(dir: &Path) -> PathBuf {
     )
     .unwrap();
     folder
+}
+
+/// A `ferret serve` started by a test: its process and the address it printed; killed when
+/// dropped.
+pub struct Server {
+    pub child: Child,
+    pub url: String,
+}
+
+impl Server {
+    /// `ferret serve` with `args` (after `serve`; give `--listen 127.0.0.1:0`) and `env` set,
+    /// without a token from the environment; returns once it printed its address.
+    pub fn spawn(args: &[&str], env: &[(&str, &Path)]) -> Server {
+        use std::io::BufRead;
+        let mut child = Command::new(env!("CARGO_BIN_EXE_ferret"))
+            .arg("serve")
+            .args(args)
+            .envs(env.iter().map(|(k, v)| (*k, *v)))
+            .env_remove("FERRET_SERVE_TOKEN")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("ferret serve starts");
+        let stdout = child.stdout.take().expect("piped stdout");
+        let mut line = String::new();
+        std::io::BufReader::new(stdout)
+            .read_line(&mut line)
+            .expect("the server prints its address");
+        let url = line
+            .split_whitespace()
+            .find(|w| w.starts_with("http://"))
+            .unwrap_or_else(|| panic!("no address in {line:?}"))
+            .to_string();
+        Server { child, url }
+    }
+
+    /// Stops the server now.
+    pub fn kill(mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
 }

@@ -144,12 +144,6 @@ pub fn resolved(path: &Path) -> PathBuf {
     }
 }
 
-/// Whether one of `a` and `b` is the other or inside it (after [`resolved`]).
-pub fn nested(a: &Path, b: &Path) -> bool {
-    let (a, b) = (resolved(a), resolved(b));
-    a.starts_with(&b) || b.starts_with(&a)
-}
-
 /// Writes `bytes` to `path` atomically.
 pub fn write_bytes(path: &Path, bytes: impl AsRef<[u8]>) -> Result<()> {
     write_atomic(path, |w| w.write_all(bytes.as_ref()))

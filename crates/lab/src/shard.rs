@@ -585,19 +585,23 @@ pub struct MergedDir {
 /// Refuses a merge's `out` that is one of the shard folders `dirs`, inside one, or holds one:
 /// writing there would replace what the merge reads (and a rerun could not be made).
 pub fn check_out(dirs: &[PathBuf], out: &Path) -> crate::Result<()> {
-    match dirs.iter().find(|d| crate::files::nested(d, out)) {
-        None => Ok(()),
-        Some(d) => Err(crate::LabError::invalid(format!(
-            "--out {} {} the shard {}: write the merge to a folder of its own",
-            out.display(),
-            if crate::files::resolved(out) == crate::files::resolved(d) {
-                "is"
-            } else {
-                "is inside or contains"
-            },
-            d.display()
-        ))),
+    let o = crate::files::resolved(out);
+    for d in dirs {
+        let r = crate::files::resolved(d);
+        if o.starts_with(&r) || r.starts_with(&o) {
+            return Err(crate::LabError::invalid(format!(
+                "--out {} {} the shard {}: write the merge to a folder of its own",
+                out.display(),
+                if o == r {
+                    "is"
+                } else {
+                    "is inside or contains"
+                },
+                d.display()
+            )));
+        }
     }
+    Ok(())
 }
 
 /// [`merge_runs`] of the shards in `dirs`, written into `out` (which must exist) as

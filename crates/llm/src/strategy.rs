@@ -38,10 +38,10 @@ pub const LLM_MODEL: &str = "llm+model";
 /// The strategy kind of the LLM-direct baseline.
 pub const LLM_DIRECT: &str = "llm-direct";
 /// The strategy kind of the planner over the prior fused with an LLM's likelihoods.
-pub const FUSED: &str = "fused";
+pub const FUSED: &str = FusionBase::Prior.kind();
 /// The strategy kind of the planner over the learned likelihood (`model/learned`) fused with an
 /// LLM's likelihoods.
-pub const FUSED_LEARNED: &str = "fused-learned";
+pub const FUSED_LEARNED: &str = FusionBase::Learned.kind();
 
 /// True for the kinds that plan over an LLM's likelihoods (`llm+model`, `fused`,
 /// `fused-learned`): the ones whose probability questions are asked before trials run.
@@ -396,11 +396,7 @@ pub fn register_fused(
                         "{path}: the fit for {kind}/{name} was made with another prior; fit it again with this one"
                     )));
                 }
-                let base_source = builtin_source(
-                    base.source_spec().trim_start_matches("model/"),
-                    Some(prior),
-                )
-                .map_err(bad)?;
+                let base_source = builtin_source(base.source_name(), Some(prior)).map_err(bad)?;
                 let fused = Fused::over(
                     &format!("{kind}/{name}"),
                     base_source,

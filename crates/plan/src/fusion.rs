@@ -144,18 +144,18 @@ impl FusionBase {
 
     /// The strategy kind that plans over this base fused with another source: `fused` or
     /// `fused-learned`.
-    pub fn kind(self) -> &'static str {
+    pub const fn kind(self) -> &'static str {
         match self {
             Self::Prior => "fused",
             Self::Learned => "fused-learned",
         }
     }
 
-    /// The base's source as a strategy spec: `model/prior` or `model/learned`.
-    pub fn source_spec(self) -> &'static str {
+    /// The base's built-in source (`model/<name>`): `prior` or `learned`.
+    pub fn source_name(self) -> &'static str {
         match self {
-            Self::Prior => "model/prior",
-            Self::Learned => "model/learned",
+            Self::Prior => "prior",
+            Self::Learned => "learned",
         }
     }
 }

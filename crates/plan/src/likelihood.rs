@@ -330,22 +330,20 @@ pub struct Prior {
     hidden: Option<Arc<Hidden>>,
 }
 
-/// The priors of a [`HoldOut`]: one per fold, each without that fold's types, made when a
-/// question first needs it (a run holding out fold 1 of 1 000 needs one of them, and each is a
-/// copy of the prior).
+/// The priors of a [`HoldOut`]: one per fold, each the prior holding it without that fold's
+/// types, made when a question first needs it (a run holding out fold 1 of 1 000 needs one of
+/// them, and each is a copy of the prior).
 #[derive(Debug)]
 struct Hidden {
     holdout: HoldOut,
-    /// The prior the folds forget from.
-    base: Prior,
     priors: Vec<std::sync::OnceLock<Prior>>,
 }
 
 impl PartialEq for Hidden {
-    /// The fold priors are the base's, made on demand: equal bases and hold-outs are equal
-    /// whatever was asked so far.
+    /// The fold priors follow from the prior holding them: equal hold-outs are equal whatever
+    /// was asked so far.
     fn eq(&self, other: &Self) -> bool {
-        self.holdout == other.holdout && self.base == other.base
+        self.holdout == other.holdout
     }
 }
 
@@ -519,17 +517,12 @@ impl Prior {
     /// holds out for it (its calibration is kept: two numbers fitted over all types, which
     /// carry no one type's counts).
     pub fn holding_out(&self, holdout: HoldOut) -> Prior {
-        let base = self.without_hidden();
         let priors = (0..holdout.folds())
             .map(|_| std::sync::OnceLock::new())
             .collect();
         Prior {
-            hidden: Some(Arc::new(Hidden {
-                holdout,
-                base: base.clone(),
-                priors,
-            })),
-            ..base
+            hidden: Some(Arc::new(Hidden { holdout, priors })),
+            ..self.without_hidden()
         }
     }
 
@@ -568,8 +561,7 @@ impl Prior {
                 let folds = h.holdout.folds();
                 h.priors.get(k).map_or(self, |cell| {
                     cell.get_or_init(|| {
-                        h.base
-                            .without_types(&|t: &ObjectType| HoldOut::fold_of(t, folds) == k)
+                        self.without_types(&|t: &ObjectType| HoldOut::fold_of(t, folds) == k)
                     })
                 })
             }

@@ -70,7 +70,7 @@ impl Service {
         };
         let trials = self.store.read(|r| r.trials_of(deployment))?;
         check_sequential(&spec, deployment, &trials)?;
-        let snapshot = snapshot(&trials);
+        let seen = snapshot(&trials);
         // The first container's plan for a choice, made without holding the deployment.
         let plan_for = |chosen: usize| -> Result<Planned, ApiError> {
             let owner = Owner {
@@ -91,30 +91,28 @@ impl Service {
         let chosen = self
             .deployment(&spec, &trials, candidates.clone())?
             .choose_overlapping();
-        let mut planned = Some(plan_for(chosen)?);
+        let mut planned = plan_for(chosen)?;
         let mut created = None;
         let started = claim.complete(&route, body, |w| {
             w.lock_deployment(deployment)?;
             // Under the deployment's lock, the choice from the trials as they are now: another
             // robot's start or end since the plan above rarely changes it, and when it does the
             // new choice is planned here, so a start is never refused for being overtaken.
-            let (now, k) = if w.reader().trial_counts(deployment)? == snapshot {
-                (snapshot, trials.len() as i64 + 1)
+            let (now, k) = if w.reader().trial_counts(deployment)? == seen {
+                (seen, trials.len() as i64 + 1)
             } else {
                 let fresh = w.reader().trials_of(deployment)?;
                 check_sequential(&spec, deployment, &fresh)?;
                 let again = self
                     .deployment(&spec, &fresh, candidates.clone())?
                     .choose_overlapping();
-                if planned.as_ref().is_none_or(|p| p.chosen != again) {
+                if planned.chosen != again {
                     tracing::debug!(deployment, "the choice changed while the trial was planned");
-                    planned = Some(plan_for(again)?);
+                    planned = plan_for(again)?;
                 }
-                (self::snapshot(&fresh), fresh.len() as i64 + 1)
+                (snapshot(&fresh), fresh.len() as i64 + 1)
             };
-            let Some(p) = planned.as_ref() else {
-                return Err(ApiError::internal("no plan for the trial"));
-            };
+            let p = &planned;
             let id = w.insert_trial(&NewTrial {
                 deployment,
                 k,
@@ -144,10 +142,10 @@ impl Service {
             )
         });
         // A reply stored meanwhile by another run of the request id rolled the insert back.
-        if let (Ok(_), Some(id), Some(p)) = (&started, created, planned)
+        if let (Ok(_), Some(id)) = (&started, created)
             && claim.wrote()
         {
-            self.searches.keep(id, 0, p.live);
+            self.searches.keep(id, 0, planned.live);
         }
         started
     }

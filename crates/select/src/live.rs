@@ -78,6 +78,9 @@ pub struct LiveDeployment {
     replays: Vec<f64>,
     /// The choice made for the trial in progress, if any.
     pending: Option<usize>,
+    /// Trials started by [`choose_overlapping`](Self::choose_overlapping), so that a history
+    /// replayed in pieces checks each end against the starts before it.
+    started: usize,
 }
 
 /// A trial's end as stored: a [`TrialEnd`] without its replay costs.
@@ -134,6 +137,7 @@ impl LiveDeployment {
             ends: Vec::new(),
             replays: Vec::new(),
             pending: None,
+            started: 0,
         }
     }
 
@@ -197,35 +201,48 @@ impl LiveDeployment {
         events: &[DeploymentEvent],
     ) -> Result<Self, SelectError> {
         let mut d = Self::new(method, strategies, c, seed)?;
-        let (mut started, mut ended) = (0usize, 0usize);
+        d.extend_events(events)?;
+        Ok(d)
+    }
+
+    /// Goes on from the events already replayed (or made) with the ones that happened since, in
+    /// order: each start's choice is made again and must match the stored one. Replaying a
+    /// history in pieces gives the same state as replaying it at once, so a service can keep
+    /// the state between requests and read only what is new.
+    ///
+    /// # Errors
+    /// As [`replay_events`](Self::replay_events); the state is then partly advanced and should
+    /// be dropped.
+    pub fn extend_events(&mut self, events: &[DeploymentEvent]) -> Result<(), SelectError> {
         for event in events {
             match event {
                 DeploymentEvent::Started { chosen } => {
-                    started += 1;
-                    let again = d.choose_overlapping();
+                    let again = self.choose_overlapping();
                     if again != *chosen {
                         return Err(SelectError::Live(format!(
-                            "trial {started}: stored choice {chosen} but the selector now chooses {again}"
+                            "trial {}: stored choice {chosen} but the selector now chooses {again}",
+                            self.started
                         )));
                     }
                 }
                 DeploymentEvent::Ended(end) => {
-                    ended += 1;
-                    if ended > started {
+                    if self.ends.len() >= self.started {
                         return Err(SelectError::Live(format!(
-                            "end {ended} comes before any open trial started"
+                            "end {} comes before any open trial started",
+                            self.ends.len() + 1
                         )));
                     }
-                    d.end_overlapping(end)?;
+                    self.end_overlapping(end)?;
                 }
             }
         }
-        Ok(d)
+        Ok(())
     }
 
     /// The strategy for a trial that may run alongside other open ones: chosen from the trials
     /// ended so far, each call a new trial (it draws the next tie-break; nothing is pending).
     pub fn choose_overlapping(&mut self) -> usize {
+        self.started += 1;
         self.selector.choose(&mut self.rng)
     }
 
@@ -300,7 +317,8 @@ impl LiveDeployment {
         i
     }
 
-    /// What [`choose`](Self::choose) would return, without committing to it.
+    /// What [`choose`](Self::choose) would return, without committing to it; with no trial in
+    /// progress, also what [`choose_overlapping`](Self::choose_overlapping) would return.
     pub fn peek(&self) -> usize {
         match self.pending {
             Some(p) => p,

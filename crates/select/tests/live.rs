@@ -123,6 +123,33 @@ proptest! {
     }
 
     #[test]
+    fn a_history_replayed_in_pieces_is_the_history_replayed_at_once(
+        method in method(),
+        seed in 0u64..1000,
+        script in prop::collection::vec(prop::option::of(0usize..4), 1..40),
+        costs in prop::collection::vec(prop::collection::vec(0u8..6, 3), 1..8),
+        cuts in prop::collection::vec(0usize..40, 0..4),
+    ) {
+        let costs: Vec<Vec<f64>> = costs.iter().map(|r| r.iter().map(|&c| f64::from(c)).collect()).collect();
+        let (original, events) = overlapping(method, seed, &script, &costs);
+        let mut cuts: Vec<usize> = cuts.into_iter().map(|c| c % (events.len() + 1)).collect();
+        cuts.push(events.len());
+        cuts.sort_unstable();
+        let mut pieces = LiveDeployment::new(method, 3, 5.0, seed).unwrap();
+        let mut from = 0;
+        for cut in cuts {
+            pieces.extend_events(&events[from..cut]).unwrap();
+            from = cut;
+            // What a service answers between pieces without committing to it: the choice the
+            // next start makes.
+            let mut probe = LiveDeployment::replay_events(method, 3, 5.0, seed, &events[..cut]).unwrap();
+            prop_assert_eq!(pieces.peek(), probe.choose_overlapping());
+        }
+        prop_assert_eq!(pieces.stats(), original.stats());
+        prop_assert!(original.finished().eq(pieces.finished()));
+    }
+
+    #[test]
     fn sequential_events_are_the_sequential_deployment(
         method in method(),
         seed in 0u64..1000,

@@ -274,6 +274,16 @@ pub struct Observe {
     pub travelled_m: Option<f64>,
 }
 
+/// `POST /trials/{id}/abandon`: the robot gives the search up (it failed, or was called away).
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct AbandonTrial {
+    /// Makes a retried request harmless.
+    #[serde(default)]
+    #[schema(min_length = 1, max_length = 200)]
+    pub request_id: Option<String>,
+}
+
 /// A scene in the list.
 #[derive(Debug, Serialize, ToSchema)]
 pub struct SceneSummary {
@@ -482,6 +492,12 @@ impl WithRequestId for CreateDeployment {
 }
 
 impl WithRequestId for StartTrial {
+    fn request_id_mut(&mut self) -> &mut Option<String> {
+        &mut self.request_id
+    }
+}
+
+impl WithRequestId for AbandonTrial {
     fn request_id_mut(&mut self) -> &mut Option<String> {
         &mut self.request_id
     }

@@ -1,13 +1,12 @@
 //! Deployments: created with their candidates, selector, exploration constant and seed; their
 //! state (trials, per-strategy statistics, the next choice and why) rebuilt from the stored
-//! trials on every request, through the same deployment loop `ferret deploy` runs.
+//! trials on every read, through the same selector `ferret deploy` runs (trial starts keep it
+//! between requests: `selectors`).
 
 use std::sync::Arc;
 
 use ferret_plan::{ReplayMode, Strategy};
-use ferret_select::{
-    DEFAULT_C, DeploymentEvent, DeploymentLoop, FinishedTrial, LiveDeployment, TrialEnd,
-};
+use ferret_select::{DEFAULT_C, LiveDeployment};
 use ferret_world::TravelCost;
 
 use crate::api::{
@@ -16,6 +15,7 @@ use crate::api::{
 use crate::error::{ApiError, ErrorKind};
 use crate::model::{ApiReply, DeploymentSpec, Outcome, StoredTrial, TrialStatus};
 use crate::replies::Begun;
+use crate::selectors::{HistoryMark, events_since, new_live};
 use crate::service::{Service, json};
 
 impl Service {
@@ -167,30 +167,11 @@ impl Service {
         spec: &DeploymentSpec,
         trials: &[StoredTrial],
     ) -> Result<LiveDeployment, ApiError> {
-        LiveDeployment::replay_events(
-            spec.selector,
-            spec.strategies.len(),
-            spec.c,
-            spec.seed,
-            &events(trials)?,
-        )
-        .map_err(|e| ApiError::internal(e.to_string()))
-    }
-
-    /// The deployment loop's state, rebuilt from the stored trials.
-    pub(crate) fn deployment(
-        &self,
-        spec: &DeploymentSpec,
-        trials: &[StoredTrial],
-        candidates: Vec<Arc<dyn Strategy>>,
-    ) -> Result<DeploymentLoop, ApiError> {
-        DeploymentLoop::replay_events(
-            (spec.selector, spec.c, spec.seed),
-            candidates,
-            ROBOT_REPLAY,
-            &events(trials)?,
-        )
-        .map_err(|e| ApiError::internal(e.to_string()))
+        let (events, _) = events_since(HistoryMark::default(), trials)?;
+        let mut live = new_live(spec)?;
+        live.extend_events(&events)
+            .map_err(|e| ApiError::internal(e.to_string()))?;
+        Ok(live)
     }
 
     fn deployment_state(
@@ -256,53 +237,3 @@ const KEPT_SPECS: usize = 4096;
 /// since a robot's trial costs what it travelled.
 pub(crate) const ROBOT_REPLAY: (ReplayMode, TravelCost) =
     (ReplayMode::Pessimistic, TravelCost::Plain);
-
-/// A deployment's history as the selector saw it: each trial's start (after the ends it was
-/// chosen from) and each end, in the order they happened.
-pub(crate) fn events(trials: &[StoredTrial]) -> Result<Vec<DeploymentEvent>, ApiError> {
-    let mut ends: Vec<&StoredTrial> = trials.iter().filter(|t| t.end_seq.is_some()).collect();
-    ends.sort_by_key(|t| t.end_seq);
-    let corrupt = |t: &StoredTrial, what: &str| {
-        ApiError::internal(format!(
-            "deployment {}: trial {} {what}; the stored order of starts and ends is inconsistent",
-            t.deployment, t.id
-        ))
-    };
-    for (i, t) in ends.iter().enumerate() {
-        if t.end_seq != Some(i as i64 + 1) {
-            return Err(corrupt(t, "ended out of sequence"));
-        }
-        if t.started_after > i as i64 {
-            return Err(corrupt(t, "ended before it started"));
-        }
-    }
-    let mut events = Vec::with_capacity(trials.len() + ends.len());
-    let mut starts = trials.iter().peekable();
-    let mut last_after = 0;
-    let mut start = |t: &StoredTrial, events: &mut Vec<DeploymentEvent>| {
-        if t.started_after < last_after {
-            return Err(corrupt(t, "started before an earlier trial"));
-        }
-        last_after = t.started_after;
-        events.push(DeploymentEvent::Started { chosen: t.chosen });
-        Ok(())
-    };
-    for (i, end) in ends.iter().enumerate() {
-        // The starts that saw only the `i` ends before this one.
-        while let Some(t) = starts.next_if(|t| t.started_after <= i as i64) {
-            start(t, &mut events)?;
-        }
-        events.push(DeploymentEvent::Ended(match end.status {
-            TrialStatus::Done => TrialEnd::Finished(FinishedTrial {
-                chosen: end.chosen,
-                cost: end.cost.unwrap_or(f64::NAN),
-                replays: end.replays.clone().unwrap_or_default(),
-            }),
-            _ => TrialEnd::Abandoned { chosen: end.chosen },
-        }));
-    }
-    for t in starts {
-        start(t, &mut events)?;
-    }
-    Ok(events)
-}

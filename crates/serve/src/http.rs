@@ -32,8 +32,8 @@ use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
 use crate::api::{
-    CreateDeployment, DeploymentState, ErrorBody, ErrorDetail, Observe, SceneDetail, SceneSummary,
-    StartTrial, TrialState, UploadScene, WithRequestId,
+    AbandonTrial, CreateDeployment, DeploymentState, ErrorBody, ErrorDetail, Observe, SceneDetail,
+    SceneSummary, StartTrial, TrialState, UploadScene, WithRequestId,
 };
 use crate::error::{ApiError, ErrorKind};
 use crate::model::{ApiReply, Outcome};
@@ -445,6 +445,20 @@ async fn post_observation(
     blocking(move || s.record_observation(trial, b.value, &b.raw)).await
 }
 
+#[utoipa::path(post, path = "/trials/{id}/abandon", request_body = AbandonTrial,
+    operation_id = "abandon",
+    params(("id" = i64, Path, description = "Trial id", minimum = 1), ("Idempotency-Key" = Option<String>, Header, description = "The request id, as the request_id field (either, or both the same)")),
+    responses((status = 200, description = "The trial ended as abandoned; selection learns nothing from it", body = TrialState),
+        (status = 404, description = "No such trial", body = ErrorBody),
+        (status = 409, description = "The trial has ended already", body = ErrorBody)))]
+async fn abandon_trial(
+    State(s): State<Arc<Service>>,
+    Id(trial, _): Id<TrialId>,
+    b: JsonBody<AbandonTrial>,
+) -> Response {
+    blocking(move || s.abandon_trial(trial, b.value, &b.raw)).await
+}
+
 /// The OpenAPI document as derived from the types; [`document`] adds what the derive cannot say.
 #[derive(OpenApi)]
 #[openapi(
@@ -503,6 +517,7 @@ fn routes() -> (Router<Arc<Service>>, utoipa::openapi::OpenApi) {
         .routes(routes!(start_trial))
         .routes(routes!(get_trial))
         .routes(routes!(post_observation))
+        .routes(routes!(abandon_trial))
         .split_for_parts()
 }
 
@@ -608,6 +623,7 @@ fn links() -> Vec<(&'static str, &'static str, u16, Value)> {
         json!({
             "GetTrial": to("get_trial", "id", "trial"),
             "Observe": to("observe", "id", "trial"),
+            "Abandon": to("abandon", "id", "trial"),
         })
     };
     vec![

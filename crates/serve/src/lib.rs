@@ -21,6 +21,7 @@ pub mod model;
 mod replies;
 mod scenes;
 mod searches;
+mod selectors;
 pub mod server;
 pub mod service;
 pub mod store;

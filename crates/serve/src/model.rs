@@ -62,6 +62,8 @@ pub enum TrialStatus {
     Done,
     /// Every container was searched without finding the target; the trial does not count.
     Exhausted,
+    /// The robot gave the search up; the trial does not count.
+    Abandoned,
 }
 
 impl TrialStatus {
@@ -70,6 +72,7 @@ impl TrialStatus {
             TrialStatus::Searching => "searching",
             TrialStatus::Done => "done",
             TrialStatus::Exhausted => "exhausted",
+            TrialStatus::Abandoned => "abandoned",
         }
     }
 
@@ -78,6 +81,7 @@ impl TrialStatus {
             "searching" => Some(TrialStatus::Searching),
             "done" => Some(TrialStatus::Done),
             "exhausted" => Some(TrialStatus::Exhausted),
+            "abandoned" => Some(TrialStatus::Abandoned),
             _ => None,
         }
     }

@@ -5,13 +5,15 @@
 
 use std::sync::Arc;
 
-use ferret_plan::{Search, SearchProblem, Strategy, TrialSpec, hindsight_truth};
+use ferret_plan::{Search, SearchProblem, Strategy, TrialSpec, hindsight_truth, replay_costs};
 use ferret_world::ObjectType;
 use ferret_world::distance::Place;
 
 use crate::api::{
-    MAX_OBJECTS, MAX_TRAVELLED_M, MAX_TYPE_NAME, NextContainer, Observe, StartTrial, TrialState,
+    AbandonTrial, MAX_OBJECTS, MAX_TRAVELLED_M, MAX_TYPE_NAME, NextContainer, Observe, StartTrial,
+    TrialState,
 };
+use crate::deployments::ROBOT_REPLAY;
 use crate::error::{ApiError, ErrorKind, plan_error};
 use crate::grids::Placed;
 use crate::model::{
@@ -20,7 +22,7 @@ use crate::model::{
 use crate::replies::Begun;
 use crate::searches::{LiveSearch, Owner};
 use crate::service::{Service, json};
-use crate::store::{NewTrial, TrialCounts};
+use crate::store::{NewTrial, TrialEnding};
 
 /// An object type as the API takes it: ASCII letters and digits, as in `CellPhone`.
 pub(crate) fn is_type_name(s: &str) -> bool {
@@ -68,10 +70,6 @@ impl Service {
             target: ObjectType::new(req.target.clone()),
             revealed: Vec::new(),
         };
-        let trials = self.store.read(|r| r.trials_of(deployment))?;
-        check_sequential(&spec, deployment, &trials)?;
-        let seen = snapshot(&trials);
-        // The first container's plan for a choice, made without holding the deployment.
         let plan_for = |chosen: usize| -> Result<Planned, ApiError> {
             let owner = Owner {
                 placed: placed.clone(),
@@ -88,64 +86,108 @@ impl Service {
                 .map(|c| next_container(&placed, Place::Start, c));
             Ok(Planned { chosen, live, next })
         };
-        let chosen = self
-            .deployment(&spec, &trials, candidates.clone())?
-            .choose_overlapping();
-        let mut planned = plan_for(chosen)?;
+        let mut planned: Option<Planned> = None;
         let mut created = None;
-        let started = claim.complete(&route, body, |w| {
-            w.lock_deployment(deployment)?;
-            // Under the deployment's lock, the choice from the trials as they are now: another
-            // robot's start or end since the plan above rarely changes it, and when it does the
-            // new choice is planned here, so a start is never refused for being overtaken.
-            let (now, k) = if w.reader().trial_counts(deployment)? == seen {
-                (seen, trials.len() as i64 + 1)
-            } else {
-                let fresh = w.reader().trials_of(deployment)?;
-                check_sequential(&spec, deployment, &fresh)?;
-                let again = self
-                    .deployment(&spec, &fresh, candidates.clone())?
-                    .choose_overlapping();
-                if planned.chosen != again {
-                    tracing::debug!(deployment, "the choice changed while the trial was planned");
-                    planned = plan_for(again)?;
-                }
-                (snapshot(&fresh), fresh.len() as i64 + 1)
-            };
-            let p = &planned;
-            let id = w.insert_trial(&NewTrial {
-                deployment,
-                k,
-                scene: &req.scene,
-                target: &req.target,
-                pose: req.pose,
-                chosen: p.chosen,
-                started_after: now.ended as i64,
+        let mut attempt = 0;
+        let started = loop {
+            attempt += 1;
+            // The choice from the trials ended so far, and the first container's plan for it,
+            // made without holding the deployment.
+            let (chosen, seen) = self.selectors.choose(deployment, &spec, |started, ended| {
+                Ok(self
+                    .store
+                    .read(|r| r.trials_since(deployment, started, ended))?)
             })?;
-            created = Some(id);
-            json(
-                Outcome::Created,
-                &TrialState {
-                    trial: id,
+            if spec.sequential && seen.open > 0 {
+                check_sequential(deployment, self.store.read(|r| r.open_trial(deployment))?)?;
+            }
+            let mut p = match planned.take() {
+                Some(p) if p.chosen == chosen => p,
+                _ => plan_for(chosen)?,
+            };
+            let overtaken = std::cell::Cell::new(false);
+            let reply = claim.complete(&route, body, |w| {
+                // Under the deployment's lock, the choice from the trials as they are now
+                // (the selector goes on from where it was: this costs the trials since, read
+                // with the lock in one round trip). Another robot's start or end since the
+                // plan above rarely changes it. When it does, the lock is let go and the new
+                // choice planned without it, since planning can take a while and every start
+                // and end of the deployment waits for the lock; after a few such rounds the
+                // plan is made here, so a start is never refused for being overtaken.
+                let fresh = w
+                    .lock_deployment_since(deployment, seen.started, seen.ended)?
+                    .ok_or_else(|| {
+                        ApiError::new(
+                            ErrorKind::NotFound,
+                            "deployment",
+                            format!("no deployment {deployment}"),
+                        )
+                    })?;
+                let mut now = seen;
+                if !fresh.is_empty() {
+                    let again;
+                    (again, now) = self.selectors.choose(deployment, &spec, |started, ended| {
+                        if (started, ended) == (seen.started, seen.ended) {
+                            Ok(fresh.clone())
+                        } else {
+                            Ok(w.reader().trials_since(deployment, started, ended)?)
+                        }
+                    })?;
+                    if spec.sequential && now.open > 0 {
+                        check_sequential(deployment, w.reader().open_trial(deployment)?)?;
+                    }
+                    if p.chosen != again {
+                        tracing::debug!(
+                            deployment,
+                            attempt,
+                            "the choice changed while the trial was planned"
+                        );
+                        if attempt < PLANS_WITHOUT_LOCK {
+                            overtaken.set(true);
+                            return Err(ApiError::internal("overtaken"));
+                        }
+                        p = plan_for(again)?;
+                    }
+                }
+                let k = now.started as i64 + 1;
+                let id = w.insert_trial(&NewTrial {
                     deployment,
                     k,
-                    scene: req.scene.clone(),
-                    target: req.target.clone(),
-                    strategy: spec.strategies[p.chosen].clone(),
-                    status: TrialStatus::Searching,
-                    searched: Vec::new(),
-                    cost_m: 0.0,
-                    travelled_m: None,
-                    next: p.next.clone(),
-                    replays_m: None,
-                },
-            )
-        });
+                    scene: &req.scene,
+                    target: &req.target,
+                    pose: req.pose,
+                    chosen: p.chosen,
+                    started_after: now.ended as i64,
+                })?;
+                created = Some(id);
+                json(
+                    Outcome::Created,
+                    &TrialState {
+                        trial: id,
+                        deployment,
+                        k,
+                        scene: req.scene.clone(),
+                        target: req.target.clone(),
+                        strategy: spec.strategies[p.chosen].clone(),
+                        status: TrialStatus::Searching,
+                        searched: Vec::new(),
+                        cost_m: 0.0,
+                        travelled_m: None,
+                        next: p.next.clone(),
+                        replays_m: None,
+                    },
+                )
+            });
+            planned = Some(p);
+            if !overtaken.get() {
+                break reply;
+            }
+        };
         // A reply stored meanwhile by another run of the request id rolled the insert back.
-        if let (Ok(_), Some(id)) = (&started, created)
+        if let (Ok(_), Some(id), Some(p)) = (&started, created, planned)
             && claim.wrote()
         {
-            self.searches.keep(id, 0, planned.live);
+            self.searches.keep(id, 0, p.live);
         }
         started
     }
@@ -212,13 +254,7 @@ impl Service {
             Begun::Fresh(claim) => claim,
         };
         let row = self.trial_row(id)?;
-        if row.status != TrialStatus::Searching {
-            return Err(ApiError::new(
-                ErrorKind::Conflict,
-                "trial",
-                format!("trial {id} has ended ({:?})", row.status).to_lowercase(),
-            ));
-        }
+        check_searching(&row)?;
         if req.objects.len() > MAX_OBJECTS {
             return Err(ApiError::new(
                 ErrorKind::Invalid,
@@ -304,17 +340,16 @@ impl Service {
         };
         let (status, next, replays) = if req.found {
             let truth = hindsight_truth(house, target, c).map_err(plan_error)?;
-            let trials = self.store.read(|r| r.trials_of(row.deployment))?;
-            let replays = self
-                .deployment(spec, &trials, candidates.clone())?
-                .replays(
-                    &SearchProblem::new(house, &placed.distances, &t.trial)
-                        .with_replay_memo(&placed.replays),
-                    &truth,
-                    c,
-                    (row.chosen, cost),
-                )
-                .map_err(plan_error)?;
+            let replays = replay_costs(
+                ROBOT_REPLAY,
+                candidates,
+                &SearchProblem::new(house, &placed.distances, &t.trial)
+                    .with_replay_memo(&placed.replays),
+                &truth,
+                c,
+                (row.chosen, cost),
+            )
+            .map_err(plan_error)?;
             (TrialStatus::Done, None, Some(replays))
         } else {
             match upcoming.flatten() {
@@ -327,24 +362,27 @@ impl Service {
             }
         };
         let reply = claim.complete(&route, body, |w| {
-            // Every write of a deployment's trials holds its row: the order trials end in is
-            // the deployment's history, and one observation per sequence number is kept.
-            w.lock_deployment(row.deployment)?;
-            let r = w.reader();
-            if r.trial_progress(id)? != Some((TrialStatus::Searching, observations.len())) {
+            // Every observation holds its trial's row, so one observation per sequence number
+            // is kept; an end then holds its deployment's too (the order trials end in is the
+            // deployment's history, which starts are chosen from), as briefly as it can, since
+            // every start and end of the deployment waits for it. Steps, most of a fleet's
+            // requests, leave the deployment free.
+            if w.lock_trial_progress(id)? != Some((TrialStatus::Searching, observations.len())) {
                 return Err(ApiError::new(
                     ErrorKind::Conflict,
                     "trial",
                     "the trial changed while this observation was planned; read it and retry",
                 ));
             }
-            w.insert_observation(id, observations.len(), &observation)?;
-            let mut end_seq = None;
-            if status != TrialStatus::Searching {
-                let ended = r.trial_counts(row.deployment)?.ended as i64;
-                end_seq = Some(ended + 1);
-                w.end_trial(id, status, (cost, ended + 1), replays.as_deref())?;
-            }
+            let end_seq = w.record_and_end(
+                (id, row.deployment),
+                Some((observations.len(), &observation)),
+                (status != TrialStatus::Searching).then_some(TrialEnding {
+                    status,
+                    cost,
+                    replays: replays.as_deref(),
+                }),
+            )?;
             let mut all = observations.clone();
             all.push(observation.clone());
             let mut updated = row.clone();
@@ -364,7 +402,73 @@ impl Service {
         }
         reply
     }
+    /// `POST /trials/{id}/abandon`: ends a trial still searching without a cost to learn
+    /// from, as a trial that searched every container does, so that a robot whose search
+    /// failed does not leave it open (a sequential deployment would take no other trial).
+    pub fn abandon_trial(
+        &self,
+        id: i64,
+        req: AbandonTrial,
+        body: &[u8],
+    ) -> Result<ApiReply, ApiError> {
+        let route = format!("POST /trials/{id}/abandon");
+        let claim = match self.begin(req.request_id.as_deref(), &route, body)? {
+            Begun::Replied(reply) => return Ok(reply),
+            Begun::Fresh(claim) => claim,
+        };
+        let row = self.trial_row(id)?;
+        check_searching(&row)?;
+        let observations = self.store.read(|r| r.observations(id))?;
+        let spec = self.spec(row.deployment)?;
+        let cost: f64 = observations.iter().map(|o| o.leg).sum();
+        let reply = claim.complete(&route, body, |w| {
+            // As any trial's end: the trial's row, then the deployment's.
+            if w.lock_trial_progress(id)? != Some((TrialStatus::Searching, observations.len())) {
+                return Err(ApiError::new(
+                    ErrorKind::Conflict,
+                    "trial",
+                    "the trial changed while it was being abandoned; read it and retry",
+                ));
+            }
+            let end_seq = w.record_and_end(
+                (id, row.deployment),
+                None,
+                Some(TrialEnding {
+                    status: TrialStatus::Abandoned,
+                    cost,
+                    replays: None,
+                }),
+            )?;
+            let mut ended = row.clone();
+            ended.status = TrialStatus::Abandoned;
+            ended.cost = Some(cost);
+            ended.end_seq = end_seq;
+            json(
+                Outcome::Done,
+                &trial_state(&ended, &spec, &observations, cost, None),
+            )
+        });
+        self.searches.forget(id);
+        reply
+    }
 }
+
+/// 409 for a trial that has ended.
+fn check_searching(row: &StoredTrial) -> Result<(), ApiError> {
+    if row.status == TrialStatus::Searching {
+        return Ok(());
+    }
+    Err(ApiError::new(
+        ErrorKind::Conflict,
+        "trial",
+        format!("trial {} has ended ({})", row.id, row.status.as_str()),
+    ))
+}
+
+/// Rounds of a trial start that plan without holding the deployment; a start overtaken that
+/// often (its choice changed by other trials each time) plans its last under the lock.
+const PLANS_WITHOUT_LOCK: u32 = 3;
+
 /// A trial's first step, planned for the strategy `chosen`.
 struct Planned {
     chosen: usize,
@@ -372,34 +476,17 @@ struct Planned {
     next: Option<NextContainer>,
 }
 
-/// 409 while a sequential deployment has a trial searching.
-fn check_sequential(
-    spec: &DeploymentSpec,
-    deployment: i64,
-    trials: &[StoredTrial],
-) -> Result<(), ApiError> {
-    match trials.iter().find(|t| t.status == TrialStatus::Searching) {
-        Some(open) if spec.sequential => Err(ApiError::new(
+/// 409 naming the trial of a sequential deployment still searching, if there is one.
+fn check_sequential(deployment: i64, open: Option<i64>) -> Result<(), ApiError> {
+    match open {
+        Some(open) => Err(ApiError::new(
             ErrorKind::Conflict,
             "deployment",
             format!(
-                "trial {} of deployment {deployment} is still searching and the deployment is sequential; finish it first",
-                open.id
+                "trial {open} of deployment {deployment} is still searching and the deployment is sequential; finish it first"
             ),
         )),
-        _ => Ok(()),
-    }
-}
-
-/// What a trial's choice depends on: how many trials started and how many ended.
-fn snapshot(trials: &[StoredTrial]) -> TrialCounts {
-    TrialCounts {
-        started: trials.len(),
-        ended: trials.iter().filter(|t| t.end_seq.is_some()).count(),
-        open: trials
-            .iter()
-            .filter(|t| t.status == TrialStatus::Searching)
-            .count(),
+        None => Ok(()),
     }
 }
 

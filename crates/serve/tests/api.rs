@@ -653,3 +653,88 @@ async fn a_kept_search_and_kept_replays_answer_as_rebuilt_ones() {
     assert!(reused[0] >= TARGETS.len() as u64, "{reused:?}");
     assert_eq!(reused[1], 0);
 }
+
+/// A robot that gives a search up ends its trial: the trial reads `abandoned` with the map
+/// distance of the legs it reported, selection learns nothing from it (the next choice is the
+/// selector's after an abandoned trial), and a sequential deployment takes its next trial.
+#[tokio::test(flavor = "multi_thread")]
+async fn an_abandoned_trial_ends_and_teaches_nothing() {
+    let s = start(None, None).await;
+    let (_, dep) = s
+        .post("/deployments", json!({"sequential": true, "seed": 3}))
+        .await;
+    let id = dep["id"].as_i64().unwrap();
+    let start_body = json!({"scene": "flat", "target": "Wallet"});
+    let (st, trial) = s
+        .post(&format!("/deployments/{id}/trials"), start_body.clone())
+        .await;
+    assert_eq!(st, 201, "{trial}");
+    let tid = trial["trial"].as_i64().unwrap();
+    let first = trial["next"]["container"].as_str().unwrap().to_string();
+    let (_, stepped) = s
+        .post(
+            &format!("/trials/{tid}/observations"),
+            json!({"container": first, "found": false}),
+        )
+        .await;
+    let walked = stepped["cost_m"].as_f64().unwrap();
+    assert!(walked > 0.0, "{stepped}");
+
+    let abandon = json!({"request_id": "give-up-1"});
+    let (st, ended) = s
+        .post(&format!("/trials/{tid}/abandon"), abandon.clone())
+        .await;
+    assert_eq!(st, 200, "{ended}");
+    assert_eq!(ended["status"], "abandoned", "{ended}");
+    assert_eq!(ended["next"], Value::Null, "{ended}");
+    assert_eq!(ended["cost_m"].as_f64().unwrap(), walked, "{ended}");
+    assert_eq!(ended["searched"], json!([first]), "{ended}");
+    // The same request again is the same reply; another is a conflict, as is a step.
+    let (st, again) = s.post(&format!("/trials/{tid}/abandon"), abandon).await;
+    assert_eq!((st, &again), (200, &ended));
+    let (st, e) = s.post(&format!("/trials/{tid}/abandon"), json!({})).await;
+    assert_eq!(
+        (st, e["error"]["field"].as_str()),
+        (409, Some("trial")),
+        "{e}"
+    );
+    assert!(
+        e["error"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("abandoned"),
+        "{e}"
+    );
+    let (st, e) = s
+        .post(
+            &format!("/trials/{tid}/observations"),
+            json!({"container": "bed", "found": false}),
+        )
+        .await;
+    assert_eq!(st, 409, "{e}");
+    let (st, e) = s.post("/trials/999/abandon", json!({})).await;
+    assert_eq!(st, 404, "{e}");
+    let (_, read) = s.get(&format!("/trials/{tid}")).await;
+    assert_eq!(read, ended);
+
+    // Nothing learned: the selector after one abandoned trial chooses the next.
+    let mut live =
+        LiveDeployment::new(Method::ReplaySelection, strategies().len(), 5.0, 3).unwrap();
+    let names: Vec<String> = strategies().iter().map(|s| s.name().to_string()).collect();
+    let first_choice = live.choose();
+    assert_eq!(trial["strategy"], names[first_choice]);
+    live.abandon().unwrap();
+    let (_, state) = s.get(&format!("/deployments/{id}")).await;
+    assert_eq!(state["open_trial"], Value::Null, "{state}");
+    assert_eq!(state["trials"][0]["status"], "abandoned", "{state}");
+    for row in state["per_strategy"].as_array().unwrap() {
+        assert_eq!(row["deployed"], 0, "{state}");
+    }
+    assert_eq!(state["next"]["strategy"], names[live.peek()], "{state}");
+    let (st, second) = s
+        .post(&format!("/deployments/{id}/trials"), start_body)
+        .await;
+    assert_eq!(st, 201, "{second}");
+    assert_eq!(second["strategy"], names[live.choose()], "{second}");
+    assert_eq!(second["k"], 2, "{second}");
+}

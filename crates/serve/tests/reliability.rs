@@ -279,7 +279,7 @@ fn the_openapi_links_name_operations_that_exist() {
             followed += 1;
         }
     }
-    assert_eq!(followed, 7);
+    assert_eq!(followed, 9);
 }
 
 #[test]
@@ -1122,5 +1122,71 @@ fn a_database_file_emptied_or_replaced_underneath_is_not_written_to() {
                 "{how}: {reply}"
             );
         }
+    }
+}
+
+/// A server stopped gracefully after its SQLite file was emptied or replaced underneath: closing
+/// used to copy the log into the emptied file (which the next start called malformed) or delete
+/// the log beside the file put in its place. Now it closes without writing: the emptied file
+/// stays empty, the replaced one byte for byte as it was, and the log keeps the last writes.
+#[test]
+fn a_lost_database_file_is_not_written_to_when_the_server_stops() {
+    use ferret_serve::model::DeploymentSpec;
+    let spec = DeploymentSpec {
+        strategies: vec!["optimistic+greedy".into()],
+        selector: ferret_select::Method::ReplaySelection,
+        c: 5.0,
+        seed: 0,
+        sequential: false,
+    };
+    for how in ["emptied", "replaced"] {
+        let dir = tempfile::tempdir().unwrap();
+        let db = dir.path().join("s.sqlite");
+        let wal = dir.path().join("s.sqlite-wal");
+        let store = ferret_serve::Store::open(&db).unwrap();
+        // Some writes copied into the file, then some only in the log.
+        for _ in 0..3 {
+            store.write(|w| w.insert_deployment(&spec)).unwrap();
+        }
+        let checkpoint = rusqlite::Connection::open(&db).unwrap();
+        checkpoint
+            .query_row("PRAGMA wal_checkpoint(TRUNCATE)", [], |_| Ok(()))
+            .unwrap();
+        drop(checkpoint);
+        for _ in 0..3 {
+            store.write(|w| w.insert_deployment(&spec)).unwrap();
+        }
+        let logged = std::fs::metadata(&wal).unwrap().len();
+        assert!(logged > 0, "{how}: the last writes are in the log");
+        let replacement = match how {
+            "emptied" => {
+                std::fs::OpenOptions::new()
+                    .write(true)
+                    .open(&db)
+                    .unwrap()
+                    .set_len(0)
+                    .unwrap();
+                Vec::new()
+            }
+            _ => {
+                let other = dir.path().join("other.sqlite");
+                std::fs::copy(&db, &other).unwrap();
+                std::fs::rename(&other, &db).unwrap();
+                std::fs::read(&db).unwrap()
+            }
+        };
+        drop(store);
+        let after = std::fs::read(&db).unwrap();
+        assert!(
+            after == replacement,
+            "{how}: closing wrote into the file ({} bytes, {} before)",
+            after.len(),
+            replacement.len()
+        );
+        assert_eq!(
+            std::fs::metadata(&wal).map(|m| m.len()).ok(),
+            Some(logged),
+            "{how}: the log was not kept as it was"
+        );
     }
 }

@@ -171,7 +171,15 @@ struct ServeLine {
     duplicated_observations: usize,
     /// Deployments whose stored trials are not the ones their robot started.
     mismatched_deployments: usize,
+    /// Median start of each robot's trials 11–30 and of its last 20, when it ran 60 or more:
+    /// whether a start costs more as its deployment's history grows.
+    start_early_p50_ms: Option<f64>,
+    start_late_p50_ms: Option<f64>,
 }
+
+/// Trials a robot runs before its early starts are timed, and how many are timed at each end.
+const EARLY_FROM: usize = 10;
+const TIMED_STARTS: usize = 20;
 
 /// The most robots `bench serve` runs (one thread each).
 const MAX_BENCH_DEPLOYMENTS: usize = 10_000;
@@ -421,6 +429,23 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
         }
     })
     .collect();
+    let by_history = |late: bool| {
+        let mut ms: Vec<f64> = robots
+            .iter()
+            .flat_map(|r| {
+                let n = r.starts.len();
+                let from = if late {
+                    n.saturating_sub(TIMED_STARTS)
+                } else {
+                    EARLY_FROM
+                };
+                r.starts.iter().skip(from).take(TIMED_STARTS)
+            })
+            .map(|d| d.as_secs_f64() * 1e3)
+            .collect();
+        ms.sort_by(f64::total_cmp);
+        (args.trials >= 3 * TIMED_STARTS).then(|| quantile(&ms, 0.5))
+    };
     let requests: usize = robots.iter().map(|r| r.requests).sum();
     let refused_starts: usize = robots.iter().map(|r| r.refused_starts).sum();
     let errors: usize = robots.iter().map(|r| r.errors).sum::<usize>() + verified.errors;
@@ -456,6 +481,8 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
         lost_observations: verified.lost,
         duplicated_observations: verified.duplicated,
         mismatched_deployments: verified.mismatched,
+        start_early_p50_ms: by_history(false),
+        start_late_p50_ms: by_history(true),
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&line)?);
@@ -486,6 +513,13 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
             println!(
                 "  {:<5} {:>6} replies: p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms",
                 k.reply, k.count, k.p50_ms, k.p99_ms, k.max_ms
+            );
+        }
+        if let (Some(early), Some(late)) = (line.start_early_p50_ms, line.start_late_p50_ms) {
+            println!(
+                "  starts as the history grows: p50 {early:.1} ms for each robot's trials {}–{}, {late:.1} ms for its last {TIMED_STARTS}",
+                EARLY_FROM + 1,
+                EARLY_FROM + TIMED_STARTS
             );
         }
         if let Some(k) = line.killed_after_s {
@@ -612,6 +646,8 @@ struct Robot {
     /// Writes so far, for request ids.
     writes: usize,
     latencies: Vec<(Reply, std::time::Duration)>,
+    /// Each trial's start, in order.
+    starts: Vec<std::time::Duration>,
     requests: usize,
     retries: usize,
     /// Starts answered 409.
@@ -646,6 +682,7 @@ impl Robot {
             id,
             writes: 0,
             latencies: Vec::new(),
+            starts: Vec::new(),
             requests: 0,
             retries: 0,
             refused_starts: 0,
@@ -746,6 +783,9 @@ impl Robot {
                 self.errors += 1;
                 break;
             };
+            if let Some((_, took)) = self.latencies.last() {
+                self.starts.push(*took);
+            }
             let trial = reply["trial"].as_i64().unwrap_or_default();
             self.acked.push((trial, Vec::new()));
             while reply["status"] == "searching" {

@@ -369,6 +369,69 @@ impl Conn<'_> {
         }
     }
 
+    /// A trial's status and observation count from a row of [`PROGRESS`].
+    fn progress(&self, id: i64, row: &Row) -> Result<(TrialStatus, usize), StoreError> {
+        let bad = |what: &str| self.corrupt(format!("trial {id}: {what}"));
+        let status = TrialStatus::parse(&self.some_text(row, 0, "trial status")?)
+            .ok_or_else(|| bad("status"))?;
+        let seen = usize::try_from(self.int(row, 1, "observation count")?)
+            .map_err(|_| bad("observation count"))?;
+        Ok((status, seen))
+    }
+
+    /// Trials from rows of [`TRIAL_COLUMNS`].
+    fn trials(&self, rows: &[Row]) -> Result<Vec<StoredTrial>, StoreError> {
+        let c = self;
+        rows.iter()
+            .map(|r| {
+                let id = c.int(r, 0, "trial id")?;
+                let bad = |what: &str| c.corrupt(format!("trial {id}: {what}"));
+                let json =
+                    |i: usize, what: &str| -> Result<Option<serde_json::Value>, StoreError> {
+                        c.text(r, i, what)?
+                            .map(|p| serde_json::from_str(&p).map_err(|_| bad(what)))
+                            .transpose()
+                    };
+                Ok(StoredTrial {
+                    id,
+                    deployment: c.int(r, 1, "trial deployment")?,
+                    k: c.int(r, 2, "trial k")?,
+                    scene: c.some_text(r, 3, "trial scene")?,
+                    target: c.some_text(r, 4, "trial target")?,
+                    pose: json(5, "pose")?
+                        .map(serde_json::from_value)
+                        .transpose()
+                        .map_err(|_| bad("pose"))?,
+                    chosen: usize::try_from(c.int(r, 6, "trial chosen")?)
+                        .map_err(|_| bad("chosen"))?,
+                    status: TrialStatus::parse(&c.some_text(r, 7, "trial status")?)
+                        .ok_or_else(|| bad("status"))?,
+                    cost: c.real(r, 8, "trial cost")?,
+                    replays: json(9, "replays")?
+                        .map(serde_json::from_value)
+                        .transpose()
+                        .map_err(|_| bad("replays"))?,
+                    started_after: c.int(r, 10, "trial started_after")?,
+                    end_seq: match r.get(11) {
+                        Some(Value::Null) => None,
+                        _ => Some(c.int(r, 11, "trial end_seq")?),
+                    },
+                })
+            })
+            .collect()
+    }
+
+    /// Runs `statements` in order; on PostgreSQL they are sent at once (one round trip).
+    fn query_all(&self, statements: &[(&str, &[Value])]) -> Result<Vec<Vec<Row>>, StoreError> {
+        match self {
+            Conn::Sqlite(c, s) => statements
+                .iter()
+                .map(|(sql, params)| sqlite::query(c, s, sql, params))
+                .collect(),
+            Conn::Postgres(c) => c.query_all(statements),
+        }
+    }
+
     fn query_opt(&self, sql: &str, params: &[Value]) -> Result<Option<Row>, StoreError> {
         Ok(self.query(sql, params)?.into_iter().next())
     }
@@ -442,25 +505,124 @@ impl Writer<'_> {
         }
     }
 
+    fn lock_deployment_sql(&self) -> &'static str {
+        match &self.conn {
+            Conn::Sqlite(..) => "SELECT id FROM deployments WHERE id = $1",
+            Conn::Postgres(_) => "SELECT id FROM deployments WHERE id = $1 FOR UPDATE",
+        }
+    }
+
     /// Locks deployment `id` until the transaction ends, so that the trials of one deployment
     /// are started and ended by one replica at a time (on SQLite, every write transaction
-    /// already holds the whole file). Returns false when there is no such deployment.
+    /// already holds the whole file), and then reads, under the lock, its trials that started
+    /// after its first `started` or ended after its first `ended` (as
+    /// [`Reader::trials_since`]), in one round trip: what a trial's start holds the deployment
+    /// for is kept short, since every start and end of the deployment waits for it. `None`
+    /// when there is no such deployment.
     ///
     /// # Errors
-    /// The database refuses.
-    pub fn lock_deployment(&self, id: i64) -> Result<bool, StoreError> {
-        match &self.conn {
-            Conn::Sqlite(..) => Ok(!self
-                .conn
-                .query("SELECT id FROM deployments WHERE id = $1", &[id.into()])?
-                .is_empty()),
-            Conn::Postgres(c) => Ok(!c
-                .query(
-                    "SELECT id FROM deployments WHERE id = $1 FOR UPDATE",
-                    &[id.into()],
-                )?
-                .is_empty()),
+    /// The database refuses, or a row does not parse.
+    pub fn lock_deployment_since(
+        &self,
+        id: i64,
+        started: usize,
+        ended: usize,
+    ) -> Result<Option<Vec<StoredTrial>>, StoreError> {
+        let count = |n: usize| Value::from(i64::try_from(n).unwrap_or(i64::MAX));
+        let since = format!(
+            "SELECT {TRIAL_COLUMNS} FROM trials WHERE deployment = $1 AND (k > $2 OR end_seq > $3) ORDER BY k"
+        );
+        let answers = self.conn.query_all(&[
+            (self.lock_deployment_sql(), &[id.into()]),
+            (&since, &[id.into(), count(started), count(ended)]),
+        ])?;
+        match answers.as_slice() {
+            [locked, rows] if !locked.is_empty() => Ok(Some(self.conn.trials(rows)?)),
+            _ => Ok(None),
         }
+    }
+
+    /// Locks trial `id` until the transaction ends, so that one observation per sequence
+    /// number is recorded without holding its deployment (an observation that leaves the trial
+    /// searching changes nothing a deployment's other trials depend on), and reads its status
+    /// and number of observations under the lock, in one round trip. `None` when there is no
+    /// such trial.
+    ///
+    /// # Errors
+    /// The database refuses, or the row does not parse.
+    pub fn lock_trial_progress(&self, id: i64) -> Result<Option<(TrialStatus, usize)>, StoreError> {
+        let lock = match &self.conn {
+            Conn::Sqlite(..) => "SELECT id FROM trials WHERE id = $1",
+            Conn::Postgres(_) => "SELECT id FROM trials WHERE id = $1 FOR UPDATE",
+        };
+        let answers = self
+            .conn
+            .query_all(&[(lock, &[id.into()]), (PROGRESS, &[id.into()])])?;
+        match answers.as_slice() {
+            [_, progress] => match progress.first() {
+                Some(row) => Ok(Some(self.conn.progress(id, row)?)),
+                None => Ok(None),
+            },
+            _ => Ok(None),
+        }
+    }
+
+    /// Stores observation `seq` of `trial` (unless `observation` is `None`) and, when `end`
+    /// says how, ends the trial as the next of `deployment`'s trials to end, taking the
+    /// deployment's lock for that, in one round trip; returns the end's number. Take the
+    /// trial's lock first ([`lock_trial_progress`](Self::lock_trial_progress)): a transaction
+    /// taking both takes the trial's first, so two never wait for each other.
+    ///
+    /// # Errors
+    /// The database refuses (an observation `seq` stored already, no such trial).
+    pub fn record_and_end(
+        &self,
+        (trial, deployment): (i64, i64),
+        observation: Option<(usize, &StoredObservation)>,
+        end: Option<TrialEnding<'_>>,
+    ) -> Result<Option<i64>, StoreError> {
+        let mut statements: Vec<(&str, Vec<Value>)> = Vec::new();
+        if let Some((seq, o)) = observation {
+            statements.push((
+                INSERT_OBSERVATION,
+                vec![
+                    trial.into(),
+                    (seq as i64).into(),
+                    o.container.as_str().into(),
+                    o.found.into(),
+                    serde_json::json!(o.objects).to_string().into(),
+                    o.travelled.into(),
+                    o.leg.into(),
+                ],
+            ));
+        }
+        if let Some(e) = &end {
+            statements.push((self.lock_deployment_sql(), vec![deployment.into()]));
+            statements.push((
+                "UPDATE trials SET status = $2, cost = $3, replays = $4,
+                     end_seq = (SELECT coalesce(max(end_seq), 0) + 1 FROM trials
+                                WHERE deployment = $5)
+                 WHERE id = $1 RETURNING end_seq",
+                vec![
+                    trial.into(),
+                    e.status.as_str().into(),
+                    e.cost.into(),
+                    e.replays.map(|r| serde_json::json!(r).to_string()).into(),
+                    deployment.into(),
+                ],
+            ));
+        }
+        let borrowed: Vec<(&str, &[Value])> =
+            statements.iter().map(|(q, p)| (*q, p.as_slice())).collect();
+        let answers = self.conn.query_all(&borrowed)?;
+        if end.is_none() {
+            return Ok(None);
+        }
+        let row = answers
+            .last()
+            .and_then(|rows| rows.first())
+            .ok_or_else(|| self.conn.corrupt(format!("trial {trial}: no row to end")))?;
+        Ok(Some(self.conn.int(row, 0, "end_seq")?))
     }
 
     /// Stores a scene's text under its name.
@@ -517,58 +679,6 @@ impl Writer<'_> {
         self.conn.int(&row, 0, "trial id")
     }
 
-    /// Appends an observation as number `seq` (0-based) of `trial`.
-    ///
-    /// # Errors
-    /// The database refuses (a taken `seq`).
-    pub fn insert_observation(
-        &self,
-        trial: i64,
-        seq: usize,
-        o: &StoredObservation,
-    ) -> Result<(), StoreError> {
-        let objects = serde_json::json!(o.objects).to_string();
-        self.conn.execute(
-            "INSERT INTO observations (trial, seq, container, found, objects, travelled, leg)
-             VALUES ($1, $2, $3, $4, $5, $6, $7)",
-            &[
-                trial.into(),
-                (seq as i64).into(),
-                o.container.as_str().into(),
-                o.found.into(),
-                objects.into(),
-                o.travelled.into(),
-                o.leg.into(),
-            ],
-        )?;
-        Ok(())
-    }
-
-    /// Ends a trial as the `end_seq`-th of its deployment to end.
-    ///
-    /// # Errors
-    /// The database refuses (a taken `end_seq`).
-    pub fn end_trial(
-        &self,
-        trial: i64,
-        status: TrialStatus,
-        (cost, end_seq): (f64, i64),
-        replays: Option<&[f64]>,
-    ) -> Result<(), StoreError> {
-        let replays = replays.map(|r| serde_json::json!(r).to_string());
-        self.conn.execute(
-            "UPDATE trials SET status = $2, cost = $3, replays = $4, end_seq = $5 WHERE id = $1",
-            &[
-                trial.into(),
-                status.as_str().into(),
-                cost.into(),
-                replays.into(),
-                end_seq.into(),
-            ],
-        )?;
-        Ok(())
-    }
-
     /// Stores the reply to a request id; false (and nothing stored) when the id has a reply
     /// already.
     ///
@@ -614,6 +724,17 @@ pub struct TrialCounts {
     pub open: usize,
 }
 
+/// How a trial ends, for [`Writer::record_and_end`].
+#[derive(Clone, Copy, Debug)]
+pub struct TrialEnding<'a> {
+    /// Done, exhausted or abandoned.
+    pub status: TrialStatus,
+    /// Its cost, metres.
+    pub cost: f64,
+    /// Every candidate's replay cost, when done.
+    pub replays: Option<&'a [f64]>,
+}
+
 /// A trial to store.
 #[derive(Clone, Copy, Debug)]
 pub struct NewTrial<'a> {
@@ -632,6 +753,14 @@ pub struct NewTrial<'a> {
     /// How many of the deployment's trials had ended when it started.
     pub started_after: i64,
 }
+
+/// A trial's status and number of observations.
+const PROGRESS: &str = "SELECT status, (SELECT count(*) FROM observations WHERE trial = $1)
+     FROM trials WHERE id = $1";
+
+const INSERT_OBSERVATION: &str =
+    "INSERT INTO observations (trial, seq, container, found, objects, travelled, leg)
+     VALUES ($1, $2, $3, $4, $5, $6, $7)";
 
 const TRIAL_COLUMNS: &str =
     "id, deployment, k, scene, target, pose, chosen, status, cost, replays, started_after, end_seq";
@@ -767,49 +896,12 @@ impl Reader<'_> {
             .collect()
     }
 
-    fn trials_where(&self, clause: &str, key: i64) -> Result<Vec<StoredTrial>, StoreError> {
+    fn trials_where(&self, clause: &str, keys: &[Value]) -> Result<Vec<StoredTrial>, StoreError> {
         let rows = self.conn.query(
             &format!("SELECT {TRIAL_COLUMNS} FROM trials WHERE {clause} ORDER BY k"),
-            &[key.into()],
+            keys,
         )?;
-        let c = &self.conn;
-        rows.iter()
-            .map(|r| {
-                let id = c.int(r, 0, "trial id")?;
-                let bad = |what: &str| c.corrupt(format!("trial {id}: {what}"));
-                let json =
-                    |i: usize, what: &str| -> Result<Option<serde_json::Value>, StoreError> {
-                        c.text(r, i, what)?
-                            .map(|p| serde_json::from_str(&p).map_err(|_| bad(what)))
-                            .transpose()
-                    };
-                Ok(StoredTrial {
-                    id,
-                    deployment: c.int(r, 1, "trial deployment")?,
-                    k: c.int(r, 2, "trial k")?,
-                    scene: c.some_text(r, 3, "trial scene")?,
-                    target: c.some_text(r, 4, "trial target")?,
-                    pose: json(5, "pose")?
-                        .map(serde_json::from_value)
-                        .transpose()
-                        .map_err(|_| bad("pose"))?,
-                    chosen: usize::try_from(c.int(r, 6, "trial chosen")?)
-                        .map_err(|_| bad("chosen"))?,
-                    status: TrialStatus::parse(&c.some_text(r, 7, "trial status")?)
-                        .ok_or_else(|| bad("status"))?,
-                    cost: c.real(r, 8, "trial cost")?,
-                    replays: json(9, "replays")?
-                        .map(serde_json::from_value)
-                        .transpose()
-                        .map_err(|_| bad("replays"))?,
-                    started_after: c.int(r, 10, "trial started_after")?,
-                    end_seq: match r.get(11) {
-                        Some(Value::Null) => None,
-                        _ => Some(c.int(r, 11, "trial end_seq")?),
-                    },
-                })
-            })
-            .collect()
+        self.conn.trials(&rows)
     }
 
     /// A deployment's trials, in order.
@@ -817,31 +909,45 @@ impl Reader<'_> {
     /// # Errors
     /// The database refuses, or a row does not parse.
     pub fn trials_of(&self, deployment: i64) -> Result<Vec<StoredTrial>, StoreError> {
-        self.trials_where("deployment = $1", deployment)
+        self.trials_where("deployment = $1", &[deployment.into()])
     }
 
-    /// How many trials of a deployment started, ended and are still searching, counted by the
-    /// database (what a new trial's choice depends on, read under the deployment's lock).
+    /// The trials of a deployment that started after its first `started` or ended after its
+    /// first `ended` (in order of start): what happened since a state made from those, read in
+    /// one statement so that it continues that state consistently. Both halves are index range
+    /// scans, so a long history costs nothing here.
+    ///
+    /// # Errors
+    /// The database refuses, or a row does not parse.
+    pub fn trials_since(
+        &self,
+        deployment: i64,
+        started: usize,
+        ended: usize,
+    ) -> Result<Vec<StoredTrial>, StoreError> {
+        let count = |n: usize| i64::try_from(n).unwrap_or(i64::MAX);
+        self.trials_where(
+            "deployment = $1 AND (k > $2 OR end_seq > $3)",
+            &[
+                deployment.into(),
+                count(started).into(),
+                count(ended).into(),
+            ],
+        )
+    }
+
+    /// The first trial of a deployment still searching, if any.
     ///
     /// # Errors
     /// The database refuses.
-    pub fn trial_counts(&self, deployment: i64) -> Result<TrialCounts, StoreError> {
+    pub fn open_trial(&self, deployment: i64) -> Result<Option<i64>, StoreError> {
         let c = &self.conn;
-        let row = c
-            .query_opt(
-                "SELECT count(*), count(end_seq), count(*) - count(end_seq) FROM trials
-                 WHERE deployment = $1",
-                &[deployment.into()],
-            )?
-            .ok_or_else(|| c.corrupt("counting trials gave no row".into()))?;
-        let count = |i: usize, what: &str| -> Result<usize, StoreError> {
-            usize::try_from(c.int(&row, i, what)?).map_err(|_| c.corrupt(format!("{what} < 0")))
-        };
-        Ok(TrialCounts {
-            started: count(0, "trials started")?,
-            ended: count(1, "trials ended")?,
-            open: count(2, "trials open")?,
-        })
+        c.query_opt(
+            "SELECT id FROM trials WHERE deployment = $1 AND end_seq IS NULL ORDER BY k LIMIT 1",
+            &[deployment.into()],
+        )?
+        .map(|row| c.int(&row, 0, "trial id"))
+        .transpose()
     }
 
     /// A trial by id.
@@ -849,30 +955,10 @@ impl Reader<'_> {
     /// # Errors
     /// The database refuses, or the row does not parse.
     pub fn trial(&self, id: i64) -> Result<Option<StoredTrial>, StoreError> {
-        Ok(self.trials_where("id = $1", id)?.into_iter().next())
-    }
-
-    /// A trial's status and how many observations it has, in one statement: what a write
-    /// checks to know nothing changed since it planned.
-    ///
-    /// # Errors
-    /// The database refuses, or the row does not parse.
-    pub fn trial_progress(&self, id: i64) -> Result<Option<(TrialStatus, usize)>, StoreError> {
-        let c = &self.conn;
-        let Some(row) = c.query_opt(
-            "SELECT status, (SELECT count(*) FROM observations WHERE trial = $1) FROM trials
-             WHERE id = $1",
-            &[id.into()],
-        )?
-        else {
-            return Ok(None);
-        };
-        let bad = |what: &str| c.corrupt(format!("trial {id}: {what}"));
-        let status = TrialStatus::parse(&c.some_text(&row, 0, "trial status")?)
-            .ok_or_else(|| bad("status"))?;
-        let seen = usize::try_from(c.int(&row, 1, "observation count")?)
-            .map_err(|_| bad("observation count"))?;
-        Ok(Some((status, seen)))
+        Ok(self
+            .trials_where("id = $1", &[id.into()])?
+            .into_iter()
+            .next())
     }
 
     /// A trial's observations, in order.

@@ -457,6 +457,49 @@ impl Conn<'_> {
             .map_err(|e| pg.pg(e))?;
         rows.iter().map(|r| row(pg, r)).collect()
     }
+
+    /// Runs `statements` in order, sent together (pipelined): the server gets them in one
+    /// round trip and runs each after the one before, so every statement sees what the ones
+    /// before it did (a lock taken by the first is held when the second reads).
+    pub(super) fn query_all(
+        &self,
+        statements: &[(&str, &[Value])],
+    ) -> Result<Vec<Vec<Row>>, StoreError> {
+        let pg = self.pg;
+        let params: Vec<Vec<&(dyn ToSql + Sync)>> = statements
+            .iter()
+            .map(|(_, p)| p.iter().map(|v| v as _).collect())
+            .collect();
+        let answers = pg
+            .block_on(async {
+                // Prepared first (a round trip only for a statement new to this connection),
+                // so that none is sent before an earlier one still waiting for its
+                // preparation: the order they run in is the order given.
+                let prepared = futures_util::future::try_join_all(statements.iter().map(
+                    |(sql, _)| async move {
+                        match &self.on {
+                            On::Client(c) => c.prepare_cached(sql).await,
+                            On::Tx(t) => t.prepare_cached(sql).await,
+                        }
+                    },
+                ))
+                .await?;
+                futures_util::future::try_join_all(prepared.iter().zip(&params).map(
+                    |(stmt, params)| async move {
+                        match &self.on {
+                            On::Client(c) => c.query(stmt, params).await,
+                            On::Tx(t) => t.query(stmt, params).await,
+                        }
+                    },
+                ))
+                .await
+            })
+            .map_err(|e| pg.pg(e))?;
+        answers
+            .iter()
+            .map(|rows| rows.iter().map(|r| row(pg, r)).collect())
+            .collect()
+    }
 }
 
 fn row(pg: &Postgres, r: &tokio_postgres::Row) -> Result<Row, StoreError> {

@@ -4,9 +4,10 @@
 //! version in `PRAGMA user_version`.
 
 use std::path::{Path, PathBuf};
-use std::sync::{Mutex, MutexGuard};
+use std::sync::{Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, Instant};
 
+use rusqlite::config::DbConfig;
 use rusqlite::types::{ToSqlOutput, ValueRef};
 use rusqlite::{Connection, TransactionBehavior};
 
@@ -49,6 +50,27 @@ pub(super) struct Sqlite {
     last_check: Mutex<Option<(Instant, Result<(), String>)>>,
     /// The file as opened (device and inode): one put in its place is not this database.
     identity: Option<(u64, u64)>,
+}
+
+impl Drop for Sqlite {
+    fn drop(&mut self) {
+        let Err(lost) = self.check_in_place() else {
+            return;
+        };
+        // Closing the last connection copies the log into the file and deletes the log: into a
+        // file emptied underneath, that writes pages into what is no longer a whole database
+        // (the next start calls it malformed), and with another file put in its place it
+        // deletes the log now beside that one. So the connection closes without it, leaving
+        // the file as it was found and the log with the writes since its last copy.
+        let conn = self.conn.get_mut().unwrap_or_else(PoisonError::into_inner);
+        if let Err(e) = conn.set_db_config(DbConfig::SQLITE_DBCONFIG_NO_CKPT_ON_CLOSE, true) {
+            tracing::error!("{}: cannot keep closing from writing to it: {e}", self.file);
+        }
+        tracing::error!(
+            "{lost}; closed without writing to it. Its log {}-wal is left as it was; restore the database from a copy",
+            self.file
+        );
+    }
 }
 
 /// The device and inode of a file (`None` where the platform has none).

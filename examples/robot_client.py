@@ -8,7 +8,8 @@
 
 For each target it opens a trial, then repeats: ask where to search next, "drive" there, look
 inside, report what was seen; until the target is found (`done`) or every container was searched
-(`exhausted`). The simulated robot's eyes are the `contents` of each container in the scene
+(`exhausted`). Stopped with Ctrl-C in the middle of a search, it tells the server it gave the
+trial up (`abandoned`), so the trial is not left open. The simulated robot's eyes are the `contents` of each container in the scene
 listing (GET /scenes/{name}).
 
 On a real robot (a ROS node, say) only `search_container()` changes: send a navigation goal to the
@@ -156,7 +157,7 @@ def run_trial(api, trial_id, target, strategy, reply, containers, log):
     # The server ends a trial itself after at most one search per container; the bound only
     # guards this loop against a misbehaving server.
     for _ in range(len(containers) + 1):
-        if status in ("done", "exhausted"):
+        if status in ("done", "exhausted", "abandoned"):
             break
         proposal = reply.get("next")
         if not proposal:
@@ -253,6 +254,9 @@ def parse_args(argv):
                          "--selector, --c and --seed are then the deployment's own); a trial it "
                          "has open is finished first and counts for its target if that is in "
                          "--targets")
+    ap.add_argument("--abandon-open", action="store_true",
+                    help="with --deployment: give up the trial it has open (POST "
+                         "/trials/{id}/abandon) instead of finishing it")
     ap.add_argument("--json", action="store_true",
                     help="print one JSON object with the results instead of the table")
     ap.add_argument("-v", "--verbose", action="store_true",
@@ -291,7 +295,20 @@ def run(args, log):
     trials = []
     targets = list(args.targets)
     open_id = open_trial_id(state)
-    if open_id is not None:
+    if open_id is not None and args.abandon_open:
+        t = api.post(f"/trials/{quote(open_id)}/abandon", {})
+        log(f"gave up open trial {open_id} ({t.get('target')}, {t.get('strategy')})")
+        trials.append({
+            "trial": open_id,
+            "target": t.get("target"),
+            "strategy": t.get("strategy"),
+            "cost_m": t.get("cost_m"),
+            "searched": list(t.get("searched") or []),
+            "status": t.get("status"),
+        })
+        if not args.json:
+            print_trial(len(trials), trials[-1])
+    elif open_id is not None:
         summary = resume_open_trial(api, open_id, containers, log)
         trials.append(summary)
         if summary["target"] in targets:
@@ -306,7 +323,18 @@ def run(args, log):
                          {"scene": args.scene, "target": target})
         trial_id = reply["trial"]
         log(f"trial {trial_id}: {target} with {reply.get('strategy')}")
-        summary = run_trial(api, trial_id, target, reply.get("strategy"), reply, containers, log)
+        try:
+            summary = run_trial(api, trial_id, target, reply.get("strategy"), reply, containers,
+                                log)
+        except KeyboardInterrupt:
+            # Stopped mid-search: the trial is given up rather than left open. Best effort:
+            # without the server, the next run with --deployment resumes it instead.
+            try:
+                api.post(f"/trials/{quote(trial_id)}/abandon", {})
+                print(f"stopped: trial {trial_id} abandoned", file=sys.stderr)
+            except (ApiError, Unreachable) as e:
+                print(f"stopped: trial {trial_id} left open ({e})", file=sys.stderr)
+            raise
         trials.append(summary)
         if not args.json:
             print_trial(len(trials), summary)
@@ -330,6 +358,8 @@ def main(argv=None):
     except (KeyError, TypeError, ValueError) as e:
         print(f"error: unexpected reply from {args.url}: {e!r}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        return 130
     if args.json:
         json.dump({"deployment": dep, "trials": trials, "state": state}, sys.stdout, indent=2)
         print()

@@ -344,12 +344,12 @@ class FerretNode(Node):
                     found_at = step.id
                     break
         except StepFailed as e:
-            trial.abandon()
+            self._abandon(trial)
             self._publish_belief(trial, likelihoods, target, places, found_at)
             timing.total_s = time.perf_counter() - started
             return self._end(handle, trial, e.status, str(e))
         except PlannerError as e:
-            trial.abandon()
+            self._abandon(trial)
             timing.total_s = time.perf_counter() - started
             return self._end(handle, trial, Status.PLANNER_ERROR, str(e))
         try:
@@ -373,6 +373,13 @@ class FerretNode(Node):
             Status.EXHAUSTED,
             f"{target} not found in any of the {len(trial.searched)} containers",
         )
+
+    def _abandon(self, trial) -> None:
+        """Gives the trial up (on the server too, with the serve backend)."""
+        trial.abandon()
+        why = getattr(trial, "abandon_error", None)
+        if why:
+            self.get_logger().warning(f"the server keeps the trial open: {why}")
 
     def _end(self, handle, trial, status, message, container=None) -> SearchObject.Result:
         r = SearchObject.Result()

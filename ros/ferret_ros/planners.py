@@ -326,8 +326,8 @@ class ServePlanner:
         state = self.request("GET", f"/deployments/{deployment}")
         open_trial = state.get("open_trial")
         if open_trial:
-            # A trial a failure left open (the API cannot abandon one): go on with it when it
-            # looks for the same object, since the deployment takes no other trial meanwhile.
+            # A trial left open (this node stopped in the middle of a search, before it could
+            # abandon it): go on with it when it looks for the same object.
             t = self.request("GET", f"/trials/{open_trial}")
             if t["target"] != target or t["scene"] != scene:
                 raise PlannerError(
@@ -349,6 +349,8 @@ class ServeTrial:
         self.places = places
         self.strategy = state["strategy"]
         self.ended = False
+        # Why the server could not be told of an abandoned search, if it could not.
+        self.abandon_error: Optional[str] = None
 
     def next(self) -> Optional[Place]:
         n = self.state.get("next")
@@ -382,5 +384,13 @@ class ServeTrial:
         return self.state.get("replays_m")
 
     def abandon(self) -> None:
-        # Left open on the server (see ServePlanner.start).
+        """Ends the trial on the server as abandoned (it teaches selection nothing), so that a
+        failed search does not stay open there. Best effort: a server out of reach keeps the
+        trial open, and the next search for the same object goes on with it."""
+        if self.ended:
+            return
         self.ended = True
+        try:
+            self.state = self.planner.request("POST", f"/trials/{self.state['trial']}/abandon", {})
+        except PlannerError as e:
+            self.abandon_error = str(e)

@@ -391,6 +391,33 @@ def test_serve_backend_makes_the_same_searches(start_node, robot, house, ferret_
     assert [t["strategy"] for t in state["trials"]] == [r["chosen"] for r in rows]
 
 
+def test_a_failed_search_is_abandoned_on_the_server(start_node, robot, ferret_serve):
+    """Navigation fails in the middle of a serve-backed search: the node ends the trial on the
+    server as abandoned instead of leaving it open, and the next search starts a trial of its
+    own."""
+    nav, _, _ = robot
+    _, client = start_node(
+        "ferret_serve_abandon", backend="serve", serve_url=ferret_serve, serve_scene="apartment",
+        strategies=STRATEGIES, seed=0, plan_from_robot_pose=False,
+    )
+    nav.reset()
+    nav.mode, nav.fail_from = "abort", nav.goals + 2
+    try:
+        _, result, _ = client.send("Wallet")
+    finally:
+        nav.mode = "ok"
+    assert result.status == Status.NAVIGATION_FAILED, result.message
+    with urllib.request.urlopen(ferret_serve + "/deployments/1", timeout=5) as r:
+        state = json.loads(r.read())
+    assert [t["status"] for t in state["trials"]] == ["abandoned"], state
+    assert state["open_trials"] == []
+    _, again, _ = client.send("Wallet")
+    assert again.found, again.message
+    with urllib.request.urlopen(ferret_serve + "/deployments/1", timeout=5) as r:
+        state = json.loads(r.read())
+    assert [t["status"] for t in state["trials"]] == ["abandoned", "done"], state
+
+
 def test_trials_start_where_the_robot_is(start_node, robot, house, ferret_serve):
     """Without going back to the start between searches, each trial plans from the robot's
     pose (/amcl_pose): the node's own placing of the scene at that pose gives the searches that

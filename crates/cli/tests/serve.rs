@@ -133,6 +133,46 @@ fn the_paper_targets_through_the_python_client_cost_what_deploy_says() {
     server.kill();
 }
 
+/// A trial left open on the server (a robot stopped mid-search) is given up by the Python
+/// client's `--abandon-open`: it reads `abandoned`, and the client's own trials follow it.
+#[test]
+fn the_python_client_abandons_an_open_trial() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(&dir.path().join("serve.sqlite"));
+    let (st, dep) = post(&format!("{}/deployments", server.url), json!({"seed": 4}));
+    assert_eq!(st, 201, "{dep}");
+    let id = dep["id"].as_i64().unwrap();
+    let (st, open) = post(
+        &format!("{}/deployments/{id}/trials", server.url),
+        json!({"scene": "apartment", "target": "Wallet"}),
+    );
+    assert_eq!(st, 201, "{open}");
+    let o = Command::new("python3")
+        .arg(repo().join("examples/robot_client.py"))
+        .args(["--url", &server.url, "--scene", "apartment"])
+        .args(["--deployment", &id.to_string(), "--abandon-open"])
+        .args(["--targets", "Blanket", "--json"])
+        .env_remove("FERRET_SERVE_TOKEN")
+        .output()
+        .expect("python3 runs");
+    assert!(o.status.success(), "{}", text(&o));
+    let report: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let trials = report["trials"].as_array().unwrap();
+    assert_eq!(trials.len(), 2, "{report}");
+    assert_eq!(trials[0]["trial"], open["trial"], "{report}");
+    assert_eq!(trials[0]["status"], "abandoned", "{report}");
+    assert_eq!(trials[1]["status"], "done", "{report}");
+    let state = get(&format!("{}/deployments/{id}", server.url));
+    let statuses: Vec<&str> = state["trials"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t["status"].as_str().unwrap())
+        .collect();
+    assert_eq!(statuses, ["abandoned", "done"], "{state}");
+    server.kill();
+}
+
 /// Runs the five targets through HTTP; `kill_at` = (trial index, observations) after which the
 /// server is killed with SIGKILL and restarted on the same database.
 fn run_through_http(db: &Path, kill_at: Option<(usize, usize)>) -> Vec<(String, f64, Vec<String>)> {

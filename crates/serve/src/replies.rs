@@ -9,7 +9,7 @@ use crate::api::MAX_REQUEST_ID;
 use crate::error::{ApiError, ErrorKind};
 use crate::model::{ApiReply, StoredReply};
 use crate::service::Service;
-use crate::store::{Claim, Reader, Writer};
+use crate::store::{Claim, Final, FinalFailed, Reader, Writer, store_reply};
 
 /// How a write with a request id begins: answered from the stored reply, or claimed.
 pub(crate) enum Begun<'a> {
@@ -114,6 +114,18 @@ impl RequestClaim<'_> {
         !self.rolled_back.get()
     }
 
+    /// Replaces the reply stored by [`complete`](Self::complete) by `reply` (a reply that could
+    /// only be finished once the write was committed); nothing without a request id.
+    ///
+    /// # Errors
+    /// The database refuses.
+    pub(crate) fn replace(&self, reply: &ApiReply) -> Result<(), ApiError> {
+        let Some(id) = self.id.as_deref() else {
+            return Ok(());
+        };
+        Ok(self.service.store.replace_reply(id, &reply.body)?)
+    }
+
     /// Runs a write operation with request-id idempotency, under this claim. [`Service::begin`]
     /// found no reply stored, and the claim keeps every other run of the id out, so the reply
     /// is not looked up again before the operation; storing it is what checks. Should the id
@@ -126,35 +138,51 @@ impl RequestClaim<'_> {
         body: &[u8],
         op: impl FnOnce(&Writer<'_>) -> Result<ApiReply, ApiError>,
     ) -> Result<ApiReply, ApiError> {
+        self.complete_with(route, body, |w| Ok((op(w)?, Vec::new())))
+    }
+
+    /// [`complete`](Self::complete) for an operation that ends with statements to run with the
+    /// commit (see [`Store::write_finishing`](crate::store::Store::write_finishing)); the reply
+    /// is stored last among them.
+    pub(crate) fn complete_with(
+        &self,
+        route: &str,
+        body: &[u8],
+        op: impl FnOnce(&Writer<'_>) -> Result<(ApiReply, Vec<Final>), ApiError>,
+    ) -> Result<ApiReply, ApiError> {
         let request_id = self.id.as_deref();
-        let taken = &self.rolled_back;
-        taken.set(false);
-        let done = self.service.store.write(|w| {
-            let reply = op(w)?;
+        self.rolled_back.set(false);
+        // Where the reply is among the final statements.
+        let reply_at = std::cell::Cell::new(None);
+        let done = self.service.store.write_finishing(|w| {
+            let (reply, mut finals) = op(w)?;
             if let Some(id) = request_id {
-                let stored = w.insert_reply(
+                reply_at.set(Some(finals.len()));
+                finals.push(store_reply(
                     id,
                     &StoredReply {
                         fingerprint: fingerprint(route, body),
                         outcome: reply.outcome,
                         body: reply.body.clone(),
                     },
-                )?;
-                if !stored {
-                    taken.set(true);
-                    // An error rolls the operation back.
-                    return Err(ApiError::internal("the request id has a reply already"));
-                }
+                ));
             }
-            Ok(reply)
-        });
-        if !taken.get() {
-            return done;
+            Ok::<_, ApiError>((reply, finals))
+        })?;
+        match done {
+            Ok(reply) => Ok(reply),
+            // The id has a reply already: the write is rolled back and that reply returned.
+            Err(FinalFailed { index, error })
+                if error.is_duplicate() && reply_at.get() == Some(index) =>
+            {
+                self.rolled_back.set(true);
+                self.service
+                    .store
+                    .read(|r| Ok(stored_reply(r, request_id, route, body)))??
+                    .ok_or_else(|| ApiError::internal("a request id's stored reply vanished"))
+            }
+            Err(FinalFailed { error, .. }) => Err(error.into()),
         }
-        self.service
-            .store
-            .read(|r| Ok(stored_reply(r, request_id, route, body)))??
-            .ok_or_else(|| ApiError::internal("a request id's stored reply vanished"))
     }
 }
 

@@ -146,6 +146,12 @@ impl Selectors {
         self.kept.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
+    /// Where deployment `id`'s kept selector stands (the start of its history when none is
+    /// kept).
+    pub(crate) fn mark(&self, id: i64) -> HistoryMark {
+        self.lock().1.get(&id).map(|k| k.mark).unwrap_or_default()
+    }
+
     /// The choice for a new trial of deployment `id` and the counts it was made from, after
     /// bringing its selector up to date with `since(started, ended)`: the trials that started
     /// or ended after the first `started` starts and `ended` ends (read in one statement).
@@ -157,7 +163,7 @@ impl Selectors {
         spec: &DeploymentSpec,
         since: impl Fn(usize, usize) -> Result<Vec<StoredTrial>, ApiError>,
     ) -> Result<(usize, TrialCounts), ApiError> {
-        let from = self.lock().1.get(&id).map(|k| k.mark).unwrap_or_default();
+        let from = self.mark(id);
         let rows = since(from.started, from.ended)?;
         let mut kept = self.lock();
         let (clock, map) = &mut *kept;

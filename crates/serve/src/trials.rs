@@ -19,7 +19,7 @@ use crate::grids::Placed;
 use crate::model::{
     ApiReply, DeploymentSpec, Outcome, StoredObservation, StoredTrial, TrialStatus,
 };
-use crate::replies::Begun;
+use crate::replies::{Begun, RequestClaim};
 use crate::searches::{LiveSearch, Owner};
 use crate::service::{Service, json};
 use crate::store::{NewTrial, TrialEnding};
@@ -30,10 +30,13 @@ pub(crate) fn is_type_name(s: &str) -> bool {
 }
 
 impl Service {
-    /// `POST /deployments/{id}/trials`. The strategy is chosen from the trials ended so far and
-    /// the first container planned without holding the database; when another trial of the
-    /// deployment started or ended meanwhile (another robot, perhaps on another replica), the
-    /// choice is made again from the new state.
+    /// `POST /deployments/{id}/trials`. What must be decided under the deployment's lock is
+    /// decided there and nothing more: the strategy, chosen from the trials ended so far (the
+    /// selector goes on from where this replica kept it, reading the trials since in the same
+    /// round trip as the lock), and the trial's place in the deployment's order. The first
+    /// container is planned once the trial is stored, without the lock, since planning can
+    /// take a while and every start and end of the deployment waits for it. So a start is never
+    /// refused or made again for being overtaken by other robots' trials.
     pub fn start_trial(
         &self,
         deployment: i64,
@@ -42,7 +45,7 @@ impl Service {
     ) -> Result<ApiReply, ApiError> {
         let route = format!("POST /deployments/{deployment}/trials");
         let claim = match self.begin(req.request_id.as_deref(), &route, body)? {
-            Begun::Replied(reply) => return Ok(reply),
+            Begun::Replied(reply) => return self.planned_start(reply, None, None),
             Begun::Fresh(claim) => claim,
         };
         let spec = self.spec(deployment)?;
@@ -58,138 +61,140 @@ impl Service {
         }
         // The route's resource is the deployment (404 when missing); a scene named in the body
         // that does not exist makes the body unusable: 422.
-        let placed = self.placed(&req.scene, req.pose).map_err(|e| {
+        self.placed(&req.scene, req.pose).map_err(|e| {
             if e.kind == ErrorKind::NotFound {
                 ApiError::new(ErrorKind::Invalid, e.field, e.message)
             } else {
                 e
             }
         })?;
-        let candidates = self.stored_candidates(deployment, &spec)?;
-        let trial = TrialSpec {
-            target: ObjectType::new(req.target.clone()),
-            revealed: Vec::new(),
-        };
-        let plan_for = |chosen: usize| -> Result<Planned, ApiError> {
-            let owner = Owner {
-                placed: placed.clone(),
-                trial: trial.clone(),
-                strategy: candidates[chosen].clone(),
-            };
-            let mut live = LiveSearch::try_new(owner, |o| {
-                let problem = SearchProblem::new(&o.placed.house, &o.placed.distances, &o.trial);
-                Search::start(o.strategy.as_ref(), &problem, None).map_err(plan_error)
-            })?;
-            let next = live
-                .with_dependent_mut(|_, search| search.next_container())
-                .map_err(plan_error)?
-                .map(|c| next_container(&placed, Place::Start, c));
-            Ok(Planned { chosen, live, next })
-        };
-        let mut planned: Option<Planned> = None;
-        let mut created = None;
-        let mut attempt = 0;
-        let started = loop {
-            attempt += 1;
-            // The choice from the trials ended so far, and the first container's plan for it,
-            // made without holding the deployment.
-            let (chosen, seen) = self.selectors.choose(deployment, &spec, |started, ended| {
-                Ok(self
-                    .store
-                    .read(|r| r.trials_since(deployment, started, ended))?)
-            })?;
-            if spec.sequential && seen.open > 0 {
-                check_sequential(deployment, self.store.read(|r| r.open_trial(deployment))?)?;
-            }
-            let mut p = match planned.take() {
-                Some(p) if p.chosen == chosen => p,
-                _ => plan_for(chosen)?,
-            };
-            let overtaken = std::cell::Cell::new(false);
-            let reply = claim.complete(&route, body, |w| {
-                // Under the deployment's lock, the choice from the trials as they are now
-                // (the selector goes on from where it was: this costs the trials since, read
-                // with the lock in one round trip). Another robot's start or end since the
-                // plan above rarely changes it. When it does, the lock is let go and the new
-                // choice planned without it, since planning can take a while and every start
-                // and end of the deployment waits for the lock; after a few such rounds the
-                // plan is made here, so a start is never refused for being overtaken.
-                let fresh = w
-                    .lock_deployment_since(deployment, seen.started, seen.ended)?
-                    .ok_or_else(|| {
-                        ApiError::new(
-                            ErrorKind::NotFound,
-                            "deployment",
-                            format!("no deployment {deployment}"),
-                        )
-                    })?;
-                let mut now = seen;
-                if !fresh.is_empty() {
-                    let again;
-                    (again, now) = self.selectors.choose(deployment, &spec, |started, ended| {
-                        if (started, ended) == (seen.started, seen.ended) {
-                            Ok(fresh.clone())
-                        } else {
-                            Ok(w.reader().trials_since(deployment, started, ended)?)
-                        }
-                    })?;
-                    if spec.sequential && now.open > 0 {
-                        check_sequential(deployment, w.reader().open_trial(deployment)?)?;
-                    }
-                    if p.chosen != again {
-                        tracing::debug!(
-                            deployment,
-                            attempt,
-                            "the choice changed while the trial was planned"
-                        );
-                        if attempt < PLANS_WITHOUT_LOCK {
-                            overtaken.set(true);
-                            return Err(ApiError::internal("overtaken"));
-                        }
-                        p = plan_for(again)?;
-                    }
-                }
-                let k = now.started as i64 + 1;
-                let id = w.insert_trial(&NewTrial {
-                    deployment,
-                    k,
-                    scene: &req.scene,
-                    target: &req.target,
-                    pose: req.pose,
-                    chosen: p.chosen,
-                    started_after: now.ended as i64,
+        self.stored_candidates(deployment, &spec)?;
+        // The trial as stored, so that planning it needs no read.
+        let started = std::cell::RefCell::new(None);
+        let stored = claim.complete_with(&route, body, |w| {
+            let mark = self.selectors.mark(deployment);
+            let now = w
+                .lock_deployment_since(deployment, mark.started, mark.ended)?
+                .ok_or_else(|| {
+                    ApiError::new(
+                        ErrorKind::NotFound,
+                        "deployment",
+                        format!("no deployment {deployment}"),
+                    )
                 })?;
-                created = Some(id);
-                json(
-                    Outcome::Created,
-                    &TrialState {
-                        trial: id,
-                        deployment,
-                        k,
-                        scene: req.scene.clone(),
-                        target: req.target.clone(),
-                        strategy: spec.strategies[p.chosen].clone(),
-                        status: TrialStatus::Searching,
-                        searched: Vec::new(),
-                        cost_m: 0.0,
-                        travelled_m: None,
-                        next: p.next.clone(),
-                        replays_m: None,
-                    },
-                )
-            });
-            planned = Some(p);
-            if !overtaken.get() {
-                break reply;
+            let (chosen, counts) = self.selectors.choose(deployment, &spec, |started, ended| {
+                if (started, ended) == (mark.started, mark.ended) {
+                    Ok(now.since.clone())
+                } else {
+                    Ok(w.reader().trials_since(deployment, started, ended)?)
+                }
+            })?;
+            if spec.sequential && counts.open > 0 {
+                check_sequential(deployment, w.reader().open_trial(deployment)?)?;
             }
+            // The trial goes with the commit, with the reply naming it: the deployment is held
+            // for the round trip that took its lock and no other.
+            let new = NewTrial {
+                deployment,
+                k: counts.started as i64 + 1,
+                scene: &req.scene,
+                target: &req.target,
+                pose: req.pose,
+                chosen,
+                started_after: counts.ended as i64,
+            };
+            let trial = w.insert_trial_last(now.next_trial, &new);
+            started.replace(Some(StoredTrial {
+                id: now.next_trial,
+                deployment,
+                k: new.k,
+                scene: req.scene.clone(),
+                target: req.target.clone(),
+                pose: req.pose,
+                chosen,
+                status: TrialStatus::Searching,
+                cost: None,
+                replays: None,
+                started_after: new.started_after,
+                end_seq: None,
+            }));
+            let reply = ApiReply {
+                outcome: Outcome::Created,
+                body: unplanned(now.next_trial),
+            };
+            Ok((reply, vec![trial]))
+        })?;
+        let known = if claim.wrote() {
+            started.into_inner()
+        } else {
+            None
         };
-        // A reply stored meanwhile by another run of the request id rolled the insert back.
-        if let (Ok(_), Some(id), Some(p)) = (&started, created, planned)
-            && claim.wrote()
-        {
-            self.searches.keep(id, 0, p.live);
+        self.planned_start(stored, Some(&claim), known)
+    }
+
+    /// The reply to a trial's start from what was stored for it: the trial as it started
+    /// (`known` when this request stored it, else read), with its first container planned now. The reply stored with the trial names the trial
+    /// only (planning waits until the deployment is let go); once planned it is stored whole,
+    /// under the request's `claim`, so that a retry gets these very bytes. A retry that finds
+    /// only the trial's name (the server stopped in between) plans it again, to the same reply.
+    fn planned_start(
+        &self,
+        stored: ApiReply,
+        claim: Option<&RequestClaim<'_>>,
+        known: Option<StoredTrial>,
+    ) -> Result<ApiReply, ApiError> {
+        let Some(id) = unplanned_trial(&stored.body) else {
+            return Ok(stored);
+        };
+        let row = match known {
+            Some(row) if row.id == id => row,
+            _ => self.trial_row(id)?,
+        };
+        let spec = self.spec(row.deployment)?;
+        let candidates = self.stored_candidates(row.deployment, &spec)?;
+        let strategy = candidates
+            .get(row.chosen)
+            .cloned()
+            .ok_or_else(|| ApiError::internal(format!("trial {id}: no strategy {}", row.chosen)))?;
+        let placed = self.placed(&row.scene, row.pose)?;
+        let owner = Owner {
+            placed: placed.clone(),
+            trial: TrialSpec {
+                target: ObjectType::new(row.target.clone()),
+                revealed: Vec::new(),
+            },
+            strategy,
+        };
+        let mut live = LiveSearch::try_new(owner, |o| {
+            let problem = SearchProblem::new(&o.placed.house, &o.placed.distances, &o.trial);
+            Search::start(o.strategy.as_ref(), &problem, None).map_err(plan_error)
+        })?;
+        let next = live
+            .with_dependent_mut(|_, search| search.next_container())
+            .map_err(plan_error)?
+            .map(|c| next_container(&placed, Place::Start, c));
+        let reply = json(
+            Outcome::Created,
+            &TrialState {
+                trial: id,
+                deployment: row.deployment,
+                k: row.k,
+                scene: row.scene.clone(),
+                target: row.target.clone(),
+                strategy: spec.strategies[row.chosen].clone(),
+                status: TrialStatus::Searching,
+                searched: Vec::new(),
+                cost_m: 0.0,
+                travelled_m: None,
+                next,
+                replays_m: None,
+            },
+        )?;
+        if let Some(claim) = claim {
+            claim.replace(&reply)?;
         }
-        started
+        self.searches.keep(id, 0, live);
+        Ok(reply)
     }
 
     fn trial_row(&self, id: i64) -> Result<StoredTrial, ApiError> {
@@ -361,12 +366,12 @@ impl Service {
                 None => (TrialStatus::Exhausted, None, None),
             }
         };
-        let reply = claim.complete(&route, body, |w| {
+        let reply = claim.complete_with(&route, body, |w| {
             // Every observation holds its trial's row, so one observation per sequence number
             // is kept; an end then holds its deployment's too (the order trials end in is the
-            // deployment's history, which starts are chosen from), as briefly as it can, since
-            // every start and end of the deployment waits for it. Steps, most of a fleet's
-            // requests, leave the deployment free.
+            // deployment's history, which starts are chosen from), taken by a statement that
+            // goes with the commit, since every start and end of the deployment waits for it.
+            // Steps, most of a fleet's requests, leave the deployment free.
             if w.lock_trial_progress(id)? != Some((TrialStatus::Searching, observations.len())) {
                 return Err(ApiError::new(
                     ErrorKind::Conflict,
@@ -374,7 +379,7 @@ impl Service {
                     "the trial changed while this observation was planned; read it and retry",
                 ));
             }
-            let end_seq = w.record_and_end(
+            let last = w.record_and_end_last(
                 (id, row.deployment),
                 Some((observations.len(), &observation)),
                 (status != TrialStatus::Searching).then_some(TrialEnding {
@@ -382,18 +387,18 @@ impl Service {
                     cost,
                     replays: replays.as_deref(),
                 }),
-            )?;
+            );
             let mut all = observations.clone();
             all.push(observation.clone());
             let mut updated = row.clone();
             updated.status = status;
             updated.cost = (status != TrialStatus::Searching).then_some(cost);
             updated.replays = replays.clone();
-            updated.end_seq = end_seq;
-            json(
+            let reply = json(
                 Outcome::Done,
                 &trial_state(&updated, spec, &all, cost, next.clone()),
-            )
+            )?;
+            Ok((reply, last))
         });
         if reply.is_ok() && status == TrialStatus::Searching {
             self.searches.keep(id, observations.len() + 1, live);
@@ -421,7 +426,7 @@ impl Service {
         let observations = self.store.read(|r| r.observations(id))?;
         let spec = self.spec(row.deployment)?;
         let cost: f64 = observations.iter().map(|o| o.leg).sum();
-        let reply = claim.complete(&route, body, |w| {
+        let reply = claim.complete_with(&route, body, |w| {
             // As any trial's end: the trial's row, then the deployment's.
             if w.lock_trial_progress(id)? != Some((TrialStatus::Searching, observations.len())) {
                 return Err(ApiError::new(
@@ -430,7 +435,7 @@ impl Service {
                     "the trial changed while it was being abandoned; read it and retry",
                 ));
             }
-            let end_seq = w.record_and_end(
+            let last = w.record_and_end_last(
                 (id, row.deployment),
                 None,
                 Some(TrialEnding {
@@ -438,15 +443,15 @@ impl Service {
                     cost,
                     replays: None,
                 }),
-            )?;
+            );
             let mut ended = row.clone();
             ended.status = TrialStatus::Abandoned;
             ended.cost = Some(cost);
-            ended.end_seq = end_seq;
-            json(
+            let reply = json(
                 Outcome::Done,
                 &trial_state(&ended, &spec, &observations, cost, None),
-            )
+            )?;
+            Ok((reply, last))
         });
         self.searches.forget(id);
         reply
@@ -465,16 +470,22 @@ fn check_searching(row: &StoredTrial) -> Result<(), ApiError> {
     ))
 }
 
-/// Rounds of a trial start that plan without holding the deployment; a start overtaken that
-/// often (its choice changed by other trials each time) plans its last under the lock.
-const PLANS_WITHOUT_LOCK: u32 = 3;
-
-/// A trial's first step, planned for the strategy `chosen`.
-struct Planned {
-    chosen: usize,
-    live: LiveSearch,
-    next: Option<NextContainer>,
+/// What is stored as the reply to a trial's start until its first container is planned.
+fn unplanned(trial: i64) -> String {
+    serde_json::json!({ UNPLANNED: trial }).to_string()
 }
+
+/// The trial named by a stored reply that waits for its plan.
+fn unplanned_trial(body: &str) -> Option<i64> {
+    // A planned reply is a trial's state, which never has this key.
+    if !body.contains(UNPLANNED) {
+        return None;
+    }
+    serde_json::from_str::<serde_json::Value>(body).ok()?[UNPLANNED].as_i64()
+}
+
+/// The key of [`unplanned`] replies.
+const UNPLANNED: &str = "unplanned_trial";
 
 /// 409 naming the trial of a sequential deployment still searching, if there is one.
 fn check_sequential(deployment: i64, open: Option<i64>) -> Result<(), ApiError> {

@@ -738,3 +738,57 @@ async fn an_abandoned_trial_ends_and_teaches_nothing() {
     assert_eq!(second["strategy"], names[live.choose()], "{second}");
     assert_eq!(second["k"], 2, "{second}");
 }
+
+/// A trial's start is stored before its first container is planned; a retry that finds only
+/// the trial's name stored (the server stopped in between) plans it again, to the very reply
+/// the first run gave.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_start_stored_before_its_plan_is_answered_again_alike() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("serve.sqlite");
+    let s = start(Some(&db), None).await;
+    let (_, dep) = s.post("/deployments", json!({"seed": 2})).await;
+    let id = dep["id"].as_i64().unwrap();
+    let path = format!("{}/deployments/{id}/trials", s.url);
+    let body = r#"{"request_id": "start-1", "scene": "flat", "target": "Wallet"}"#;
+    let send = || async {
+        let r = s
+            .client
+            .post(&path)
+            .header("content-type", "application/json")
+            .body(body)
+            .send()
+            .await
+            .unwrap();
+        (r.status().as_u16(), r.text().await.unwrap())
+    };
+    let (st, first) = send().await;
+    assert_eq!(st, 201, "{first}");
+    let trial: Value = serde_json::from_str(&first).unwrap();
+    assert!(trial["next"]["container"].is_string(), "{first}");
+    let stored_body = |db: &Path| -> String {
+        rusqlite::Connection::open(db)
+            .unwrap()
+            .query_row("SELECT body FROM requests WHERE id = 'start-1'", [], |r| {
+                r.get(0)
+            })
+            .unwrap()
+    };
+    assert_eq!(
+        stored_body(&db),
+        first,
+        "the planned reply is what is stored"
+    );
+    // As a server stopped between storing the trial and planning it leaves the request.
+    rusqlite::Connection::open(&db)
+        .unwrap()
+        .execute(
+            "UPDATE requests SET body = ?1 WHERE id = 'start-1'",
+            [format!(r#"{{"unplanned_trial":{}}}"#, trial["trial"])],
+        )
+        .unwrap();
+    let (st, again) = send().await;
+    assert_eq!((st, &again), (201, &first));
+    let (_, state) = s.get(&format!("/deployments/{id}")).await;
+    assert_eq!(state["trials"].as_array().unwrap().len(), 1, "{state}");
+}

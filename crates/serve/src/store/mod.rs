@@ -95,6 +95,19 @@ pub enum StoreError {
 }
 
 impl StoreError {
+    /// True when a row was refused for a key another row holds.
+    pub fn is_duplicate(&self) -> bool {
+        match self {
+            StoreError::Postgres { source, .. } => {
+                source.code() == Some(&tokio_postgres::error::SqlState::UNIQUE_VIOLATION)
+            }
+            StoreError::Sql { source, .. } => {
+                source.sqlite_error_code() == Some(rusqlite::ErrorCode::ConstraintViolation)
+            }
+            _ => false,
+        }
+    }
+
     /// True when the failure is the database being out of reach (or shutting down) rather than
     /// a fault in its data: a request may be retried, here or on another replica.
     pub fn is_unavailable(&self) -> bool {
@@ -321,6 +334,37 @@ impl Store {
         }
     }
 
+    /// Replaces the body of request `id`'s stored reply, in a statement of its own (one round
+    /// trip on PostgreSQL: it is its own transaction).
+    ///
+    /// # Errors
+    /// The database refuses, or cannot be reached.
+    pub fn replace_reply(&self, id: &str, body: &str) -> Result<(), StoreError> {
+        const SQL: &str = "UPDATE requests SET body = $2 WHERE id = $1";
+        let params = [request_key(id).as_ref().into(), body.into()];
+        match &self.backend {
+            Backend::Sqlite(s) => s.write(|conn| conn.execute(SQL, &params).map(drop)),
+            Backend::Postgres(p) => p.read(|conn| conn.execute(SQL, &params).map(drop)),
+        }
+    }
+
+    /// Like [`write`](Self::write), with statements `f` gives to run last: they are sent with
+    /// the commit (on PostgreSQL in one round trip, so that locks they take are held no longer
+    /// than the server takes to run them). When one of them fails the transaction is rolled
+    /// back and the inner error says which.
+    ///
+    /// # Errors
+    /// What `f` returns, or the transaction failing to begin or commit.
+    pub fn write_finishing<T, E: From<StoreError>>(
+        &self,
+        f: impl FnOnce(&Writer<'_>) -> Result<(T, Vec<Final>), E>,
+    ) -> Result<Result<T, FinalFailed>, E> {
+        match &self.backend {
+            Backend::Sqlite(s) => s.write_finishing(|conn| f(&Writer { conn })),
+            Backend::Postgres(p) => p.write_finishing(|conn| f(&Writer { conn })),
+        }
+    }
+
     /// Claims `key` for one request across every replica of the database while the returned
     /// guard lives: `None` when another replica holds it. On SQLite (one server per file) there
     /// is nothing to claim across processes and this always succeeds.
@@ -527,18 +571,55 @@ impl Writer<'_> {
         id: i64,
         started: usize,
         ended: usize,
-    ) -> Result<Option<Vec<StoredTrial>>, StoreError> {
+    ) -> Result<Option<DeploymentNow>, StoreError> {
         let count = |n: usize| Value::from(i64::try_from(n).unwrap_or(i64::MAX));
         let since = format!(
             "SELECT {TRIAL_COLUMNS} FROM trials WHERE deployment = $1 AND (k > $2 OR end_seq > $3) ORDER BY k"
         );
+        // A new trial's id, taken with the lock so that the trial and the reply naming it can
+        // go with the commit. (SQLite writes one transaction at a time: the next id is free.)
+        let next_id = match &self.conn {
+            Conn::Sqlite(..) => "SELECT coalesce(max(id), 0) + 1 FROM trials",
+            Conn::Postgres(_) => "SELECT nextval(pg_get_serial_sequence('trials', 'id'))",
+        };
         let answers = self.conn.query_all(&[
+            (next_id, &[]),
             (self.lock_deployment_sql(), &[id.into()]),
             (&since, &[id.into(), count(started), count(ended)]),
         ])?;
         match answers.as_slice() {
-            [locked, rows] if !locked.is_empty() => Ok(Some(self.conn.trials(rows)?)),
+            [next, locked, rows] if !locked.is_empty() => {
+                let next = next
+                    .first()
+                    .ok_or_else(|| self.conn.corrupt("no next trial id".into()))?;
+                Ok(Some(DeploymentNow {
+                    since: self.conn.trials(rows)?,
+                    next_trial: self.conn.int(next, 0, "next trial id")?,
+                }))
+            }
             _ => Ok(None),
+        }
+    }
+
+    /// Stores trial `t` under id `id` (from [`lock_deployment_since`]), as a statement run
+    /// with the commit.
+    ///
+    /// [`lock_deployment_since`]: Self::lock_deployment_since
+    pub fn insert_trial_last(&self, id: i64, t: &NewTrial<'_>) -> Final {
+        let pose = t.pose.map(|p| serde_json::json!(p).to_string());
+        Final {
+            sql: "INSERT INTO trials (id, deployment, k, scene, target, pose, chosen, status, started_after)
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, 'searching', $8)",
+            params: vec![
+                id.into(),
+                t.deployment.into(),
+                t.k.into(),
+                t.scene.into(),
+                t.target.into(),
+                pose.into(),
+                (t.chosen as i64).into(),
+                t.started_after.into(),
+            ],
         }
     }
 
@@ -567,25 +648,23 @@ impl Writer<'_> {
         }
     }
 
-    /// Stores observation `seq` of `trial` (unless `observation` is `None`) and, when `end`
-    /// says how, ends the trial as the next of `deployment`'s trials to end, taking the
-    /// deployment's lock for that, in one round trip; returns the end's number. Take the
-    /// trial's lock first ([`lock_trial_progress`](Self::lock_trial_progress)): a transaction
-    /// taking both takes the trial's first, so two never wait for each other.
-    ///
-    /// # Errors
-    /// The database refuses (an observation `seq` stored already, no such trial).
-    pub fn record_and_end(
+    /// Statements that store observation `seq` of `trial` (unless `observation` is `None`)
+    /// and, when `end` says how, end the trial as the next of `deployment`'s trials to end,
+    /// taking the deployment's lock for that: to run with the commit, so that the deployment
+    /// is held for no round trip at all. Take the trial's lock first
+    /// ([`lock_trial_progress`](Self::lock_trial_progress)): a transaction taking both takes
+    /// the trial's first, so two never wait for each other.
+    pub fn record_and_end_last(
         &self,
         (trial, deployment): (i64, i64),
         observation: Option<(usize, &StoredObservation)>,
         end: Option<TrialEnding<'_>>,
-    ) -> Result<Option<i64>, StoreError> {
-        let mut statements: Vec<(&str, Vec<Value>)> = Vec::new();
+    ) -> Vec<Final> {
+        let mut statements = Vec::new();
         if let Some((seq, o)) = observation {
-            statements.push((
-                INSERT_OBSERVATION,
-                vec![
+            statements.push(Final {
+                sql: INSERT_OBSERVATION,
+                params: vec![
                     trial.into(),
                     (seq as i64).into(),
                     o.container.as_str().into(),
@@ -594,35 +673,28 @@ impl Writer<'_> {
                     o.travelled.into(),
                     o.leg.into(),
                 ],
-            ));
+            });
         }
         if let Some(e) = &end {
-            statements.push((self.lock_deployment_sql(), vec![deployment.into()]));
-            statements.push((
-                "UPDATE trials SET status = $2, cost = $3, replays = $4,
+            statements.push(Final {
+                sql: self.lock_deployment_sql(),
+                params: vec![deployment.into()],
+            });
+            statements.push(Final {
+                sql: "UPDATE trials SET status = $2, cost = $3, replays = $4,
                      end_seq = (SELECT coalesce(max(end_seq), 0) + 1 FROM trials
                                 WHERE deployment = $5)
-                 WHERE id = $1 RETURNING end_seq",
-                vec![
+                 WHERE id = $1",
+                params: vec![
                     trial.into(),
                     e.status.as_str().into(),
                     e.cost.into(),
                     e.replays.map(|r| serde_json::json!(r).to_string()).into(),
                     deployment.into(),
                 ],
-            ));
+            });
         }
-        let borrowed: Vec<(&str, &[Value])> =
-            statements.iter().map(|(q, p)| (*q, p.as_slice())).collect();
-        let answers = self.conn.query_all(&borrowed)?;
-        if end.is_none() {
-            return Ok(None);
-        }
-        let row = answers
-            .last()
-            .and_then(|rows| rows.first())
-            .ok_or_else(|| self.conn.corrupt(format!("trial {trial}: no row to end")))?;
-        Ok(Some(self.conn.int(row, 0, "end_seq")?))
+        statements
     }
 
     /// Stores a scene's text under its name.
@@ -651,32 +723,6 @@ impl Writer<'_> {
             )?
             .ok_or_else(|| self.conn.corrupt("a new deployment has no id".into()))?;
         self.conn.int(&row, 0, "deployment id")
-    }
-
-    /// Stores a new trial (status searching), number `k` of its deployment, started when
-    /// `started_after` trials of it had ended; returns its id.
-    ///
-    /// # Errors
-    /// The database refuses (a taken `k`).
-    pub fn insert_trial(&self, t: &NewTrial<'_>) -> Result<i64, StoreError> {
-        let pose = t.pose.map(|p| serde_json::json!(p).to_string());
-        let row = self
-            .conn
-            .query_opt(
-                "INSERT INTO trials (deployment, k, scene, target, pose, chosen, status, started_after)
-                 VALUES ($1, $2, $3, $4, $5, $6, 'searching', $7) RETURNING id",
-                &[
-                    t.deployment.into(),
-                    t.k.into(),
-                    t.scene.into(),
-                    t.target.into(),
-                    pose.into(),
-                    (t.chosen as i64).into(),
-                    t.started_after.into(),
-                ],
-            )?
-            .ok_or_else(|| self.conn.corrupt("a new trial has no id".into()))?;
-        self.conn.int(&row, 0, "trial id")
     }
 
     /// Stores the reply to a request id; false (and nothing stored) when the id has a reply
@@ -733,6 +779,45 @@ pub struct TrialEnding<'a> {
     pub cost: f64,
     /// Every candidate's replay cost, when done.
     pub replays: Option<&'a [f64]>,
+}
+
+/// A deployment as a trial's start finds it under its lock.
+#[derive(Clone, Debug)]
+pub struct DeploymentNow {
+    /// Its trials started or ended since what the caller knew.
+    pub since: Vec<StoredTrial>,
+    /// The id the new trial will have.
+    pub next_trial: i64,
+}
+
+/// A statement a write runs last, with its commit ([`Store::write_finishing`]).
+#[derive(Clone, Debug)]
+pub struct Final {
+    sql: &'static str,
+    params: Vec<Value>,
+}
+
+/// The final statement that failed, the transaction rolled back.
+#[derive(Debug)]
+pub struct FinalFailed {
+    /// Its place among the final statements.
+    pub index: usize,
+    /// What the database said.
+    pub error: StoreError,
+}
+
+/// The reply to request `id`, stored as the last statement of its write: a second reply to the
+/// same id is refused ([`StoreError::is_duplicate`]), rolling back the write it ended.
+pub fn store_reply(id: &str, reply: &StoredReply) -> Final {
+    Final {
+        sql: "INSERT INTO requests (id, fingerprint, status, body) VALUES ($1, $2, $3, $4)",
+        params: vec![
+            request_key(id).as_ref().into(),
+            reply.fingerprint.as_str().into(),
+            stored_code(reply.outcome).into(),
+            reply.body.as_str().into(),
+        ],
+    }
 }
 
 /// A trial to store.

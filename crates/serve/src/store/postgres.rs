@@ -230,6 +230,58 @@ impl Postgres {
         Ok(out)
     }
 
+    pub(super) fn write_finishing<T, E: From<StoreError>>(
+        &self,
+        f: impl FnOnce(super::Conn<'_>) -> Result<(T, Vec<super::Final>), E>,
+    ) -> Result<Result<T, super::FinalFailed>, E> {
+        let mut client = self.client()?;
+        let tx = self
+            .block_on(client.transaction())
+            .map_err(|e| self.pg(e))?;
+        let (out, finals) = f(super::Conn::Postgres(Conn {
+            on: On::Tx(&tx),
+            pg: self,
+        }))?;
+        let params: Vec<Vec<&(dyn ToSql + Sync)>> = finals
+            .iter()
+            .map(|last| last.params.iter().map(|v| v as _).collect())
+            .collect();
+        let (results, committed) = self.block_on(async {
+            let prepared = match futures_util::future::try_join_all(
+                finals.iter().map(|last| tx.prepare_cached(last.sql)),
+            )
+            .await
+            {
+                Ok(p) => p,
+                Err(e) => return (vec![Err(e)], Ok(())),
+            };
+            // Sent together with the commit: the server runs them in order, and after a
+            // failed one the commit rolls the transaction back.
+            let statements = futures_util::future::join_all(
+                prepared
+                    .iter()
+                    .zip(&params)
+                    .map(|(stmt, params)| tx.execute(stmt, params)),
+            );
+            tokio::join!(statements, tx.batch_execute("COMMIT"))
+        });
+        // Committed (or rolled back) above: dropping the transaction would roll it back
+        // again, which the server answers with a warning.
+        std::mem::forget(tx);
+        if let Some((index, error)) = results
+            .into_iter()
+            .enumerate()
+            .find_map(|(i, r)| r.err().map(|e| (i, e)))
+        {
+            return Ok(Err(super::FinalFailed {
+                index,
+                error: self.pg(error),
+            }));
+        }
+        committed.map_err(|e| self.pg(e))?;
+        Ok(Ok(out))
+    }
+
     pub(super) fn schema_version(&self) -> Result<i64, StoreError> {
         self.read(|c| {
             let rows = c.query("SELECT max(version) FROM ferret_schema", &[])?;

@@ -304,6 +304,28 @@ impl Sqlite {
     }
 }
 
+impl Sqlite {
+    pub(super) fn write_finishing<T, E: From<StoreError>>(
+        &self,
+        f: impl FnOnce(super::Conn<'_>) -> Result<(T, Vec<super::Final>), E>,
+    ) -> Result<Result<T, super::FinalFailed>, E> {
+        self.check_in_place()?;
+        let mut conn = self.lock();
+        let tx = conn
+            .transaction_with_behavior(TransactionBehavior::Immediate)
+            .map_err(|e| self.sql(e))?;
+        let (out, finals) = f(super::Conn::Sqlite(&tx, self))?;
+        for (index, last) in finals.iter().enumerate() {
+            if let Err(error) = query(&tx, self, last.sql, &last.params) {
+                // Dropping the transaction rolls it back.
+                return Ok(Err(super::FinalFailed { index, error }));
+            }
+        }
+        tx.commit().map_err(|e| self.sql(e))?;
+        Ok(Ok(out))
+    }
+}
+
 /// Reads every page of the file on a connection of its own (`PRAGMA quick_check`: b-tree
 /// structure, cell layout, free list, not index contents), so that damage is seen wherever it
 /// is: the service's connection keeps the pages it has read in its cache, and reading a row or

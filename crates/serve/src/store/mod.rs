@@ -770,7 +770,7 @@ pub struct TrialCounts {
     pub open: usize,
 }
 
-/// How a trial ends, for [`Writer::record_and_end`].
+/// How a trial ends, for [`Writer::record_and_end_last`].
 #[derive(Clone, Copy, Debug)]
 pub struct TrialEnding<'a> {
     /// Done, exhausted or abandoned.

@@ -17,8 +17,10 @@
 //! the reference's formulas); [`Distances::travel_cost`](crate::Distances::travel_cost) applies
 //! it to a house's occupancy grid.
 
+use std::cell::RefCell;
 use std::cmp::Ordering;
-use std::collections::BinaryHeap;
+use std::collections::{BinaryHeap, HashMap, HashSet};
+use std::sync::{Mutex, PoisonError};
 
 /// Weight of a free cell in open floor: the reference's base weight, divided out at the end.
 const BASE: f64 = 50.0;
@@ -129,17 +131,10 @@ impl SoftGrid {
 
     /// The reference's cost of a trajectory visiting `points` in order: all of them freed on one
     /// copy of the grid, then the soft cost of each leg, summed (a leg between equal cells costs
-    /// 0). `f64::INFINITY` when a leg cannot be travelled.
+    /// 0). `f64::INFINITY` when a leg cannot be travelled. For many trajectories on one grid,
+    /// [`SoftCache::trajectory_cost`] gives the same costs without recomputing the weights.
     pub fn trajectory_cost(&self, points: &[usize]) -> f64 {
-        let mut g = self.clone();
-        for &p in points {
-            g.free(p);
-        }
-        let weights = g.weights();
-        points
-            .windows(2)
-            .map(|leg| g.dijkstra(&weights, leg[0], leg[1]))
-            .sum()
+        SoftCache::new(self, points).trajectory_cost(points)
     }
 
     /// The plain length in cells (every free cell weighs 1, same moves as the soft cost): the
@@ -203,6 +198,361 @@ impl SoftGrid {
     }
 }
 
+/// Bit of a free cell's level: the cell is in `g1` (an obstacle among its 8 neighbours).
+const G1: u8 = 1;
+/// Bit of a free cell's level: the cell is in `g2`.
+const G2: u8 = 2;
+/// Bit of a free cell's level: the cell is in `g3`.
+const G3: u8 = 4;
+/// The level of a blocked cell.
+const BLOCKED: u8 = 8;
+/// How far (in rows and columns) an obstacle raises the weight of a cell: `g3` reaches 3 cells.
+const REACH: isize = 3;
+
+/// The weight of a cell of level `level` in units of open floor, `None` when blocked. The same
+/// expression as [`SoftGrid::weights`], so both give the same bits.
+fn level_weight(level: u8) -> Option<f64> {
+    let bit = |b: u8| f64::from(u8::from(level & b != 0));
+    (level & BLOCKED == 0).then(|| (BASE + 8.0 * bit(G1) + 5.0 * bit(G2) + bit(G3)) / BASE)
+}
+
+/// The level bits an obstacle at offset (`dr`, `dc`) gives a cell. Inflating by a square, a plus
+/// and a square again reaches, in closed form: `g1` within a 3 × 3 square; `g2` within
+/// Chebyshev distance 2 and Manhattan distance 3; `g3` within Chebyshev 3 and Manhattan 5. Each
+/// offset decomposes into steps that stay between the obstacle and the cell, so the grid's edge
+/// cuts no chain the inflations would follow.
+fn reach_bits(dr: isize, dc: isize) -> u8 {
+    let (chebyshev, manhattan) = (dr.abs().max(dc.abs()), dr.abs() + dc.abs());
+    let mut bits = 0;
+    if chebyshev <= 1 {
+        bits |= G1;
+    }
+    if chebyshev <= 2 && manhattan <= 3 {
+        bits |= G2;
+    }
+    if chebyshev <= REACH && manhattan <= 5 {
+        bits |= G3;
+    }
+    bits
+}
+
+/// One house's soft cost, ready for many trajectories.
+///
+/// [`SoftGrid::trajectory_cost`] recomputes the weights of the whole grid and runs one Dijkstra
+/// search per leg for every trajectory; an evaluation asks for thousands of trajectories on one
+/// grid, most of their legs between the same few places. This keeps:
+/// - the level of every cell (which of `g1`, `g2`, `g3` hold it), computed once. Freeing a
+///   visited cell changes only the levels within 3 cells of it, so a trajectory through blocked
+///   cells patches a copy of the levels there instead of inflating the whole grid again;
+/// - the cost of every leg already searched while nothing had to be freed (the visited points
+///   are usually free cells, then the freed grid is the grid itself). A search from a cell
+///   records every stop it settles on its way; the second search from one cell settles every
+///   stop, since that cell is evidently a place trajectories leave from often.
+///
+/// Costs equal [`SoftGrid::trajectory_cost`]'s to the bit: weights come from the same
+/// expression, each search is the same Dijkstra (a cell's cost is final when settled, whatever
+/// cells are searched for), and legs are summed in the same order.
+pub struct SoftCache {
+    width: usize,
+    height: usize,
+    /// [`G1`] | [`G2`] | [`G3`] bits of every free cell, [`BLOCKED`] for blocked cells.
+    levels: Vec<u8>,
+    /// The cells trajectories are expected to visit, sorted, each once.
+    stops: Vec<usize>,
+    legs: Mutex<Legs>,
+}
+
+/// Leg costs of the unpatched grid.
+#[derive(Default)]
+struct Legs {
+    /// Soft cost in cells by (from, to) cell.
+    cost: HashMap<(usize, usize), f64>,
+    /// Cells searched from once, with early exit.
+    searched: HashSet<usize>,
+}
+
+impl std::fmt::Debug for SoftCache {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SoftCache")
+            .field("width", &self.width)
+            .field("height", &self.height)
+            .field("stops", &self.stops.len())
+            .finish_non_exhaustive()
+    }
+}
+
+impl SoftCache {
+    /// The soft cost of `grid`, for trajectories that mostly visit `stops` (e.g. a house's start
+    /// and access cells; others work too, their legs are only remembered less).
+    pub fn new(grid: &SoftGrid, stops: &[usize]) -> Self {
+        let g1 = grid.inflate(&grid.blocked, true);
+        let g2 = grid.inflate(&g1, false);
+        let g3 = grid.inflate(&g2, true);
+        let levels = (0..grid.blocked.len())
+            .map(|i| {
+                if grid.blocked[i] {
+                    BLOCKED
+                } else {
+                    (u8::from(g1[i]) * G1) | (u8::from(g2[i]) * G2) | (u8::from(g3[i]) * G3)
+                }
+            })
+            .collect();
+        let mut stops = stops.to_vec();
+        stops.sort_unstable();
+        stops.dedup();
+        Self {
+            width: grid.width,
+            height: grid.height,
+            levels,
+            stops,
+            legs: Mutex::new(Legs::default()),
+        }
+    }
+
+    /// The cost of a trajectory visiting `points` in order, exactly as
+    /// [`SoftGrid::trajectory_cost`] on the grid this cache was made from.
+    pub fn trajectory_cost(&self, points: &[usize]) -> f64 {
+        let blocked = |p: usize| self.levels.get(p).is_some_and(|l| l & BLOCKED != 0);
+        if points.iter().any(|&p| blocked(p)) {
+            let levels = self.freed(points);
+            return points
+                .windows(2)
+                .map(|leg| {
+                    self.leg(&levels, leg[0], leg[1], |search| {
+                        search.run(&levels, self.width, leg[0], &[leg[1]], Some(leg[1]));
+                        search.cost_to(leg[1])
+                    })
+                })
+                .sum();
+        }
+        points
+            .windows(2)
+            .map(|leg| {
+                let (from, to) = (leg[0], leg[1]);
+                self.leg(&self.levels, from, to, |search| {
+                    self.remembered(search, from, to)
+                })
+            })
+            .sum()
+    }
+
+    /// The levels with every point of `points` freed, patched around each newly freed cell.
+    fn freed(&self, points: &[usize]) -> Vec<u8> {
+        let mut levels = self.levels.clone();
+        let (w, h) = (self.width as isize, self.height as isize);
+        for &p in points {
+            if levels.get(p).is_none_or(|l| l & BLOCKED == 0) {
+                continue;
+            }
+            levels[p] = 0;
+            let (r, c) = ((p / self.width) as isize, (p % self.width) as isize);
+            for rr in (r - REACH).max(0)..=(r + REACH).min(h - 1) {
+                for cc in (c - REACH).max(0)..=(c + REACH).min(w - 1) {
+                    let q = (rr * w + cc) as usize;
+                    if levels[q] & BLOCKED == 0 {
+                        levels[q] = self.level_at(&levels, rr, cc);
+                    }
+                }
+            }
+        }
+        levels
+    }
+
+    /// The level of free cell (`r`, `c`) from the obstacles around it in `levels`.
+    fn level_at(&self, levels: &[u8], r: isize, c: isize) -> u8 {
+        let (w, h) = (self.width as isize, self.height as isize);
+        let mut bits = 0;
+        for dr in -REACH..=REACH {
+            for dc in -REACH..=REACH {
+                let b = reach_bits(dr, dc);
+                let (rr, cc) = (r + dr, c + dc);
+                if b & !bits == 0 || !((0..h).contains(&rr) && (0..w).contains(&cc)) {
+                    continue;
+                }
+                if levels[(rr * w + cc) as usize] & BLOCKED != 0 {
+                    bits |= b;
+                }
+            }
+        }
+        bits
+    }
+
+    /// One leg's cost on `levels`: ∞ off the grid or from or to a blocked cell, 0 between equal
+    /// cells, else `search` with this thread's scratch buffers.
+    fn leg(
+        &self,
+        levels: &[u8],
+        from: usize,
+        to: usize,
+        search: impl FnOnce(&mut Search) -> f64,
+    ) -> f64 {
+        let free = |p: usize| levels.get(p).is_some_and(|l| l & BLOCKED == 0);
+        if !free(from) || !free(to) {
+            return f64::INFINITY;
+        }
+        if from == to {
+            return 0.0;
+        }
+        SCRATCH.with(|cell| match cell.try_borrow_mut() {
+            Ok(mut scratch) => search(&mut scratch),
+            // Only re-entry could find it taken; a fresh one gives the same answer.
+            Err(_) => search(&mut Search::default()),
+        })
+    }
+
+    /// The cost from `from` to `to` on the unpatched grid, searched only if no earlier search
+    /// settled `to` from `from`; every stop a search settles is remembered.
+    fn remembered(&self, search: &mut Search, from: usize, to: usize) -> f64 {
+        let again = {
+            let legs = self.legs.lock().unwrap_or_else(PoisonError::into_inner);
+            if let Some(&c) = legs.cost.get(&(from, to)) {
+                return c;
+            }
+            legs.searched.contains(&from)
+        };
+        let mut targets = self.stops.clone();
+        if let Err(i) = targets.binary_search(&to) {
+            targets.insert(i, to);
+        }
+        search.run(
+            &self.levels,
+            self.width,
+            from,
+            &targets,
+            (!again).then_some(to),
+        );
+        let mut legs = self.legs.lock().unwrap_or_else(PoisonError::into_inner);
+        legs.searched.insert(from);
+        for &(cell, c) in &search.found {
+            legs.cost.insert((from, cell), c);
+        }
+        search.cost_to(to)
+    }
+}
+
+thread_local! {
+    /// Dijkstra buffers as large as the largest grid searched on this thread, reused by every
+    /// search so that a short leg costs what it settles, not the size of the grid.
+    static SCRATCH: RefCell<Search> = RefCell::new(Search::default());
+}
+
+/// Reusable state of one Dijkstra search. A cell's entries are valid only when its stamp is the
+/// current search's, so nothing is cleared between searches.
+#[derive(Default)]
+struct Search {
+    stamp: u32,
+    /// Stamp of the search that reached the cell (its `dist` is valid).
+    reached: Vec<u32>,
+    /// Stamp of the search that settled the cell.
+    settled: Vec<u32>,
+    /// Stamp of the search that looks for the cell.
+    wanted: Vec<u32>,
+    dist: Vec<f64>,
+    heap: BinaryHeap<Entry>,
+    /// (cell, cost) of every wanted cell the last search settled, and, when the search ran out of
+    /// cells, ∞ for those it could not reach.
+    found: Vec<(usize, f64)>,
+}
+
+impl Search {
+    /// The cost to `cell` found by the last search, ∞ when it did not settle `cell`.
+    fn cost_to(&self, cell: usize) -> f64 {
+        self.found
+            .iter()
+            .find(|&&(c, _)| c == cell)
+            .map_or(f64::INFINITY, |&(_, d)| d)
+    }
+
+    /// Exact Dijkstra on `levels` from free cell `from` as [`SoftGrid::dijkstra`] runs it, until
+    /// `until` is settled (or, with `None`, every cell of `targets`); records in `found` every
+    /// cell of `targets` settled, and ∞ for each one out of reach once every reachable cell is.
+    fn run(
+        &mut self,
+        levels: &[u8],
+        width: usize,
+        from: usize,
+        targets: &[usize],
+        until: Option<usize>,
+    ) {
+        let n = levels.len();
+        if self.reached.len() < n {
+            self.reached.resize(n, 0);
+            self.settled.resize(n, 0);
+            self.wanted.resize(n, 0);
+            self.dist.resize(n, f64::INFINITY);
+        }
+        if self.stamp == u32::MAX {
+            self.reached.fill(0);
+            self.settled.fill(0);
+            self.wanted.fill(0);
+            self.stamp = 0;
+        }
+        self.stamp += 1;
+        let stamp = self.stamp;
+        self.heap.clear();
+        self.found.clear();
+        let mut remaining = 0usize;
+        for &t in targets {
+            if let Some(w) = self.wanted.get_mut(t)
+                && *w != stamp
+            {
+                *w = stamp;
+                remaining += 1;
+            }
+        }
+        let weight = |v: usize| level_weight(levels[v]);
+        let (w, h) = (width as isize, (n / width.max(1)) as isize);
+        self.reached[from] = stamp;
+        self.dist[from] = 0.0;
+        self.heap.push(Entry(0.0, from));
+        while let Some(Entry(d, u)) = self.heap.pop() {
+            if self.settled[u] == stamp {
+                continue;
+            }
+            self.settled[u] = stamp;
+            if self.wanted[u] == stamp {
+                self.found.push((u, d));
+                remaining -= 1;
+                if Some(u) == until || remaining == 0 {
+                    return;
+                }
+            }
+            let Some(wu) = weight(u) else { continue };
+            let (r, c) = ((u / width) as isize, (u % width) as isize);
+            for dr in -1..=1isize {
+                for dc in -1..=1isize {
+                    if dr == 0 && dc == 0 {
+                        continue;
+                    }
+                    let (rr, cc) = (r + dr, c + dc);
+                    if !((0..h).contains(&rr) && (0..w).contains(&cc)) {
+                        continue;
+                    }
+                    let v = (rr * w + cc) as usize;
+                    let Some(wv) = weight(v) else { continue };
+                    let length = if dr != 0 && dc != 0 {
+                        std::f64::consts::SQRT_2
+                    } else {
+                        1.0
+                    };
+                    let next = d + length * 0.5 * (wu + wv);
+                    if self.reached[v] != stamp || next < self.dist[v] {
+                        self.reached[v] = stamp;
+                        self.dist[v] = next;
+                        self.heap.push(Entry(next, v));
+                    }
+                }
+            }
+        }
+        // Every cell reachable was settled: the wanted ones not found are out of reach.
+        for &t in targets {
+            if t < n && self.settled[t] != stamp {
+                self.found.push((t, f64::INFINITY));
+            }
+        }
+    }
+}
+
 /// A heap entry ordered by smallest cost first, then lowest cell.
 #[derive(PartialEq)]
 struct Entry(f64, usize);
@@ -242,6 +592,10 @@ mod tests {
 
     fn at(g: &SoftGrid, i: usize, j: usize) -> usize {
         i * g.width() + j
+    }
+
+    fn bits(w: &[Option<f64>]) -> Vec<Option<u64>> {
+        w.iter().map(|c| c.map(f64::to_bits)).collect()
     }
 
     fn close(a: f64, b: f64) {
@@ -379,7 +733,128 @@ mod tests {
         assert_eq!(g.pair_cost(left, right), f64::INFINITY);
     }
 
+    /// The straightforward trajectory cost the cache must match: every point freed on a copy,
+    /// the whole grid's weights recomputed, one search per leg.
+    fn trajectory_oracle(g: &SoftGrid, points: &[usize]) -> f64 {
+        let mut g = g.clone();
+        for &p in points {
+            g.free(p);
+        }
+        let weights = g.weights();
+        points
+            .windows(2)
+            .map(|leg| g.dijkstra(&weights, leg[0], leg[1]))
+            .sum()
+    }
+
+    /// A random grid up to 14 × 14 with about `density` of its cells blocked.
+    fn random_grid(density: f64) -> impl Strategy<Value = SoftGrid> {
+        (1usize..15, 1usize..15).prop_flat_map(move |(w, h)| {
+            proptest::collection::vec(proptest::bool::weighted(density), w * h)
+                .prop_map(move |cells| SoftGrid::new(w, cells).unwrap())
+        })
+    }
+
+    /// Cell indices, a few of them off the grid of `n` cells.
+    fn random_points(n: usize, len: std::ops::Range<usize>) -> impl Strategy<Value = Vec<usize>> {
+        proptest::collection::vec(prop_oneof![9 => 0..n, 1 => n..n + 3], len)
+    }
+
+    #[test]
+    fn the_cache_keeps_the_check_values() {
+        let g = c3();
+        let stops: Vec<usize> = [(0, 0), (6, 9), (0, 9), (6, 0)]
+            .iter()
+            .map(|&(i, j)| at(&g, i, j))
+            .collect();
+        let cache = SoftCache::new(&g, &stops);
+        let t =
+            |p: &[usize]| cache.trajectory_cost(&p.iter().map(|&k| stops[k]).collect::<Vec<_>>());
+        // Asked twice and in both orders, so that remembered legs and full searches answer too.
+        for _ in 0..2 {
+            close(t(&[0, 1, 2]), 25.181833);
+            close(t(&[0, 3, 2]), 27.221833);
+            close(
+                t(&[2, 1, 0]),
+                trajectory_oracle(&g, &[stops[2], stops[1], stops[0]]),
+            );
+        }
+        let g = grid(&["...#...", "...#...", "...#..."]);
+        let cache = SoftCache::new(&g, &[]);
+        close(
+            cache.trajectory_cost(&[at(&g, 1, 3), at(&g, 1, 0), at(&g, 1, 6)]),
+            10.65,
+        );
+        assert_eq!(
+            cache.trajectory_cost(&[at(&g, 1, 0), at(&g, 1, 6)]),
+            f64::INFINITY
+        );
+    }
+
     proptest! {
+        /// Freeing cells one at a time and patching the levels around each gives the weights a
+        /// full recomputation gives on the freed grid, bit for bit.
+        #[test]
+        fn patched_weights_equal_recomputed(
+            (g, points) in random_grid(0.4).prop_flat_map(|g| {
+                let n = g.width() * g.height();
+                (Just(g), random_points(n, 0..8))
+            }),
+        ) {
+            let cache = SoftCache::new(&g, &[]);
+            let unpatched: Vec<_> = cache.levels.iter().map(|&l| level_weight(l)).collect();
+            prop_assert_eq!(bits(&unpatched), bits(&g.weights()));
+            let mut freed = g.clone();
+            for &p in &points {
+                freed.free(p);
+            }
+            let patched: Vec<_> = cache.freed(&points).iter().map(|&l| level_weight(l)).collect();
+            prop_assert_eq!(bits(&patched), bits(&freed.weights()));
+        }
+
+        /// Trajectories through any cells, free, blocked or off the grid, cost what the full
+        /// recomputation gives, bit for bit, also when asked again of one cache.
+        #[test]
+        fn cached_trajectories_equal_recomputed(
+            (g, trajectories) in random_grid(0.3).prop_flat_map(|g| {
+                let n = g.width() * g.height();
+                (Just(g), proptest::collection::vec(random_points(n, 0..7), 1..5))
+            }),
+        ) {
+            let stops: Vec<usize> = trajectories.iter().flatten().copied().collect();
+            let cache = SoftCache::new(&g, &stops[..stops.len() / 2]);
+            for _ in 0..2 {
+                for t in &trajectories {
+                    let (cached, full) = (cache.trajectory_cost(t), trajectory_oracle(&g, t));
+                    prop_assert_eq!(cached.to_bits(), full.to_bits(), "{} ≠ {} for {:?}", cached, full, t);
+                    prop_assert_eq!(g.trajectory_cost(t).to_bits(), full.to_bits());
+                }
+            }
+        }
+
+        /// Trajectories between free stops, where legs are remembered and searches settle
+        /// several stops at once, cost what the full recomputation gives, bit for bit.
+        #[test]
+        fn remembered_legs_equal_recomputed(
+            (g, stops, trajectories) in random_grid(0.25).prop_flat_map(|g| {
+                let free: Vec<usize> = (0..g.width() * g.height()).filter(|&i| !g.blocked[i]).collect();
+                let k = free.len().max(1);
+                (
+                    Just(g),
+                    Just(free),
+                    proptest::collection::vec(proptest::collection::vec(0..k, 0..8), 1..12),
+                )
+            }),
+        ) {
+            prop_assume!(!stops.is_empty());
+            let cache = SoftCache::new(&g, &stops);
+            for t in &trajectories {
+                let points: Vec<usize> = t.iter().map(|&k| stops[k]).collect();
+                let (cached, full) = (cache.trajectory_cost(&points), trajectory_oracle(&g, &points));
+                prop_assert_eq!(cached.to_bits(), full.to_bits(), "{} ≠ {} for {:?}", cached, full, points);
+            }
+        }
+
         /// Every cell weighs at least 1, so the soft cost is never below the plain length of
         /// the same moves, and is finite exactly when the plain length is.
         #[test]

@@ -293,6 +293,8 @@ impl Distances {
     /// cell freed first. `None` for the soft cost of synthetic distances (they have no grid) or
     /// for a place that does not exist; the soft cost of a leg no 8-connected path joins
     /// (possible only with cells that need corner cutting, never in practice) is infinite.
+    /// The soft cost's weights and legs are kept (a [`SoftCache`] shared by clones of these
+    /// distances), so later trajectories on this grid cost little more than their new legs.
     pub fn travel_cost(&self, places: &[Place], cost: TravelCost) -> Option<f64> {
         let n = self.containers + 1;
         if places.iter().any(|p| p.slot() >= n) {

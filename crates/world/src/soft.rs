@@ -21,7 +21,7 @@
 
 use std::cell::RefCell;
 use std::cmp::Ordering;
-use std::collections::{BinaryHeap, HashMap, HashSet};
+use std::collections::{BinaryHeap, HashMap};
 use std::sync::{Mutex, PoisonError};
 
 /// Weight of a free cell in open floor: the reference's base weight, divided out at the end.
@@ -238,6 +238,12 @@ fn reach_bits(dr: isize, dc: isize) -> u8 {
     bits
 }
 
+/// Index of grid cell `p` in a `width` × `height` grid framed by one ring of cells, `None` off
+/// the grid.
+fn framed_index(width: usize, height: usize, p: usize) -> Option<usize> {
+    (p < width * height).then(|| (p / width + 1) * (width + 2) + p % width + 1)
+}
+
 /// One house's soft cost, ready for many trajectories.
 ///
 /// [`SoftGrid::trajectory_cost`] recomputes the weights of the whole grid and runs one Dijkstra
@@ -247,9 +253,10 @@ fn reach_bits(dr: isize, dc: isize) -> u8 {
 ///   visited cell changes only the levels within 3 cells of it, so a trajectory through blocked
 ///   cells patches a copy of the levels there instead of inflating the whole grid again;
 /// - the cost of every leg already searched while nothing had to be freed (the visited points
-///   are usually free cells, then the freed grid is the grid itself). A search from a cell
-///   records every stop it settles on its way; the second search from one cell settles every
-///   stop, since that cell is evidently a place trajectories leave from often.
+///   are usually free cells, then the freed grid is the grid itself), and of every leg to a stop
+///   that a search settled on its way. A search still stops at its leg's end: on multiroom-val150
+///   under the paper protocol, searching on to every stop instead settles more cells in all than
+///   searching again when a farther leg comes up.
 ///
 /// Costs equal [`SoftGrid::trajectory_cost`]'s to the bit: weights come from the same
 /// expression, legs are summed in the same order, and a Dijkstra search gives every cell the
@@ -262,19 +269,10 @@ pub struct SoftCache {
     /// by one ring of blocked cells (row-major, `width + 2` wide) so that a search's steps need
     /// no bounds checks.
     levels: Vec<u8>,
-    /// The cells trajectories are expected to visit, sorted, each once.
+    /// The cells trajectories are expected to visit (framed indices), sorted, each once.
     stops: Vec<usize>,
-    legs: Mutex<Legs>,
-}
-
-/// Leg costs of the unpatched grid.
-#[derive(Default)]
-struct Legs {
-    /// Soft cost in cells by (from, to) cell.
-    cost: HashMap<(usize, usize), f64>,
-    /// Cells (framed indices) searched from at least once: the next search from one of them
-    /// settles every stop.
-    searched: HashSet<usize>,
+    /// Soft cost in cells of the unpatched grid's legs, by (from, to) cell.
+    legs: Mutex<HashMap<(usize, usize), f64>>,
 }
 
 impl std::fmt::Debug for SoftCache {
@@ -304,7 +302,10 @@ impl SoftCache {
                 (u8::from(g1[i]) * G1) | (u8::from(g2[i]) * G2) | (u8::from(g3[i]) * G3)
             };
         }
-        let mut stops = stops.to_vec();
+        let mut stops: Vec<usize> = stops
+            .iter()
+            .filter_map(|&p| framed_index(grid.width, grid.height, p))
+            .collect();
         stops.sort_unstable();
         stops.dedup();
         Self {
@@ -312,7 +313,7 @@ impl SoftCache {
             height: grid.height,
             levels,
             stops,
-            legs: Mutex::new(Legs::default()),
+            legs: Mutex::default(),
         }
     }
 
@@ -329,7 +330,7 @@ impl SoftCache {
                 .windows(2)
                 .map(|leg| {
                     self.leg(&levels, leg[0], leg[1], |search, from, to| {
-                        search.run(&levels, self.width + 2, from, &[to], Some(to));
+                        search.run(&levels, self.width + 2, from, to, &[]);
                         search.cost_to(to)
                     })
                 })
@@ -347,8 +348,7 @@ impl SoftCache {
 
     /// Index in the framed `levels` of grid cell `p`, `None` off the grid.
     fn framed(&self, p: usize) -> Option<usize> {
-        (p < self.width * self.height)
-            .then(|| (p / self.width + 1) * (self.width + 2) + p % self.width + 1)
+        framed_index(self.width, self.height, p)
     }
 
     /// Grid cell of index `f` of the framed `levels` (inside the frame).
@@ -425,29 +425,21 @@ impl SoftCache {
     }
 
     /// The cost between framed cells `from` and `to` on the unpatched grid, searched only if no
-    /// earlier search settled `to` from `from`; every stop a search settles is remembered.
+    /// earlier search from `from` settled `to`; every stop a search settles is remembered.
     fn remembered(&self, search: &mut Search, from: usize, to: usize) -> f64 {
         let key = |t: usize| (self.unframed(from), self.unframed(t));
-        let again = {
-            let legs = self.legs.lock().unwrap_or_else(PoisonError::into_inner);
-            if let Some(&c) = legs.cost.get(&key(to)) {
-                return c;
-            }
-            legs.searched.contains(&from)
-        };
-        let mut targets: Vec<usize> = self.stops.iter().filter_map(|&s| self.framed(s)).collect();
-        targets.push(to);
-        search.run(
-            &self.levels,
-            self.width + 2,
-            from,
-            &targets,
-            (!again).then_some(to),
-        );
+        if let Some(&c) = self
+            .legs
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .get(&key(to))
+        {
+            return c;
+        }
+        search.run(&self.levels, self.width + 2, from, to, &self.stops);
         let mut legs = self.legs.lock().unwrap_or_else(PoisonError::into_inner);
-        legs.searched.insert(from);
         for &(cell, c) in &search.found {
-            legs.cost.insert(key(cell), c);
+            legs.insert(key(cell), c);
         }
         search.cost_to(to)
     }
@@ -467,8 +459,8 @@ struct Search {
     dist: Vec<f64>,
     /// Cells the current search looks for.
     wanted: Vec<bool>,
-    /// Cells whose cost lies in `[k, k + 1)`, in bucket `k mod 3`.
-    buckets: [Vec<usize>; 3],
+    /// Cells whose cost lies in `[k, k + 1)`, in bucket `k mod 4`.
+    buckets: [Vec<usize>; 4],
     /// (framed cell, cost) of every wanted cell the last search settled, and, when the search
     /// ran out of cells, ∞ for those it could not reach.
     found: Vec<(usize, f64)>,
@@ -483,9 +475,9 @@ impl Search {
             .map_or(f64::INFINITY, |&(_, d)| d)
     }
 
-    /// Dijkstra on framed `levels` (`framed` wide) from free cell `from`, until `until` is
-    /// settled (or, with `None`, every cell of `targets`); records in `found` every cell of
-    /// `targets` settled, and ∞ for each one out of reach once every reachable cell is.
+    /// Dijkstra on framed `levels` (`framed` wide) from free cell `from` until `to` is settled;
+    /// records in `found` its cost and that of every cell of `passing` settled on the way (∞ for
+    /// each one out of reach, once every reachable cell is settled).
     ///
     /// Steps as [`SoftGrid::dijkstra`]'s, each costing `ℓ·(W(p) + W(q))/2` evaluated the same
     /// way, so a path's cost is the same left-to-right sum. Rounding is monotone and never makes
@@ -494,16 +486,9 @@ impl Search {
     /// settled in. That frees the queue: every step costs at least 1 (each weight is ≥ 1) and at
     /// most 1.28·√2 < 2, so cells are kept in buckets one unit wide (Dinitz): every cell whose
     /// cost lies in `[k, k + 1)` is final once all cheaper buckets are settled (a path through an
-    /// unsettled cell costs at least `k + 1`, an integer, so rounding cannot bring it below), and
-    /// three circular buckets hold all costs in reach.
-    fn run(
-        &mut self,
-        levels: &[u8],
-        framed: usize,
-        from: usize,
-        targets: &[usize],
-        until: Option<usize>,
-    ) {
+    /// unsettled cell costs at least `k + 1`, an integer, so rounding cannot bring it below).
+    /// Costs in reach span three buckets; four circular ones make the index a mask.
+    fn run(&mut self, levels: &[u8], framed: usize, from: usize, to: usize, passing: &[usize]) {
         let n = levels.len();
         self.dist.clear();
         self.dist.resize(n, f64::INFINITY);
@@ -512,11 +497,7 @@ impl Search {
             b.clear();
         }
         self.found.clear();
-        let mut remaining = 0usize;
-        for &t in targets {
-            if !self.wanted[t] {
-                remaining += 1;
-            }
+        for &t in passing.iter().chain([&to]) {
             self.wanted[t] = true;
         }
         let weight: [f64; 16] = std::array::from_fn(|l| level_weight(l as u8).unwrap_or(f64::NAN));
@@ -531,7 +512,7 @@ impl Search {
         self.buckets[0].push(from);
         let mut bucket = 0usize;
         'search: loop {
-            while let Some(u) = self.buckets[bucket % 3].pop() {
+            while let Some(u) = self.buckets[bucket & 3].pop() {
                 let d = self.dist[u];
                 if d < 0.0 {
                     continue; // settled already; this entry is stale
@@ -539,8 +520,7 @@ impl Search {
                 self.dist[u] = -1.0;
                 if self.wanted[u] {
                     self.found.push((u, d));
-                    remaining -= 1;
-                    if Some(u) == until || remaining == 0 {
+                    if u == to {
                         break 'search;
                     }
                 }
@@ -556,14 +536,15 @@ impl Search {
                         let next = d + length * 0.5 * (wu + weight[usize::from(lv)]);
                         if next < self.dist[v] {
                             self.dist[v] = next;
-                            self.buckets[next as usize % 3].push(v);
+                            self.buckets[next as usize & 3].push(v);
                         }
                     }
                 }
             }
             if self.buckets.iter().all(Vec::is_empty) {
-                // Every reachable cell is settled: the targets not found are out of reach.
-                for &t in targets {
+                // Every reachable cell is settled: the cells looked for and not found are out of
+                // reach.
+                for &t in passing.iter().chain([&to]) {
                     if self.dist[t] >= 0.0 {
                         self.found.push((t, f64::INFINITY));
                         self.dist[t] = -1.0;
@@ -573,7 +554,7 @@ impl Search {
             }
             bucket += 1;
         }
-        for &t in targets {
+        for &t in passing.iter().chain([&to]) {
             self.wanted[t] = false;
         }
     }

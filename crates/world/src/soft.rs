@@ -21,7 +21,8 @@
 
 use std::cell::RefCell;
 use std::cmp::Ordering;
-use std::collections::{BinaryHeap, HashMap};
+use std::collections::{BinaryHeap, HashMap, VecDeque};
+use std::sync::atomic::{AtomicU64, Ordering as AtomicOrdering};
 use std::sync::{Mutex, PoisonError};
 
 /// Weight of a free cell in open floor: the reference's base weight, divided out at the end.
@@ -254,14 +255,17 @@ fn framed_index(width: usize, height: usize, p: usize) -> Option<usize> {
 ///   cells patches a copy of the levels there instead of inflating the whole grid again;
 /// - the cost of every leg already searched while nothing had to be freed (the visited points
 ///   are usually free cells, then the freed grid is the grid itself), and of every leg to a stop
-///   that a search settled on its way. A search still stops at its leg's end: on multiroom-val150
-///   under the paper protocol, searching on to every stop instead settles more cells in all than
-///   searching again when a farther leg comes up.
+///   that a search settled on its way;
+/// - searches paused at the end of their leg (per thread, see [`Paused`]): a later leg from the
+///   same cell to a stop not settled yet carries the search on instead of starting again. Each
+///   cell is then settled once per start cell at most, and only as far as the legs asked for
+///   reach: on multiroom-val150 under the paper protocol, searching on to every stop settles
+///   more cells in all, and so does starting every leg afresh.
 ///
 /// Costs equal [`SoftGrid::trajectory_cost`]'s to the bit: weights come from the same
 /// expression, legs are summed in the same order, and a Dijkstra search gives every cell the
-/// same cost whatever order it settles cells of equal cost in and whichever cells it looks for
-/// (see [`Search::run`]).
+/// same cost whatever order it settles cells of equal cost in, whichever cells it looks for and
+/// wherever it pauses (see [`Search::settle`]).
 pub struct SoftCache {
     width: usize,
     height: usize,
@@ -273,7 +277,12 @@ pub struct SoftCache {
     stops: Vec<usize>,
     /// Soft cost in cells of the unpatched grid's legs, by (from, to) cell.
     legs: Mutex<HashMap<(usize, usize), f64>>,
+    /// Tells this cache's paused searches apart from other caches' (see [`Paused`]).
+    id: u64,
 }
+
+/// The next [`SoftCache::id`].
+static NEXT_CACHE_ID: AtomicU64 = AtomicU64::new(0);
 
 impl std::fmt::Debug for SoftCache {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -314,6 +323,7 @@ impl SoftCache {
             levels,
             stops,
             legs: Mutex::default(),
+            id: NEXT_CACHE_ID.fetch_add(1, AtomicOrdering::Relaxed),
         }
     }
 
@@ -330,7 +340,8 @@ impl SoftCache {
                 .windows(2)
                 .map(|leg| {
                     self.leg(&levels, leg[0], leg[1], |search, from, to| {
-                        search.run(&levels, self.width + 2, from, to, &[]);
+                        search.start(levels.len(), from);
+                        search.settle(&levels, self.width + 2, to, &[]);
                         search.cost_to(to)
                     })
                 })
@@ -424,8 +435,9 @@ impl SoftCache {
         })
     }
 
-    /// The cost between framed cells `from` and `to` on the unpatched grid, searched only if no
-    /// earlier search from `from` settled `to`; every stop a search settles is remembered.
+    /// The cost between framed cells `from` and `to` on the unpatched grid: remembered, or
+    /// searched, carrying on this thread's paused search from `from` when there is one; every
+    /// stop settled on the way is remembered, and the search is paused again at `to`.
     fn remembered(&self, search: &mut Search, from: usize, to: usize) -> f64 {
         let key = |t: usize| (self.unframed(from), self.unframed(t));
         if let Some(&c) = self
@@ -436,19 +448,78 @@ impl SoftCache {
         {
             return c;
         }
-        search.run(&self.levels, self.width + 2, from, to, &self.stops);
+        let n = self.levels.len();
+        match search.unpause(self.id, from) {
+            // A cell that is no stop may have been passed without its cost being kept.
+            Some(paused) if !paused.settled(to) => search.resume(n, paused),
+            _ => search.start(n, from),
+        }
+        let exhausted = search.settle(&self.levels, self.width + 2, to, &self.stops);
         let mut legs = self.legs.lock().unwrap_or_else(PoisonError::into_inner);
         for &(cell, c) in &search.found {
             legs.insert(key(cell), c);
         }
-        search.cost_to(to)
+        drop(legs);
+        let cost = search.cost_to(to);
+        if !exhausted {
+            search.pause(self.id, from);
+        }
+        cost
+    }
+}
+
+impl Drop for SoftCache {
+    fn drop(&mut self) {
+        // Searches paused on other threads go when those threads need the room.
+        let _ = SCRATCH.try_with(|cell| {
+            if let Ok(mut scratch) = cell.try_borrow_mut() {
+                scratch.paused.retain(|p| p.cache != self.id);
+            }
+        });
     }
 }
 
 thread_local! {
     /// Dijkstra buffers as large as the largest grid searched on this thread, reused by every
-    /// search rather than allocated per leg.
+    /// search rather than allocated per leg, and the searches paused on this thread.
     static SCRATCH: RefCell<Search> = RefCell::new(Search::default());
+}
+
+/// Most memory the searches paused on one thread may hold: the least recently paused go first.
+/// A house's evaluation runs on one thread and leaves from some 20 cells; a paused search on
+/// multiroom-val150 holds 15 kB on average, so this keeps a few houses' worth.
+#[cfg(not(test))]
+const PAUSED_BYTES: usize = 4 << 20;
+/// Small enough that the tests' small grids see paused searches forgotten, too.
+#[cfg(test)]
+const PAUSED_BYTES: usize = 2 << 10;
+
+/// A search stopped at the end of a leg, to be carried on when a later leg from the same cell
+/// needs a cell it has not settled: so every cell is settled at most once per start cell, not
+/// once per leg.
+struct Paused {
+    /// [`SoftCache::id`] of the cache searched.
+    cache: u64,
+    /// Start cell (framed index).
+    from: usize,
+    /// Bucket round the search stopped in.
+    round: usize,
+    /// Settled cells, one bit each.
+    settled: Vec<u64>,
+    /// Cells reached and not settled, with their best cost so far.
+    frontier: Vec<(usize, f64)>,
+}
+
+impl Paused {
+    fn settled(&self, cell: usize) -> bool {
+        self.settled
+            .get(cell / 64)
+            .is_some_and(|w| w >> (cell % 64) & 1 != 0)
+    }
+
+    fn bytes(&self) -> usize {
+        self.settled.len() * size_of::<u64>() + self.frontier.len() * size_of::<(usize, f64)>()
+    }
 }
 
 /// Reusable buffers of one Dijkstra search on framed levels.
@@ -457,13 +528,18 @@ struct Search {
     /// Cost of the best path found so far (∞ for none), −1 once settled, so that one comparison
     /// `next < dist` both skips settled cells and finds improvements.
     dist: Vec<f64>,
+    /// Settled cells, one bit each (what pausing keeps of `dist`'s −1s).
+    settled: Vec<u64>,
     /// Cells the current search looks for.
     wanted: Vec<bool>,
-    /// Cells whose cost lies in `[k, k + 1)`, in bucket `k mod 4`.
+    /// Cells whose cost lies in `[k, k + 1)`, in bucket `k mod 4`, in round `k`.
     buckets: [Vec<usize>; 4],
+    round: usize,
     /// (framed cell, cost) of every wanted cell the last search settled, and, when the search
     /// ran out of cells, ∞ for those it could not reach.
     found: Vec<(usize, f64)>,
+    /// Searches paused on this thread, the most recently paused first.
+    paused: VecDeque<Paused>,
 }
 
 impl Search {
@@ -475,9 +551,87 @@ impl Search {
             .map_or(f64::INFINITY, |&(_, d)| d)
     }
 
-    /// Dijkstra on framed `levels` (`framed` wide) from free cell `from` until `to` is settled;
-    /// records in `found` its cost and that of every cell of `passing` settled on the way (∞ for
-    /// each one out of reach, once every reachable cell is settled).
+    /// A new search from framed cell `from` on `n` framed cells.
+    fn start(&mut self, n: usize, from: usize) {
+        self.clear(n);
+        self.dist[from] = 0.0;
+        self.buckets[0].push(from);
+    }
+
+    /// The search `paused` again, on `n` framed cells.
+    fn resume(&mut self, n: usize, paused: Paused) {
+        self.clear(n);
+        for (w, &word) in paused.settled.iter().enumerate() {
+            let mut bits = word;
+            while bits != 0 {
+                self.dist[w * 64 + bits.trailing_zeros() as usize] = -1.0;
+                bits &= bits - 1;
+            }
+        }
+        self.settled = paused.settled;
+        for (v, d) in paused.frontier {
+            self.dist[v] = d;
+            self.buckets[d as usize & 3].push(v);
+        }
+        self.round = paused.round;
+    }
+
+    fn clear(&mut self, n: usize) {
+        self.dist.clear();
+        self.dist.resize(n, f64::INFINITY);
+        self.settled.clear();
+        self.settled.resize(n.div_ceil(64), 0);
+        for b in &mut self.buckets {
+            b.clear();
+        }
+        self.round = 0;
+    }
+
+    /// Takes this thread's paused search from `from` on cache `cache`, if any.
+    fn unpause(&mut self, cache: u64, from: usize) -> Option<Paused> {
+        let i = self
+            .paused
+            .iter()
+            .position(|p| p.cache == cache && p.from == from)?;
+        self.paused.remove(i)
+    }
+
+    /// Keeps the current search (from `from` on cache `cache`) to carry on later, forgetting
+    /// the least recently paused ones beyond [`PAUSED_BYTES`].
+    fn pause(&mut self, cache: u64, from: usize) {
+        let mut frontier = Vec::new();
+        for b in &self.buckets {
+            for &v in b {
+                // A cell may wait in several buckets; its cost is the one in `dist`.
+                if self.dist[v] >= 0.0 {
+                    frontier.push((v, self.dist[v]));
+                    self.dist[v] = -1.0;
+                }
+            }
+        }
+        let paused = Paused {
+            cache,
+            from,
+            round: self.round,
+            settled: std::mem::take(&mut self.settled),
+            frontier,
+        };
+        self.paused.push_front(paused);
+        let mut bytes = 0;
+        let keep = self
+            .paused
+            .iter()
+            .take_while(|p| {
+                bytes += p.bytes();
+                bytes <= PAUSED_BYTES
+            })
+            .count();
+        self.paused.truncate(keep);
+    }
+
+    /// Carries on the search until `to` is settled; records in `found` its cost and that of
+    /// every cell of `passing` settled on the way, and, when every reachable cell is settled
+    /// (returns `true`), ∞ for those out of reach.
     ///
     /// Steps as [`SoftGrid::dijkstra`]'s, each costing `ℓ·(W(p) + W(q))/2` evaluated the same
     /// way, so a path's cost is the same left-to-right sum. Rounding is monotone and never makes
@@ -487,16 +641,11 @@ impl Search {
     /// most 1.28·√2 < 2, so cells are kept in buckets one unit wide (Dinitz): every cell whose
     /// cost lies in `[k, k + 1)` is final once all cheaper buckets are settled (a path through an
     /// unsettled cell costs at least `k + 1`, an integer, so rounding cannot bring it below).
-    /// Costs in reach span three buckets; four circular ones make the index a mask.
-    fn run(&mut self, levels: &[u8], framed: usize, from: usize, to: usize, passing: &[usize]) {
-        let n = levels.len();
-        self.dist.clear();
-        self.dist.resize(n, f64::INFINITY);
-        self.wanted.resize(n, false);
-        for b in &mut self.buckets {
-            b.clear();
-        }
+    /// Costs in reach span three buckets; four circular ones make the index a mask. It also
+    /// lets a search stop anywhere and carry on later from its settled cells and frontier.
+    fn settle(&mut self, levels: &[u8], framed: usize, to: usize, passing: &[usize]) -> bool {
         self.found.clear();
+        self.wanted.resize(levels.len(), false);
         for &t in passing.iter().chain([&to]) {
             self.wanted[t] = true;
         }
@@ -508,21 +657,16 @@ impl Search {
             framed - 1,
             framed + 1,
         ];
-        self.dist[from] = 0.0;
-        self.buckets[0].push(from);
-        let mut bucket = 0usize;
-        'search: loop {
-            while let Some(u) = self.buckets[bucket & 3].pop() {
+        let exhausted = 'search: loop {
+            while let Some(u) = self.buckets[self.round & 3].pop() {
                 let d = self.dist[u];
                 if d < 0.0 {
                     continue; // settled already; this entry is stale
                 }
                 self.dist[u] = -1.0;
+                self.settled[u / 64] |= 1 << (u % 64);
                 if self.wanted[u] {
                     self.found.push((u, d));
-                    if u == to {
-                        break 'search;
-                    }
                 }
                 let wu = weight[usize::from(levels[u])];
                 for (offsets, length) in [(straight, 1.0), (diagonal, std::f64::consts::SQRT_2)] {
@@ -540,6 +684,11 @@ impl Search {
                         }
                     }
                 }
+                // Stopping only after `to`'s steps are taken leaves every settled cell's steps
+                // taken, so that a paused search can carry on from its frontier alone.
+                if u == to {
+                    break 'search false;
+                }
             }
             if self.buckets.iter().all(Vec::is_empty) {
                 // Every reachable cell is settled: the cells looked for and not found are out of
@@ -550,13 +699,14 @@ impl Search {
                         self.dist[t] = -1.0;
                     }
                 }
-                break;
+                break true;
             }
-            bucket += 1;
-        }
+            self.round += 1;
+        };
         for &t in passing.iter().chain([&to]) {
             self.wanted[t] = false;
         }
+        exhausted
     }
 }
 

@@ -256,16 +256,17 @@ fn framed_index(width: usize, height: usize, p: usize) -> Option<usize> {
 /// - the cost of every leg already searched while nothing had to be freed (the visited points
 ///   are usually free cells, then the freed grid is the grid itself), and of every leg to a stop
 ///   that a search settled on its way;
-/// - searches paused at the end of their leg (per thread, see [`Paused`]): a later leg from the
+/// - searches paused at the end of their leg (per thread, 4 MiB at most): a later leg from the
 ///   same cell to a stop not settled yet carries the search on instead of starting again. Each
 ///   cell is then settled once per start cell at most, and only as far as the legs asked for
 ///   reach: on multiroom-val150 under the paper protocol, searching on to every stop settles
 ///   more cells in all, and so does starting every leg afresh.
 ///
 /// Costs equal [`SoftGrid::trajectory_cost`]'s to the bit: weights come from the same
-/// expression, legs are summed in the same order, and a Dijkstra search gives every cell the
-/// same cost whatever order it settles cells of equal cost in, whichever cells it looks for and
-/// wherever it pauses (see [`Search::settle`]).
+/// expression, legs are summed in the same order, and Dijkstra's proof holds for floating-point
+/// sums (rounding is monotone and never makes a sum smaller than a part), so a search settles
+/// every cell at the least sum over its paths whatever order it settles cells of equal cost in,
+/// whichever cells it looks for and wherever it pauses.
 pub struct SoftCache {
     width: usize,
     height: usize,

@@ -650,7 +650,13 @@ impl Search {
         for &t in passing.iter().chain([&to]) {
             self.wanted[t] = true;
         }
-        let weight: [f64; 16] = std::array::from_fn(|l| level_weight(l as u8).unwrap_or(f64::NAN));
+        // The cost of a step from a cell of level `a` to one of level `b`, at `a << 4 | b`,
+        // computed as `SoftGrid::dijkstra` computes it (NaN for blocked cells, never used).
+        let weight = |l: usize| level_weight(l as u8).unwrap_or(f64::NAN);
+        let step = |length: f64| -> [f64; 256] {
+            std::array::from_fn(|ab| length * 0.5 * (weight(ab >> 4) + weight(ab & 15)))
+        };
+        let (straight_step, diagonal_step) = (step(1.0), step(std::f64::consts::SQRT_2));
         let straight = [framed.wrapping_neg(), usize::MAX, 1, framed];
         let diagonal = [
             framed.wrapping_neg().wrapping_sub(1),
@@ -669,8 +675,8 @@ impl Search {
                 if self.wanted[u] {
                     self.found.push((u, d));
                 }
-                let wu = weight[usize::from(levels[u])];
-                for (offsets, length) in [(straight, 1.0), (diagonal, std::f64::consts::SQRT_2)] {
+                let lu = usize::from(levels[u]) << 4;
+                for (offsets, step) in [(straight, &straight_step), (diagonal, &diagonal_step)] {
                     for off in offsets {
                         // The frame keeps every step from a grid cell inside `levels`.
                         let v = u.wrapping_add(off);
@@ -678,7 +684,7 @@ impl Search {
                         if lv & BLOCKED != 0 {
                             continue;
                         }
-                        let next = d + length * 0.5 * (wu + weight[usize::from(lv)]);
+                        let next = d + step[lu | usize::from(lv)];
                         if next < self.dist[v] {
                             self.dist[v] = next;
                             self.buckets[next as usize & 3].push(v);

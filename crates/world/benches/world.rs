@@ -1,5 +1,7 @@
 //! The world benchmark: the 150 evaluation houses (`multiroom-val150.jsonl.gz`) loaded, turned
-//! into 0.05 m occupancy grids and full distance matrices, in parallel over houses.
+//! into 0.05 m occupancy grids and full distance matrices, in parallel over houses; and the
+//! paper protocol's soft cost of many trajectories per house, kept per house ([`SoftCache`]) and
+//! computed afresh for each trajectory.
 //!
 //! Target: ≤ 10 s wall for load + grids + distances on a 2-core machine, ≤ 1 GB peak memory.
 //! Needs FERRET_PROCTHOR_DIR set to a directory holding `multiroom-val150.jsonl.gz` and
@@ -13,9 +15,12 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use ferret_world::distance::{build, build_all};
 use ferret_world::procthor::{AssetDatabase, LoadOptions, load_scenes};
 use ferret_world::{
-    Container, Footprint, GridParams, House, ObjectType, OccupancyGrid, Point, Polygon, Pose, Room,
-    RoomType, Scene, Wall,
+    AccessRule, Container, ContainerSet, Footprint, GridParams, House, ObjectType, OccupancyGrid,
+    Point, Polygon, Pose, Room, RoomType, Scene, SoftCache, SoftGrid, Wall,
 };
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
 fn val150(c: &mut Criterion) {
@@ -61,6 +66,88 @@ fn val150(c: &mut Criterion) {
     });
     g.bench_function("grid+distances", |b| {
         b.iter(|| black_box(build_all(&scenes, &params)))
+    });
+    g.finish();
+    soft_costs(c, &dir, &db);
+}
+
+/// A house's soft grid, its start and access cells, and trajectories over them.
+struct SoftHouse {
+    grid: SoftGrid,
+    stops: Vec<usize>,
+    trajectories: Vec<Vec<usize>>,
+}
+
+/// The soft cost under the paper protocol's containers and access cells on the first 10 houses:
+/// per house, 90 trajectories (about what every target × 3 strategies ask) from the start
+/// through a random half of the containers in random order, one thread. Random orders ask for
+/// far more distinct legs than planners do, so the kept legs help less than in an evaluation.
+fn soft_costs(c: &mut Criterion, dir: &std::path::Path, db: &AssetDatabase) {
+    let opts = LoadOptions {
+        shard: None,
+        asset_db: Some(db),
+        containers: ContainerSet::Furniture,
+        ..LoadOptions::default()
+    };
+    let params = GridParams {
+        access: AccessRule::NearestFree,
+        ..GridParams::default()
+    };
+    let scenes = load_scenes(&dir.join("multiroom-val150.jsonl.gz"), &opts)
+        .expect("the houses load")
+        .scenes;
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let houses: Vec<SoftHouse> = scenes[..10]
+        .iter()
+        .filter_map(|s| OccupancyGrid::build(&s.house, &params).ok())
+        .map(|grid| {
+            let w = grid.width() as usize;
+            let index = |c: ferret_world::grid::Cell| c.z as usize * w + c.x as usize;
+            let start = index(grid.start_cell());
+            let access: Vec<usize> = (0..grid.container_count())
+                .filter_map(|i| grid.access_cell(i).map(index))
+                .collect();
+            let trajectories = (0..90)
+                .map(|_| {
+                    let mut visits = access.clone();
+                    visits.shuffle(&mut rng);
+                    visits.truncate(access.len().div_ceil(2));
+                    std::iter::once(start).chain(visits).collect()
+                })
+                .collect();
+            let blocked = grid.cells().map(|(c, _)| !grid.is_reachable(c)).collect();
+            SoftHouse {
+                grid: SoftGrid::new(w, blocked).expect("a grid's cells fill its rows"),
+                stops: std::iter::once(start).chain(access).collect(),
+                trajectories,
+            }
+        })
+        .collect();
+    let mut g = c.benchmark_group("val150 soft cost");
+    g.sample_size(10)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(30));
+    g.bench_function("kept per house", |b| {
+        b.iter(|| {
+            houses
+                .iter()
+                .map(|h| {
+                    let cache = SoftCache::new(&h.grid, &h.stops);
+                    h.trajectories
+                        .iter()
+                        .map(|t| cache.trajectory_cost(t))
+                        .sum::<f64>()
+                })
+                .sum::<f64>()
+        })
+    });
+    g.bench_function("afresh per trajectory", |b| {
+        b.iter(|| {
+            houses
+                .iter()
+                .flat_map(|h| h.trajectories.iter().map(|t| h.grid.trajectory_cost(t)))
+                .sum::<f64>()
+        })
     });
     g.finish();
 }

@@ -23,6 +23,8 @@
 //! from each cell are precomputed as a bit mask. On multiroom-val150 (87 k cells and 23 places
 //! per house on average) a house takes a median 17 ms on one thread.
 
+use std::sync::{Arc, OnceLock};
+
 use rayon::prelude::*;
 
 use crate::error::{Result, WorldError};
@@ -30,7 +32,7 @@ use crate::geometry::Point;
 use crate::grid::{Cell, GridParams, OccupancyGrid, neighbours};
 use crate::house::{House, Scene};
 use crate::rules::TravelCost;
-use crate::soft::SoftGrid;
+use crate::soft::{SoftCache, SoftGrid};
 
 /// Most containers a house may have for its distances to be computed: the matrix holds
 /// (containers + 1)² distances, so 2 000 containers take 32 MB (60 000 would take 28 GB).
@@ -72,6 +74,36 @@ struct Routes {
     grid: OccupancyGrid,
     /// Flat cell index of every slot.
     cells: Vec<u32>,
+    /// The soft cost of this grid, made on first use: an evaluation asks it for every trial of
+    /// the house, mostly for legs it has already searched. Shared by clones (same grid, same
+    /// cells); `None` inside when the grid makes no soft grid.
+    soft: Arc<OnceLock<Option<SoftCache>>>,
+}
+
+impl Routes {
+    fn new(grid: OccupancyGrid, cells: Vec<u32>) -> Self {
+        Self {
+            grid,
+            cells,
+            soft: Arc::default(),
+        }
+    }
+
+    fn soft(&self) -> Option<&SoftCache> {
+        self.soft
+            .get_or_init(|| {
+                let blocked = self
+                    .grid
+                    .raw_cells()
+                    .iter()
+                    .map(|&b| !OccupancyGrid::raw_reachable(b))
+                    .collect();
+                let grid = SoftGrid::new(self.grid.width() as usize, blocked)?;
+                let stops: Vec<usize> = self.cells.iter().map(|&c| c as usize).collect();
+                Some(SoftCache::new(&grid, &stops))
+            })
+            .as_ref()
+    }
 }
 
 impl Distances {
@@ -170,10 +202,7 @@ impl Distances {
         Ok(Distances {
             containers: n - 1,
             metres,
-            routes: Some(Routes {
-                grid: grid.clone(),
-                cells,
-            }),
+            routes: Some(Routes::new(grid.clone(), cells)),
         })
     }
 
@@ -222,10 +251,7 @@ impl Distances {
         Ok(Distances {
             containers: self.containers,
             metres,
-            routes: Some(Routes {
-                grid: grid.clone(),
-                cells,
-            }),
+            routes: Some(Routes::new(grid.clone(), cells)),
         })
     }
 
@@ -267,6 +293,8 @@ impl Distances {
     /// cell freed first. `None` for the soft cost of synthetic distances (they have no grid) or
     /// for a place that does not exist; the soft cost of a leg no 8-connected path joins
     /// (possible only with cells that need corner cutting, never in practice) is infinite.
+    /// The soft cost's weights and legs are kept (a [`SoftCache`] shared by clones of these
+    /// distances), so later trajectories on this grid cost little more than their new legs.
     pub fn travel_cost(&self, places: &[Place], cost: TravelCost) -> Option<f64> {
         let n = self.containers + 1;
         if places.iter().any(|p| p.slot() >= n) {
@@ -277,15 +305,7 @@ impl Distances {
             TravelCost::Soft => {
                 let r = self.routes.as_ref()?;
                 let cells: Vec<usize> = places.iter().map(|p| r.cells[p.slot()] as usize).collect();
-                let soft = SoftGrid::new(
-                    r.grid.width() as usize,
-                    r.grid
-                        .raw_cells()
-                        .iter()
-                        .map(|&b| !OccupancyGrid::raw_reachable(b))
-                        .collect(),
-                )?;
-                Some(soft.trajectory_cost(&cells) * r.grid.resolution())
+                Some(r.soft()?.trajectory_cost(&cells) * r.grid.resolution())
             }
         }
     }

@@ -31,4 +31,4 @@ pub use house::{
 pub use map::{MapCell, OccupancyMap};
 pub use rules::{AccessRule, ContainerSet, TravelCost};
 pub use scene::SceneFile;
-pub use soft::SoftGrid;
+pub use soft::{SoftCache, SoftGrid};

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use ferret_world::procthor::{AssetDatabase, parse_house, parse_house_with};
 use ferret_world::{
     AccessRule, ContainerSet, Distances, GridParams, HouseLocation, OccupancyGrid, Place, Scene,
-    TravelCost,
+    SoftGrid, TravelCost,
 };
 
 fn at() -> HouseLocation {
@@ -171,4 +171,57 @@ fn soft_cost_of_a_trajectory_is_at_least_its_plain_length() {
         m.travel_cost(&[Place::Container(5)], TravelCost::Plain),
         None
     );
+}
+
+#[test]
+fn the_kept_soft_cost_equals_the_soft_cost_computed_afresh() {
+    let scene = load(ContainerSet::Furniture);
+    let params = GridParams {
+        access: AccessRule::NearestFree,
+        ..GridParams::default()
+    };
+    let grid = OccupancyGrid::build(&scene.house, &params).unwrap();
+    let d = Distances::compute(&scene.house, &grid).unwrap();
+    let w = grid.width() as usize;
+    let blocked = grid.cells().map(|(c, _)| !grid.is_reachable(c)).collect();
+    let fresh = SoftGrid::new(w, blocked).unwrap();
+    let index = |p: Place| {
+        let c = match p {
+            Place::Start => grid.start_cell(),
+            Place::Container(i) => grid.access_cell(i).unwrap(),
+        };
+        c.z as usize * w + c.x as usize
+    };
+    let n = scene.house.containers.len();
+    let forward: Vec<Place> = std::iter::once(Place::Start)
+        .chain((0..n).map(Place::Container))
+        .collect();
+    let mut trajectories = vec![forward.clone()];
+    for k in 1..n {
+        let mut t = forward.clone();
+        t[1..].rotate_left(k);
+        trajectories.push(t.clone());
+        t[1..].reverse();
+        trajectories.push(t);
+    }
+    trajectories.push(vec![
+        Place::Start,
+        Place::Container(0),
+        Place::Container(0),
+        Place::Start,
+    ]);
+    // Twice over, so that the second round is answered from legs the first one searched.
+    for _ in 0..2 {
+        for t in &trajectories {
+            let kept = d.travel_cost(t, TravelCost::Soft).unwrap();
+            // The visited cells are reachable, so nothing needs freeing: each leg is a search
+            // on the grid as it is, with its weights recomputed.
+            let afresh = t
+                .windows(2)
+                .map(|leg| fresh.cost(index(leg[0]), index(leg[1])))
+                .sum::<f64>()
+                * grid.resolution();
+            assert_eq!(kept.to_bits(), afresh.to_bits(), "{t:?}: {kept} ≠ {afresh}");
+        }
+    }
 }

@@ -10,7 +10,7 @@ use std::sync::Arc;
 use ferret_plan::{PlanError, ReplayMode, SearchProblem, Strategy, replay_costs, run_trial};
 use ferret_world::{GroundTruth, ObjectType, TravelCost};
 
-use crate::{DeploymentEvent, LiveDeployment, Method, SelectError, TrialEnd};
+use crate::{LiveDeployment, Method, SelectError, TrialEnd};
 
 /// What a deployment step can fail on.
 #[derive(Debug, thiserror::Error)]
@@ -119,24 +119,6 @@ impl DeploymentLoop {
         pending: Option<usize>,
     ) -> Result<Self, SelectError> {
         let live = LiveDeployment::restore(method, candidates.len(), c, seed, history, pending)?;
-        Ok(Self {
-            candidates,
-            live,
-            settings,
-        })
-    }
-
-    /// A deployment whose trials may overlap, rebuilt from its events in the order they happened.
-    ///
-    /// # Errors
-    /// What [`LiveDeployment::replay_events`] refuses.
-    pub fn replay_events(
-        (method, c, seed): (Method, f64, u64),
-        candidates: Vec<Arc<dyn Strategy>>,
-        settings: ReplaySettings,
-        events: &[DeploymentEvent],
-    ) -> Result<Self, SelectError> {
-        let live = LiveDeployment::replay_events(method, candidates.len(), c, seed, events)?;
         Ok(Self {
             candidates,
             live,

@@ -6,7 +6,7 @@
 use std::sync::Arc;
 
 use ferret_plan::{ReplayMode, Strategy};
-use ferret_select::{DEFAULT_C, LiveDeployment};
+use ferret_select::DEFAULT_C;
 use ferret_world::TravelCost;
 
 use crate::api::{
@@ -15,7 +15,7 @@ use crate::api::{
 use crate::error::{ApiError, ErrorKind};
 use crate::model::{ApiReply, DeploymentSpec, Outcome, StoredTrial, TrialStatus};
 use crate::replies::Begun;
-use crate::selectors::{HistoryMark, events_since, new_live};
+use crate::selectors::replayed;
 use crate::service::{Service, json};
 
 impl Service {
@@ -162,25 +162,13 @@ impl Service {
         json(Outcome::Done, &self.deployment_state(id, &spec, &trials)?)
     }
 
-    fn live(
-        &self,
-        spec: &DeploymentSpec,
-        trials: &[StoredTrial],
-    ) -> Result<LiveDeployment, ApiError> {
-        let (events, _) = events_since(HistoryMark::default(), trials)?;
-        let mut live = new_live(spec)?;
-        live.extend_events(&events)
-            .map_err(|e| ApiError::internal(e.to_string()))?;
-        Ok(live)
-    }
-
     fn deployment_state(
         &self,
         id: i64,
         spec: &DeploymentSpec,
         trials: &[StoredTrial],
     ) -> Result<DeploymentState, ApiError> {
-        let live = self.live(spec, trials)?;
+        let (live, _) = replayed(id, spec, trials)?;
         let stats = live.stats();
         let next = live.peek();
         Ok(DeploymentState {

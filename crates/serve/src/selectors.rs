@@ -207,10 +207,7 @@ impl Selectors {
         spec: &DeploymentSpec,
         rows: &[StoredTrial],
     ) -> Result<(usize, TrialCounts), ApiError> {
-        let (events, mark) = events_since(HistoryMark::default(), rows)?;
-        let mut live = new_live(spec)?;
-        live.extend_events(&events)
-            .map_err(|e| ApiError::internal(format!("deployment {id}: {e}")))?;
+        let (live, mark) = replayed(id, spec, rows)?;
         let answer = (live.peek(), mark.counts());
         let mut kept = self.lock();
         let (clock, map) = &mut *kept;
@@ -242,8 +239,27 @@ impl Selectors {
     }
 }
 
+/// Deployment `id`'s selector replayed from all its trials `rows`, and where that leaves its
+/// history.
+pub(crate) fn replayed(
+    id: i64,
+    spec: &DeploymentSpec,
+    rows: &[StoredTrial],
+) -> Result<(LiveDeployment, HistoryMark), ApiError> {
+    let (events, mark) = events_since(HistoryMark::default(), rows)?;
+    let live = LiveDeployment::replay_events(
+        spec.selector,
+        spec.strategies.len(),
+        spec.c,
+        spec.seed,
+        &events,
+    )
+    .map_err(|e| ApiError::internal(format!("deployment {id}: {e}")))?;
+    Ok((live, mark))
+}
+
 /// A deployment's selector before its first trial.
-pub(crate) fn new_live(spec: &DeploymentSpec) -> Result<LiveDeployment, ApiError> {
+fn new_live(spec: &DeploymentSpec) -> Result<LiveDeployment, ApiError> {
     LiveDeployment::new(spec.selector, spec.strategies.len(), spec.c, spec.seed)
         .map_err(|e| ApiError::internal(e.to_string()))
 }

@@ -22,7 +22,7 @@ use crate::model::{
 use crate::replies::{Begun, RequestClaim};
 use crate::searches::{LiveSearch, Owner};
 use crate::service::{Service, json};
-use crate::store::{NewTrial, TrialEnding};
+use crate::store::{NewTrial, TrialEnding, Writer};
 
 /// An object type as the API takes it: ASCII letters and digits, as in `CellPhone`.
 pub(crate) fn is_type_name(s: &str) -> bool {
@@ -372,13 +372,7 @@ impl Service {
             // deployment's history, which starts are chosen from), taken by a statement that
             // goes with the commit, since every start and end of the deployment waits for it.
             // Steps, most of a fleet's requests, leave the deployment free.
-            if w.lock_trial_progress(id)? != Some((TrialStatus::Searching, observations.len())) {
-                return Err(ApiError::new(
-                    ErrorKind::Conflict,
-                    "trial",
-                    "the trial changed while this observation was planned; read it and retry",
-                ));
-            }
+            lock_unchanged(w, id, observations.len(), "this observation was planned")?;
             let last = w.record_and_end_last(
                 (id, row.deployment),
                 Some((observations.len(), &observation)),
@@ -407,6 +401,7 @@ impl Service {
         }
         reply
     }
+
     /// `POST /trials/{id}/abandon`: ends a trial still searching without a cost to learn
     /// from, as a trial that searched every container does, so that a robot whose search
     /// failed does not leave it open (a sequential deployment would take no other trial).
@@ -428,13 +423,7 @@ impl Service {
         let cost: f64 = observations.iter().map(|o| o.leg).sum();
         let reply = claim.complete_with(&route, body, |w| {
             // As any trial's end: the trial's row, then the deployment's.
-            if w.lock_trial_progress(id)? != Some((TrialStatus::Searching, observations.len())) {
-                return Err(ApiError::new(
-                    ErrorKind::Conflict,
-                    "trial",
-                    "the trial changed while it was being abandoned; read it and retry",
-                ));
-            }
+            lock_unchanged(w, id, observations.len(), "it was being abandoned")?;
             let last = w.record_and_end_last(
                 (id, row.deployment),
                 None,
@@ -456,6 +445,19 @@ impl Service {
         self.searches.forget(id);
         reply
     }
+}
+
+/// Locks trial `id` and checks it is still searching with the `seen` observations it was read
+/// with; 409 when another request changed it while `meanwhile`.
+fn lock_unchanged(w: &Writer<'_>, id: i64, seen: usize, meanwhile: &str) -> Result<(), ApiError> {
+    if w.lock_trial_progress(id)? == Some((TrialStatus::Searching, seen)) {
+        return Ok(());
+    }
+    Err(ApiError::new(
+        ErrorKind::Conflict,
+        "trial",
+        format!("the trial changed while {meanwhile}; read it and retry"),
+    ))
 }
 
 /// 409 for a trial that has ended.

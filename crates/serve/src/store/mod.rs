@@ -573,9 +573,7 @@ impl Writer<'_> {
         ended: usize,
     ) -> Result<Option<DeploymentNow>, StoreError> {
         let count = |n: usize| Value::from(i64::try_from(n).unwrap_or(i64::MAX));
-        let since = format!(
-            "SELECT {TRIAL_COLUMNS} FROM trials WHERE deployment = $1 AND (k > $2 OR end_seq > $3) ORDER BY k"
-        );
+        let since = format!("SELECT {TRIAL_COLUMNS} FROM trials WHERE {SINCE} ORDER BY k");
         // A new trial's id, taken with the lock so that the trial and the reply naming it can
         // go with the commit. (SQLite writes one transaction at a time: the next id is free.)
         let next_id = match &self.conn {
@@ -847,6 +845,9 @@ const INSERT_OBSERVATION: &str =
     "INSERT INTO observations (trial, seq, container, found, objects, travelled, leg)
      VALUES ($1, $2, $3, $4, $5, $6, $7)";
 
+/// A deployment's trials started after its first `$2` or ended after its first `$3`.
+const SINCE: &str = "deployment = $1 AND (k > $2 OR end_seq > $3)";
+
 const TRIAL_COLUMNS: &str =
     "id, deployment, k, scene, target, pose, chosen, status, cost, replays, started_after, end_seq";
 
@@ -1012,7 +1013,7 @@ impl Reader<'_> {
     ) -> Result<Vec<StoredTrial>, StoreError> {
         let count = |n: usize| i64::try_from(n).unwrap_or(i64::MAX);
         self.trials_where(
-            "deployment = $1 AND (k > $2 OR end_seq > $3)",
+            SINCE,
             &[
                 deployment.into(),
                 count(started).into(),

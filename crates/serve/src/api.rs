@@ -232,7 +232,7 @@ fn integer_valued<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<u64>,
 }
 
 /// `POST /deployments/{id}/trials`.
-#[derive(Debug, Deserialize, ToSchema)]
+#[derive(Clone, Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct StartTrial {
     /// Makes a retried request harmless.

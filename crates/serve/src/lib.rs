@@ -15,6 +15,7 @@
 pub mod api;
 mod deployments;
 pub mod error;
+mod gather;
 mod grids;
 pub mod http;
 pub mod model;

@@ -30,6 +30,28 @@ pub(crate) struct RequestClaim<'a> {
     rolled_back: std::cell::Cell<bool>,
 }
 
+/// A request's id and fingerprint, to store its reply from another request's write.
+#[derive(Clone, Debug)]
+pub(crate) struct ReplyTo {
+    id: String,
+    fingerprint: String,
+}
+
+impl ReplyTo {
+    /// The statement storing `reply` as this request's, to run with the commit; it fails as
+    /// [`store_reply`]'s does when the request has a reply already.
+    pub(crate) fn store(&self, reply: &ApiReply) -> Final {
+        store_reply(
+            &self.id,
+            &StoredReply {
+                fingerprint: self.fingerprint.clone(),
+                outcome: reply.outcome,
+                body: reply.body.clone(),
+            },
+        )
+    }
+}
+
 impl Drop for RequestClaim<'_> {
     fn drop(&mut self) {
         if let Some(id) = self.id.take() {
@@ -107,6 +129,15 @@ impl Service {
 }
 
 impl RequestClaim<'_> {
+    /// What storing this request's reply takes, for a write that stores the replies of several
+    /// requests at once (gathered trial starts); `None` without a request id.
+    pub(crate) fn reply_to(&self, route: &str, body: &[u8]) -> Option<ReplyTo> {
+        self.id.as_ref().map(|id| ReplyTo {
+            id: id.clone(),
+            fingerprint: fingerprint(route, body),
+        })
+    }
+
     /// Whether the last [`complete`](Self::complete) committed its own write (false when it
     /// answered with a reply stored meanwhile, its write rolled back): what it wrote may be
     /// remembered only then.

@@ -152,34 +152,54 @@ impl Selectors {
         self.lock().1.get(&id).map(|k| k.mark).unwrap_or_default()
     }
 
-    /// The choice for a new trial of deployment `id` and the counts it was made from, after
-    /// bringing its selector up to date with `since(started, ended)`: the trials that started
-    /// or ended after the first `started` starts and `ended` ends (read in one statement).
-    /// When another request brought the selector further meanwhile, its state is used (it is
-    /// as fresh as this read or fresher).
+    /// The choices for `n` new trials of deployment `id`, started one after another, and the
+    /// counts each was made from, after bringing its selector up to date with
+    /// `since(started, ended)`: the trials that started or ended after the first `started`
+    /// starts and `ended` ends (read in one statement). When another request brought the
+    /// selector further meanwhile, its state is used (it is as fresh as this read or fresher).
+    ///
+    /// Each choice after the first is made after the starts before it in the batch, as if
+    /// those had been stored and read back: the kept selector goes on past them, so the batch
+    /// must be stored, or the selector [forgotten](Self::forget).
     pub(crate) fn choose(
         &self,
         id: i64,
         spec: &DeploymentSpec,
+        n: usize,
         since: impl Fn(usize, usize) -> Result<Vec<StoredTrial>, ApiError>,
-    ) -> Result<(usize, TrialCounts), ApiError> {
+    ) -> Result<Vec<(usize, TrialCounts)>, ApiError> {
         let from = self.mark(id);
-        let rows = since(from.started, from.ended)?;
+        let mut rows = since(from.started, from.ended)?;
         let mut kept = self.lock();
-        let (clock, map) = &mut *kept;
-        *clock += 1;
-        let now = *clock;
         // A selector dropped or behind this read's start is rebuilt from this read when it
-        // covers the whole history, else from a fresh one below.
-        let usable = match map.get(&id) {
+        // covers the whole history, else from a fresh one.
+        let usable = match kept.1.get(&id) {
             Some(k) => k.mark.started >= from.started && k.mark.ended >= from.ended,
             None => from == HistoryMark::default(),
         };
         if !usable {
             drop(kept);
-            let rows = since(0, 0)?;
-            return self.rebuild(id, spec, &rows);
+            rows = since(0, 0)?;
+            let (live, mark) = replayed(id, spec, &rows)?;
+            kept = self.lock();
+            let fresher = kept
+                .1
+                .get(&id)
+                .is_some_and(|k| k.mark.started >= mark.started && k.mark.ended >= mark.ended);
+            if !fresher {
+                kept.1.insert(
+                    id,
+                    Kept {
+                        mark,
+                        live,
+                        used: 0,
+                    },
+                );
+            }
         }
+        let (clock, map) = &mut *kept;
+        *clock += 1;
+        let now = *clock;
         let k = match map.entry(id) {
             std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
             std::collections::hash_map::Entry::Vacant(e) => e.insert(Kept {
@@ -189,44 +209,44 @@ impl Selectors {
             }),
         };
         let (events, mark) = events_since(k.mark, &rows)?;
-        if let Err(e) = k.live.extend_events(&events) {
-            map.remove(&id);
-            return Err(ApiError::internal(format!("deployment {id}: {e}")));
+        let mut answers = Vec::with_capacity(n);
+        let mut extended = || {
+            k.live.extend_events(&events)?;
+            let mut mark = mark;
+            for i in 0..n {
+                let chosen = k.live.peek();
+                answers.push((chosen, mark.counts()));
+                if i + 1 < n {
+                    k.live
+                        .extend_events(&[DeploymentEvent::Started { chosen }])?;
+                    mark = HistoryMark {
+                        started: mark.started + 1,
+                        ended: mark.ended,
+                        last_after: mark.ended as i64,
+                    };
+                }
+            }
+            Ok::<_, ferret_select::SelectError>(mark)
+        };
+        let extended = extended();
+        match extended {
+            Ok(mark) => {
+                k.mark = mark;
+                k.used = now;
+                self.trim(map);
+                Ok(answers)
+            }
+            Err(e) => {
+                map.remove(&id);
+                Err(ApiError::internal(format!("deployment {id}: {e}")))
+            }
         }
-        k.mark = mark;
-        k.used = now;
-        let answer = (k.live.peek(), k.mark.counts());
-        self.trim(map);
-        Ok(answer)
     }
 
-    /// Replaces deployment `id`'s selector by one made from all of `rows`.
-    fn rebuild(
-        &self,
-        id: i64,
-        spec: &DeploymentSpec,
-        rows: &[StoredTrial],
-    ) -> Result<(usize, TrialCounts), ApiError> {
-        let (live, mark) = replayed(id, spec, rows)?;
-        let answer = (live.peek(), mark.counts());
-        let mut kept = self.lock();
-        let (clock, map) = &mut *kept;
-        *clock += 1;
-        let fresher = map
-            .get(&id)
-            .is_some_and(|k| k.mark.started >= mark.started && k.mark.ended >= mark.ended);
-        if !fresher {
-            map.insert(
-                id,
-                Kept {
-                    mark,
-                    live,
-                    used: *clock,
-                },
-            );
-        }
-        self.trim(map);
-        Ok(answer)
+    /// Drops deployment `id`'s selector (rebuilt from the database when next needed): after a
+    /// batch of choices that was not stored.
+    pub(crate) fn forget(&self, id: i64) {
+        self.lock().1.remove(&id);
     }
 
     fn trim(&self, map: &mut HashMap<i64, Kept>) {

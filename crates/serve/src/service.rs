@@ -94,6 +94,10 @@ pub(crate) struct Scenes {
     pub(crate) uploaded: BTreeMap<String, SceneSummary>,
 }
 
+/// The most trial starts of one deployment stored in one transaction: enough for a fleet's
+/// burst, few enough that one failed statement costs little to redo.
+const MAX_STARTS_TOGETHER: usize = 64;
+
 /// Deployments whose selectors a replica keeps between requests. A selector holds its
 /// deployment's costs (8 bytes per candidate and trial): 1 024 deployments of 2 000 trials of
 /// 3 candidates are 48 MiB.
@@ -111,6 +115,8 @@ pub struct Service {
     pub(crate) searches: crate::searches::Searches,
     /// Deployments' selectors kept between requests.
     pub(crate) selectors: crate::selectors::Selectors,
+    /// Trial starts waiting for their deployment's lock on this replica, made together.
+    pub(crate) starts: crate::gather::Gather<i64, crate::trials::StartJob, crate::trials::Gathered>,
     /// Request ids being run on this replica now.
     pub(crate) in_flight: std::sync::Mutex<std::collections::HashSet<String>>,
     /// Deployments' specs read so far: a spec never changes once stored, and every request of
@@ -136,6 +142,12 @@ pub(crate) fn json<T: Serialize>(outcome: Outcome, value: &T) -> Result<ApiReply
 }
 
 impl Service {
+    /// How many trial starts this replica stored together with other starts of their
+    /// deployment (robots of a fleet starting at once) since it started.
+    pub fn starts_made_together(&self) -> u64 {
+        self.starts.together()
+    }
+
     /// A service over `store`, offering `candidates` (strategies built by the caller, the same
     /// registry as `ferret eval`), planning on grids with `grid`, with the default limits.
     ///
@@ -206,6 +218,7 @@ impl Service {
             specs: std::sync::Mutex::default(),
             searches: crate::searches::Searches::new(options.live_searches),
             selectors: crate::selectors::Selectors::new(KEPT_SELECTORS),
+            starts: crate::gather::Gather::new(MAX_STARTS_TOGETHER),
         })
     }
 

@@ -19,10 +19,10 @@ use crate::grids::Placed;
 use crate::model::{
     ApiReply, DeploymentSpec, Outcome, StoredObservation, StoredTrial, TrialStatus,
 };
-use crate::replies::{Begun, RequestClaim};
+use crate::replies::{Begun, ReplyTo, RequestClaim};
 use crate::searches::{LiveSearch, Owner};
 use crate::service::{Service, json};
-use crate::store::{NewTrial, TrialEnding, Writer};
+use crate::store::{Final, NewTrial, TrialEnding, Writer};
 
 /// An object type as the API takes it: ASCII letters and digits, as in `CellPhone`.
 pub(crate) fn is_type_name(s: &str) -> bool {
@@ -69,31 +69,138 @@ impl Service {
             }
         })?;
         self.stored_candidates(deployment, &spec)?;
-        // The trial as stored, so that planning it needs no read.
-        let started = std::cell::RefCell::new(None);
-        let stored = claim.complete_with(&route, body, |w| {
-            let mark = self.selectors.mark(deployment);
-            let now = w
-                .lock_deployment_since(deployment, mark.started, mark.ended)?
-                .ok_or_else(|| {
-                    ApiError::new(
-                        ErrorKind::NotFound,
-                        "deployment",
-                        format!("no deployment {deployment}"),
-                    )
-                })?;
-            let (chosen, counts) = self.selectors.choose(deployment, &spec, |started, ended| {
+        // Made alone: the trial as stored is kept, so that planning it needs no read.
+        let alone = || {
+            let started = std::cell::RefCell::new(None);
+            let stored = claim.complete_with(&route, body, |w| {
+                let (mut trials, finals) = self.store_starts(w, deployment, &spec, &[&req])?;
+                let trial = trials
+                    .pop()
+                    .ok_or_else(|| ApiError::internal("a start stored no trial"))?;
+                let reply = ApiReply {
+                    outcome: Outcome::Created,
+                    body: unplanned(trial.id),
+                };
+                started.replace(Some(trial));
+                Ok((reply, finals))
+            })?;
+            Ok::<_, ApiError>((stored, started.into_inner().filter(|_| claim.wrote())))
+        };
+        // Robots sharing a deployment start trials at once: those that wait for the lock on
+        // this replica are made together by one of them (a sequential deployment's starts,
+        // one at a time by definition, are not).
+        let gathered = if spec.sequential {
+            Gathered::Alone
+        } else {
+            let job = StartJob {
+                req: req.clone(),
+                reply_to: claim.reply_to(&route, body),
+            };
+            self.starts.run(
+                &deployment,
+                job,
+                |jobs| match jobs.len() {
+                    // This request's own, the only one waiting.
+                    1 => vec![match alone() {
+                        Ok((stored, trial)) => Gathered::Started(stored, trial),
+                        Err(e) => Gathered::Failed(e),
+                    }],
+                    _ => self.start_together(deployment, &spec, &jobs),
+                },
+                || Gathered::Alone,
+            )
+        };
+        let (stored, known) = match gathered {
+            Gathered::Started(stored, trial) => (stored, trial),
+            Gathered::Failed(e) => return Err(e),
+            Gathered::Alone => alone()?,
+        };
+        self.planned_start(stored, Some(&claim), known)
+    }
+
+    /// Starts of one deployment that waited for each other, stored in one transaction: one
+    /// lock, one read, one commit. Every start gets the choice it would have got alone in
+    /// this order. Should a statement fail (a request whose reply another replica stored
+    /// meanwhile), nothing is stored and each start is made alone.
+    fn start_together(
+        &self,
+        deployment: i64,
+        spec: &DeploymentSpec,
+        jobs: &[StartJob],
+    ) -> Vec<Gathered> {
+        let reqs: Vec<&StartTrial> = jobs.iter().map(|j| &j.req).collect();
+        let done = self.store.write_finishing(|w| {
+            let (trials, mut finals) = self.store_starts(w, deployment, spec, &reqs)?;
+            let mut started = Vec::with_capacity(trials.len());
+            for (trial, job) in trials.into_iter().zip(jobs) {
+                let reply = ApiReply {
+                    outcome: Outcome::Created,
+                    body: unplanned(trial.id),
+                };
+                if let Some(to) = &job.reply_to {
+                    finals.push(to.store(&reply));
+                }
+                started.push(Gathered::Started(reply, Some(trial)));
+            }
+            Ok::<_, ApiError>((started, finals))
+        });
+        match done {
+            Ok(Ok(started)) => {
+                tracing::debug!(
+                    deployment,
+                    starts = jobs.len(),
+                    "trial starts stored together"
+                );
+                started
+            }
+            Ok(Err(failed)) => {
+                tracing::debug!(deployment, error = %failed.error, "trial starts stored together failed; each is made alone");
+                self.selectors.forget(deployment);
+                jobs.iter().map(|_| Gathered::Alone).collect()
+            }
+            Err(e) => {
+                self.selectors.forget(deployment);
+                jobs.iter().map(|_| Gathered::Failed(e.clone())).collect()
+            }
+        }
+    }
+
+    /// Under deployment `deployment`'s lock (taken here), the choices for trials started by
+    /// `reqs` in this order and their places in the deployment's order; returns the trials and
+    /// the statements that store them, to run with the commit. What must be decided under the
+    /// lock is decided here and nothing more.
+    fn store_starts(
+        &self,
+        w: &Writer<'_>,
+        deployment: i64,
+        spec: &DeploymentSpec,
+        reqs: &[&StartTrial],
+    ) -> Result<(Vec<StoredTrial>, Vec<Final>), ApiError> {
+        let mark = self.selectors.mark(deployment);
+        let now = w
+            .lock_deployment_since(deployment, (mark.started, mark.ended), reqs.len())?
+            .ok_or_else(|| {
+                ApiError::new(
+                    ErrorKind::NotFound,
+                    "deployment",
+                    format!("no deployment {deployment}"),
+                )
+            })?;
+        let choices = self
+            .selectors
+            .choose(deployment, spec, reqs.len(), |started, ended| {
                 if (started, ended) == (mark.started, mark.ended) {
                     Ok(now.since.clone())
                 } else {
                     Ok(w.reader().trials_since(deployment, started, ended)?)
                 }
             })?;
-            if spec.sequential && counts.open > 0 {
-                check_sequential(deployment, w.reader().open_trial(deployment)?)?;
-            }
-            // The trial goes with the commit, with the reply naming it: the deployment is held
-            // for the round trip that took its lock and no other.
+        if spec.sequential && choices.first().is_some_and(|(_, counts)| counts.open > 0) {
+            check_sequential(deployment, w.reader().open_trial(deployment)?)?;
+        }
+        let mut trials = Vec::with_capacity(reqs.len());
+        let mut finals = Vec::with_capacity(reqs.len());
+        for ((req, (chosen, counts)), id) in reqs.iter().zip(choices).zip(now.next_trials) {
             let new = NewTrial {
                 deployment,
                 k: counts.started as i64 + 1,
@@ -103,9 +210,9 @@ impl Service {
                 chosen,
                 started_after: counts.ended as i64,
             };
-            let trial = w.insert_trial_last(now.next_trial, &new);
-            started.replace(Some(StoredTrial {
-                id: now.next_trial,
+            finals.push(w.insert_trial_last(id, &new));
+            trials.push(StoredTrial {
+                id,
                 deployment,
                 k: new.k,
                 scene: req.scene.clone(),
@@ -117,19 +224,9 @@ impl Service {
                 replays: None,
                 started_after: new.started_after,
                 end_seq: None,
-            }));
-            let reply = ApiReply {
-                outcome: Outcome::Created,
-                body: unplanned(now.next_trial),
-            };
-            Ok((reply, vec![trial]))
-        })?;
-        let known = if claim.wrote() {
-            started.into_inner()
-        } else {
-            None
-        };
-        self.planned_start(stored, Some(&claim), known)
+            });
+        }
+        Ok((trials, finals))
     }
 
     /// The reply to a trial's start from what was stored for it: the trial as it started
@@ -475,6 +572,23 @@ fn check_searching(row: &StoredTrial) -> Result<(), ApiError> {
 /// What is stored as the reply to a trial's start until its first container is planned.
 fn unplanned(trial: i64) -> String {
     serde_json::json!({ UNPLANNED: trial }).to_string()
+}
+
+/// A trial's start waiting to be stored with others of its deployment.
+pub(crate) struct StartJob {
+    req: StartTrial,
+    reply_to: Option<ReplyTo>,
+}
+
+/// What became of a gathered start.
+pub(crate) enum Gathered {
+    /// Stored: the reply stored for it (naming the trial) and the trial, when this write
+    /// stored it (not when a reply stored before was found).
+    Started(ApiReply, Option<StoredTrial>),
+    /// Not stored: to be made alone.
+    Alone,
+    /// Refused, or the database failed.
+    Failed(ApiError),
 }
 
 /// The trial named by a stored reply that waits for its plan.

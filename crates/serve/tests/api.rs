@@ -792,3 +792,78 @@ async fn a_start_stored_before_its_plan_is_answered_again_alike() {
     let (_, state) = s.get(&format!("/deployments/{id}")).await;
     assert_eq!(state["trials"].as_array().unwrap().len(), 1, "{state}");
 }
+
+/// Robots of a fleet starting trials in one deployment at once: the starts waiting for the
+/// deployment's lock are stored together, and each gets the choice it would have got alone in
+/// the order the trials are numbered (no trial ended: the selector's overlapping choices, one
+/// after another). A retried request gets its reply byte for byte.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn starts_made_at_once_are_stored_together_with_the_choices_made_one_by_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("serve.sqlite");
+    let s = Arc::new(start((!support::on_postgres()).then_some(db.as_path()), None).await);
+    let (_, dep) = s.post("/deployments", json!({"seed": 3})).await;
+    let id = dep["id"].as_i64().unwrap();
+    let robots = 32;
+    let body = |r: usize| json!({"request_id": format!("start-{r}"), "scene": "flat", "target": TARGETS[r % TARGETS.len()]});
+    let starts: Vec<_> = (0..robots)
+        .map(|r| {
+            let s = s.clone();
+            let body = body(r);
+            tokio::spawn(async move {
+                let r = s
+                    .client
+                    .post(format!("{}/deployments/{id}/trials", s.url))
+                    .json(&body)
+                    .send()
+                    .await
+                    .unwrap();
+                (r.status().as_u16(), r.text().await.unwrap())
+            })
+        })
+        .collect();
+    let mut replies = Vec::new();
+    for start in starts {
+        let (status, text) = start.await.unwrap();
+        assert_eq!(status, 201, "{text}");
+        replies.push(text);
+    }
+    assert!(
+        s.service.starts_made_together() > 0,
+        "{robots} starts at once were each stored alone"
+    );
+    let mut trials: Vec<Value> = replies
+        .iter()
+        .map(|t| serde_json::from_str(t).unwrap())
+        .collect();
+    trials.sort_by_key(|t| t["k"].as_i64().unwrap());
+    let ks: Vec<i64> = trials.iter().map(|t| t["k"].as_i64().unwrap()).collect();
+    assert_eq!(ks, (1..=robots as i64).collect::<Vec<_>>());
+    let names: Vec<String> = strategies().iter().map(|s| s.name().to_string()).collect();
+    let mut live =
+        LiveDeployment::new(Method::ReplaySelection, strategies().len(), 5.0, 3).unwrap();
+    for t in &trials {
+        assert_eq!(
+            t["strategy"],
+            names[live.choose_overlapping()],
+            "trial {}",
+            t["k"]
+        );
+        assert!(t["next"]["container"].is_string(), "{t}");
+    }
+    // The history replays (the GET rebuilds the selector and checks every stored choice).
+    let (st, state) = s.get(&format!("/deployments/{id}")).await;
+    assert_eq!(st, 200, "{state}");
+    assert_eq!(state["open_trials"].as_array().unwrap().len(), robots);
+    for r in [0, robots / 2, robots - 1] {
+        let again = s
+            .client
+            .post(format!("{}/deployments/{id}/trials", s.url))
+            .json(&body(r))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(again.status().as_u16(), 201);
+        assert_eq!(again.text().await.unwrap(), replies[r], "robot {r}'s retry");
+    }
+}

@@ -561,38 +561,53 @@ impl Writer<'_> {
     /// already holds the whole file), and then reads, under the lock, its trials that started
     /// after its first `started` or ended after its first `ended` (as
     /// [`Reader::trials_since`]), in one round trip: what a trial's start holds the deployment
-    /// for is kept short, since every start and end of the deployment waits for it. `None`
-    /// when there is no such deployment.
+    /// for is kept short, since every start and end of the deployment waits for it. Takes the
+    /// ids of `new_trials` trials (at least one) to start. `None` when there is no such
+    /// deployment.
     ///
     /// # Errors
     /// The database refuses, or a row does not parse.
     pub fn lock_deployment_since(
         &self,
         id: i64,
-        started: usize,
-        ended: usize,
+        (started, ended): (usize, usize),
+        new_trials: usize,
     ) -> Result<Option<DeploymentNow>, StoreError> {
         let count = |n: usize| Value::from(i64::try_from(n).unwrap_or(i64::MAX));
         let since = format!("SELECT {TRIAL_COLUMNS} FROM trials WHERE {SINCE} ORDER BY k");
-        // A new trial's id, taken with the lock so that the trial and the reply naming it can
-        // go with the commit. (SQLite writes one transaction at a time: the next id is free.)
-        let next_id = match &self.conn {
-            Conn::Sqlite(..) => "SELECT coalesce(max(id), 0) + 1 FROM trials",
-            Conn::Postgres(_) => "SELECT nextval(pg_get_serial_sequence('trials', 'id'))",
+        // The new trials' ids, taken with the lock so that the trials and the replies naming
+        // them can go with the commit. (SQLite writes one transaction at a time: the ids after
+        // the largest are free.)
+        let next_ids = match &self.conn {
+            Conn::Sqlite(..) => {
+                "WITH RECURSIVE n(i) AS (SELECT 1 UNION ALL SELECT i + 1 FROM n WHERE i < $1)
+                 SELECT (SELECT coalesce(max(id), 0) FROM trials) + i FROM n ORDER BY i"
+            }
+            Conn::Postgres(_) => {
+                "SELECT nextval(pg_get_serial_sequence('trials', 'id'))
+                 FROM generate_series(1, $1::bigint)"
+            }
         };
         let answers = self.conn.query_all(&[
-            (next_id, &[]),
+            (next_ids, &[count(new_trials)]),
             (self.lock_deployment_sql(), &[id.into()]),
             (&since, &[id.into(), count(started), count(ended)]),
         ])?;
         match answers.as_slice() {
             [next, locked, rows] if !locked.is_empty() => {
-                let next = next
-                    .first()
-                    .ok_or_else(|| self.conn.corrupt("no next trial id".into()))?;
+                let next_trials = next
+                    .iter()
+                    .map(|row| self.conn.int(row, 0, "next trial id"))
+                    .collect::<Result<Vec<_>, _>>()?;
+                if next_trials.len() != new_trials {
+                    return Err(self.conn.corrupt(format!(
+                        "{} trial ids where {new_trials} were asked for",
+                        next_trials.len()
+                    )));
+                }
                 Ok(Some(DeploymentNow {
                     since: self.conn.trials(rows)?,
-                    next_trial: self.conn.int(next, 0, "next trial id")?,
+                    next_trials,
                 }))
             }
             _ => Ok(None),
@@ -784,8 +799,8 @@ pub struct TrialEnding<'a> {
 pub struct DeploymentNow {
     /// Its trials started or ended since what the caller knew.
     pub since: Vec<StoredTrial>,
-    /// The id the new trial will have.
-    pub next_trial: i64,
+    /// The ids the new trials will have, in order.
+    pub next_trials: Vec<i64>,
 }
 
 /// A statement a write runs last, with its commit ([`Store::write_finishing`]).

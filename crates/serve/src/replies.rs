@@ -114,14 +114,18 @@ impl Service {
             _shared: None,
             rolled_back: Default::default(),
         };
-        match self.store.claim(id)? {
+        // The stored reply is looked up while the claim is asked for. Should another replica
+        // store it between the two (and let go of the id), this request runs again, and
+        // storing its reply, which finds the first, rolls it back and answers with that.
+        let (claimed, stored) = self.store.claim_while(id, || {
+            self.store
+                .read(|r| Ok(stored_reply(r, request_id, route, body)))
+        });
+        match claimed? {
             Some(shared) => claim._shared = Some(shared),
             None => return Err(in_flight()),
         }
-        match self
-            .store
-            .read(|r| Ok(stored_reply(r, request_id, route, body)))??
-        {
+        match stored?? {
             Some(reply) => Ok(Begun::Replied(reply)),
             None => Ok(Begun::Fresh(claim)),
         }

@@ -377,6 +377,30 @@ impl Store {
             Backend::Postgres(p) => Ok(p.claim(key)?.map(|k| Claim { held: Some((p, k)) })),
         }
     }
+
+    /// [`claim`](Self::claim), with `during` run while the claim is asked for (on PostgreSQL
+    /// the claim's round trip and the statements `during` runs overlap): for what is safe to
+    /// do before the claim is known, such as looking up a stored reply whose absence is checked
+    /// again when the reply is stored.
+    ///
+    /// # Errors
+    /// As [`claim`](Self::claim), beside what `during` returns.
+    pub fn claim_while<T>(
+        &self,
+        key: &str,
+        during: impl FnOnce() -> T,
+    ) -> (Result<Option<Claim<'_>>, StoreError>, T) {
+        match &self.backend {
+            Backend::Sqlite(_) => (Ok(Some(Claim { held: None })), during()),
+            Backend::Postgres(p) => {
+                let (claimed, out) = p.claim_while(key, during);
+                (
+                    claimed.map(|k| k.map(|k| Claim { held: Some((p, k)) })),
+                    out,
+                )
+            }
+        }
+    }
 }
 
 /// A request key held across replicas; released when dropped (or when the replica holding it

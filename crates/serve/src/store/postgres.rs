@@ -218,56 +218,81 @@ impl Postgres {
         &self,
         f: impl FnOnce(super::Conn<'_>) -> Result<T, E>,
     ) -> Result<T, E> {
-        let mut client = self.client()?;
-        let tx = self
-            .block_on(client.transaction())
-            .map_err(|e| self.pg(e))?;
+        let tx = Tx::new(self.client()?);
         let out = f(super::Conn::Postgres(Conn {
             on: On::Tx(&tx),
             pg: self,
-        }))?;
-        self.block_on(tx.commit()).map_err(|e| self.pg(e))?;
-        Ok(out)
+        }));
+        match out {
+            Ok(out) => {
+                self.end(tx, "COMMIT")?;
+                Ok(out)
+            }
+            Err(e) => {
+                // The error said what went wrong; a failed rollback discards the connection.
+                let _ = self.end(tx, "ROLLBACK");
+                Err(e)
+            }
+        }
+    }
+
+    /// Ends `tx` with `how` (`COMMIT` or `ROLLBACK`), if it began.
+    fn end(&self, tx: Tx, how: &str) -> Result<(), StoreError> {
+        if tx.state.get() == TxState::Open {
+            self.block_on(tx.client().batch_execute(how))
+                .map_err(|e| self.pg(e))?;
+        }
+        tx.state.set(TxState::Ended);
+        Ok(())
     }
 
     pub(super) fn write_finishing<T, E: From<StoreError>>(
         &self,
         f: impl FnOnce(super::Conn<'_>) -> Result<(T, Vec<super::Final>), E>,
     ) -> Result<Result<T, super::FinalFailed>, E> {
-        let mut client = self.client()?;
-        let tx = self
-            .block_on(client.transaction())
-            .map_err(|e| self.pg(e))?;
-        let (out, finals) = f(super::Conn::Postgres(Conn {
+        let tx = Tx::new(self.client()?);
+        let (out, finals) = match f(super::Conn::Postgres(Conn {
             on: On::Tx(&tx),
             pg: self,
-        }))?;
+        })) {
+            Ok(done) => done,
+            Err(e) => {
+                let _ = self.end(tx, "ROLLBACK");
+                return Err(e);
+            }
+        };
         let params: Vec<Vec<&(dyn ToSql + Sync)>> = finals
             .iter()
             .map(|last| last.params.iter().map(|v| v as _).collect())
             .collect();
+        let client = tx.client();
+        let begin = tx.begin();
         let (results, committed) = self.block_on(async {
             let prepared = match futures_util::future::try_join_all(
-                finals.iter().map(|last| tx.prepare_cached(last.sql)),
+                finals.iter().map(|last| client.prepare_cached(last.sql)),
             )
             .await
             {
                 Ok(p) => p,
                 Err(e) => return (vec![Err(e)], Ok(())),
             };
-            // Sent together with the commit: the server runs them in order, and after a
-            // failed one the commit rolls the transaction back.
+            // Sent together with the commit (and the BEGIN, when nothing was sent before):
+            // the server runs them in order, and after a failed one the commit rolls the
+            // transaction back.
             let statements = futures_util::future::join_all(
                 prepared
                     .iter()
                     .zip(&params)
-                    .map(|(stmt, params)| tx.execute(stmt, params)),
+                    .map(|(stmt, params)| client.execute(stmt, params)),
             );
-            tokio::join!(statements, tx.batch_execute("COMMIT"))
+            let (began, results, committed) =
+                tokio::join!(begin, statements, client.batch_execute("COMMIT"));
+            match began {
+                Ok(()) => (results, committed),
+                Err(e) => (vec![Err(e)], Ok(())),
+            }
         });
-        // Committed (or rolled back) above: dropping the transaction would roll it back
-        // again, which the server answers with a warning.
-        std::mem::forget(tx);
+        tx.state.set(TxState::Ended);
         if let Some((index, error)) = results
             .into_iter()
             .enumerate()
@@ -295,14 +320,21 @@ impl Postgres {
     /// Brings the schema to [`SCHEMA_VERSION`] in one transaction under the migration lock, or
     /// refuses a newer one.
     fn migrate(&self) -> Result<(), StoreError> {
-        let mut client = self.client()?;
-        let tx = self
-            .block_on(client.transaction())
-            .map_err(|e| self.pg(e))?;
-        let c = Conn {
+        let tx = Tx::new(self.client()?);
+        let migrated = self.migrate_in(&Conn {
             on: On::Tx(&tx),
             pg: self,
-        };
+        });
+        match migrated {
+            Ok(()) => self.end(tx, "COMMIT"),
+            Err(e) => {
+                let _ = self.end(tx, "ROLLBACK");
+                Err(e)
+            }
+        }
+    }
+
+    fn migrate_in(&self, c: &Conn<'_>) -> Result<(), StoreError> {
         c.execute("SELECT pg_advisory_xact_lock($1)", &[MIGRATION_LOCK.into()])?;
         c.execute(
             "CREATE TABLE IF NOT EXISTS ferret_schema (version BIGINT NOT NULL)",
@@ -341,7 +373,7 @@ impl Postgres {
                 self.db
             );
         }
-        self.block_on(tx.commit()).map_err(|e| self.pg(e))
+        Ok(())
     }
 
     /// The two halves of `key`'s advisory lock: the first 8 bytes of its SHA-256, so that every
@@ -373,6 +405,41 @@ impl Postgres {
             db: self.db.clone(),
             what: "the claims session cannot be opened".into(),
         })
+    }
+
+    /// [`claim`](Self::claim) sent first, `during` run while its answer is on the way.
+    pub(super) fn claim_while<T>(
+        &self,
+        key: &str,
+        during: impl FnOnce() -> T,
+    ) -> (Result<Option<(i32, i32)>, StoreError>, T) {
+        let lock = Self::lock_key(key);
+        let (Some(rt), Ok(session)) = (&self.runtime, self.claim_session()) else {
+            let out = during();
+            return (self.claim(key), out);
+        };
+        let asked = rt.spawn({
+            let session = Arc::clone(&session);
+            async move {
+                session
+                    .client
+                    .query_one(&session.lock, &[&lock.0, &lock.1])
+                    .await
+                    .map(|row| row.get::<_, bool>(0))
+            }
+        });
+        let out = during();
+        let claimed = match self.block_on(asked) {
+            Ok(Ok(took)) => Ok(took.then_some(lock)),
+            // The session may have died with the server's restart: ask again on a new one.
+            Ok(Err(_)) if session.client.is_closed() => self.claim(key),
+            Ok(Err(e)) => Err(self.pg(e)),
+            Err(e) => Err(StoreError::Unreachable {
+                db: self.db.clone(),
+                what: format!("asking for a request claim: {e}"),
+            }),
+        };
+        (claimed, out)
     }
 
     /// Releases a claim taken by [`claim`](Self::claim). A failure is logged: the lock then
@@ -441,7 +508,90 @@ impl Postgres {
 /// What a [`Conn`] runs its statements on.
 enum On<'a> {
     Client(&'a deadpool_postgres::Client),
-    Tx(&'a deadpool_postgres::Transaction<'a>),
+    Tx(&'a Tx),
+}
+
+impl On<'_> {
+    fn client(&self) -> &deadpool_postgres::Client {
+        match self {
+            On::Client(c) => c,
+            On::Tx(t) => t.client(),
+        }
+    }
+
+    /// What to send before the next statements: `BEGIN` for a transaction none of whose
+    /// statements was sent yet.
+    fn begin(&self) -> impl std::future::Future<Output = Result<(), tokio_postgres::Error>> + '_ {
+        let begin = match self {
+            On::Tx(t) => Some(t.begin()),
+            On::Client(_) => None,
+        };
+        async move {
+            match begin {
+                Some(b) => b.await,
+                None => Ok(()),
+            }
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum TxState {
+    /// Nothing sent yet: the BEGIN goes with the first statements.
+    NotBegun,
+    Open,
+    Ended,
+}
+
+/// A transaction on a pooled connection whose `BEGIN` is sent with its first statements, in
+/// the same round trip (tokio-postgres's own transaction waits for its `BEGIN` first, a round
+/// trip more for every write, each waiting for a core on a busy machine). A transaction
+/// dropped open (a panic) discards its connection, and the server rolls it back.
+struct Tx {
+    client: Option<deadpool_postgres::Client>,
+    state: std::cell::Cell<TxState>,
+}
+
+impl Tx {
+    fn new(client: deadpool_postgres::Client) -> Self {
+        Self {
+            client: Some(client),
+            state: std::cell::Cell::new(TxState::NotBegun),
+        }
+    }
+
+    fn client(&self) -> &deadpool_postgres::Client {
+        // Present until dropped.
+        self.client.as_ref().unwrap_or_else(|| {
+            unreachable!("a transaction's connection is kept until it is dropped")
+        })
+    }
+
+    /// `BEGIN` when it was not sent yet (the transaction counts as open from here), else
+    /// nothing; to be polled before the statements it goes with.
+    fn begin(&self) -> impl std::future::Future<Output = Result<(), tokio_postgres::Error>> + '_ {
+        let first = self.state.get() == TxState::NotBegun;
+        if first {
+            self.state.set(TxState::Open);
+        }
+        async move {
+            if first {
+                self.client().batch_execute("BEGIN").await
+            } else {
+                Ok(())
+            }
+        }
+    }
+}
+
+impl Drop for Tx {
+    fn drop(&mut self) {
+        if self.state.get() == TxState::Open
+            && let Some(client) = self.client.take()
+        {
+            drop(deadpool_postgres::Object::take(client));
+        }
+    }
 }
 
 /// A pooled connection, or a transaction on one.
@@ -466,26 +616,21 @@ impl Conn<'_> {
     }
 
     fn batch(&self, sql: &str) -> Result<(), tokio_postgres::Error> {
-        match &self.on {
-            On::Client(c) => self.pg.block_on(c.batch_execute(sql)),
-            On::Tx(t) => self.pg.block_on(t.batch_execute(sql)),
-        }
+        let c = self.on.client();
+        self.pg.block_on(async {
+            let (began, done) = tokio::join!(self.on.begin(), c.batch_execute(sql));
+            began.and(done)
+        })
     }
 
     pub(super) fn execute(&self, sql: &str, params: &[Value]) -> Result<u64, StoreError> {
         let params: Vec<&(dyn ToSql + Sync)> = params.iter().map(|p| p as _).collect();
         let pg = self.pg;
+        let c = self.on.client();
         pg.block_on(async {
-            match &self.on {
-                On::Client(c) => {
-                    let stmt = c.prepare_cached(sql).await?;
-                    c.execute(&stmt, &params).await
-                }
-                On::Tx(t) => {
-                    let stmt = t.prepare_cached(sql).await?;
-                    t.execute(&stmt, &params).await
-                }
-            }
+            let stmt = c.prepare_cached(sql).await?;
+            let (began, done) = tokio::join!(self.on.begin(), c.execute(&stmt, &params));
+            began.and(done)
         })
         .map_err(|e| pg.pg(e))
     }
@@ -495,16 +640,10 @@ impl Conn<'_> {
         let pg = self.pg;
         let rows = pg
             .block_on(async {
-                match &self.on {
-                    On::Client(c) => {
-                        let stmt = c.prepare_cached(sql).await?;
-                        c.query(&stmt, &params).await
-                    }
-                    On::Tx(t) => {
-                        let stmt = t.prepare_cached(sql).await?;
-                        t.query(&stmt, &params).await
-                    }
-                }
+                let c = self.on.client();
+                let stmt = c.prepare_cached(sql).await?;
+                let (began, rows) = tokio::join!(self.on.begin(), c.query(&stmt, &params));
+                began.and(rows)
             })
             .map_err(|e| pg.pg(e))?;
         rows.iter().map(|r| row(pg, r)).collect()
@@ -527,24 +666,21 @@ impl Conn<'_> {
                 // Prepared first (a round trip only for a statement new to this connection),
                 // so that none is sent before an earlier one still waiting for its
                 // preparation: the order they run in is the order given.
-                let prepared = futures_util::future::try_join_all(statements.iter().map(
-                    |(sql, _)| async move {
-                        match &self.on {
-                            On::Client(c) => c.prepare_cached(sql).await,
-                            On::Tx(t) => t.prepare_cached(sql).await,
-                        }
-                    },
-                ))
+                let c = self.on.client();
+                let prepared = futures_util::future::try_join_all(
+                    statements.iter().map(|(sql, _)| c.prepare_cached(sql)),
+                )
                 .await?;
-                futures_util::future::try_join_all(prepared.iter().zip(&params).map(
-                    |(stmt, params)| async move {
-                        match &self.on {
-                            On::Client(c) => c.query(stmt, params).await,
-                            On::Tx(t) => t.query(stmt, params).await,
-                        }
-                    },
-                ))
-                .await
+                let (began, answers) = tokio::join!(
+                    self.on.begin(),
+                    futures_util::future::try_join_all(
+                        prepared
+                            .iter()
+                            .zip(&params)
+                            .map(|(stmt, params)| c.query(stmt, params)),
+                    )
+                );
+                began.and(answers)
             })
             .map_err(|e| pg.pg(e))?;
         answers

@@ -4,6 +4,7 @@
 //! deployment's row (`SELECT … FOR UPDATE`); request ids in flight are held as session
 //! advisory locks on one connection of the replica, so they vanish with a replica that dies.
 
+use std::future::Future;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -414,30 +415,28 @@ impl Postgres {
         during: impl FnOnce() -> T,
     ) -> (Result<Option<(i32, i32)>, StoreError>, T) {
         let lock = Self::lock_key(key);
-        let (Some(rt), Ok(session)) = (&self.runtime, self.claim_session()) else {
+        let Ok(session) = self.claim_session() else {
             let out = during();
             return (self.claim(key), out);
         };
-        let asked = rt.spawn({
-            let session = Arc::clone(&session);
-            async move {
-                session
-                    .client
-                    .query_one(&session.lock, &[&lock.0, &lock.1])
-                    .await
-                    .map(|row| row.get::<_, bool>(0))
-            }
-        });
+        let params: [&(dyn ToSql + Sync); 2] = [&lock.0, &lock.1];
+        let mut asked = std::pin::pin!(session.client.query_one(&session.lock, &params));
+        // Polled once here, which sends the statement; its answer is awaited after `during`.
+        // (Not spawned: the runtime's one worker drives every connection, and a task per
+        // request there slows them all.)
+        let sent = asked
+            .as_mut()
+            .poll(&mut std::task::Context::from_waker(std::task::Waker::noop()));
         let out = during();
-        let claimed = match self.block_on(asked) {
-            Ok(Ok(took)) => Ok(took.then_some(lock)),
+        let answer = match sent {
+            std::task::Poll::Ready(answer) => answer,
+            std::task::Poll::Pending => self.block_on(asked),
+        };
+        let claimed = match answer {
+            Ok(row) => Ok(row.get::<_, bool>(0).then_some(lock)),
             // The session may have died with the server's restart: ask again on a new one.
-            Ok(Err(_)) if session.client.is_closed() => self.claim(key),
-            Ok(Err(e)) => Err(self.pg(e)),
-            Err(e) => Err(StoreError::Unreachable {
-                db: self.db.clone(),
-                what: format!("asking for a request claim: {e}"),
-            }),
+            Err(_) if session.client.is_closed() => self.claim(key),
+            Err(e) => Err(self.pg(e)),
         };
         (claimed, out)
     }

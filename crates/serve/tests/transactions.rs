@@ -80,3 +80,22 @@ fn a_failed_final_statement_rolls_back_the_statements_before_it() {
         Some("{}".to_string())
     );
 }
+
+#[test]
+fn a_replaced_reply_is_read_back_and_an_unknown_id_changes_nothing() {
+    let store = support::store();
+    let reply = StoredReply {
+        fingerprint: "f".into(),
+        outcome: Outcome::Created,
+        body: "{\"unplanned_trial\": 1}".into(),
+    };
+    store
+        .write_finishing(|_| Ok::<_, StoreError>(((), vec![store_reply("start-1", &reply)])))
+        .unwrap()
+        .unwrap();
+    store.replace_reply("start-1", "{\"trial\": 1}").unwrap();
+    store.replace_reply("start-2", "{\"trial\": 2}").unwrap();
+    let read = |id: &str| store.read(|r| r.reply(id)).unwrap().map(|r| r.body);
+    assert_eq!(read("start-1").as_deref(), Some("{\"trial\": 1}"));
+    assert_eq!(read("start-2"), None);
+}

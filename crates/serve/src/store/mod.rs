@@ -334,17 +334,32 @@ impl Store {
         }
     }
 
-    /// Replaces the body of request `id`'s stored reply, in a statement of its own (one round
-    /// trip on PostgreSQL: it is its own transaction).
+    /// Replaces the body of request `id`'s stored reply, in a transaction of its own (one
+    /// round trip on PostgreSQL). Used for a reply that completes one stored before (a trial
+    /// start's plan): losing it to a crash of the database only means that a retry plans again,
+    /// to the same reply, so on PostgreSQL it does not wait for its commit to reach the disk
+    /// (`synchronous_commit` off for this transaction alone).
     ///
     /// # Errors
     /// The database refuses, or cannot be reached.
     pub fn replace_reply(&self, id: &str, body: &str) -> Result<(), StoreError> {
         const SQL: &str = "UPDATE requests SET body = $2 WHERE id = $1";
-        let params = [request_key(id).as_ref().into(), body.into()];
+        let params = vec![request_key(id).as_ref().into(), body.into()];
         match &self.backend {
             Backend::Sqlite(s) => s.write(|conn| conn.execute(SQL, &params).map(drop)),
-            Backend::Postgres(p) => p.read(|conn| conn.execute(SQL, &params).map(drop)),
+            Backend::Postgres(p) => {
+                let finals = vec![
+                    Final {
+                        sql: "SET LOCAL synchronous_commit TO OFF",
+                        params: Vec::new(),
+                    },
+                    Final { sql: SQL, params },
+                ];
+                match p.write_finishing(|_| Ok::<_, StoreError>(((), finals)))? {
+                    Ok(()) => Ok(()),
+                    Err(failed) => Err(failed.error),
+                }
+            }
         }
     }
 

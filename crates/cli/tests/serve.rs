@@ -578,3 +578,60 @@ fn bench_serve_runs_robots_sharing_one_deployment_without_refusals() {
         "{line}"
     );
 }
+
+/// `bench serve --fresh-trials`: every trial starts from a pose of its own, with targets drawn
+/// per trial, so no two trials the server sees are alike (read back from its database).
+#[test]
+fn bench_serve_fresh_trials_never_repeats_a_trial() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("bench.sqlite");
+    let out = ferret(&[
+        "bench",
+        "serve",
+        "--generate",
+        "6",
+        "--strategies",
+        STRATEGIES,
+        "--deployments",
+        "6",
+        "--trials",
+        "4",
+        "--fresh-trials",
+        "--db",
+        s(&db),
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    let line: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(line["fresh_trials"], true, "{line}");
+    for field in ["errors", "lost_observations", "duplicated_observations"] {
+        assert_eq!(line[field], 0, "{field}: {line}");
+    }
+    let store = ferret_serve::Store::open(&db).unwrap();
+    let trials: Vec<_> = store
+        .read(|r| {
+            let mut all = Vec::new();
+            for d in r.deployment_ids()? {
+                all.extend(r.trials_of(d)?);
+            }
+            Ok(all)
+        })
+        .unwrap();
+    assert_eq!(trials.len(), 24);
+    let mut seen = std::collections::HashSet::new();
+    for t in &trials {
+        let pose = t
+            .pose
+            .unwrap_or_else(|| panic!("trial {} has no pose", t.id));
+        assert!(
+            seen.insert((t.scene.clone(), pose.map(f64::to_bits), t.target.clone())),
+            "trial {} repeats another",
+            t.id
+        );
+    }
+    let pairs: std::collections::HashSet<_> = trials
+        .iter()
+        .map(|t| (t.scene.clone(), t.target.clone()))
+        .collect();
+    assert!(pairs.len() > 6, "one target per scene: {pairs:?}");
+}

@@ -68,6 +68,13 @@ pub struct ServeArgs {
     /// overlap and each start's choice depends on the others'. Starts refused (409) are counted.
     #[arg(long)]
     shared_deployment: bool,
+    /// Every trial starts from a pose of its own (a reachable free cell of its scene and a
+    /// heading, drawn with --seed) and searches for a target drawn for it, so no two trials
+    /// are alike and no kept replay is found again: what robots that set out where their last
+    /// trial left them see. By default every trial starts at its scene's start, and each scene
+    /// has one target.
+    #[arg(long)]
+    fresh_trials: bool,
     /// Run the servers as processes of this `ferret` binary (another version's, to compare
     /// servers under the same robots in one run) instead of this one.
     #[arg(long, value_name = "PATH")]
@@ -140,6 +147,8 @@ struct ServeLine {
     replicas: usize,
     /// Whether every robot ran its trials in one shared deployment.
     shared_deployment: bool,
+    /// Whether every trial started from a pose of its own with a target of its own.
+    fresh_trials: bool,
     database: String,
     /// Replay costs each server keeps per scene and pose.
     kept_replays: usize,
@@ -191,8 +200,6 @@ const MAX_BENCH_REPLICAS: usize = 64;
 fn serve(args: ServeArgs) -> Result<ExitCode> {
     use std::sync::Arc;
 
-    use ferret_plan::draw_trial;
-
     if args.deployments == 0 || args.trials == 0 || args.replicas == 0 {
         anyhow::bail!("--deployments, --trials and --replicas must be at least 1");
     }
@@ -239,32 +246,7 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
             .to_string_lossy()
             .into_owned()
     });
-    // The work list: per deployment, (scene name, target) per trial, with the truth to answer.
-    let mut plans = Vec::with_capacity(args.deployments);
-    for d in 0..args.deployments {
-        let mut trials = Vec::with_capacity(args.trials);
-        for k in 0..args.trials {
-            let scene = &loaded.scenes[(d * args.trials + k) % loaded.scenes.len()];
-            let trial = draw_trial(&scene.house, &scene.truth, args.seed, 0.0)?;
-            let contents: std::collections::HashMap<String, Vec<String>> = scene
-                .house
-                .containers
-                .iter()
-                .enumerate()
-                .map(|(i, c)| {
-                    let held = scene
-                        .truth
-                        .contents(i)
-                        .iter()
-                        .map(|o| o.object_type.to_string())
-                        .collect();
-                    (c.id.clone(), held)
-                })
-                .collect();
-            trials.push((scene.house.name.clone(), trial.target.to_string(), contents));
-        }
-        plans.push(trials);
-    }
+    let plans = work_list(&args, &loaded.scenes)?;
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()?;
@@ -453,6 +435,7 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
     let line = ServeLine {
         replicas: args.replicas,
         shared_deployment: args.shared_deployment,
+        fresh_trials: args.fresh_trials,
         kept_replays: args.kept_replays,
         database: if ferret_serve::is_postgres_url(&db) {
             "postgres".into()
@@ -488,7 +471,7 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
         println!("{}", serde_json::to_string_pretty(&line)?);
     } else {
         println!(
-            "{} replica(s) on {} keeping {} replays per scene, {} {} × {} trials: {} requests in {:.1} s = {:.0} requests/s; next-container reply p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms; {} retries ({} refused starts), {} errors",
+            "{} replica(s) on {} keeping {} replays per scene, {} {} × {} trials{}: {} requests in {:.1} s = {:.0} requests/s; next-container reply p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms; {} retries ({} refused starts), {} errors",
             line.replicas,
             line.database,
             line.kept_replays,
@@ -499,6 +482,11 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
                 "deployments"
             },
             line.trials,
+            if line.fresh_trials {
+                " (each from a pose of its own)"
+            } else {
+                ""
+            },
             line.requests,
             line.seconds,
             line.requests_per_second,
@@ -619,11 +607,93 @@ fn spawn_replica(
     )
 }
 
+/// A trial a robot runs: scene, target, start pose (`None`: the scene's start), and what
+/// each container holds, to answer its searches.
 type RobotTrial = (
     String,
     String,
+    Option<[f64; 3]>,
     std::collections::HashMap<String, Vec<String>>,
 );
+
+/// The trials of each robot: robot d runs houses d·trials .. in file order (wrapping), with the
+/// target drawn for its house with --seed, from the house's start; or, with --fresh-trials,
+/// from a pose and with a target drawn for the trial itself, none twice.
+fn work_list(args: &ServeArgs, scenes: &[ferret_world::Scene]) -> Result<Vec<Vec<RobotTrial>>> {
+    use rand::{Rng, SeedableRng};
+
+    // The reachable free cells of each scene, built when a fresh trial first needs them.
+    let mut reachable: Vec<Option<Vec<ferret_world::Point>>> = vec![None; scenes.len()];
+    let mut drawn = std::collections::HashSet::new();
+    let mut plans = Vec::with_capacity(args.deployments);
+    for d in 0..args.deployments {
+        let mut trials = Vec::with_capacity(args.trials);
+        for k in 0..args.trials {
+            let n = d * args.trials + k;
+            let i = n % scenes.len();
+            let scene = &scenes[i];
+            let (target, pose) = if args.fresh_trials {
+                let cells = match &mut reachable[i] {
+                    Some(cells) => cells,
+                    slot => {
+                        let grid =
+                            ferret_world::OccupancyGrid::build(&scene.house, &args.grid.params())
+                                .with_context(|| format!("house {}", scene.house.name))?;
+                        let cells = grid
+                            .cells()
+                            .filter(|(c, _)| grid.is_reachable(*c))
+                            .map(|(c, _)| grid.center(c))
+                            .collect();
+                        slot.insert(cells)
+                    }
+                };
+                if cells.is_empty() {
+                    anyhow::bail!("house {}: no reachable free cell", scene.house.name);
+                }
+                // Drawn again (a new seed) until the trial is one not drawn before.
+                let mut attempt = 0u64;
+                loop {
+                    let seed = args
+                        .seed
+                        .wrapping_add((n as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15))
+                        .wrapping_add(attempt.wrapping_mul(0xbf58_476d_1ce4_e5b9));
+                    let target =
+                        ferret_plan::draw_trial(&scene.house, &scene.truth, seed, 0.0)?.target;
+                    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+                    let at = cells[rng.random_range(0..cells.len())];
+                    let yaw = rng.random_range(-180.0..180.0_f64).round();
+                    let key = (i, at.x.to_bits(), at.z.to_bits(), target.to_string());
+                    if drawn.insert(key) || attempt >= 1_000 {
+                        break (target, Some([at.x, at.z, yaw]));
+                    }
+                    attempt += 1;
+                }
+            } else {
+                let target =
+                    ferret_plan::draw_trial(&scene.house, &scene.truth, args.seed, 0.0)?.target;
+                (target, None)
+            };
+            let contents = scene
+                .house
+                .containers
+                .iter()
+                .enumerate()
+                .map(|(c, container)| {
+                    let held = scene
+                        .truth
+                        .contents(c)
+                        .iter()
+                        .map(|o| o.object_type.to_string())
+                        .collect();
+                    (container.id.clone(), held)
+                })
+                .collect();
+            trials.push((scene.house.name.clone(), target.to_string(), pose, contents));
+        }
+        plans.push(trials);
+    }
+    Ok(plans)
+}
 
 /// What was read back after the run.
 #[derive(Default)]
@@ -772,13 +842,12 @@ impl Robot {
             }
         };
         self.deployment = Some(id);
-        for (scene, target, contents) in trials {
-            let Some(mut reply) = self
-                .post(
-                    &format!("/deployments/{id}/trials"),
-                    json!({"scene": scene, "target": target}),
-                )
-                .await
+        for (scene, target, pose, contents) in trials {
+            let mut start = json!({"scene": scene, "target": target});
+            if let Some(pose) = pose {
+                start["pose"] = json!(pose);
+            }
+            let Some(mut reply) = self.post(&format!("/deployments/{id}/trials"), start).await
             else {
                 self.errors += 1;
                 break;

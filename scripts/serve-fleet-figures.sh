@@ -13,7 +13,9 @@
 # checkout's; FERRET_FIG_RUNS sets how many runs of each (default 2). Then robots sharing one
 # deployment (`--shared-deployment`), the servers of FERRET_BEFORE_BIN and of this checkout under
 # the same robots (`--serve-bin`), on SQLite and on two replicas with PostgreSQL;
-# FERRET_FIG_SHARED_ONLY=1 runs only those.
+# FERRET_FIG_SHARED_ONLY=1 runs only those. Last, trials that never repeat (`--fresh-trials`:
+# each from a pose and with a target of its own), the servers of FERRET_BEFORE_BIN and of this
+# checkout under the same robots again; FERRET_FIG_FRESH_ONLY=1 runs only those.
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
@@ -41,8 +43,9 @@ run() {
 }
 tmp="$(mktemp -d)"
 trap 'rm -rf "$tmp"; if [ -n "${pg_started:-}" ]; then "$ROOT/scripts/postgres.sh" stop "$pg_started"; fi' EXIT
+only="${FERRET_FIG_SHARED_ONLY:-0}${FERRET_FIG_FRESH_ONLY:-0}"
 for ((i = 1; i <= RUNS; i++)); do
-    [ "${FERRET_FIG_SHARED_ONLY:-0}" = 1 ] && break
+    [ "$only" != 00 ] && break
     if [ -n "${FERRET_BEFORE_BIN:-}" ]; then
         run "sqlite-before" "$FERRET_BEFORE_BIN" bench serve
     fi
@@ -54,13 +57,14 @@ for ((i = 1; i <= RUNS; i++)); do
     run "postgres-2-replicas-kept-replays-0" "$ferret" bench serve --replicas 2 --db "$db" \
         --kept-replays 0
 done
-if [ "${FERRET_FIG_SHARED_ONLY:-0}" != 1 ]; then
+if [ "$only" = 00 ]; then
     db="$("$ROOT/scripts/postgres.sh" new-db "fleet_$$_kill")"
     run "postgres-2-replicas-kill" "$ferret" bench serve --replicas 2 --db "$db" --kill-replica-after 5
 fi
 # A fleet sharing one deployment: every server a process of its own (`--serve-bin`), so that the
 # version before and this one run under the same robots.
 for ((i = 1; i <= RUNS; i++)); do
+    [ "${FERRET_FIG_FRESH_ONLY:-0}" = 1 ] && break
     for who in before this; do
         bin="$ferret"
         if [ "$who" = before ]; then
@@ -71,6 +75,23 @@ for ((i = 1; i <= RUNS; i++)); do
             --db "$tmp/shared-$who-$i.sqlite"
         db="$("$ROOT/scripts/postgres.sh" new-db "fleet_$$_shared_${who}_$i")"
         run "shared-postgres-2-replicas-$who" "$ferret" bench serve --shared-deployment \
+            --serve-bin "$bin" --replicas 2 --db "$db"
+    done
+done
+# Trials that never repeat: kept replays are never found again, every end replays every other
+# candidate.
+for ((i = 1; i <= RUNS; i++)); do
+    [ "${FERRET_FIG_SHARED_ONLY:-0}" = 1 ] && break
+    for who in before this; do
+        bin="$ferret"
+        if [ "$who" = before ]; then
+            [ -n "${FERRET_BEFORE_BIN:-}" ] || continue
+            bin="$FERRET_BEFORE_BIN"
+        fi
+        run "fresh-sqlite-$who" "$ferret" bench serve --fresh-trials --serve-bin "$bin" \
+            --db "$tmp/fresh-$who-$i.sqlite"
+        db="$("$ROOT/scripts/postgres.sh" new-db "fleet_$$_fresh_${who}_$i")"
+        run "fresh-postgres-2-replicas-$who" "$ferret" bench serve --fresh-trials \
             --serve-bin "$bin" --replicas 2 --db "$db"
     done
 done

@@ -1,16 +1,18 @@
 //! # ferret-serve
 //!
 //! ferret as a service a real robot calls: it owns the HTTP API (`ferret serve`), the scenes a
-//! robot lives in, live deployments and step-by-step trials, and their storage in SQLite. It
-//! adds no planner, simulator or selector of its own: a trial step is `ferret_plan::Search`, the
-//! replay after a trial and the selector's update are `ferret_select::DeploymentLoop`, the same
-//! loop `ferret deploy` drives. The modules follow the API's resources (`scenes`,
-//! `deployments`, `trials`) around the data they share ([`model`]); [`store`] keeps it,
-//! `replies` makes writes safe to retry, `grids` builds and caches what planning needs, and
-//! [`http`] only parses, calls and answers. Everything is
-//! written to the database before a reply leaves, and every in-memory state is rebuilt from the
-//! rows, so a killed server resumes where it stopped; replies to requests carrying a
-//! `request_id` are stored too, so a robot can retry safely. See docs/serve.md.
+//! robot lives in, live deployments and step-by-step trials, and their storage in SQLite or in a
+//! PostgreSQL database that several replicas share. It adds no planner, simulator or selector of
+//! its own: a trial step is `ferret_plan::Search`, the replays after a trial are
+//! `ferret_plan::replay_costs`, and a deployment's choices are `ferret_select::LiveDeployment`'s.
+//! The modules follow the API's resources (`scenes`, `deployments`, `trials`) around the data
+//! they share ([`model`]); [`store`] keeps it, `replies` makes writes safe to retry,
+//! `selectors` keeps deployments' selectors between requests, `gather` stores together the
+//! trial starts that wait for one deployment's lock, `grids` builds and caches what planning
+//! needs, and [`http`] only parses, calls and answers. Everything is written to the database
+//! before a reply leaves, and every in-memory state is rebuilt from the rows, so a killed server
+//! resumes where it stopped; replies to requests carrying a `request_id` are stored too, so a
+//! robot can retry safely. See docs/serve.md.
 
 pub mod api;
 mod deployments;

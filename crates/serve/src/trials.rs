@@ -36,7 +36,9 @@ impl Service {
     /// round trip as the lock), and the trial's place in the deployment's order. The first
     /// container is planned once the trial is stored, without the lock, since planning can
     /// take a while and every start and end of the deployment waits for it. So a start is never
-    /// refused or made again for being overtaken by other robots' trials.
+    /// refused or made again for being overtaken by other robots' trials. Starts of one
+    /// deployment that wait for its lock on this replica are stored together, by one of them,
+    /// in one transaction: the deployment is then held once for all of them.
     pub fn start_trial(
         &self,
         deployment: i64,

@@ -38,6 +38,15 @@ pub(crate) struct ReplyTo {
 }
 
 impl ReplyTo {
+    /// The reply to request `id`, sent to `route` with `body`, as a claim would give it.
+    #[cfg(test)]
+    pub(crate) fn new(id: &str, route: &str, body: &[u8]) -> Self {
+        Self {
+            id: id.to_string(),
+            fingerprint: fingerprint(route, body),
+        }
+    }
+
     /// The statement storing `reply` as this request's, to run with the commit; it fails as
     /// [`store_reply`]'s does when the request has a reply already.
     pub(crate) fn store(&self, reply: &ApiReply) -> Final {

@@ -726,3 +726,100 @@ fn next_container(placed: &Placed, from: Place, c: usize) -> NextContainer {
         path: placed.path(from, to).to_vec(),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use ferret_plan::{PlannerConfig, StrategyRegistry};
+    use ferret_select::{LiveDeployment, Method};
+    use ferret_world::GridParams;
+
+    use super::*;
+    use crate::model::StoredReply;
+    use crate::store::{Store, store_reply};
+
+    const BODY: &[u8] = br#"{"scene": "flat", "target": "Wallet"}"#;
+
+    fn job(request_id: Option<&str>, route: &str) -> StartJob {
+        StartJob {
+            req: StartTrial {
+                request_id: request_id.map(str::to_string),
+                scene: "flat".into(),
+                target: "Wallet".into(),
+                pose: None,
+            },
+            reply_to: request_id.map(|id| ReplyTo::new(id, route, BODY)),
+        }
+    }
+
+    /// Starts stored together get the choices one start after another would get and the
+    /// replies that name their trials; when one of them cannot be stored (its request was
+    /// answered meanwhile, by another replica), none is, and each is made alone.
+    #[test]
+    fn starts_stored_together_or_none_of_them() {
+        let registry = StrategyRegistry::builtin(None, PlannerConfig::default(), 10);
+        let strategies = ["optimistic+greedy", "model/uniform", "model/uniform/k2"]
+            .iter()
+            .map(|s| registry.build(s).unwrap())
+            .collect();
+        let s = Service::new(
+            Store::in_memory().unwrap(),
+            GridParams::default(),
+            strategies,
+        )
+        .unwrap();
+        let created = s
+            .create_deployment(serde_json::from_str("{}").unwrap(), b"{}")
+            .unwrap();
+        let deployment = serde_json::from_str::<serde_json::Value>(&created.body).unwrap()["id"]
+            .as_i64()
+            .unwrap();
+        let spec = s.spec(deployment).unwrap();
+        let route = format!("POST /deployments/{deployment}/trials");
+        let answered = StoredReply {
+            fingerprint: String::new(),
+            outcome: Outcome::Created,
+            body: "answered by another replica".into(),
+        };
+        s.store
+            .write_finishing(|_| Ok::<_, ApiError>(((), vec![store_reply("dup", &answered)])))
+            .unwrap()
+            .unwrap();
+
+        let jobs = [
+            job(Some("a"), &route),
+            job(Some("dup"), &route),
+            job(None, &route),
+        ];
+        let made = s.start_together(deployment, &spec, &jobs);
+        assert!(made.iter().all(|g| matches!(g, Gathered::Alone)));
+        assert!(
+            s.store
+                .read(|r| r.trials_of(deployment))
+                .unwrap()
+                .is_empty()
+        );
+        assert_eq!(s.store.read(|r| r.reply("a")).unwrap(), None);
+
+        let jobs = [
+            job(Some("a"), &route),
+            job(None, &route),
+            job(Some("b"), &route),
+        ];
+        let made = s.start_together(deployment, &spec, &jobs);
+        let mut live = LiveDeployment::new(Method::ReplaySelection, 3, 5.0, 0).unwrap();
+        for (k, (g, j)) in made.iter().zip(&jobs).enumerate() {
+            let Gathered::Started(reply, Some(trial)) = g else {
+                panic!("start {k} was not stored");
+            };
+            assert_eq!(trial.k, k as i64 + 1);
+            assert_eq!(trial.chosen, live.choose_overlapping(), "start {k}");
+            assert_eq!(reply.body, unplanned(trial.id));
+            if let Some(id) = &j.req.request_id {
+                let stored = s.store.read(|r| r.reply(id)).unwrap().unwrap();
+                assert_eq!(stored.body, reply.body);
+            }
+        }
+        let stored = s.store.read(|r| r.trials_of(deployment)).unwrap();
+        assert_eq!(stored.len(), 3);
+    }
+}

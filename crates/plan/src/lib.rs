@@ -72,6 +72,7 @@ pub mod holdout;
 pub mod learned;
 pub mod likelihood;
 pub mod logistic;
+pub mod plan_memo;
 pub mod planner;
 pub mod policy;
 pub mod probability;
@@ -95,6 +96,7 @@ pub use likelihood::{
     CALIBRATION_FOLDS, Evidence, LikelihoodSource, Noise, OracleLikelihood, Prior,
     PriorCalibration, RawPrior, Uniform,
 };
+pub use plan_memo::PlanMemo;
 pub use planner::{Plan, TourProblem, solve_brute_force, solve_exact};
 pub use policy::{CandidateLimit, CostModel, Greedy, Oracle, Planner, PlannerConfig, Policy};
 pub use probability::Probability;

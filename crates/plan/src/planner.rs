@@ -340,7 +340,32 @@ fn relax<const W: usize>(best: &mut [f64; W], w: f64, leg: &[f64; W], after: f64
     }
 }
 
+/// The best first candidate of `problem` given its table's first steps (see
+/// [`Solution::first_steps`]): what [`Solution::next`] gives with nothing searched and the robot
+/// where `problem` has it, computed the same way.
+pub(crate) fn first_from_steps(problem: &TourProblem, steps: &[f64]) -> Option<usize> {
+    // The weight of nothing searched, as the table has it.
+    let weight = 1.0;
+    let mut best: Option<(f64, usize)> = None;
+    for (x, &after) in steps.iter().enumerate().take(problem.len()) {
+        let v = weight * (problem.from_robot[x] + problem.search_cost + problem.extra(x)) + after;
+        if best.is_none_or(|(b, _)| v < b) {
+            best = Some((v, x));
+        }
+    }
+    best.map(|(_, x)| x)
+}
+
 impl Solution {
+    /// The entries a first decision reads: for each candidate, the expected cost after it
+    /// when it is searched first.
+    pub(crate) fn first_steps(&self) -> Vec<f64> {
+        let full = (1usize << self.n) - 1;
+        (0..self.n)
+            .map(|x| self.h[(full & !(1 << x)) * self.stride + x])
+            .collect()
+    }
+
     /// The best next candidate after searching set `searched` (bit mask over local indices),
     /// standing at `at` (`None` = the robot's original position, only valid with nothing searched).
     /// Ties go to the lower index.

@@ -1,9 +1,12 @@
 //! Policies: map a belief to the next container to search.
 
+use std::sync::Arc;
+
 use ferret_world::Place;
 
 use crate::belief::Belief;
 use crate::error::PlanError;
+use crate::plan_memo::PlanMemo;
 use crate::planner::{self, Solution, TourProblem};
 use crate::probability::Probability;
 
@@ -108,13 +111,16 @@ pub struct Planner {
     config: PlannerConfig,
     /// A full solution over a candidate set, reused while the robot follows it.
     cached: Option<Cached>,
+    /// First steps of tables other searches of this house solved.
+    memo: Option<Arc<PlanMemo>>,
 }
 
 #[derive(Debug)]
 struct Cached {
     candidates: Vec<usize>,
     problem: TourProblem,
-    solution: Solution,
+    /// `None` while the decision came from the memo: solved when the robot follows it further.
+    solution: Option<Solution>,
 }
 
 impl Planner {
@@ -124,7 +130,15 @@ impl Planner {
             p,
             config,
             cached: None,
+            memo: None,
         }
+    }
+
+    /// The same planner, taking first decisions over candidate sets already solved in this
+    /// house from `memo` and keeping there those it solves (see [`PlanMemo`]); its decisions
+    /// are the same bit for bit.
+    pub fn with_memo(self, memo: Option<Arc<PlanMemo>>) -> Self {
+        Self { memo, ..self }
     }
 
     /// The candidates for this decision under the configured limit.
@@ -212,8 +226,8 @@ impl Planner {
     /// Reuses the cached solution when the candidate set is unchanged except for containers
     /// searched since, and the robot stands at one of them (Bellman's principle: the best
     /// continuation of an optimal plan is a table lookup).
-    fn cached_next(&self, belief: &Belief<'_>, candidates: &[usize]) -> Option<usize> {
-        let cached = self.cached.as_ref()?;
+    fn cached_next(&mut self, belief: &Belief<'_>, candidates: &[usize]) -> Option<usize> {
+        let cached = self.cached.as_mut()?;
         let mut searched = 0usize;
         for (i, &c) in cached.candidates.iter().enumerate() {
             if belief.is_searched(c) {
@@ -233,8 +247,14 @@ impl Planner {
         if at.is_some_and(|a| searched & (1 << a) == 0) {
             return None;
         }
+        // A first step taken from the memo: the table it came from, solved again (bit for bit
+        // the same) now that the robot follows it.
+        if cached.solution.is_none() {
+            cached.solution = planner::solve_exact(&cached.problem).map(|(_, solution)| solution);
+        }
         cached
             .solution
+            .as_ref()?
             .next(&cached.problem, searched, at)
             .map(|i| cached.candidates[i])
     }
@@ -259,6 +279,23 @@ impl Policy for Planner {
         // The old table is no longer of use; dropped first, its memory serves the new solve.
         self.cached = None;
         let problem = self.problem(belief, &candidates);
+        // The authors' extra term makes the table depend on where the robot stands.
+        let memo = self
+            .memo
+            .as_ref()
+            .filter(|_| self.config.cost == CostModel::Paper);
+        if let Some(memo) = memo
+            && let Some(steps) = memo.first_steps(&candidates, &problem)
+            && let Some(first) = planner::first_from_steps(&problem, &steps)
+        {
+            let chosen = candidates[first];
+            self.cached = Some(Cached {
+                candidates,
+                problem,
+                solution: None,
+            });
+            return Ok(chosen);
+        }
         let (plan, solution) = planner::solve_exact(&problem).ok_or_else(|| PlanError::Policy {
             policy: "model".into(),
             error: format!(
@@ -273,10 +310,13 @@ impl Policy for Planner {
             .first()
             .map(|&i| candidates[i])
             .ok_or_else(|| no_container("model"))?;
+        if let Some(memo) = memo {
+            memo.keep(&candidates, &problem, &solution);
+        }
         self.cached = Some(Cached {
             candidates,
             problem,
-            solution,
+            solution: Some(solution),
         });
         Ok(first)
     }

@@ -5,6 +5,9 @@
 
 use ferret_world::{Distances, House, ObjectType};
 
+use std::sync::Arc;
+
+use crate::plan_memo::PlanMemo;
 use crate::replay::ReplayMemo;
 use crate::trial::TrialSpec;
 
@@ -21,6 +24,8 @@ pub struct SearchProblem<'a> {
     pub trial: &'a TrialSpec,
     /// Replays already computed in this house from this start, when the caller keeps them.
     memo: Option<&'a ReplayMemo>,
+    /// First steps of plans solved in this house, when the caller keeps them.
+    plans: Option<&'a Arc<PlanMemo>>,
 }
 
 impl<'a> SearchProblem<'a> {
@@ -31,6 +36,7 @@ impl<'a> SearchProblem<'a> {
             distances,
             trial,
             memo: None,
+            plans: None,
         }
     }
 
@@ -41,6 +47,21 @@ impl<'a> SearchProblem<'a> {
             memo: Some(memo),
             ..self
         }
+    }
+
+    /// The same problem, its model strategies taking first decisions over candidate sets
+    /// solved before from `memo` (the same decisions, without solving). The memo must belong
+    /// to this house on this grid (any start); see [`PlanMemo`].
+    pub fn with_plan_memo(self, memo: &'a Arc<PlanMemo>) -> Self {
+        Self {
+            plans: Some(memo),
+            ..self
+        }
+    }
+
+    /// The plan memo given with [`with_plan_memo`](Self::with_plan_memo).
+    pub fn plan_memo(&self) -> Option<&'a Arc<PlanMemo>> {
+        self.plans
     }
 
     /// The replay memo given with [`with_replay_memo`](Self::with_replay_memo).

@@ -324,6 +324,8 @@ impl Strategy for ModelStrategy {
                 got: p.len(),
             });
         }
-        Ok(Box::new(Planner::new(p, self.config)))
+        Ok(Box::new(
+            Planner::new(p, self.config).with_memo(ctx.problem.plan_memo().cloned()),
+        ))
     }
 }

@@ -3,8 +3,8 @@
 use std::sync::Arc;
 
 use ferret_plan::{
-    CandidateLimit, PlannerConfig, Prior, SearchProblem, StrategyRegistry, TrialSpec, replay_cost,
-    run_trial,
+    CandidateLimit, PlanMemo, PlannerConfig, Prior, SearchProblem, StrategyRegistry, TrialSpec,
+    replay_cost, run_trial,
 };
 use ferret_world::{
     Container, Distances, Footprint, GroundTruth, House, ObjectType, Point, Polygon, Pose, Room,
@@ -15,6 +15,16 @@ use proptest::strategy::Strategy as _;
 
 /// A one-room house with containers at `points`, Euclidean travel, and the given contents.
 fn house(
+    points: &[(f64, f64)],
+    types: &[usize],
+    contents: &[Vec<usize>],
+) -> (House, GroundTruth, Distances) {
+    house_at((0.0, 0.0), points, types, contents)
+}
+
+/// [`house`] with the robot starting at `start`.
+fn house_at(
+    start: (f64, f64),
     points: &[(f64, f64)],
     types: &[usize],
     contents: &[Vec<usize>],
@@ -48,7 +58,7 @@ fn house(
             access: None,
         })
         .collect();
-    let start = Point::new(0.0, 0.0);
+    let start = Point::new(start.0, start.1);
     let places: Vec<Point> = std::iter::once(start)
         .chain(points.iter().map(|&(x, z)| Point::new(x, z)))
         .collect();
@@ -693,4 +703,80 @@ fn a_deployed_candidate_that_cannot_be_replayed_fails_no_end() {
         )
         .is_err()
     );
+}
+
+/// Every trial of every target from each of `starts` in one house, with `spec` planning and one
+/// plan memo shared by them all, each beside the same trial without a memo; returns the memo's
+/// hits.
+fn trials_with_and_without_a_memo(
+    spec: &str,
+    (pts, kinds, contents): &HouseParts,
+    starts: &[(f64, f64)],
+) -> Result<u64, proptest::test_runner::TestCaseError> {
+    let memo = Arc::new(PlanMemo::new(64));
+    for &start in starts {
+        let (house, truth, distances) = house_at(start, pts, kinds, contents);
+        let scene = Scene {
+            house: house.clone(),
+            truth: truth.clone(),
+        };
+        let strategy = registry(std::slice::from_ref(&scene)).build(spec).unwrap();
+        for target in truth.target_types() {
+            let trial = TrialSpec {
+                target,
+                revealed: vec![],
+            };
+            let problem = SearchProblem::new(&house, &distances, &trial);
+            let alone = run_trial(strategy.as_ref(), &problem, &truth);
+            let shared = run_trial(strategy.as_ref(), &problem.with_plan_memo(&memo), &truth);
+            prop_assert_eq!(alone.ok(), shared.ok(), "{} from {:?}", spec, start);
+        }
+    }
+    Ok(memo.hits())
+}
+
+fn arb_larger_house() -> impl proptest::strategy::Strategy<Value = HouseParts> {
+    (7usize..=13).prop_flat_map(|n| {
+        (
+            prop::collection::vec((-15.0f64..15.0, -15.0f64..15.0), n),
+            prop::collection::vec(0usize..4, n),
+            prop::collection::vec(prop::collection::vec(0usize..3, 0..3), n),
+        )
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(32))]
+
+    /// A plan memo shared by a house's trials (from several starts, for every target) changes
+    /// no decision of any model strategy: each trial searches the same containers in the same
+    /// order at the same cost as without it.
+    #[test]
+    fn a_plan_memo_changes_no_decision(
+        parts in arb_larger_house(),
+        starts in prop::collection::vec((-15.0f64..15.0, -15.0f64..15.0), 1..4),
+    ) {
+        for spec in ["model/uniform/exact5", "model/prior/exact4", "model/uniform", "model/prior/k3"] {
+            trials_with_and_without_a_memo(spec, &parts, &starts)?;
+        }
+    }
+}
+
+/// The memo is used: in a house of twelve containers on a ring, trials from several starts meet
+/// candidate sets solved before (so the property above compares decisions taken from it).
+#[test]
+fn a_plan_memo_is_used_by_trials_of_one_house() {
+    let pts: Vec<(f64, f64)> = (0..12)
+        .map(|i| {
+            let a = f64::from(i) * std::f64::consts::TAU / 12.0;
+            (10.0 * a.cos(), 10.0 * a.sin())
+        })
+        .collect();
+    let kinds: Vec<usize> = (0..12).map(|i| i % 4).collect();
+    let contents: Vec<Vec<usize>> = (0..12).map(|i| vec![i % 3]).collect();
+    let starts = [(0.0, 0.0), (1.0, 0.5), (-2.0, 1.0), (0.5, -3.0)];
+    let hits =
+        trials_with_and_without_a_memo("model/uniform/exact5", &(pts, kinds, contents), &starts)
+            .unwrap();
+    assert!(hits > 0, "no decision came from the memo");
 }

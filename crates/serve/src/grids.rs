@@ -7,7 +7,7 @@ use std::collections::HashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 
-use ferret_plan::ReplayMemo;
+use ferret_plan::{PlanMemo, ReplayMemo, SearchProblem, TrialSpec};
 use ferret_world::distance::{self, Place};
 use ferret_world::{Distances, GridParams, House, OccupancyGrid, Point, Pose, Scene};
 
@@ -31,6 +31,9 @@ pub(crate) struct Placed {
     /// Replays of trials that ended here: the same trial ends the same way for every robot of
     /// a fleet, and each end replays every other candidate.
     pub(crate) replays: ReplayMemo,
+    /// First steps of the plans solved in this scene, shared with the scene at every start on
+    /// the same grid (a plan over containers does not depend on where the robot starts).
+    pub(crate) plans: Arc<PlanMemo>,
 }
 
 /// A traced path: `[x, y]` corners on the floor.
@@ -40,13 +43,26 @@ pub(crate) type FloorPath = Arc<[[f64; 2]]>;
 const KEPT_PATHS: usize = 4096;
 
 impl Placed {
-    pub(crate) fn new(house: House, distances: Distances, kept_replays: usize) -> Self {
+    pub(crate) fn new(
+        house: House,
+        distances: Distances,
+        kept_replays: usize,
+        plans: Arc<PlanMemo>,
+    ) -> Self {
         Self {
             house,
             distances,
             paths: Mutex::default(),
             replays: ReplayMemo::new(kept_replays),
+            plans,
         }
+    }
+
+    /// The search problem of `trial` here, with what this scene keeps for it.
+    pub(crate) fn problem<'a>(&'a self, trial: &'a TrialSpec) -> SearchProblem<'a> {
+        SearchProblem::new(&self.house, &self.distances, trial)
+            .with_replay_memo(&self.replays)
+            .with_plan_memo(&self.plans)
     }
 
     /// Memory it holds, roughly: two bytes per grid cell, the distance matrix, the house, and
@@ -54,7 +70,13 @@ impl Placed {
     fn bytes(&self) -> usize {
         let n = self.house.containers.len() + 1;
         let cells = self.distances.grid().map_or(0, OccupancyGrid::cell_count);
-        cells * 2 + n * n * 8 + n * 64 + 64 * 1024 + (1 << 20) + self.replays.capacity() * 128
+        cells * 2
+            + n * n * 8
+            + n * 64
+            + 64 * 1024
+            + (1 << 20)
+            + self.replays.capacity() * 128
+            + self.plans.capacity() * 512
     }
 
     /// The path from `from` to `to` as `[x, y]` corners on the floor (empty without a grid).
@@ -200,6 +222,8 @@ pub(crate) struct Grids {
     params: GridParams,
     /// Replay costs each placed scene keeps.
     kept_replays: usize,
+    /// Plans' first steps each scene keeps.
+    kept_plans: usize,
     cache: Mutex<GridCache>,
     builds: Permits,
     /// Whole grids built so far (each costs a search per container).
@@ -212,16 +236,18 @@ pub(crate) struct Grids {
 
 impl Grids {
     /// Grids on `params`, at most `budget` bytes of them cached, `concurrent_builds` built at
-    /// once, each placed scene keeping up to `kept_replays` replay costs.
+    /// once, each placed scene keeping up to `kept_replays` replay costs and each scene the
+    /// first steps of up to `kept_plans` plans.
     pub(crate) fn new(
         params: GridParams,
         budget: usize,
         concurrent_builds: usize,
-        kept_replays: usize,
+        (kept_replays, kept_plans): (usize, usize),
     ) -> Self {
         Self {
             params,
             kept_replays,
+            kept_plans,
             cache: Mutex::new(GridCache {
                 budget,
                 used: 0,
@@ -301,7 +327,12 @@ impl Grids {
         if let Some(pose) = pose {
             check_shift(&grid, &house, pose, field)?;
         }
-        Ok(Arc::new(Placed::new(house, distances, self.kept_replays)))
+        Ok(Arc::new(Placed::new(
+            house,
+            distances,
+            self.kept_replays,
+            Arc::new(PlanMemo::new(self.kept_plans)),
+        )))
     }
 
     /// The scene `name` with the robot at `pose` (cached per pose), `load` reading the scene
@@ -420,7 +451,13 @@ impl Grids {
         };
         check_shift(&grid, &house, pose, "pose")?;
         let distances = base.distances.with_start(&house, &grid).map_err(invalid)?;
-        Ok(Arc::new(Placed::new(house, distances, self.kept_replays)))
+        // The same grid, so the same travel between containers: plans are shared.
+        Ok(Arc::new(Placed::new(
+            house,
+            distances,
+            self.kept_replays,
+            Arc::clone(&base.plans),
+        )))
     }
 
     /// Replays answered from the replay costs of the placed scenes now cached.
@@ -429,6 +466,19 @@ impl Grids {
             .entries
             .values()
             .map(|e| e.0.replays.hits())
+            .sum()
+    }
+
+    /// Decisions taken from the plans' first steps the scenes now cached keep.
+    pub(crate) fn plans_reused(&self) -> u64 {
+        let cache = self.lock_cache();
+        // A scene's memo is shared by its placed scenes at every start: counted once.
+        let mut seen = std::collections::HashSet::new();
+        cache
+            .entries
+            .values()
+            .filter(|e| seen.insert(Arc::as_ptr(&e.0.plans)))
+            .map(|e| e.0.plans.hits())
             .sum()
     }
 

@@ -69,6 +69,10 @@ pub struct ServiceOptions {
     /// the same way again (see [`ferret_plan::ReplayMemo`]); 0 replays every candidate at
     /// every trial end.
     pub kept_replays: usize,
+    /// Candidate sets whose plans' first steps each scene keeps (see
+    /// [`ferret_plan::PlanMemo`]; about 500 bytes each), for searches and replays that meet a
+    /// set another one solved: the same decisions without solving; 0 solves every time.
+    pub kept_plans: usize,
 }
 
 impl Default for ServiceOptions {
@@ -81,6 +85,7 @@ impl Default for ServiceOptions {
             concurrent_builds: std::thread::available_parallelism().map_or(2, |n| n.get().max(2)),
             live_searches: 64,
             kept_replays: 4096,
+            kept_plans: 2048,
         }
     }
 }
@@ -212,7 +217,7 @@ impl Service {
                 grid,
                 options.grid_cache_bytes,
                 options.concurrent_builds,
-                options.kept_replays,
+                (options.kept_replays, options.kept_plans),
             ),
             in_flight: std::sync::Mutex::default(),
             specs: std::sync::Mutex::default(),
@@ -227,6 +232,11 @@ impl Service {
     /// grids are still cached.
     pub fn replays_reused(&self) -> u64 {
         self.grids.replays_reused()
+    }
+
+    /// Planner decisions taken from plans kept in the scenes now cached instead of solved.
+    pub fn plans_reused(&self) -> u64 {
+        self.grids.plans_reused()
     }
 
     /// The limits it enforces.

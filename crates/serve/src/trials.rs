@@ -5,7 +5,7 @@
 
 use std::sync::Arc;
 
-use ferret_plan::{Search, SearchProblem, Strategy, TrialSpec, hindsight_truth, replay_costs};
+use ferret_plan::{Search, Strategy, TrialSpec, hindsight_truth, replay_costs};
 use ferret_world::ObjectType;
 use ferret_world::distance::Place;
 
@@ -265,7 +265,7 @@ impl Service {
             strategy,
         };
         let mut live = LiveSearch::try_new(owner, |o| {
-            let problem = SearchProblem::new(&o.placed.house, &o.placed.distances, &o.trial);
+            let problem = o.placed.problem(&o.trial);
             Search::start(o.strategy.as_ref(), &problem, None).map_err(plan_error)
         })?;
         let next = live
@@ -447,8 +447,7 @@ impl Service {
             let replays = replay_costs(
                 ROBOT_REPLAY,
                 candidates,
-                &SearchProblem::new(house, &placed.distances, &t.trial)
-                    .with_replay_memo(&placed.replays),
+                &placed.problem(&t.trial),
                 &truth,
                 c,
                 (row.chosen, cost),
@@ -660,7 +659,7 @@ fn rebuild<'a>(
     trial: &'a TrialSpec,
     observations: &[StoredObservation],
 ) -> Result<Search<'a>, ApiError> {
-    let problem = SearchProblem::new(&placed.house, &placed.distances, trial);
+    let problem = placed.problem(trial);
     let mut search = Search::start(strategy, &problem, None).map_err(plan_error)?;
     for o in observations {
         let c = placed.house.container_index(&o.container).ok_or_else(|| {

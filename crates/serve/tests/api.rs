@@ -594,17 +594,21 @@ async fn a_restarted_service_resumes_every_open_trial() {
 }
 
 /// A search kept between requests answers exactly as one rebuilt from the store on every
-/// request, and replays kept from earlier trial ends as replaying again: the same deployment
-/// driven twice, once keeping both and once keeping neither, gets the same replies byte for
-/// byte, and the first run did answer replays from what it kept.
+/// request, replays kept from earlier trial ends as replaying again, and plans kept from other
+/// searches as solving again: the same deployment driven twice, once keeping all three and once
+/// keeping none, from several poses, gets the same replies byte for byte, and the first run did
+/// answer replays and planner decisions from what it kept.
 #[tokio::test(flavor = "multi_thread")]
-async fn a_kept_search_and_kept_replays_answer_as_rebuilt_ones() {
+async fn kept_searches_replays_and_plans_answer_as_rebuilt_ones() {
     let mut runs = Vec::new();
     let mut reused = Vec::new();
+    let mut planned = Vec::new();
+    let poses = [None, Some([2.0, 2.0, 90.0]), Some([7.5, 2.5, -45.0])];
     for keep in [64, 0] {
         let options = ServiceOptions {
             live_searches: keep,
             kept_replays: keep * 64,
+            kept_plans: keep * 32,
             ..ServiceOptions::default()
         };
         let s = start_with(None, None, options, ServeOptions::default()).await;
@@ -620,12 +624,17 @@ async fn a_kept_search_and_kept_replays_answer_as_rebuilt_ones() {
         };
         let (_, dep) = s.post("/deployments", json!({"seed": 2})).await;
         let mut replies = Vec::new();
-        for target in TARGETS.iter().chain(TARGETS.iter()) {
+        for (target, pose) in TARGETS
+            .iter()
+            .chain(TARGETS.iter())
+            .flat_map(|t| poses.iter().map(move |p| (t, p)))
+        {
+            let mut body = json!({"scene": "flat", "target": target});
+            if let Some(pose) = pose {
+                body["pose"] = json!(pose);
+            }
             let (st, mut t) = s
-                .post(
-                    &format!("/deployments/{}/trials", dep["id"]),
-                    json!({"scene": "flat", "target": target}),
-                )
+                .post(&format!("/deployments/{}/trials", dep["id"]), body)
                 .await;
             assert_eq!(st, 201, "{t}");
             replies.push(t.clone());
@@ -646,12 +655,16 @@ async fn a_kept_search_and_kept_replays_answer_as_rebuilt_ones() {
         }
         runs.push(replies);
         reused.push(s.service.replays_reused());
+        planned.push(s.service.plans_reused());
     }
-    assert!(runs[0].len() > 20, "{}", runs[0].len());
+    assert!(runs[0].len() > 60, "{}", runs[0].len());
     assert_eq!(runs[0], runs[1]);
-    // Every target comes twice, so each second ending reuses the other candidates' replays.
+    // Every target comes twice from each pose, so each second ending reuses the other
+    // candidates' replays.
     assert!(reused[0] >= TARGETS.len() as u64, "{reused:?}");
     assert_eq!(reused[1], 0);
+    assert!(planned[0] > 0, "no decision came from a kept plan");
+    assert_eq!(planned[1], 0);
 }
 
 /// A robot that gives a search up ends its trial: the trial reads `abandoned` with the map

@@ -83,6 +83,11 @@ pub struct ServeArgs {
     /// replays every candidate at every trial end.
     #[arg(long, value_name = "N", default_value_t = ferret_serve::ServiceOptions::default().kept_replays)]
     kept_replays: usize,
+    /// Plans' first steps each server keeps per scene (`ferret serve --kept-plans`; 0 solves
+    /// every plan); by default the server's own default (and the option is not passed to
+    /// servers of --serve-bin, which may predate it).
+    #[arg(long, value_name = "N")]
+    kept_plans: Option<usize>,
     /// PostgreSQL connections per replica.
     #[arg(long, value_name = "N", default_value_t = ferret_serve::PostgresOptions::default().pool_size)]
     db_pool: usize,
@@ -152,6 +157,8 @@ struct ServeLine {
     database: String,
     /// Replay costs each server keeps per scene and pose.
     kept_replays: usize,
+    /// Plans' first steps each server keeps per scene, when given (else its default).
+    kept_plans: Option<usize>,
     deployments: usize,
     trials: usize,
     requests: usize,
@@ -264,9 +271,11 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
                 .map(|s| setup.registry.build(s))
                 .collect::<Result<Vec<_>, _>>()?
         };
+        let defaults = ferret_serve::ServiceOptions::default();
         let options = ferret_serve::ServiceOptions {
             kept_replays: args.kept_replays,
-            ..ferret_serve::ServiceOptions::default()
+            kept_plans: args.kept_plans.unwrap_or(defaults.kept_plans),
+            ..defaults
         };
         let service =
             ferret_serve::Service::with_options(store, args.grid.params(), candidates, options)
@@ -437,6 +446,7 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
         shared_deployment: args.shared_deployment,
         fresh_trials: args.fresh_trials,
         kept_replays: args.kept_replays,
+        kept_plans: args.kept_plans,
         database: if ferret_serve::is_postgres_url(&db) {
             "postgres".into()
         } else {
@@ -584,6 +594,9 @@ fn spawn_replica(
         "--listen",
         "127.0.0.1:0",
     ]);
+    if let Some(n) = args.kept_plans {
+        cmd.args(["--kept-plans", &n.to_string()]);
+    }
     cmd.stdout(std::process::Stdio::piped())
         .stderr(std::fs::File::create(log)?);
     let mut child = cmd.spawn().context("spawning ferret serve")?;

@@ -103,6 +103,11 @@ pub struct Args {
     /// simulating them again; 0 replays every time. About 128 bytes each.
     #[arg(long, value_name = "N", default_value_t = ServiceOptions::default().kept_replays)]
     kept_replays: usize,
+    /// Candidate sets whose exact plans each scene keeps the first steps of (about 500 bytes
+    /// each): a search or replay that meets a set another one solved takes the same decision
+    /// without solving the planner's table again; 0 solves every time.
+    #[arg(long, value_name = "N", default_value_t = ServiceOptions::default().kept_plans)]
+    kept_plans: usize,
     /// Largest request body, KiB (413 past it).
     #[arg(long, value_name = "KIB", default_value_t = 1024)]
     max_body_kib: usize,
@@ -203,6 +208,7 @@ fn check(args: &Args) -> Result<Checked> {
             },
             grid_cache_bytes: args.grid_cache_mib.saturating_mul(1 << 20),
             kept_replays: args.kept_replays,
+            kept_plans: args.kept_plans,
             ..ServiceOptions::default()
         },
         serve: ServeOptions {

@@ -66,17 +66,23 @@ impl Placed {
     }
 
     /// Memory it holds, roughly: two bytes per grid cell, the distance matrix, the house, and
-    /// room for the paths it keeps.
+    /// room for the paths and replays it keeps, and for the plans when it is the first to keep
+    /// them (the scene at its own start is placed before any other start shares its plans).
     fn bytes(&self) -> usize {
         let n = self.house.containers.len() + 1;
         let cells = self.distances.grid().map_or(0, OccupancyGrid::cell_count);
+        let plans = if Arc::strong_count(&self.plans) == 1 {
+            self.plans.capacity() * 512
+        } else {
+            0
+        };
         cells * 2
             + n * n * 8
             + n * 64
             + 64 * 1024
             + (1 << 20)
             + self.replays.capacity() * 128
-            + self.plans.capacity() * 512
+            + plans
     }
 
     /// The path from `from` to `to` as `[x, y]` corners on the floor (empty without a grid).

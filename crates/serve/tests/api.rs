@@ -880,3 +880,36 @@ async fn starts_made_at_once_are_stored_together_with_the_choices_made_one_by_on
         assert_eq!(again.text().await.unwrap(), replies[r], "robot {r}'s retry");
     }
 }
+
+/// A scene's kept plans are shared by its every start, and counted once in the grid cache's
+/// memory: the scene at its own start and at two more poses hold less than twice the scene at
+/// its start alone (each would hold the plans' room again if counted per start).
+#[tokio::test(flavor = "multi_thread")]
+async fn kept_plans_are_counted_once_per_scene() {
+    let options = ServiceOptions {
+        kept_plans: 100_000,
+        grid_cache_bytes: 1 << 30,
+        ..ServiceOptions::default()
+    };
+    let s = start_with(None, None, options, ServeOptions::default()).await;
+    let (_, dep) = s.post("/deployments", json!({})).await;
+    let path = format!("/deployments/{}/trials", dep["id"]);
+    let (st, t) = s
+        .post(&path, json!({"scene": "flat", "target": "Wallet"}))
+        .await;
+    assert_eq!(st, 201, "{t}");
+    let alone = s.service.grid_cache_bytes();
+    assert!(alone > 100_000 * 512, "{alone}");
+    for pose in [[2.0, 2.0, 90.0], [7.5, 2.5, -45.0]] {
+        let (st, t) = s
+            .post(
+                &path,
+                json!({"scene": "flat", "target": "Wallet", "pose": pose}),
+            )
+            .await;
+        assert_eq!(st, 201, "{t}");
+    }
+    let three = s.service.grid_cache_bytes();
+    assert!(three > alone, "{three} {alone}");
+    assert!(three < 2 * alone, "{three} against {alone} for one start");
+}

@@ -61,37 +61,32 @@ if [ "$only" = 00 ]; then
     db="$("$ROOT/scripts/postgres.sh" new-db "fleet_$$_kill")"
     run "postgres-2-replicas-kill" "$ferret" bench serve --replicas 2 --db "$db" --kill-replica-after 5
 fi
-# A fleet sharing one deployment: every server a process of its own (`--serve-bin`), so that the
-# version before and this one run under the same robots.
-for ((i = 1; i <= RUNS; i++)); do
-    [ "${FERRET_FIG_FRESH_ONLY:-0}" = 1 ] && break
-    for who in before this; do
-        bin="$ferret"
-        if [ "$who" = before ]; then
-            [ -n "${FERRET_BEFORE_BIN:-}" ] || continue
-            bin="$FERRET_BEFORE_BIN"
-        fi
-        run "shared-sqlite-$who" "$ferret" bench serve --shared-deployment --serve-bin "$bin" \
-            --db "$tmp/shared-$who-$i.sqlite"
-        db="$("$ROOT/scripts/postgres.sh" new-db "fleet_$$_shared_${who}_$i")"
-        run "shared-postgres-2-replicas-$who" "$ferret" bench serve --shared-deployment \
-            --serve-bin "$bin" --replicas 2 --db "$db"
+# before_and_after NAME FLAG: the servers of FERRET_BEFORE_BIN (when given) and of this checkout,
+# each a process of its own (`--serve-bin`) under the same robots running `bench serve FLAG`,
+# alternating, on SQLite and on two replicas with PostgreSQL.
+before_and_after() {
+    local name="$1" flag="$2" i who bin db
+    for ((i = 1; i <= RUNS; i++)); do
+        for who in before this; do
+            bin="$ferret"
+            if [ "$who" = before ]; then
+                [ -n "${FERRET_BEFORE_BIN:-}" ] || continue
+                bin="$FERRET_BEFORE_BIN"
+            fi
+            run "$name-sqlite-$who" "$ferret" bench serve "$flag" --serve-bin "$bin" \
+                --db "$tmp/$name-$who-$i.sqlite"
+            db="$("$ROOT/scripts/postgres.sh" new-db "fleet_$$_${name}_${who}_$i")"
+            run "$name-postgres-2-replicas-$who" "$ferret" bench serve "$flag" \
+                --serve-bin "$bin" --replicas 2 --db "$db"
+        done
     done
-done
+}
+# A fleet sharing one deployment.
+if [ "${FERRET_FIG_FRESH_ONLY:-0}" != 1 ]; then
+    before_and_after shared --shared-deployment
+fi
 # Trials that never repeat: kept replays are never found again, every end replays every other
 # candidate.
-for ((i = 1; i <= RUNS; i++)); do
-    [ "${FERRET_FIG_SHARED_ONLY:-0}" = 1 ] && break
-    for who in before this; do
-        bin="$ferret"
-        if [ "$who" = before ]; then
-            [ -n "${FERRET_BEFORE_BIN:-}" ] || continue
-            bin="$FERRET_BEFORE_BIN"
-        fi
-        run "fresh-sqlite-$who" "$ferret" bench serve --fresh-trials --serve-bin "$bin" \
-            --db "$tmp/fresh-$who-$i.sqlite"
-        db="$("$ROOT/scripts/postgres.sh" new-db "fleet_$$_fresh_${who}_$i")"
-        run "fresh-postgres-2-replicas-$who" "$ferret" bench serve --fresh-trials \
-            --serve-bin "$bin" --replicas 2 --db "$db"
-    done
-done
+if [ "${FERRET_FIG_SHARED_ONLY:-0}" != 1 ]; then
+    before_and_after fresh --fresh-trials
+fi

@@ -345,10 +345,24 @@ fn relax<const W: usize>(best: &mut [f64; W], w: f64, leg: &[f64; W], after: f64
 /// where `problem` has it, computed the same way.
 pub(crate) fn first_from_steps(problem: &TourProblem, steps: &[f64]) -> Option<usize> {
     // The weight of nothing searched, as the table has it.
-    let weight = 1.0;
+    let options = steps.iter().enumerate().take(problem.len());
+    best_next(
+        problem,
+        1.0,
+        options.map(|(x, &after)| (x, problem.from_robot[x], after)),
+    )
+}
+
+/// The option `(x, leg, after)` with the least `weight · (leg + R + extra) + after`, ties to the
+/// first: the one rule of a table's decisions and of the memo's.
+fn best_next(
+    problem: &TourProblem,
+    weight: f64,
+    options: impl Iterator<Item = (usize, f64, f64)>,
+) -> Option<usize> {
     let mut best: Option<(f64, usize)> = None;
-    for (x, &after) in steps.iter().enumerate().take(problem.len()) {
-        let v = weight * (problem.from_robot[x] + problem.search_cost + problem.extra(x)) + after;
+    for (x, leg, after) in options {
+        let v = weight * (leg + problem.search_cost + problem.extra(x)) + after;
         if best.is_none_or(|(b, _)| v < b) {
             best = Some((v, x));
         }
@@ -370,25 +384,16 @@ impl Solution {
     /// standing at `at` (`None` = the robot's original position, only valid with nothing searched).
     /// Ties go to the lower index.
     pub fn next(&self, problem: &TourProblem, searched: usize, at: Option<usize>) -> Option<usize> {
-        let n = self.n;
-        let full = (1usize << n) - 1;
-        let mut best: Option<(f64, usize)> = None;
-        let mut free = full & !searched;
-        while free != 0 {
-            let x = free.trailing_zeros() as usize;
-            free &= free - 1;
+        let full = (1usize << self.n) - 1;
+        let options = (0..self.n).filter(|x| searched & (1 << x) == 0).map(|x| {
             let leg = match at {
                 None => problem.from_robot[x],
                 Some(l) => problem.d(l, x),
             };
             let remaining = full & !(searched | (1 << x));
-            let v = self.weight[searched] * (leg + problem.search_cost + problem.extra(x))
-                + self.h[remaining * self.stride + x];
-            if best.is_none_or(|(b, _)| v < b) {
-                best = Some((v, x));
-            }
-        }
-        best.map(|(_, x)| x)
+            (x, leg, self.h[remaining * self.stride + x])
+        });
+        best_next(problem, self.weight[searched], options)
     }
 
     fn best_order(

@@ -30,13 +30,13 @@ enum SlotState<R> {
     Done(R),
 }
 
-struct Queue<J, R> {
-    waiting: VecDeque<Arc<Slot<J, R>>>,
-}
+/// The callers waiting on one key, in the order they came.
+type Queue<J, R> = VecDeque<Arc<Slot<J, R>>>;
 
 /// Queues of jobs by key (a deployment); jobs of different keys never wait for each other.
 pub(crate) struct Gather<K, J, R> {
-    /// A key is here while a caller leads its queue; a caller that finds none leads.
+    /// The callers waiting, by key; a key is here while a caller leads its queue, and a
+    /// caller that finds none leads.
     queues: Mutex<HashMap<K, Queue<J, R>>>,
     /// The largest number of jobs a leader takes at once.
     max_batch: usize,
@@ -78,16 +78,11 @@ impl<K: Eq + Hash + Clone, J, R> Gather<K, J, R> {
             let mut queues = lock(&self.queues);
             match queues.get_mut(key) {
                 Some(queue) => {
-                    queue.waiting.push_back(Arc::clone(&slot));
+                    queue.push_back(Arc::clone(&slot));
                     false
                 }
                 None => {
-                    queues.insert(
-                        key.clone(),
-                        Queue {
-                            waiting: VecDeque::from([Arc::clone(&slot)]),
-                        },
-                    );
+                    queues.insert(key.clone(), VecDeque::from([Arc::clone(&slot)]));
                     true
                 }
             }
@@ -124,8 +119,8 @@ impl<K: Eq + Hash + Clone, J, R> Gather<K, J, R> {
             let mut queues = lock(&self.queues);
             match queues.get_mut(key) {
                 Some(queue) => {
-                    let n = queue.waiting.len().min(self.max_batch);
-                    queue.waiting.drain(..n).collect()
+                    let n = queue.len().min(self.max_batch);
+                    queue.drain(..n).collect()
                 }
                 None => Vec::new(),
             }
@@ -154,7 +149,7 @@ impl<K: Eq + Hash + Clone, J, R> Gather<K, J, R> {
         // caller handed it.
         {
             let mut queues = lock(&self.queues);
-            let next = queues.get(key).and_then(|q| q.waiting.front().cloned());
+            let next = queues.get(key).and_then(|q| q.front().cloned());
             match next {
                 Some(next) => {
                     *lock(&next.state) = SlotState::Lead;

@@ -38,8 +38,7 @@ pub(crate) struct ReplyTo {
 }
 
 impl ReplyTo {
-    /// The reply to request `id`, sent to `route` with `body`, as a claim would give it.
-    #[cfg(test)]
+    /// The reply to request `id`, sent to `route` with `body`.
     pub(crate) fn new(id: &str, route: &str, body: &[u8]) -> Self {
         Self {
             id: id.to_string(),
@@ -145,10 +144,7 @@ impl RequestClaim<'_> {
     /// What storing this request's reply takes, for a write that stores the replies of several
     /// requests at once (gathered trial starts); `None` without a request id.
     pub(crate) fn reply_to(&self, route: &str, body: &[u8]) -> Option<ReplyTo> {
-        self.id.as_ref().map(|id| ReplyTo {
-            id: id.clone(),
-            fingerprint: fingerprint(route, body),
-        })
+        self.id.as_deref().map(|id| ReplyTo::new(id, route, body))
     }
 
     /// Whether the last [`complete`](Self::complete) committed its own write (false when it
@@ -200,16 +196,9 @@ impl RequestClaim<'_> {
         let reply_at = std::cell::Cell::new(None);
         let done = self.service.store.write_finishing(|w| {
             let (reply, mut finals) = op(w)?;
-            if let Some(id) = request_id {
+            if let Some(to) = self.reply_to(route, body) {
                 reply_at.set(Some(finals.len()));
-                finals.push(store_reply(
-                    id,
-                    &StoredReply {
-                        fingerprint: fingerprint(route, body),
-                        outcome: reply.outcome,
-                        body: reply.body.clone(),
-                    },
-                ));
+                finals.push(to.store(&reply));
             }
             Ok::<_, ApiError>((reply, finals))
         })?;
@@ -275,7 +264,7 @@ mod tests {
 
     use super::*;
     use crate::model::Outcome;
-    use crate::store::Store;
+    use crate::store::{Store, StoreError};
 
     fn service() -> Service {
         let store = Store::in_memory().unwrap();
@@ -295,7 +284,8 @@ mod tests {
             body: "the first run's reply".into(),
         };
         s.store
-            .write(|w| w.insert_reply("r1", &earlier).map(drop))
+            .write_finishing(|_| Ok::<_, StoreError>(((), vec![store_reply("r1", &earlier)])))
+            .unwrap()
             .unwrap();
         let claim = || RequestClaim {
             service: &s,

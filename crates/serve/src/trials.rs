@@ -79,10 +79,7 @@ impl Service {
                 let trial = trials
                     .pop()
                     .ok_or_else(|| ApiError::internal("a start stored no trial"))?;
-                let reply = ApiReply {
-                    outcome: Outcome::Created,
-                    body: unplanned(trial.id),
-                };
+                let reply = unplanned(trial.id);
                 started.replace(Some(trial));
                 Ok((reply, finals))
             })?;
@@ -135,10 +132,7 @@ impl Service {
             let (trials, mut finals) = self.store_starts(w, deployment, spec, &reqs)?;
             let mut started = Vec::with_capacity(trials.len());
             for (trial, job) in trials.into_iter().zip(jobs) {
-                let reply = ApiReply {
-                    outcome: Outcome::Created,
-                    body: unplanned(trial.id),
-                };
+                let reply = unplanned(trial.id);
                 if let Some(to) = &job.reply_to {
                     finals.push(to.store(&reply));
                 }
@@ -232,10 +226,11 @@ impl Service {
     }
 
     /// The reply to a trial's start from what was stored for it: the trial as it started
-    /// (`known` when this request stored it, else read), with its first container planned now. The reply stored with the trial names the trial
-    /// only (planning waits until the deployment is let go); once planned it is stored whole,
-    /// under the request's `claim`, so that a retry gets these very bytes. A retry that finds
-    /// only the trial's name (the server stopped in between) plans it again, to the same reply.
+    /// (`known` when this request stored it, else read), with its first container planned now.
+    /// The reply stored with the trial names the trial only (planning waits until the
+    /// deployment is let go); once planned it is stored whole, under the request's `claim`, so
+    /// that a retry gets these very bytes. A retry that finds only the trial's name (the server
+    /// stopped in between) plans it again, to the same reply.
     fn planned_start(
         &self,
         stored: ApiReply,
@@ -571,8 +566,11 @@ fn check_searching(row: &StoredTrial) -> Result<(), ApiError> {
 }
 
 /// What is stored as the reply to a trial's start until its first container is planned.
-fn unplanned(trial: i64) -> String {
-    serde_json::json!({ UNPLANNED: trial }).to_string()
+fn unplanned(trial: i64) -> ApiReply {
+    ApiReply {
+        outcome: Outcome::Created,
+        body: serde_json::json!({ UNPLANNED: trial }).to_string(),
+    }
 }
 
 /// A trial's start waiting to be stored with others of its deployment.
@@ -812,7 +810,7 @@ mod tests {
             };
             assert_eq!(trial.k, k as i64 + 1);
             assert_eq!(trial.chosen, live.choose_overlapping(), "start {k}");
-            assert_eq!(reply.body, unplanned(trial.id));
+            assert_eq!(*reply, unplanned(trial.id));
             if let Some(id) = &j.req.request_id {
                 let stored = s.store.read(|r| r.reply(id)).unwrap().unwrap();
                 assert_eq!(stored.body, reply.body);

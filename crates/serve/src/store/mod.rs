@@ -355,10 +355,8 @@ impl Store {
                     },
                     Final { sql: SQL, params },
                 ];
-                match p.write_finishing(|_| Ok::<_, StoreError>(((), finals)))? {
-                    Ok(()) => Ok(()),
-                    Err(failed) => Err(failed.error),
-                }
+                p.write_finishing(|_| Ok::<_, StoreError>(((), finals)))?
+                    .map_err(|failed| failed.error)
             }
         }
     }
@@ -775,25 +773,6 @@ impl Writer<'_> {
             )?
             .ok_or_else(|| self.conn.corrupt("a new deployment has no id".into()))?;
         self.conn.int(&row, 0, "deployment id")
-    }
-
-    /// Stores the reply to a request id; false (and nothing stored) when the id has a reply
-    /// already.
-    ///
-    /// # Errors
-    /// The database refuses.
-    pub fn insert_reply(&self, id: &str, reply: &StoredReply) -> Result<bool, StoreError> {
-        let stored = self.conn.execute(
-            "INSERT INTO requests (id, fingerprint, status, body) VALUES ($1, $2, $3, $4)
-             ON CONFLICT (id) DO NOTHING",
-            &[
-                request_key(id).as_ref().into(),
-                reply.fingerprint.as_str().into(),
-                stored_code(reply.outcome).into(),
-                reply.body.as_str().into(),
-            ],
-        )?;
-        Ok(stored == 1)
     }
 }
 

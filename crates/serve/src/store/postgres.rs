@@ -219,11 +219,19 @@ impl Postgres {
         &self,
         f: impl FnOnce(super::Conn<'_>) -> Result<T, E>,
     ) -> Result<T, E> {
+        self.transaction(|c| f(super::Conn::Postgres(c)))
+    }
+
+    /// Runs `f` in a transaction, committed when it returns `Ok`, rolled back otherwise.
+    fn transaction<T, E: From<StoreError>>(
+        &self,
+        f: impl FnOnce(Conn<'_>) -> Result<T, E>,
+    ) -> Result<T, E> {
         let tx = Tx::new(self.client()?);
-        let out = f(super::Conn::Postgres(Conn {
+        let out = f(Conn {
             on: On::Tx(&tx),
             pg: self,
-        }));
+        });
         match out {
             Ok(out) => {
                 self.end(tx, "COMMIT")?;
@@ -321,18 +329,7 @@ impl Postgres {
     /// Brings the schema to [`SCHEMA_VERSION`] in one transaction under the migration lock, or
     /// refuses a newer one.
     fn migrate(&self) -> Result<(), StoreError> {
-        let tx = Tx::new(self.client()?);
-        let migrated = self.migrate_in(&Conn {
-            on: On::Tx(&tx),
-            pg: self,
-        });
-        match migrated {
-            Ok(()) => self.end(tx, "COMMIT"),
-            Err(e) => {
-                let _ = self.end(tx, "ROLLBACK");
-                Err(e)
-            }
-        }
+        self.transaction(|c| self.migrate_in(&c))
     }
 
     fn migrate_in(&self, c: &Conn<'_>) -> Result<(), StoreError> {
@@ -520,7 +517,7 @@ impl On<'_> {
 
     /// What to send before the next statements: `BEGIN` for a transaction none of whose
     /// statements was sent yet.
-    fn begin(&self) -> impl std::future::Future<Output = Result<(), tokio_postgres::Error>> + '_ {
+    fn begin(&self) -> impl Future<Output = Result<(), tokio_postgres::Error>> + '_ {
         let begin = match self {
             On::Tx(t) => Some(t.begin()),
             On::Client(_) => None,
@@ -568,7 +565,7 @@ impl Tx {
 
     /// `BEGIN` when it was not sent yet (the transaction counts as open from here), else
     /// nothing; to be polled before the statements it goes with.
-    fn begin(&self) -> impl std::future::Future<Output = Result<(), tokio_postgres::Error>> + '_ {
+    fn begin(&self) -> impl Future<Output = Result<(), tokio_postgres::Error>> + '_ {
         let first = self.state.get() == TxState::NotBegun;
         if first {
             self.state.set(TxState::Open);

@@ -276,14 +276,16 @@ impl Postgres {
             .collect();
         let client = tx.client();
         let begin = tx.begin();
-        let (results, committed) = self.block_on(async {
+        // `sent`: the commit went out with them (else, should earlier statements have begun
+        // the transaction, it is still open, and dropping it discards the connection).
+        let (results, committed, sent) = self.block_on(async {
             let prepared = match futures_util::future::try_join_all(
                 finals.iter().map(|last| client.prepare_cached(last.sql)),
             )
             .await
             {
                 Ok(p) => p,
-                Err(e) => return (vec![Err(e)], Ok(())),
+                Err(e) => return (vec![Err(e)], Ok(()), false),
             };
             // Sent together with the commit (and the BEGIN, when nothing was sent before):
             // the server runs them in order, and after a failed one the commit rolls the
@@ -297,11 +299,13 @@ impl Postgres {
             let (began, results, committed) =
                 tokio::join!(begin, statements, client.batch_execute("COMMIT"));
             match began {
-                Ok(()) => (results, committed),
-                Err(e) => (vec![Err(e)], Ok(())),
+                Ok(()) => (results, committed, true),
+                Err(e) => (vec![Err(e)], Ok(()), true),
             }
         });
-        tx.state.set(TxState::Ended);
+        if sent {
+            tx.state.set(TxState::Ended);
+        }
         if let Some((index, error)) = results
             .into_iter()
             .enumerate()

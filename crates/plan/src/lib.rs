@@ -80,6 +80,7 @@ pub mod problem;
 pub mod protocol;
 pub mod pyrandom;
 pub mod replay;
+pub mod replay_memo;
 pub mod strategy;
 pub mod trial;
 
@@ -100,16 +101,17 @@ pub use plan_memo::PlanMemo;
 pub use planner::{Plan, TourProblem, solve_brute_force, solve_exact};
 pub use policy::{CandidateLimit, CostModel, Greedy, Oracle, Planner, PlannerConfig, Policy};
 pub use probability::Probability;
-pub use problem::SearchProblem;
+pub use problem::{SearchProblem, TrialSpec};
 pub use protocol::{
     AccessRule, ContainerSet, DrawMode, InitialBelief, Protocol, ProtocolName, ReplayMode,
     TargetSet, TravelCost, TrialRng, TrialSettings, UntriedScore,
 };
 pub use replay::{
-    ReplayMemo, hindsight_truth, replay_cost, replay_cost_with, replay_costs, replay_outcome_with,
+    hindsight_truth, replay_cost, replay_cost_with, replay_costs, replay_outcome_with,
 };
+pub use replay_memo::ReplayMemo;
 pub use strategy::{ModelStrategy, Strategy, StrategyRegistry, StrategySpec, TrialContext};
 pub use trial::{
-    Search, TrialOutcome, TrialSpec, TrialsPerHouse, draw_trial, draw_trials, draw_trials_with,
-    python_seed, run_trial,
+    Search, TrialOutcome, TrialsPerHouse, draw_trial, draw_trials, draw_trials_with, python_seed,
+    run_trial,
 };

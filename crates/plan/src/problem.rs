@@ -4,12 +4,21 @@
 //! plans on this one type.
 
 use ferret_world::{Distances, House, ObjectType};
+use serde::{Deserialize, Serialize};
 
 use std::sync::Arc;
 
 use crate::plan_memo::PlanMemo;
-use crate::replay::ReplayMemo;
-use crate::trial::TrialSpec;
+use crate::replay_memo::ReplayMemo;
+
+/// One house, one target, one start pose (the house's), and containers revealed beforehand.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrialSpec {
+    /// The object type to find.
+    pub target: ObjectType,
+    /// Containers known to be searched before the trial starts (usually none).
+    pub revealed: Vec<usize>,
+}
 
 /// One object-search problem: the map the robot knows, travel distances on it, and the trial
 /// (what to find, what was searched before it began). The ground truth is not part of it: a

@@ -9,19 +9,10 @@ use serde::{Deserialize, Serialize};
 use crate::belief::Belief;
 use crate::error::PlanError;
 use crate::policy::Policy;
-use crate::problem::SearchProblem;
+use crate::problem::{SearchProblem, TrialSpec};
 use crate::protocol::{InitialBelief, Protocol, TargetSet, TrialRng};
 use crate::pyrandom::PyRandom;
 use crate::strategy::{Strategy, TrialContext};
-
-/// One house, one target, one start pose (the house's), and containers revealed beforehand.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct TrialSpec {
-    /// The object type to find.
-    pub target: ObjectType,
-    /// Containers known to be searched before the trial starts (usually none).
-    pub revealed: Vec<usize>,
-}
 
 /// A deterministic RNG for house `index` under `seed`, independent of thread scheduling.
 fn house_rng(seed: u64, index: usize, stream: u64) -> ChaCha8Rng {

@@ -21,13 +21,11 @@ OUT="${FERRET_BENCH_OUT:-$ROOT/ferret-learned-bench}"
 MINILM="${FERRET_BENCH_MINILM:-0}"
 log() { printf '[learned-bench %s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }
 
-ferret="${FERRET_BIN:-}"
-if [ -z "$ferret" ]; then
-    features=()
-    [ "$MINILM" = 1 ] && features=(--features minilm)
-    (cd "$ROOT" && cargo build --release -q -p ferret-cli "${features[@]}")
-    ferret="${CARGO_TARGET_DIR:-$ROOT/target}/release/ferret"
-fi
+features=()
+[ "$MINILM" = 1 ] && features=(--features minilm)
+# shellcheck source=scripts/lib/ferret-bin.sh
+source "$ROOT/scripts/lib/ferret-bin.sh"
+ferret="$(ferret_bin "${features[@]}")"
 glove="$("$ROOT/scripts/embeddings.sh" install glove | tail -1)"
 minilm=""
 [ "$MINILM" = 1 ] && minilm="$("$ROOT/scripts/embeddings.sh" install minilm | tail -1)"

@@ -18,11 +18,9 @@ if [ -z "$DATA" ]; then
 fi
 OUT="${FERRET_BENCH_OUT:-$ROOT/ferret-prior-bench}"
 FOLDS="${FERRET_BENCH_FOLDS:-5}"
-ferret="${FERRET_BIN:-}"
-if [ -z "$ferret" ]; then
-    (cd "$ROOT" && cargo build --release -q -p ferret-cli)
-    ferret="$ROOT/target/release/ferret"
-fi
+# shellcheck source=scripts/lib/ferret-bin.sh
+source "$ROOT/scripts/lib/ferret-bin.sh"
+ferret="$(ferret_bin)"
 mkdir -p "$OUT"
 cd "$OUT"
 log() { printf '[bench %s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }

@@ -9,9 +9,9 @@
 # The venv lives under ${FERRET_PY_CACHE:-~/.cache/ferret-python}/venv-<hash of the pinned
 # requirements>, made once per set of pins. pip takes its package index from its own
 # configuration (PIP_INDEX_URL, pip.conf), never from this script. FERRET_BIN is the `ferret`
-# binary the tests compare with (default: this checkout's release build, built when missing);
-# FERRET_PROCTHOR_DIR switches on the tests on real ProcTHOR houses. The wheel is built without
-# CPU-specific flags, so it runs on any x86-64 (or aarch64) Linux with CPython ≥ 3.9.
+# binary the tests compare with (default: this checkout's release build, which cargo brings up
+# to date); FERRET_PROCTHOR_DIR switches on the tests on real ProcTHOR houses. The wheel is built
+# without CPU-specific flags, so it runs on any x86-64 (or aarch64) Linux with CPython ≥ 3.9.
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"

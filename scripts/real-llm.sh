@@ -17,12 +17,12 @@
 #   scripts/real-llm.sh unseen     # install, serve, and run the unseen-types benchmark only
 #   scripts/real-llm.sh learned    # install, serve, and run the learned likelihood with P-YESNO
 #
-# FERRET_LANE_BIN runs a given ferret binary instead of building this checkout's.
+# FERRET_LANE_BIN (else FERRET_BIN) runs a given ferret binary instead of building this checkout's.
 # Everything downloaded or built lives in $FERRET_LANE_CACHE (default ~/.cache/ferret-real-llm):
 # llama-server (~8 min on 2 cores, once), the llama-cpp-python wheel when that server is chosen
 # (~6–11 min, once), a venv and the assembled GGUF. Outputs go to $FERRET_LANE_OUT (default ferret-lane/). The lane fails on any
 # request error and when a strategy's fallback share exceeds $FERRET_LANE_MAX_FALLBACK (default
-# 0.02; see README "Real models").
+# 0.02; see docs/real-models.md, "The lane").
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
@@ -228,19 +228,14 @@ serve() {
     exit 1
 }
 
-# The ferret binary the runs use: FERRET_LANE_BIN, or this checkout's, built.
-ferret_bin() {
-    if [ -n "${FERRET_LANE_BIN:-}" ]; then
-        echo "$FERRET_LANE_BIN"
-    else
-        (cd "$ROOT" && cargo build --release -q -p ferret-cli) >&2
-        echo "$ROOT/target/release/ferret"
-    fi
-}
+# shellcheck source=scripts/lib/ferret-bin.sh
+source "$ROOT/scripts/lib/ferret-bin.sh"
+# The ferret binary the runs use: FERRET_LANE_BIN (else FERRET_BIN), or this checkout's, built.
+lane_ferret() { FERRET_BIN="${FERRET_LANE_BIN:-${FERRET_BIN:-}}" ferret_bin "$@"; }
 
 run() {
     local ferret
-    ferret="$(ferret_bin)"
+    ferret="$(lane_ferret)"
     local asset=(--asset-db "$DATA/databases/asset-database.json")
     local val=(--houses "$DATA/multiroom-val150.jsonl.gz" "${asset[@]}")
     local common=(--config "$OUT/ferret.toml" --llm-cache "$OUT/llm-cache.sqlite" --prior "$OUT/prior.json")
@@ -317,7 +312,7 @@ UNSEEN_PROMPTS="${FERRET_LANE_UNSEEN_PROMPTS:-p-yesno p-choice}"
 FOLDS="${FERRET_LANE_FOLDS:-5}"
 run_unseen() {
     local ferret
-    ferret="$(ferret_bin)"
+    ferret="$(lane_ferret)"
     local asset=(--asset-db "$DATA/databases/asset-database.json")
     local val=(--houses "$DATA/multiroom-val150.jsonl.gz" "${asset[@]}" --range "$ALL_RANGE")
     local common=(--config "$OUT/ferret.toml" --llm-cache "$OUT/llm-cache.sqlite" --prior "$OUT/prior.json")
@@ -405,12 +400,7 @@ run_unseen() {
 run_learned() {
     local ferret features=()
     [ "${FERRET_LANE_MINILM:-0}" = 1 ] && features=(--features minilm)
-    if [ -n "${FERRET_LANE_BIN:-}" ]; then
-        ferret="$FERRET_LANE_BIN"
-    else
-        (cd "$ROOT" && cargo build --release -q -p ferret-cli "${features[@]}") >&2
-        ferret="${CARGO_TARGET_DIR:-$ROOT/target}/release/ferret"
-    fi
+    ferret="$(lane_ferret "${features[@]}")"
     local embeddings=(glove)
     [ "${FERRET_LANE_MINILM:-0}" = 1 ] && embeddings+=(minilm)
     local asset=(--asset-db "$DATA/databases/asset-database.json")

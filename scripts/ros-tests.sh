@@ -14,8 +14,8 @@
 # kilted) and FERRET_ROS_PYTHON (default python3.11) name them; anything else is refused.
 # The venv lives under ${FERRET_ROS_CACHE:-~/.cache/ferret-ros}/venv-<hash of the pins and the
 # interface definitions>. pip takes its package index from its own configuration. FERRET_BIN
-# is the `ferret` binary the tests compare with (default: this checkout's release build, built
-# when missing). Tests run on ROS_DOMAIN_ID (default: one picked from this run's process id)
+# is the `ferret` binary the tests compare with (default: this checkout's release build, which
+# cargo brings up to date). Tests run on ROS_DOMAIN_ID (default: one picked from this run's process id)
 # with discovery limited to this host.
 set -euo pipefail
 

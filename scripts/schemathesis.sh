@@ -7,8 +7,8 @@
 #   scripts/schemathesis.sh             # install (cached), serve, test, stop the server
 #   scripts/schemathesis.sh install     # only make the cached venv
 #
-# FERRET_BIN runs a given ferret binary instead of building this checkout's (cargo build
-# --release, into CARGO_TARGET_DIR when set). Schemathesis (pinned below) is installed with pip
+# FERRET_BIN runs a given ferret binary instead of building this checkout's (scripts/lib/
+# ferret-bin.sh). Schemathesis (pinned below) is installed with pip
 # into a venv under $FERRET_ST_CACHE (default ~/.cache/ferret-schemathesis), once. pip takes its
 # package index from its own configuration (PIP_INDEX_URL, pip.conf), never from this script.
 # FERRET_ST_EXAMPLES sets the examples per operation (default 60). FERRET_ST_DB gives the server
@@ -40,12 +40,9 @@ install() {
 install
 [ "${1:-}" = install ] && exit 0
 
-if [ -n "${FERRET_BIN:-}" ]; then
-    BIN="$FERRET_BIN"
-else
-    (cd "$ROOT" && cargo build --release --quiet -p ferret-cli)
-    BIN="${CARGO_TARGET_DIR:-$ROOT/target}/release/ferret"
-fi
+# shellcheck source=scripts/lib/ferret-bin.sh
+source "$ROOT/scripts/lib/ferret-bin.sh"
+BIN="$(ferret_bin)"
 
 WORK="$(mktemp -d)"
 SERVER_PID=""

@@ -21,11 +21,9 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
 DATA="${FERRET_PROCTHOR_DIR:?set FERRET_PROCTHOR_DIR to the ProcTHOR directory}"
 RUNS="${FERRET_FIG_RUNS:-2}"
-ferret="${FERRET_BIN:-}"
-if [ -z "$ferret" ]; then
-    (cd "$ROOT" && cargo build --release -q -p ferret-cli)
-    ferret="${CARGO_TARGET_DIR:-$ROOT/target}/release/ferret"
-fi
+# shellcheck source=scripts/lib/ferret-bin.sh
+source "$ROOT/scripts/lib/ferret-bin.sh"
+ferret="$(ferret_bin)"
 log() { printf '[fleet-figures %s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }
 if [ -z "${FERRET_TEST_POSTGRES:-}" ]; then
     eval "$("$ROOT/scripts/postgres.sh" start)"

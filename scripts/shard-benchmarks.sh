@@ -16,11 +16,9 @@ ROOT="$(cd "$(dirname "$0")/.." && pwd)"
 DATA="${FERRET_PROCTHOR_DIR:?set FERRET_PROCTHOR_DIR to the ProcTHOR directory}"
 OUT="${FERRET_BENCH_OUT:-$ROOT/ferret-shard-bench}"
 SHARDS="${FERRET_BENCH_SHARDS:-3}"
-ferret="${FERRET_BIN:-}"
-if [ -z "$ferret" ]; then
-    (cd "$ROOT" && cargo build --release -q -p ferret-cli)
-    ferret="${CARGO_TARGET_DIR:-$ROOT/target}/release/ferret"
-fi
+# shellcheck source=scripts/lib/ferret-bin.sh
+source "$ROOT/scripts/lib/ferret-bin.sh"
+ferret="$(ferret_bin)"
 mkdir -p "$OUT"
 cd "$OUT"
 log() { printf '[shard-bench %s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }

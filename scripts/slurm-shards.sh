@@ -12,7 +12,7 @@
 #       scripts/slurm-shards.sh                   # any eval options
 #
 # Needs root (slurmd and munged are system daemons). FERRET_BIN is the ferret binary to run
-# (default: this checkout's release build, built when missing).
+# (default: this checkout's release build, which cargo brings up to date).
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
@@ -29,12 +29,9 @@ if ! command -v slurmctld >/dev/null || ! command -v slurmd >/dev/null \
     apt-get update -qq
     DEBIAN_FRONTEND=noninteractive apt-get install -y -qq slurm-wlm munge >/dev/null
 fi
-ferret="${FERRET_BIN:-}"
-if [ -z "$ferret" ]; then
-    (cd "$ROOT" && cargo build --release -q -p ferret-cli)
-    ferret="${CARGO_TARGET_DIR:-$ROOT/target}/release/ferret"
-fi
-ferret="$(cd "$(dirname "$ferret")" && pwd)/$(basename "$ferret")"
+# shellcheck source=scripts/lib/ferret-bin.sh
+source "$ROOT/scripts/lib/ferret-bin.sh"
+ferret="$(ferret_bin)"
 # shellcheck disable=SC2206 # the options are split on purpose
 EVAL=(${FERRET_SLURM_EVAL:---generate 30 --trials-per-house all})
 

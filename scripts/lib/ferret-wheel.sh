@@ -3,6 +3,9 @@
 # PY and a `log` function; sets WHEELS (a scratch directory, removed on exit) and exports FERRET_BIN
 # as an absolute path, because the tests run from that scratch directory.
 
+# shellcheck source=scripts/lib/ferret-bin.sh
+source "$(dirname "${BASH_SOURCE[0]}")/ferret-bin.sh"
+
 install_ferret_wheel() {
     WHEELS="$(mktemp -d)"
     trap 'rm -rf "$WHEELS"' EXIT
@@ -15,13 +18,6 @@ install_ferret_wheel() {
     log "wheel built in $(( $(date +%s) - started )) s: $(cd "$WHEELS" && ls)"
     "$PY" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps "$WHEELS"/*.whl
 
-    if [ -z "${FERRET_BIN:-}" ]; then
-        FERRET_BIN="$TARGET/release/ferret"
-        if [ ! -x "$FERRET_BIN" ]; then
-            log "building $FERRET_BIN"
-            (cd "$ROOT" && CARGO_TARGET_DIR="$TARGET" cargo build --release --quiet -p ferret-cli)
-        fi
-    fi
-    FERRET_BIN="$(cd "$(dirname "$FERRET_BIN")" && pwd)/$(basename "$FERRET_BIN")"
+    FERRET_BIN="$(CARGO_TARGET_DIR="$TARGET" ferret_bin)"
     export FERRET_BIN
 }

@@ -392,12 +392,12 @@ pub fn calibrate(
     } else {
         None
     };
-    let markdown = calibration_markdown(
+    let markdown = crate::report::calibration_markdown(
         &scored,
         &loaded.source,
         loaded.scenes.len(),
         trials.len(),
-        settings.targets_per_house,
+        &settings.targets_per_house.per_house("target types"),
     );
     Ok(Calibrated {
         scored,
@@ -543,63 +543,4 @@ fn fit_fusion(
         source_score: score(&|s| s.other)?,
         fused_score: score(&|s| weights.fuse(s.prior, s.other, s.gap))?,
     })
-}
-
-/// The fitted fusions as Markdown.
-pub fn fusion_markdown(file: &FusionFile) -> String {
-    let mut md = String::from(
-        "## Fusion with the prior or the learned likelihood (logit P = a·logit P_base + b·logit P_llm + c + g·(d·logit P_llm + e), g the prior's evidence gap)\n\n| strategy | a | b | c | d | e | pairs | Brier base / LLM / fused | AUROC base / LLM / fused |\n|---|---:|---:|---:|---:|---:|---:|---|---|\n",
-    );
-    let auroc = |a: Option<f64>| a.map_or_else(|| "–".into(), |a| format!("{a:.3}"));
-    for f in &file.fits {
-        md.push_str(&format!(
-            "| {}/{} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {} | {:.4} / {:.4} / {:.4} | {} / {} / {} |\n",
-            f.base.kind(),
-            f.source,
-            f.weights.a,
-            f.weights.b,
-            f.weights.c,
-            f.weights.d,
-            f.weights.e,
-            f.pairs,
-            f.prior_score.brier,
-            f.source_score.brier,
-            f.fused_score.brier,
-            auroc(f.prior_score.auroc),
-            auroc(f.source_score.auroc),
-            auroc(f.fused_score.auroc),
-        ));
-    }
-    md
-}
-
-/// The table of scores as Markdown.
-pub fn calibration_markdown(
-    scored: &[(String, Calibration)],
-    source: &str,
-    houses: usize,
-    trials: usize,
-    targets: TargetCount,
-) -> String {
-    let per_house = targets.per_house("target types");
-    let mut md = format!(
-        "# Calibration of likelihood sources\n\n{houses} houses from {source}, {per_house} per house ({trials} house–target pairs), every container: P_S(target, container) against whether it holds the target. Brier and log loss: lower is better; AUROC: 0.5 is chance.\n\n"
-    );
-    md.push_str("| source | pairs | holders | Brier | log loss | AUROC | mean p (holders) | mean p (others) |\n");
-    md.push_str("|---|---:|---:|---:|---:|---:|---:|---:|\n");
-    let opt =
-        |v: Option<f64>, digits: usize| v.map_or_else(|| "–".into(), |v| format!("{v:.digits$}"));
-    for (name, c) in scored {
-        md.push_str(&format!(
-            "| {name} | {} | {} | {:.4} | {:.4} | {} | {} | {} |\n",
-            c.pairs,
-            c.positives,
-            c.brier,
-            c.log_loss,
-            opt(c.auroc, 3),
-            opt(c.mean_p_pos, 3),
-            opt(c.mean_p_neg, 3),
-        ));
-    }
-    md
 }

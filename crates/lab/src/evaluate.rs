@@ -12,7 +12,7 @@ use rayon::prelude::*;
 use crate::error::Result;
 use crate::feedback::Feedback;
 use crate::houses::{HouseEvent, HouseStream, Mapped, OpenSource, build_maps};
-use crate::runs::TrialRow;
+use crate::rows::TrialRow;
 use crate::strategies::{LlmSettings, Strategies, add_summary, prefetch_outcome, prefetch_quiet};
 use ferret_llm::{PrefetchSummary, Prefetched};
 

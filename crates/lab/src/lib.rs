@@ -21,8 +21,11 @@ pub mod feedback;
 pub mod files;
 pub mod houses;
 pub mod language;
+pub mod merge;
 pub mod paired;
 pub mod replay;
+pub mod report;
+pub mod rows;
 pub mod runs;
 pub mod selection;
 pub mod shard;
@@ -40,8 +43,10 @@ pub use ferret_select::HouseOrder;
 pub use houses::{
     HouseEvent, HouseSource, HouseStream, LoadedHouses, Mapped, OpenSource, build_maps,
 };
-pub use runs::{CELL_M, EvalRun, RunInfo, RunWriter, TrialRow, WrittenRun, sha256_hex};
-pub use shard::{MergeError, MergedRun, Shard, ShardError, ShardSpec, merge_runs};
+pub use merge::{MergedRun, merge_runs};
+pub use rows::{CELL_M, TrialRow};
+pub use runs::{EvalRun, RunInfo, RunWriter, WrittenRun, sha256_hex};
+pub use shard::{MergeError, Shard, ShardError, ShardSpec};
 pub use strategies::{
     DEFAULT_STRATEGIES, LlmSettings, PlanningSettings, Strategies, full_registry,
     full_registry_with,

@@ -19,7 +19,8 @@ use crate::error::{LabError, Result};
 use crate::evaluate::TrialDraw;
 use crate::feedback::Feedback;
 use crate::houses::build_maps;
-use crate::runs::{EvalRun, RunInfo, TrialRow, read_run_file};
+use crate::rows::TrialRow;
+use crate::runs::{EvalRun, RunInfo, read_run_file};
 use crate::strategies::{LlmSettings, full_registry};
 
 /// One row of `replay.csv`: the replay cost of `strategy` on the trial of `house_index` and

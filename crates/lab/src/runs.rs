@@ -10,43 +10,13 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Context, LabError, Result};
 use crate::houses::HouseSource;
+use crate::report::{cells_markdown, paired_markdown, reference_means_markdown, summary_markdown};
+use crate::rows::{CELL_M, TrialRow};
+use crate::shard::{MergedShard, ShardRecord};
 use crate::strategies::PlanningSettings;
 use crate::summary::{
-    CostTable, PairedRow, SummaryRow, cells_markdown, paired_comparisons_of, paired_markdown,
-    reference_means_markdown, reference_means_of, summarize_costs, summary_markdown,
+    CostTable, PairedRow, SummaryRow, paired_comparisons_of, reference_means_of, summarize_costs,
 };
-
-/// One row of `trials.csv`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct TrialRow {
-    /// House label.
-    pub house: String,
-    /// House index in its file.
-    pub house_index: usize,
-    /// Target object type.
-    pub target: String,
-    /// Strategy spec.
-    pub strategy: String,
-    /// Distance travelled, metres.
-    pub cost_m: f64,
-    /// Containers searched.
-    pub searches: usize,
-    /// Whether the target was found.
-    pub found: bool,
-    /// Id of the container where it was found.
-    pub found_container: String,
-    /// Ids of the containers searched, in order, space separated.
-    pub searched: String,
-    /// Number of containers holding the target.
-    pub goal_containers: usize,
-    /// Distance travelled in the paper's 0.05 m grid cells, when asked for (absent otherwise,
-    /// so that the default file has the columns above only).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub cost_cells: Option<f64>,
-}
-
-/// The paper's unit of cost: a grid cell of 0.05 m (its table I is in these cells).
-pub const CELL_M: f64 = 0.05;
 
 /// What rebuilds the houses and strategies of an evaluation run.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -83,10 +53,10 @@ pub struct RunInfo {
     pub trials_sha256: Option<String>,
     /// The shard this run is (`ferret eval --shard`); absent in a whole run.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub shard: Option<crate::shard::ShardRecord>,
+    pub shard: Option<ShardRecord>,
     /// The shards a merged run was made of (`ferret merge`); absent otherwise.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub merged_from: Vec<crate::shard::MergedShard>,
+    pub merged_from: Vec<MergedShard>,
 }
 
 fn is_ferret_protocol(p: &Protocol) -> bool {

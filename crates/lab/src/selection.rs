@@ -5,10 +5,7 @@
 use std::path::Path;
 
 use ferret_plan::{DrawMode, Protocol, TrialRng, UntriedScore};
-use ferret_select::{
-    ExperimentOptions, ExperimentResult, MAX_EXPERIMENT_TRIALS, PAPER_KS, run_experiment,
-    selection_table_markdown, strategy_table_markdown,
-};
+use ferret_select::{ExperimentOptions, ExperimentResult, MAX_EXPERIMENT_TRIALS, run_experiment};
 
 use crate::error::{LabError, Result};
 use crate::feedback::Feedback;
@@ -130,38 +127,14 @@ pub fn select(
     };
     let opts = under_protocol(options, protocol);
     let result = run_experiment(&replay.table, &opts)?;
-    let markdown = selection_markdown(&replay, &result);
+    let markdown = crate::report::selection_markdown(
+        &result,
+        replay.distinct_houses,
+        replay.several_per_house().then_some(replay.trials.len()),
+    );
     Ok(Selection {
         replay,
         result,
         markdown,
     })
-}
-
-/// `selection.md` of a selection: what ran, table II at the paper's k and the strategies.
-fn selection_markdown(replay: &ReplayTable, result: &ExperimentResult) -> String {
-    let opts = &result.options;
-    let ks: Vec<usize> = PAPER_KS
-        .iter()
-        .copied()
-        .filter(|&k| k <= result.trials())
-        .collect();
-    format!(
-        "# Strategy selection\n\n{} deployments × {} trials over {} houses{}, c = {} m, seed {}.\n\n{}\n{}",
-        opts.deployments,
-        opts.trials_per_deployment,
-        replay.distinct_houses,
-        if replay.several_per_house() {
-            format!(
-                " ({} trials; one per house in each deployment)",
-                replay.trials.len()
-            )
-        } else {
-            String::new()
-        },
-        opts.c,
-        opts.seed,
-        selection_table_markdown(result, &ks),
-        strategy_table_markdown(result)
-    )
 }

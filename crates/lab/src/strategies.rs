@@ -444,15 +444,7 @@ pub fn write_token_files(service: &LlmService, dir: &Path) -> Result<Option<Toke
     if summary.exists() {
         let md = ferret_world::input::read_text(&summary, ferret_world::input::MAX_INPUT_BYTES)
             .map_err(|e| LabError::io(format!("reading {}", summary.display()), e))?;
-        let mut md = mark_rows(&md, &warnings);
-        md.push_str(&format!("\n## LLM tokens and cost\n\n```\n{report}```\n"));
-        md.push_str(&answers_markdown(&report));
-        if !warnings.is_empty() {
-            md.push_str("\n## Warnings\n\n");
-            for (strategy, w) in &warnings {
-                md.push_str(&format!("- ⚠ `{strategy}`: {w}\n"));
-            }
-        }
+        let md = crate::report::with_llm_sections(&md, &report, &warnings);
         crate::files::write_bytes(&summary, md)?;
     }
     std::fs::create_dir_all(dir)
@@ -465,76 +457,6 @@ pub fn write_token_files(service: &LlmService, dir: &Path) -> Result<Option<Toke
         }
     })?;
     Ok(Some(TokenFiles { report, warnings }))
-}
-
-/// `| strategy |` table rows of strategies with a warning get a ⚠ after the name.
-fn mark_rows(md: &str, warnings: &[(String, String)]) -> String {
-    md.lines()
-        .map(|line| {
-            match warnings
-                .iter()
-                .find(|(s, _)| line.starts_with(&format!("| {s} |")))
-            {
-                Some((s, _)) => line.replacen(&format!("| {s} |"), &format!("| {s} ⚠ |"), 1),
-                None => line.to_string(),
-            }
-        })
-        .collect::<Vec<_>>()
-        .join("\n")
-        + if md.ends_with('\n') { "\n" } else { "" }
-}
-/// How each LLM strategy's answers were read: the class of every first answer, re-asks,
-/// fallbacks, log-probabilities, and the most common probability.
-pub fn answers_markdown(report: &ferret_llm::TokenReport) -> String {
-    use ferret_llm::AnswerClass;
-    let rows: Vec<_> = report
-        .rows
-        .iter()
-        .filter(|r| r.answers.answers() > 0)
-        .collect();
-    if rows.is_empty() {
-        return String::new();
-    }
-    let mut md = String::from(
-        "\n## LLM answers\n\nClass of each distinct question's first answer (P-BATCH: of each place's percentage); unusable ones (several numbers, none, the worked example echoed, no allowed word, a place left out) are asked again, then fall back to 0.01. \"logprobs missing\": read from the text although log-probabilities were wanted (P-YESNO and P-CHOICE: the word with the endpoint's `word_answer_mass`).\n\n| strategy | answers |",
-    );
-    for c in AnswerClass::ALL {
-        md.push_str(&format!(" {} |", c.label()));
-    }
-    md.push_str(
-        " re-asked | fell back | from logprobs | logprobs missing | most common p |\n|---|---:|",
-    );
-    for _ in AnswerClass::ALL {
-        md.push_str("---:|");
-    }
-    md.push_str("---:|---:|---:|---:|---:|\n");
-    for r in rows {
-        let a = &r.answers;
-        let mut line = format!("| {} | {} |", r.strategy, a.answers());
-        for c in AnswerClass::ALL {
-            line.push_str(&format!(" {} |", a.class(c)));
-        }
-        let common = r.most_common_probability().map_or_else(
-            || "–".into(),
-            |(v, share)| format!("{:.1} % ({:.0} %)", 100.0 * v, 100.0 * share),
-        );
-        let direct = if a.direct_answers > 0 {
-            format!(" ({} P-DIRECT unmatched)", a.direct_fallbacks)
-        } else {
-            String::new()
-        };
-        line.push_str(&format!(
-            " {} | {}{} | {} | {} | {} |\n",
-            a.reasked,
-            a.fallbacks(),
-            direct,
-            a.logprob_used,
-            a.logprob_missing,
-            common
-        ));
-        md.push_str(&line);
-    }
-    md
 }
 
 #[cfg(test)]

@@ -1,12 +1,12 @@
 //! Summaries of an evaluation: per-strategy statistics (the paper's table I), paired
-//! comparisons trial by trial, the reference code's weighted means, and their Markdown.
+//! comparisons trial by trial and the reference code's weighted means (rendered by
+//! [`report`](crate::report)).
 
 use std::collections::{BTreeMap, HashMap};
 
-use ferret_plan::TrialsPerHouse;
 use serde::Serialize;
 
-use crate::runs::{CELL_M, TrialRow};
+use crate::rows::{CELL_M, TrialRow};
 
 /// Per-strategy statistics for `summary.csv`.
 #[derive(Clone, Debug, Serialize)]
@@ -85,35 +85,6 @@ pub fn reference_means_of(
             (total > 0.0).then(|| (s.clone(), sum / total))
         })
         .collect()
-}
-
-/// [`reference_means`] as Markdown, in metres and cells.
-pub fn reference_means_markdown(means: &[(String, f64)]) -> String {
-    let mut md = String::from(
-        "\n## As the reference code averages\n\nEach mean weighted by how often 500 seeded runs of 100 draws with replacement (numpy's legacy generator, as the reference's results script) pick each house.\n\n| strategy | mean cost (m) | mean cost (cells) |\n|---|---:|---:|\n",
-    );
-    for (s, m) in means {
-        md.push_str(&format!("| {s} | {m:.2} | {:.1} |\n", m / CELL_M));
-    }
-    md
-}
-
-/// The summary in 0.05 m cells as Markdown: the paper's unit, for comparison with its table I.
-pub fn cells_markdown(summary: &[SummaryRow]) -> String {
-    let mut md = String::from(
-        "\n## In the paper's unit\n\nThe same costs in grid cells of 0.05 m (metres / 0.05), the unit of the paper's table I.\n\n| strategy | trials | mean cost (cells) | 95 % CI | median (cells) |\n|---|---:|---:|---:|---:|\n",
-    );
-    for r in summary {
-        md.push_str(&format!(
-            "| {} | {} | {:.1} | ±{:.1} | {:.1} |\n",
-            r.strategy,
-            r.trials,
-            r.mean_m / CELL_M,
-            r.ci95_m / CELL_M,
-            r.median_m / CELL_M
-        ));
-    }
-    md
 }
 
 /// A trial's identity across strategies: house index and target. Two strategies' rows with the
@@ -412,106 +383,11 @@ pub fn paired_comparisons_of(
     out
 }
 
-/// A p-value as people read it: three decimals, two significant digits below 0.001, and
-/// `< 1e-6` below that.
-fn format_p(p: Option<f64>) -> String {
-    match p {
-        None => "–".into(),
-        Some(p) if p < 1e-6 => "< 1e-6".into(),
-        Some(p) if p < 0.001 => format!("{p:.1e}"),
-        Some(p) => format!("{p:.3}"),
-    }
-}
-
-/// The paired comparisons as Markdown, one table per reference; empty without comparisons.
-pub fn paired_markdown(paired: &[PairedRow]) -> String {
-    if paired.is_empty() {
-        return String::new();
-    }
-    let mut md = format!(
-        "\n## Paired comparisons\n\nPairs are the trials (house and target) both strategies finished. Difference = strategy − reference, metres (negative: the strategy is cheaper); 95 % CI of its mean by bootstrap ({PAIRED_RESAMPLES} resamples); p from the two-sided Wilcoxon signed-rank test; wins / ties / losses count the trials where the strategy is cheaper / equal / dearer.\n"
-    );
-    let mut current: Option<(&str, &str)> = None;
-    for r in paired {
-        if current != Some((r.reference.as_str(), r.role)) {
-            current = Some((r.reference.as_str(), r.role));
-            let why = match r.role {
-                "first" => "the first strategy",
-                "best" => "the lowest mean, oracle excepted",
-                _ => "named with --paired-against",
-            };
-            md.push_str(&format!(
-                "\nAgainst {} ({why}):\n\n| strategy | pairs | mean difference (m) | 95 % CI (m) | Wilcoxon p | wins / ties / losses |\n|---|---:|---:|---:|---:|---:|\n",
-                r.reference
-            ));
-        }
-        md.push_str(&format!(
-            "| {} | {} | {:+.2} | [{:+.2}, {:+.2}] | {} | {} / {} / {} |\n",
-            r.strategy,
-            r.pairs,
-            r.mean_diff_m,
-            r.ci95_low_m,
-            r.ci95_high_m,
-            format_p(r.wilcoxon_p),
-            r.wins,
-            r.ties,
-            r.losses
-        ));
-    }
-    md
-}
-
-/// The paper's table I as Markdown; `trials` trials were drawn on `houses` houses.
-pub fn summary_markdown(
-    summary: &[SummaryRow],
-    source: &str,
-    houses: usize,
-    per_house: TrialsPerHouse,
-    trials: usize,
-) -> String {
-    let drawn = match per_house {
-        TrialsPerHouse::One => "one trial per house".to_string(),
-        TrialsPerHouse::Count(n) => {
-            format!("{trials} trials, up to {n} distinct targets per house")
-        }
-        TrialsPerHouse::All => format!("{trials} trials, every target type of each house"),
-    };
-    let mut md = format!(
-        "# Navigation cost per strategy\n\n{houses} houses from {source}; {drawn}, the same for every strategy.\n\n"
-    );
-    md.push_str(
-        "| strategy | trials | mean cost (m) | 95 % CI | median (m) | cost vs optimistic+greedy |\n",
-    );
-    md.push_str("|---|---:|---:|---:|---:|---:|\n");
-    for r in summary {
-        let imp = r
-            .improvement_pct
-            // Shown as a change of cost, so that lower reads as better (−52.8 % = 52.8 % cheaper);
-            // `0.0 - p` keeps the reference's own row at +0.0 rather than −0.0.
-            .map_or_else(|| "–".to_string(), |p| format!("{:+.1} %", 0.0 - p));
-        md.push_str(&format!(
-            "| {} | {} | {:.2} | ±{:.2} | {:.2} | {} |\n",
-            r.strategy, r.trials, r.mean_m, r.ci95_m, r.median_m, imp
-        ));
-    }
-    let short: Vec<String> = summary
-        .iter()
-        .filter(|r| r.trials < trials)
-        .map(|r| format!("{} finished {} of {trials}", r.strategy, r.trials))
-        .collect();
-    if !short.is_empty() {
-        md.push_str(&format!(
-            "\n**Failed trials:** {}. Means and medians cover each strategy's own trials; \"cost vs optimistic+greedy\" compares only the {} paired trials (houses where every strategy finished).\n",
-            short.join("; "),
-            summary.first().map_or(0, |r| r.paired_trials)
-        ));
-    }
-    md
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::report::{cells_markdown, paired_markdown, summary_markdown};
+    use ferret_plan::TrialsPerHouse;
 
     fn trial(house_index: usize, strategy: &str, cost_m: f64) -> TrialRow {
         TrialRow {

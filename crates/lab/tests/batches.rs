@@ -3,8 +3,9 @@
 
 use std::path::{Path, PathBuf};
 
+use ferret_lab::merge::merge_dirs;
 use ferret_lab::runs::{ReportView, RunWriter};
-use ferret_lab::shard::{SHARD_RULE, ShardRecord, merge_dirs};
+use ferret_lab::shard::{SHARD_RULE, ShardRecord};
 use ferret_lab::{
     EvalRun, HouseSource, LlmSettings, PlanningSettings, RunInfo, Shard, Silent, TrialDraw,
     evaluate_source_each, full_registry, merge_runs,

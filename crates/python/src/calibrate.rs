@@ -4,7 +4,8 @@
 use std::path::PathBuf;
 
 use ferret_lab::LoadedHouses;
-use ferret_lab::calibrate::{CalibrationSettings, DEFAULT_SOURCES, TargetCount, fusion_markdown};
+use ferret_lab::calibrate::{CalibrationSettings, DEFAULT_SOURCES, TargetCount};
+use ferret_lab::report::fusion_markdown;
 use ferret_llm::FailurePolicy;
 use ferret_plan::{Calibration, FusionFile};
 use ferret_world::Scene;

@@ -4,8 +4,9 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use ferret_lab::runs::{CELL_M, EvalRun, ReportView, RunInfo, RunWriter, TrialRow};
+use ferret_lab::runs::{EvalRun, ReportView, RunInfo, RunWriter};
 use ferret_lab::shard::{SHARD_RULE, Shard, ShardRecord};
+use ferret_lab::{CELL_M, TrialRow};
 use ferret_lab::{DEFAULT_STRATEGIES, TrialDraw};
 use ferret_llm::FailurePolicy;
 use ferret_plan::TrialsPerHouse;

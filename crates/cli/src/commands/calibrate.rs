@@ -7,9 +7,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use ferret_lab::calibrate::{
-    CalibrationSettings, DEFAULT_SOURCES, TargetCount, calibrate, fusion_markdown,
-};
+use ferret_lab::calibrate::{CalibrationSettings, DEFAULT_SOURCES, TargetCount, calibrate};
 use ferret_plan::Calibration;
 
 use crate::common::{Bars, HouseArgs};
@@ -144,7 +142,7 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
     println!("{}", done.markdown);
     if let (Some(path), Some(file)) = (&args.fit_fusion, &done.fusion) {
         crate::output::write_bytes(path, file.to_json())?;
-        println!("{}", fusion_markdown(file));
+        println!("{}", ferret_lab::report::fusion_markdown(file));
         println!("wrote {}", path.display());
     }
     super::llm_setup::write_token_report(&setup.service, &args.out)?;

@@ -5,7 +5,8 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::Result;
-use ferret_lab::runs::{ReportView, RunInfo, RunWriter, TrialRow};
+use ferret_lab::TrialRow;
+use ferret_lab::runs::{ReportView, RunInfo, RunWriter};
 use ferret_lab::shard::{SHARD_RULE, ShardRecord};
 use ferret_lab::{CostTable, HouseSource, TrialDraw, evaluate_source_each};
 use ferret_plan::{Protocol, TrialOutcome, TrialSpec, TrialsPerHouse};

@@ -7,8 +7,9 @@ use std::process::ExitCode;
 use anyhow::{Context, Result};
 
 use ferret_lab::HouseSource;
-use ferret_lab::runs::{RunInfo, TrialRow};
-use ferret_lab::shard::MergedDir;
+use ferret_lab::TrialRow;
+use ferret_lab::merge::MergedDir;
+use ferret_lab::runs::RunInfo;
 use ferret_llm::ResponseCache;
 use ferret_world::procthor::HouseRange;
 
@@ -66,9 +67,9 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let mut status = ExitCode::SUCCESS;
     if !args.runs.is_empty() {
         // Before the lock, which would leave its file in a shard given as --out.
-        ferret_lab::shard::check_out(&args.runs, &args.out)?;
+        ferret_lab::merge::check_out(&args.runs, &args.out)?;
         let mut lock = ferret_lab::files::DirLock::acquire(&args.out)?;
-        let merged = ferret_lab::shard::merge_dirs(&args.runs, &args.out)?;
+        let merged = ferret_lab::merge::merge_dirs(&args.runs, &args.out)?;
         lock.used();
         let pictures = draw_merged_pictures(&merged, &args.out)?;
         println!("{}", merged.written.report.markdown);

@@ -1,0 +1,37 @@
+//! The rows of a run and their unit, below everything else of a run: one [`TrialRow`] per trial
+//! and strategy (a line of `trials.csv`), and the paper's cost unit [`CELL_M`]. Summaries, run
+//! files, shards and their merge all read these and nothing here reads them.
+
+use serde::{Deserialize, Serialize};
+
+/// One row of `trials.csv`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrialRow {
+    /// House label.
+    pub house: String,
+    /// House index in its file.
+    pub house_index: usize,
+    /// Target object type.
+    pub target: String,
+    /// Strategy spec.
+    pub strategy: String,
+    /// Distance travelled, metres.
+    pub cost_m: f64,
+    /// Containers searched.
+    pub searches: usize,
+    /// Whether the target was found.
+    pub found: bool,
+    /// Id of the container where it was found.
+    pub found_container: String,
+    /// Ids of the containers searched, in order, space separated.
+    pub searched: String,
+    /// Number of containers holding the target.
+    pub goal_containers: usize,
+    /// Distance travelled in the paper's 0.05 m grid cells, when asked for (absent otherwise,
+    /// so that the default file has the columns above only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cost_cells: Option<f64>,
+}
+
+/// The paper's unit of cost: a grid cell of 0.05 m (its table I is in these cells).
+pub const CELL_M: f64 = 0.05;

@@ -51,7 +51,8 @@ def find(house: ferret.House, target: str, strategy: str, prior: ferret.Prior) -
         seen = look_into(house, container)
         found = target in seen
         leg = search.record(container, found=found, objects=seen)
-        print(f"  {where}: planned {leg:.2f} m, driven {driven:.2f} m, saw {', '.join(seen) or 'nothing'}")
+        saw = ", ".join(seen) or "nothing"
+        print(f"  {where}: planned {leg:.2f} m, driven {driven:.2f} m, saw {saw}")
         if found:
             break
     return search
@@ -67,12 +68,16 @@ def main(argv: Optional[List[str]] = None) -> int:
     prior = ferret.Prior.default()
     # The request a node would receive; here the house's first searchable type.
     target = house.target_types()[0]
-    print(f"{house.name}: {len(house.rooms)} rooms, {len(house.containers)} containers; target {target}, strategy {args.strategy}")
+    print(
+        f"{house.name}: {len(house.rooms)} rooms, {len(house.containers)} containers; "
+        f"target {target}, strategy {args.strategy}"
+    )
     search = find(house, target, args.strategy, prior)
     if search.found is None:
         print(f"no {target} in any container; travelled {search.cost:.2f} m")
         return 1
-    print(f"found the {target} in {search.found.id} after {len(search.searched)} searches, {search.cost:.2f} m")
+    searches = len(search.searched)
+    print(f"found the {target} in {search.found.id} after {searches} searches, {search.cost:.2f} m")
     return 0
 
 

@@ -9,8 +9,8 @@
 For each target it opens a trial, then repeats: ask where to search next, "drive" there, look
 inside, report what was seen; until the target is found (`done`) or every container was searched
 (`exhausted`). Stopped with Ctrl-C in the middle of a search, it tells the server it gave the
-trial up (`abandoned`), so the trial is not left open. The simulated robot's eyes are the `contents` of each container in the scene
-listing (GET /scenes/{name}).
+trial up (`abandoned`), so the trial is not left open. The simulated robot's eyes are the
+`contents` of each container in the scene listing (GET /scenes/{name}).
 
 On a real robot (a ROS node, say) only `search_container()` changes: send a navigation goal to the
 proposal's `path` end / access point, run the detector, and report the object types it saw and the
@@ -85,8 +85,7 @@ class Client:
                 delay = self.delays[attempt - 1]
                 self.log(f"retrying {method} {path} in {delay:g} s ({last})")
                 time.sleep(delay)
-            req = urllib.request.Request(self.url + path, data=data, headers=headers,
-                                         method=method)
+            req = urllib.request.Request(self.url + path, data=data, headers=headers, method=method)
             try:
                 with urllib.request.urlopen(req, timeout=self.timeout) as resp:
                     raw = resp.read()
@@ -103,8 +102,10 @@ class Client:
                 continue
         if isinstance(last, ApiError):
             raise last
-        raise Unreachable(f"no answer from {self.url} ({method} {path}) after "
-                          f"{len(self.delays) + 1} attempts: {last}")
+        raise Unreachable(
+            f"no answer from {self.url} ({method} {path}) after "
+            f"{len(self.delays) + 1} attempts: {last}"
+        )
 
     @staticmethod
     def _api_error(method, path, e):
@@ -115,8 +116,9 @@ class Client:
             raw = ""
         try:
             err = json.loads(raw)["error"]
-            return ApiError(method, path, err.get("status", e.code), err.get("field"),
-                            err.get("message", raw))
+            return ApiError(
+                method, path, err.get("status", e.code), err.get("field"), err.get("message", raw)
+            )
         except (ValueError, KeyError, TypeError, AttributeError):
             return ApiError(method, path, e.code, None, raw.strip()[:500] or e.reason)
 
@@ -135,8 +137,9 @@ def search_container(proposal, scene_containers, target):
     """
     cid = proposal["container"]
     if cid not in scene_containers:
-        raise SystemExit(f"error: the server proposed container {cid!r}, "
-                         "which the scene listing does not have")
+        raise SystemExit(
+            f"error: the server proposed container {cid!r}, which the scene listing does not have"
+        )
     seen = list(scene_containers[cid].get("contents") or [])
     return cid, seen, proposal.get("distance_m")
 
@@ -161,12 +164,15 @@ def run_trial(api, trial_id, target, strategy, reply, containers, log):
             break
         proposal = reply.get("next")
         if not proposal:
-            raise SystemExit(f"error: trial {trial_id} is {status!r} but the server proposed "
-                             "no container")
+            raise SystemExit(
+                f"error: trial {trial_id} is {status!r} but the server proposed no container"
+            )
         cid, seen, travelled = search_container(proposal, containers, target)
         found = target in seen
-        log(f"  trial {trial_id}: {cid} ({proposal.get('type')}, {proposal.get('room')}) "
-            f"{fmt_m(proposal.get('distance_m'))} m: {'FOUND' if found else 'not there'}")
+        log(
+            f"  trial {trial_id}: {cid} ({proposal.get('type')}, {proposal.get('room')}) "
+            f"{fmt_m(proposal.get('distance_m'))} m: {'FOUND' if found else 'not there'}"
+        )
         obs = {"container": cid, "found": found, "objects": seen}
         if travelled is not None:
             obs["travelled_m"] = travelled
@@ -191,13 +197,14 @@ def resume_open_trial(api, trial_id, containers, log):
     trial = api.get(f"/trials/{quote(trial_id)}")
     target, strategy = trial.get("target"), trial.get("strategy")
     if not target or not trial.get("next"):
-        raise SystemExit(f"error: deployment has an open trial {trial_id} that this client cannot "
-                         f"resume (GET /trials/{trial_id} gave no target or no next container)")
+        raise SystemExit(
+            f"error: deployment has an open trial {trial_id} that this client cannot "
+            f"resume (GET /trials/{trial_id} gave no target or no next container)"
+        )
     log(f"resuming open trial {trial_id} ({target}, {strategy})")
     summary = run_trial(api, trial_id, target, strategy, trial, containers, log)
     # The searches made before the client stopped count too.
-    before = [s.get("container") if isinstance(s, dict) else s
-              for s in trial.get("searched") or []]
+    before = [s.get("container") if isinstance(s, dict) else s for s in trial.get("searched") or []]
     summary["searched"] = [c for c in before if c] + summary["searched"]
     return summary
 
@@ -216,21 +223,29 @@ def print_trial(k, t):
     if k == 1:
         print(TRIAL_HEADER)
     note = "" if t["status"] == "done" else f"  ({t['status']})"
-    print(f"{k:>3}  {t['trial']!s:>5}  {t['target']:<14} {t['strategy'] or '-':<28} "
-          f"{fmt_m(t['cost_m']):>7}  {', '.join(t['searched']) or '-'}{note}", flush=True)
+    print(
+        f"{k:>3}  {t['trial']!s:>5}  {t['target']:<14} {t['strategy'] or '-':<28} "
+        f"{fmt_m(t['cost_m']):>7}  {', '.join(t['searched']) or '-'}{note}",
+        flush=True,
+    )
 
 
 def print_state(state):
     """The deployment's per-strategy table (GET /deployments/{id})."""
     print()
-    print(f"deployment {state.get('id')}: selector {state.get('selector')}, c {state.get('c')}, "
-          f"seed {state.get('seed')}, {len(state.get('trials') or [])} trials")
-    print(f"{'strategy':<28} {'deployed':>8} {'mean_cost_m':>11} {'replay_mean_m':>13} "
-          f"{'score':>8}")
+    print(
+        f"deployment {state.get('id')}: selector {state.get('selector')}, c {state.get('c')}, "
+        f"seed {state.get('seed')}, {len(state.get('trials') or [])} trials"
+    )
+    print(
+        f"{'strategy':<28} {'deployed':>8} {'mean_cost_m':>11} {'replay_mean_m':>13} {'score':>8}"
+    )
     for s in state.get("per_strategy") or []:
-        print(f"{s.get('strategy', '?'):<28} {s.get('deployed', 0):>8} "
-              f"{fmt_m(s.get('mean_cost_m')):>11} {fmt_m(s.get('replay_mean_m')):>13} "
-              f"{fmt_m(s.get('score')):>8}")
+        print(
+            f"{s.get('strategy', '?'):<28} {s.get('deployed', 0):>8} "
+            f"{fmt_m(s.get('mean_cost_m')):>11} {fmt_m(s.get('replay_mean_m')):>13} "
+            f"{fmt_m(s.get('score')):>8}"
+        )
     nxt = state.get("next")
     if nxt:
         print(f"next: {nxt.get('strategy')} ({nxt.get('why')})")
@@ -238,29 +253,43 @@ def print_state(state):
 
 def parse_args(argv):
     ap = argparse.ArgumentParser(
-        description="Drive a simulated robot through a ferret serve deployment.")
+        description="Drive a simulated robot through a ferret serve deployment."
+    )
     ap.add_argument("--url", default=DEFAULT_URL, help=f"server (default {DEFAULT_URL})")
     ap.add_argument("--scene", required=True, help="scene name, as GET /scenes lists it")
-    ap.add_argument("--targets", required=True,
-                    help="comma-separated object types, one trial each, in order "
-                         "(e.g. Blanket,CellPhone,RemoteControl,Pillow,Wallet)")
-    ap.add_argument("--strategies",
-                    help="comma-separated candidate strategies (default: all of the server's)")
+    ap.add_argument(
+        "--targets",
+        required=True,
+        help="comma-separated object types, one trial each, in order "
+        "(e.g. Blanket,CellPhone,RemoteControl,Pillow,Wallet)",
+    )
+    ap.add_argument(
+        "--strategies", help="comma-separated candidate strategies (default: all of the server's)"
+    )
     ap.add_argument("--selector", choices=("replay", "ucb"), default="replay")
     ap.add_argument("--c", type=float, default=5.0, help="UCB exploration constant (default 5.0)")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--deployment",
-                    help="continue this deployment instead of creating one (--strategies, "
-                         "--selector, --c and --seed are then the deployment's own); a trial it "
-                         "has open is finished first and counts for its target if that is in "
-                         "--targets")
-    ap.add_argument("--abandon-open", action="store_true",
-                    help="with --deployment: give up the trial it has open (POST "
-                         "/trials/{id}/abandon) instead of finishing it")
-    ap.add_argument("--json", action="store_true",
-                    help="print one JSON object with the results instead of the table")
-    ap.add_argument("-v", "--verbose", action="store_true",
-                    help="log each search and retry to stderr")
+    ap.add_argument(
+        "--deployment",
+        help="continue this deployment instead of creating one (--strategies, "
+        "--selector, --c and --seed are then the deployment's own); a trial it "
+        "has open is finished first and counts for its target if that is in "
+        "--targets",
+    )
+    ap.add_argument(
+        "--abandon-open",
+        action="store_true",
+        help="with --deployment: give up the trial it has open (POST "
+        "/trials/{id}/abandon) instead of finishing it",
+    )
+    ap.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object with the results instead of the table",
+    )
+    ap.add_argument(
+        "-v", "--verbose", action="store_true", help="log each search and retry to stderr"
+    )
     args = ap.parse_args(argv)
     args.targets = [t.strip() for t in args.targets.split(",") if t.strip()]
     if not args.targets:
@@ -298,14 +327,16 @@ def run(args, log):
     if open_id is not None and args.abandon_open:
         t = api.post(f"/trials/{quote(open_id)}/abandon", {})
         log(f"gave up open trial {open_id} ({t.get('target')}, {t.get('strategy')})")
-        trials.append({
-            "trial": open_id,
-            "target": t.get("target"),
-            "strategy": t.get("strategy"),
-            "cost_m": t.get("cost_m"),
-            "searched": list(t.get("searched") or []),
-            "status": t.get("status"),
-        })
+        trials.append(
+            {
+                "trial": open_id,
+                "target": t.get("target"),
+                "strategy": t.get("strategy"),
+                "cost_m": t.get("cost_m"),
+                "searched": list(t.get("searched") or []),
+                "status": t.get("status"),
+            }
+        )
         if not args.json:
             print_trial(len(trials), trials[-1])
     elif open_id is not None:
@@ -319,13 +350,15 @@ def run(args, log):
     for target in targets:
         # No pose: the robot starts from the scene's start pose. A real robot sends its
         # localisation as "pose": [x, y, yaw_deg].
-        reply = api.post(f"/deployments/{quote(dep)}/trials",
-                         {"scene": args.scene, "target": target})
+        reply = api.post(
+            f"/deployments/{quote(dep)}/trials", {"scene": args.scene, "target": target}
+        )
         trial_id = reply["trial"]
         log(f"trial {trial_id}: {target} with {reply.get('strategy')}")
         try:
-            summary = run_trial(api, trial_id, target, reply.get("strategy"), reply, containers,
-                                log)
+            summary = run_trial(
+                api, trial_id, target, reply.get("strategy"), reply, containers, log
+            )
         except KeyboardInterrupt:
             # Stopped mid-search: the trial is given up rather than left open. Best effort:
             # without the server, the next run with --deployment resumes it instead.
@@ -345,8 +378,11 @@ def run(args, log):
 
 def main(argv=None):
     args = parse_args(argv)
-    log = (lambda msg: print(msg, file=sys.stderr, flush=True)) if args.verbose else (
-        lambda msg: None)
+    log = (
+        (lambda msg: print(msg, file=sys.stderr, flush=True))
+        if args.verbose
+        else (lambda msg: None)
+    )
     try:
         dep, trials, state = run(args, log)
     except ApiError as e:

@@ -20,13 +20,13 @@ import time
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
-import ferret  # noqa: E402
 import rclpy  # noqa: E402
 from rclpy.action import ActionClient  # noqa: E402
 from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
+import ferret  # noqa: E402
 from ferret_interfaces.action import SearchObject  # noqa: E402
 from ferret_ros.maps import read_scene_map  # noqa: E402
 from ferret_ros.node import FerretNode  # noqa: E402
@@ -104,7 +104,8 @@ def main() -> int:
     print(
         f"{len(goal_s)} goals from {'where the last ended' if args.from_pose else 'the start'}, "
         f"{steps} steps ({args.rounds} rounds of {len(targets)} targets in "
-        f"{house.name}, strategies {args.strategies}); simulated driving time {sum(nav.drive_s):.3f} s"
+        f"{house.name}, strategies {args.strategies}); "
+        f"simulated driving time {sum(nav.drive_s):.3f} s"
     )
     print(f"{'per step (node side)':<34} {'p50 ms':>8} {'p99 ms':>8} {'max ms':>8}")
     for name, xs in [
@@ -115,9 +116,13 @@ def main() -> int:
     ]:
         print(f"{name:<34} {pct(xs, 50) * 1e3:8.2f} {pct(xs, 99) * 1e3:8.2f} {max(xs) * 1e3:8.2f}")
     setup = [g.total_s - sum(s.total_s for s in g.steps) for g in node.timings]
-    print(f"{'per goal: trial setup (node side)':<34} {pct(setup, 50) * 1e3:8.2f} {pct(setup, 99) * 1e3:8.2f} {max(setup) * 1e3:8.2f}")
-    print(f"{'per goal (client side)':<34} {pct(goal_s, 50) * 1e3:8.2f} {pct(goal_s, 99) * 1e3:8.2f} {max(goal_s) * 1e3:8.2f}")
-    print(f"mean steps per goal {steps / len(goal_s):.2f}; median goal {statistics.median(goal_s):.3f} s")
+    for name, xs in [
+        ("per goal: trial setup (node side)", setup),
+        ("per goal (client side)", goal_s),
+    ]:
+        print(f"{name:<34} {pct(xs, 50) * 1e3:8.2f} {pct(xs, 99) * 1e3:8.2f} {max(xs) * 1e3:8.2f}")
+    median = statistics.median(goal_s)
+    print(f"mean steps per goal {steps / len(goal_s):.2f}; median goal {median:.3f} s")
     # Executors stopped and their threads joined before the nodes go, so that no callback runs
     # into a destroyed node.
     for ex, thread, nodes in spinning:

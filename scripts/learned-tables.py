@@ -32,11 +32,7 @@ def planning(out, title, runs, reference="model/prior"):
         if not (run / "summary.csv").exists():
             print(f"| {label} | (no run: {name}) | | | |")
             continue
-        paired = {
-            r["strategy"]: r
-            for r in rows(run / "paired.csv")
-            if r["reference"] == reference
-        }
+        paired = {r["strategy"]: r for r in rows(run / "paired.csv") if r["reference"] == reference}
         for s in rows(run / "summary.csv"):
             p = paired.get(s["strategy"])
             diff = (
@@ -46,15 +42,16 @@ def planning(out, title, runs, reference="model/prior"):
                 else ""
             )
             print(
-                f"| {label} | {s['strategy']} | {s['trials']} | "
-                f"{float(s['mean_m']):.2f} | {diff} |"
+                f"| {label} | {s['strategy']} | {s['trials']} | {float(s['mean_m']):.2f} | {diff} |"
             )
     print()
 
 
 def calibration(out, title, runs):
     print(f"### {title}\n")
-    print("| run | source | pairs | Brier | log loss | AUROC | mean p (holders) | mean p (others) |")
+    print(
+        "| run | source | pairs | Brier | log loss | AUROC | mean p (holders) | mean p (others) |"
+    )
     print("|---|---|---:|---:|---:|---:|---:|---:|")
     for label, name in runs:
         path = out / name / "calibration.csv"

@@ -135,7 +135,9 @@ def blank_span(text: str, start: int, end: int) -> str:
 
 
 def is_test_cfg(body: str) -> bool:
-    return re.search(r"\btest\b", body) is not None and re.search(r"\bnot\s*\(\s*test\b", body) is None
+    return (
+        re.search(r"\btest\b", body) is not None and re.search(r"\bnot\s*\(\s*test\b", body) is None
+    )
 
 
 def remove_test_code(text: str) -> tuple[str, set[str]]:
@@ -312,9 +314,7 @@ def related(a: tuple[str, ...], b: tuple[str, ...]) -> bool:
     return long[: len(short)] == short
 
 
-def edges_of(
-    modules: dict[tuple[str, ...], Module], root: Path
-) -> dict[tuple, dict[tuple, str]]:
+def edges_of(modules: dict[tuple[str, ...], Module], root: Path) -> dict[tuple, dict[tuple, str]]:
     """module -> {module it depends on: where the first reference is}."""
     edges: dict[tuple, dict[tuple, str]] = {p: {} for p in modules}
     for mod in modules.values():

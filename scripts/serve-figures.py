@@ -29,8 +29,13 @@ def square(name, side):
     return {
         "ferret_scene": 1,
         "name": name,
-        "rooms": [{"name": "hall", "type": "LivingRoom",
-                   "polygon": [[0, 0], [side, 0], [side, side], [0, side]]}],
+        "rooms": [
+            {
+                "name": "hall",
+                "type": "LivingRoom",
+                "polygon": [[0, 0], [side, 0], [side, side], [0, side]],
+            }
+        ],
         "containers": [
             {"id": "a", "type": "Dresser", "pose": [side / 2, side / 2, 0]},
             {"id": "b", "type": "Bed", "pose": [1.0, 1.0, 0]},
@@ -45,11 +50,25 @@ class Server:
     def __init__(self, binary, db, extra, nofile):
         started = time.monotonic()
         self.proc = subprocess.Popen(
-            [binary, "serve", "--scene", SCENE, "--strategies", "optimistic+greedy,model/uniform",
-             "--listen", "127.0.0.1:0", "--db", db] + extra,
-            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+            [
+                binary,
+                "serve",
+                "--scene",
+                SCENE,
+                "--strategies",
+                "optimistic+greedy,model/uniform",
+                "--listen",
+                "127.0.0.1:0",
+                "--db",
+                db,
+            ]
+            + extra,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            text=True,
             preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_NOFILE, (nofile, nofile)),
-            env={k: v for k, v in os.environ.items() if k != "FERRET_SERVE_TOKEN"})
+            env={k: v for k, v in os.environ.items() if k != "FERRET_SERVE_TOKEN"},
+        )
         line = self.proc.stdout.readline()
         m = re.search(r"http://127\.0\.0\.1:(\d+)", line)
         if not m:
@@ -69,7 +88,8 @@ class Server:
             s.sendall(
                 f"{method} {path} HTTP/1.1\r\nHost: 127.0.0.1:{self.port}\r\nConnection: close\r\n"
                 f"Content-Type: application/json\r\nContent-Length: {len(data)}\r\n\r\n".encode()
-                + data)
+                + data
+            )
             out = b""
             while True:
                 chunk = s.recv(65536)
@@ -92,7 +112,9 @@ class Server:
 
 
 def percentile(sorted_values, p):
-    return sorted_values[min(len(sorted_values) - 1, int(round(p / 100 * (len(sorted_values) - 1))))]
+    return sorted_values[
+        min(len(sorted_values) - 1, int(round(p / 100 * (len(sorted_values) - 1))))
+    ]
 
 
 def main():
@@ -102,16 +124,24 @@ def main():
     ap.add_argument("--side", type=float, default=95.0)
     ap.add_argument("--idle", type=int, default=1000)
     ap.add_argument("--requests", type=int, default=300)
-    ap.add_argument("--server-nofile", type=int, default=1024,
-                    help="the server's open-file limit (a common default)")
+    ap.add_argument(
+        "--server-nofile",
+        type=int,
+        default=1024,
+        help="the server's open-file limit (a common default)",
+    )
     ap.add_argument("--json", action="store_true")
     ap.add_argument("serve_args", nargs="*", help="more `ferret serve` arguments (after --)")
     args = ap.parse_args()
     # The idle connections need descriptors of their own.
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     resource.setrlimit(resource.RLIMIT_NOFILE, (hard, hard))
-    figures = {"uploads": args.uploads, "side_m": args.side, "idle": args.idle,
-               "server_nofile": args.server_nofile}
+    figures = {
+        "uploads": args.uploads,
+        "side_m": args.side,
+        "idle": args.idle,
+        "server_nofile": args.server_nofile,
+    }
     with tempfile.TemporaryDirectory() as tmp:
         db = os.path.join(tmp, "serve.sqlite")
         server = Server(args.bin, db, args.serve_args, args.server_nofile)

@@ -61,24 +61,50 @@ DOORS = [
 # id, type, room, pose [x, y, yaw deg], size [along own x (depth: front to back), along own y],
 # contents (CamelCase object types; what a simulated robot finds there).
 CONTAINERS = [
-    ("fridge", "Fridge", "kitchen", (0.50, 7.55, -90), (0.70, 0.80),
-     ["Apple", "Egg", "Tomato"]),
-    ("countertop", "CounterTop", "kitchen", (2.00, 7.60, -90), (0.60, 2.00),
-     ["Mug", "Bread", "KeyChain"]),
-    ("dining_table", "DiningTable", "dining room", (7.00, 6.25, 0), (1.60, 0.90),
-     ["CellPhone", "Laptop", "Apple"]),
-    ("shelf", "Shelf", "dining room", (9.70, 6.25, 180), (0.40, 1.20),
-     ["Book", "Vase"]),
-    ("sofa", "Sofa", "living room", (0.55, 2.20, 0), (0.90, 2.00),
-     ["Pillow", "Blanket"]),
-    ("coffee_table", "CoffeeTable", "living room", (2.00, 2.20, 0), (0.50, 1.00),
-     ["RemoteControl", "Mug", "Book"]),
-    ("tv_stand", "TVStand", "living room", (5.675, 2.20, 180), (0.45, 1.60),
-     ["Television", "Statue"]),
-    ("bed", "Bed", "bedroom", (8.90, 2.00, 180), (2.00, 1.60),
-     ["Pillow", "Blanket", "Book"]),
-    ("dresser", "Dresser", "bedroom", (9.10, 4.15, -90), (0.50, 1.20),
-     ["Wallet", "AlarmClock", "KeyChain"]),
+    ("fridge", "Fridge", "kitchen", (0.50, 7.55, -90), (0.70, 0.80), ["Apple", "Egg", "Tomato"]),
+    (
+        "countertop",
+        "CounterTop",
+        "kitchen",
+        (2.00, 7.60, -90),
+        (0.60, 2.00),
+        ["Mug", "Bread", "KeyChain"],
+    ),
+    (
+        "dining_table",
+        "DiningTable",
+        "dining room",
+        (7.00, 6.25, 0),
+        (1.60, 0.90),
+        ["CellPhone", "Laptop", "Apple"],
+    ),
+    ("shelf", "Shelf", "dining room", (9.70, 6.25, 180), (0.40, 1.20), ["Book", "Vase"]),
+    ("sofa", "Sofa", "living room", (0.55, 2.20, 0), (0.90, 2.00), ["Pillow", "Blanket"]),
+    (
+        "coffee_table",
+        "CoffeeTable",
+        "living room",
+        (2.00, 2.20, 0),
+        (0.50, 1.00),
+        ["RemoteControl", "Mug", "Book"],
+    ),
+    (
+        "tv_stand",
+        "TVStand",
+        "living room",
+        (5.675, 2.20, 180),
+        (0.45, 1.60),
+        ["Television", "Statue"],
+    ),
+    ("bed", "Bed", "bedroom", (8.90, 2.00, 180), (2.00, 1.60), ["Pillow", "Blanket", "Book"]),
+    (
+        "dresser",
+        "Dresser",
+        "bedroom",
+        (9.10, 4.15, -90),
+        (0.50, 1.20),
+        ["Wallet", "AlarmClock", "KeyChain"],
+    ),
 ]
 
 START = (3.20, 1.20, 90)  # living room, facing the dining-room door
@@ -317,8 +343,12 @@ def reachable(rows):
             blocked[r][c] = True
     rad = ROBOT_RADIUS / RESOLUTION
     k = int(math.floor(rad))
-    disc = [(dc, dr) for dr in range(-k, k + 1) for dc in range(-k, k + 1)
-            if dc * dc + dr * dr < rad * rad]
+    disc = [
+        (dc, dr)
+        for dr in range(-k, k + 1)
+        for dc in range(-k, k + 1)
+        if dc * dc + dr * dr < rad * rad
+    ]
     ok = [[not blocked[r][c] for c in range(w)] for r in range(h)]
     for r in range(h):
         for c in range(w):
@@ -426,15 +456,21 @@ def ascii_map(rows, step=4):
     for r in range(h - 1, -1, -step):
         line = []
         for c in range(0, w, step):
-            block = [rows[rr][cc] for rr in range(max(0, r - step + 1), r + 1)
-                     for cc in range(c, min(w, c + step))]
+            block = [
+                rows[rr][cc]
+                for rr in range(max(0, r - step + 1), r + 1)
+                for cc in range(c, min(w, c + step))
+            ]
             x = ox + (c + step / 2) * RESOLUTION
             y = oy + (r - step / 2 + 1) * RESOLUTION
             ch = "#" if OCCUPIED in block else "." if FREE in block else " "
             for cid, _, _, pose, size, _ in CONTAINERS:
                 if in_rect(corners(pose, size), x, y):
                     ch = letters[cid]
-            if abs(x - START[0]) < step * RESOLUTION / 2 and abs(y - START[1]) < step * RESOLUTION / 2:
+            if (
+                abs(x - START[0]) < step * RESOLUTION / 2
+                and abs(y - START[1]) < step * RESOLUTION / 2
+            ):
                 ch = "@"
             line.append(ch)
         out.append("".join(line).rstrip())
@@ -444,8 +480,11 @@ def ascii_map(rows, step=4):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", default=os.path.dirname(os.path.abspath(__file__)),
-                    help="folder to write map.pgm, map.yaml and scene.yaml (default: this one)")
+    ap.add_argument(
+        "--out",
+        default=os.path.dirname(os.path.abspath(__file__)),
+        help="folder to write map.pgm, map.yaml and scene.yaml (default: this one)",
+    )
     ap.add_argument("--ascii", action="store_true", help="print the map, 0.2 m per character")
     ap.add_argument("--check", action="store_true", help="check the geometry, write nothing")
     args = ap.parse_args()
@@ -467,8 +506,9 @@ def main():
             f.write(map_yaml())
         with open(os.path.join(args.out, "scene.yaml"), "w") as f:
             f.write(scene_yaml())
-        print(f"wrote map.pgm ({w}x{h} px, origin [{ox}, {oy}]), map.yaml, scene.yaml "
-              f"to {args.out}")
+        print(
+            f"wrote map.pgm ({w}x{h} px, origin [{ox}, {oy}]), map.yaml, scene.yaml to {args.out}"
+        )
     else:
         print(f"geometry consistent: {w}x{h} px, origin [{ox}, {oy}]")
 

@@ -18,16 +18,14 @@ from rclpy.node import Node
 
 from ferret_interfaces.action import SearchObject
 
-STATUS = {
-    v: k
-    for k, v in vars(SearchObject.Result).items()
-    if k.isupper() and isinstance(v, int)
-}
+STATUS = {v: k for k, v in vars(SearchObject.Result).items() if k.isupper() and isinstance(v, int)}
 
 
 def main(argv=None) -> int:
     argv = argv if argv is not None else sys.argv
-    ap = argparse.ArgumentParser(prog="python3 -m ferret_ros.find", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(
+        prog="python3 -m ferret_ros.find", description=__doc__.split("\n\n")[0]
+    )
     ap.add_argument("targets", nargs="+", help="object types, e.g. RemoteControl")
     ap.add_argument("--node", default="ferret", help="the ferret node's name (default ferret)")
     ap.add_argument("--timeout", type=float, default=600.0, help="seconds per search (default 600)")
@@ -45,6 +43,7 @@ def main(argv=None) -> int:
             print(f"no ferret node serving /{args.node}/search_object", file=sys.stderr)
             return 1
         for target in args.targets:
+
             def feedback(msg):
                 f = msg.feedback
                 p = f.next_pose.pose.position
@@ -56,7 +55,9 @@ def main(argv=None) -> int:
 
             print(f"{target}:", flush=True)
             started = time.monotonic()
-            sent = client.send_goal_async(SearchObject.Goal(target_type=target), feedback_callback=feedback)
+            sent = client.send_goal_async(
+                SearchObject.Goal(target_type=target), feedback_callback=feedback
+            )
             while not sent.done():
                 if time.monotonic() - started > 10:
                     print("  the node did not answer the goal within 10 s", file=sys.stderr)

@@ -165,14 +165,20 @@ class FerretNode(Node):
             durability=DurabilityPolicy.TRANSIENT_LOCAL,
             reliability=ReliabilityPolicy.RELIABLE,
         )
-        self.create_subscription(OccupancyGrid, g("map_topic"), self._on_map, latched, callback_group=io)
-        self.create_subscription(Detection, g("detections_topic"), self._on_detection, 10, callback_group=io)
+        self.create_subscription(
+            OccupancyGrid, g("map_topic"), self._on_map, latched, callback_group=io
+        )
+        self.create_subscription(
+            Detection, g("detections_topic"), self._on_detection, 10, callback_group=io
+        )
         self.create_subscription(
             PoseWithCovarianceStamped, g("robot_pose_topic"), self._on_pose, 10, callback_group=io
         )
         self.belief_pub = self.create_publisher(Belief, "~/belief", latched)
         self.goal_pose_pub = self.create_publisher(PoseStamped, g("goal_pose_topic"), 10)
-        self.nav = ActionClient(self, NavigateToPose, g("nav_action"), callback_group=self.reentrant)
+        self.nav = ActionClient(
+            self, NavigateToPose, g("nav_action"), callback_group=self.reentrant
+        )
         self.server = ActionServer(
             self,
             SearchObject,
@@ -203,7 +209,9 @@ class FerretNode(Node):
             yaw,
         )
         try:
-            places = [(f"{p.id} access point", p.access[0], p.access[1]) for p in self.planner.places()]
+            places = [
+                (f"{p.id} access point", p.access[0], p.access[1]) for p in self.planner.places()
+            ]
             sx, sy = self.planner.start_pose()
             places.append(("start", sx, sy))
         except PlannerError as e:
@@ -242,7 +250,8 @@ class FerretNode(Node):
     def _on_goal(self, goal) -> GoalResponse:
         if self.busy.locked():
             self.get_logger().warning(
-                f"rejecting a search for {goal.target_type!r}: a search is running (cancel it first)"
+                f"rejecting a search for {goal.target_type!r}: "
+                "a search is running (cancel it first)"
             )
             return GoalResponse.REJECT
         return GoalResponse.ACCEPT
@@ -471,9 +480,10 @@ class FerretNode(Node):
             )
         res = result_future.result()
         if res.status != GoalStatus.STATUS_SUCCEEDED:
-            what = {GoalStatus.STATUS_ABORTED: "aborted", GoalStatus.STATUS_CANCELED: "canceled"}.get(
-                res.status, f"ended with status {res.status}"
-            )
+            what = {
+                GoalStatus.STATUS_ABORTED: "aborted",
+                GoalStatus.STATUS_CANCELED: "canceled",
+            }.get(res.status, f"ended with status {res.status}")
             detail = ""
             if res.result is not None and (res.result.error_code or res.result.error_msg):
                 detail = f" (error {res.result.error_code}: {res.result.error_msg})"
@@ -501,11 +511,14 @@ class FerretNode(Node):
             if handle.is_cancel_requested:
                 raise StepFailed(Status.CANCELED, "canceled")
             if time.monotonic() >= deadline or not rclpy.ok(context=self.context):
-                where = "no pose received" if at is None else f"last pose ({at[0]:.2f}, {at[1]:.2f})"
+                where = (
+                    "no pose received" if at is None else f"last pose ({at[0]:.2f}, {at[1]:.2f})"
+                )
                 raise StepFailed(
                     Status.NAVIGATION_FAILED,
                     f"no NavigateToPose server, and the robot did not reach {place.id} via "
-                    f"{self.get_parameter('goal_pose_topic').value} within {timeout:g} s ({where} on "
+                    f"{self.get_parameter('goal_pose_topic').value} within {timeout:g} s "
+                    f"({where} on "
                     f"{self.get_parameter('robot_pose_topic').value})",
                 )
             time.sleep(POLL_S)

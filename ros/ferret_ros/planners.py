@@ -20,8 +20,9 @@ import uuid
 from dataclasses import dataclass
 from typing import Dict, List, Optional, Sequence, Tuple
 
-import ferret
 import yaml
+
+import ferret
 
 # A robot pose this close to the scene's start (metres) plans from the start itself.
 AT_START_M = 0.05
@@ -90,7 +91,9 @@ class InProcessPlanner:
                 # likelihood source that cannot answer for this scene (a learned prior without the
                 # embeddings for its names): planned once for one of its own targets.
                 targets = self.house.target_types()
-                ferret.Search(self.house, targets[0] if targets else "_", strategies[0], **self.options)
+                ferret.Search(
+                    self.house, targets[0] if targets else "_", strategies[0], **self.options
+                )
         except ferret.FerretError as e:
             raise PlannerError(str(e)) from e
         self._places = [
@@ -131,7 +134,9 @@ class InProcessPlanner:
             with open(self.scene_path, encoding="utf-8") as f:
                 doc = yaml.safe_load(f)
         except (OSError, UnicodeDecodeError, yaml.YAMLError) as e:
-            raise PlannerError(f"scene {self.scene_path}: cannot be read again to move its start: {e}") from e
+            raise PlannerError(
+                f"scene {self.scene_path}: cannot be read again to move its start: {e}"
+            ) from e
         if not isinstance(doc, dict) or "ferret_scene" not in doc:
             raise PlannerError(
                 f"scene {self.scene_path}: only ferret scene files can start from the robot's "
@@ -299,7 +304,13 @@ class ServePlanner:
         for c in s["containers"]:
             access = c.get("access") or [c["x"], c["y"]]
             out.append(
-                Place(c["id"], c["type"], c.get("room") or "", (access[0], access[1]), (c["x"], c["y"]))
+                Place(
+                    c["id"],
+                    c["type"],
+                    c.get("room") or "",
+                    (access[0], access[1]),
+                    (c["x"], c["y"]),
+                )
             )
         return out
 

@@ -20,7 +20,6 @@ import threading
 import time
 from typing import List, Optional
 
-import ferret
 import rclpy
 from builtin_interfaces.msg import Duration
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
@@ -31,6 +30,7 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+import ferret
 from ferret_interfaces.msg import Detection
 
 from .maps import Grid
@@ -141,7 +141,9 @@ class SimNav2(Node):
         c = container_at(self.house, goal.position.x, goal.position.y)
         if c is None:
             result.error_code = NavigateToPose.Result.UNKNOWN
-            result.error_msg = f"no container access point at ({goal.position.x:.2f}, {goal.position.y:.2f})"
+            result.error_msg = (
+                f"no container access point at ({goal.position.x:.2f}, {goal.position.y:.2f})"
+            )
             handle.abort()
             return result
         failing = self._failing()
@@ -240,8 +242,12 @@ def main(argv: Optional[List[str]] = None) -> int:
     from .maps import read_scene_map
 
     args_in = rclpy.utilities.remove_ros_args(argv if argv is not None else sys.argv)[1:]
-    ap = argparse.ArgumentParser(prog="python3 -m ferret_ros.sim", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--scene", required=True, help="ferret scene file (YAML) with a `map: {ros: ...}`")
+    ap = argparse.ArgumentParser(
+        prog="python3 -m ferret_ros.sim", description=__doc__.split("\n\n")[0]
+    )
+    ap.add_argument(
+        "--scene", required=True, help="ferret scene file (YAML) with a `map: {ros: ...}`"
+    )
     ap.add_argument("--speed", type=float, default=0.5, help="simulated driving speed, m/s")
     args = ap.parse_args(args_in)
     rclpy.init(args=argv)

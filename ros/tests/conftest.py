@@ -17,12 +17,12 @@ os.environ.setdefault("ROS_DOMAIN_ID", str(1 + os.getpid() % 100))
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
 
-import ferret  # noqa: E402
 import rclpy  # noqa: E402
 from rclpy.action import ActionClient  # noqa: E402
 from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 
+import ferret  # noqa: E402
 from ferret_interfaces.action import SearchObject  # noqa: E402
 from ferret_interfaces.msg import Belief  # noqa: E402
 from ferret_ros.maps import read_scene_map  # noqa: E402
@@ -105,9 +105,7 @@ class Client:
             sent.result().cancel_goal_async()
         return sent.result().accepted
 
-    def send(
-        self, target, timeout=GOAL_TIMEOUT_S, cancel_after_feedback=False, while_running=None
-    ):
+    def send(self, target, timeout=GOAL_TIMEOUT_S, cancel_after_feedback=False, while_running=None):
         """Sends a goal and waits (bounded) for its result: (status, result, feedback list)."""
         goal = SearchObject.Goal(target_type=target)
         fbs = []

@@ -10,9 +10,9 @@ import subprocess
 import time
 import urllib.request
 
-import ferret
 import pytest
 
+import ferret
 from conftest import SCENE, STRATEGIES
 from ferret_interfaces.action import SearchObject
 from ferret_ros.maps import read_scene_map
@@ -23,7 +23,9 @@ Status = SearchObject.Result
 def ferret_bin():
     path = os.environ.get("FERRET_BIN")
     if not path or not os.access(path, os.X_OK):
-        pytest.fail("FERRET_BIN must name the ferret binary to compare with (scripts/ros-tests.sh sets it)")
+        pytest.fail(
+            "FERRET_BIN must name the ferret binary to compare with (scripts/ros-tests.sh sets it)"
+        )
     return path
 
 
@@ -41,12 +43,28 @@ def test_finds_every_target_as_ferret_deploy(start_node, robot, house, tmp_path)
     nav, detector, _ = robot
     targets = house.target_types()
     run_ferret(
-        "deploy", "--houses", str(SCENE), "--find", ",".join(targets),
-        "--strategies", ",".join(STRATEGIES), "--seed", "0", "--out", str(tmp_path / "deploy"),
+        "deploy",
+        "--houses",
+        str(SCENE),
+        "--find",
+        ",".join(targets),
+        "--strategies",
+        ",".join(STRATEGIES),
+        "--seed",
+        "0",
+        "--out",
+        str(tmp_path / "deploy"),
     )
     run_ferret(
-        "eval", "--houses", str(SCENE), "--strategies", ",".join(STRATEGIES),
-        "--trials-per-house", "all", "--out", str(tmp_path / "eval"),
+        "eval",
+        "--houses",
+        str(SCENE),
+        "--strategies",
+        ",".join(STRATEGIES),
+        "--trials-per-house",
+        "all",
+        "--out",
+        str(tmp_path / "eval"),
     )
     with open(tmp_path / "deploy" / "deploy.csv") as f:
         deployed = list(csv.DictReader(f))
@@ -55,7 +73,9 @@ def test_finds_every_target_as_ferret_deploy(start_node, robot, house, tmp_path)
     assert [r["target"] for r in deployed] == targets
 
     # Every trial from the scene's start, as `ferret deploy` runs them.
-    _, client = start_node("ferret_deploy", strategies=STRATEGIES, seed=0, plan_from_robot_pose=False)
+    _, client = start_node(
+        "ferret_deploy", strategies=STRATEGIES, seed=0, plan_from_robot_pose=False
+    )
     for row in deployed:
         nav.reset()
         before = len(nav.visited)
@@ -148,7 +168,9 @@ def test_cancel_stops_the_search(start_node, robot):
         t = time.monotonic()
         second = []
         status, result, _ = client.send(
-            "Wallet", cancel_after_feedback=True, while_running=lambda: second.append(client.try_goal("Apple"))
+            "Wallet",
+            cancel_after_feedback=True,
+            while_running=lambda: second.append(client.try_goal("Apple")),
         )
         took = time.monotonic() - t
     finally:
@@ -241,8 +263,17 @@ def searches_as_deployed(client, nav, rows):
 
 def deploy_rows(tmp_path, targets):
     run_ferret(
-        "deploy", "--houses", str(SCENE), "--find", ",".join(targets),
-        "--strategies", ",".join(STRATEGIES), "--seed", "0", "--out", str(tmp_path / "deploy"),
+        "deploy",
+        "--houses",
+        str(SCENE),
+        "--find",
+        ",".join(targets),
+        "--strategies",
+        ",".join(STRATEGIES),
+        "--seed",
+        "0",
+        "--out",
+        str(tmp_path / "deploy"),
     )
     with open(tmp_path / "deploy" / "deploy.csv") as f:
         return list(csv.DictReader(f))
@@ -251,13 +282,20 @@ def deploy_rows(tmp_path, targets):
 # A word table small enough to write here: kitchen, bedroom and bathroom words pointing different
 # ways, so the learned heads have meaning to learn from (names with no word get a zero vector).
 WORDS = {
-    "kitchen": (1.0, 0.0, 0.0, 0.1), "fridge": (0.9, 0.1, 0.0, 0.0),
-    "counter": (0.8, 0.0, 0.1, 0.2), "cabinet": (0.6, 0.3, 0.2, 0.0),
-    "bedroom": (0.0, 1.0, 0.0, 0.1), "bed": (0.1, 0.9, 0.0, 0.0),
-    "dresser": (0.0, 0.8, 0.1, 0.2), "bathroom": (0.0, 0.0, 1.0, 0.1),
-    "toilet": (0.1, 0.0, 0.9, 0.0), "sink": (0.4, 0.0, 0.7, 0.0),
-    "living": (0.2, 0.2, 0.0, 1.0), "sofa": (0.0, 0.3, 0.0, 0.9),
-    "table": (0.5, 0.1, 0.0, 0.6), "desk": (0.3, 0.6, 0.0, 0.4),
+    "kitchen": (1.0, 0.0, 0.0, 0.1),
+    "fridge": (0.9, 0.1, 0.0, 0.0),
+    "counter": (0.8, 0.0, 0.1, 0.2),
+    "cabinet": (0.6, 0.3, 0.2, 0.0),
+    "bedroom": (0.0, 1.0, 0.0, 0.1),
+    "bed": (0.1, 0.9, 0.0, 0.0),
+    "dresser": (0.0, 0.8, 0.1, 0.2),
+    "bathroom": (0.0, 0.0, 1.0, 0.1),
+    "toilet": (0.1, 0.0, 0.9, 0.0),
+    "sink": (0.4, 0.0, 0.7, 0.0),
+    "living": (0.2, 0.2, 0.0, 1.0),
+    "sofa": (0.0, 0.3, 0.0, 0.9),
+    "table": (0.5, 0.1, 0.0, 0.6),
+    "desk": (0.3, 0.6, 0.0, 0.4),
 }
 
 
@@ -273,8 +311,20 @@ def test_learned_likelihood_reaches_the_node(start_node, robot, house, tmp_path,
     (table / "vectors.txt").write_text("# id: tiny\n" + "\n".join(lines) + "\n")
     prior = tmp_path / "learned.json"
     run_ferret(
-        "prior", "train", "--generate", "30", "--house-seed", "9", "--embeddings", str(table),
-        "--learned-folds", "3", "--learned-epochs", "10", "--out", str(prior),
+        "prior",
+        "train",
+        "--generate",
+        "30",
+        "--house-seed",
+        "9",
+        "--embeddings",
+        str(table),
+        "--learned-folds",
+        "3",
+        "--learned-epochs",
+        "10",
+        "--out",
+        str(prior),
     )
     strategies = ["model/learned", "model/prior"]
     targets = house.target_types()[:4]
@@ -284,7 +334,8 @@ def test_learned_likelihood_reaches_the_node(start_node, robot, house, tmp_path,
 
     monkeypatch.delenv("FERRET_EMBEDDINGS", raising=False)
     p = FerretProcess(
-        tmp_path, "ferret_learned_blind",
+        tmp_path,
+        "ferret_learned_blind",
         {"scene": str(SCENE), "strategies": ["model/learned"], "prior": str(prior)},
     )
     try:
@@ -295,14 +346,28 @@ def test_learned_likelihood_reaches_the_node(start_node, robot, house, tmp_path,
     assert "[FATAL]" in said and "FERRET_EMBEDDINGS" in said and "no word vector for" in said, said
     monkeypatch.setenv("FERRET_EMBEDDINGS", str(table))
     run_ferret(
-        "deploy", "--houses", str(SCENE), "--find", ",".join(targets), "--prior", str(prior),
-        "--strategies", ",".join(strategies), "--seed", "0", "--out", str(tmp_path / "deploy"),
+        "deploy",
+        "--houses",
+        str(SCENE),
+        "--find",
+        ",".join(targets),
+        "--prior",
+        str(prior),
+        "--strategies",
+        ",".join(strategies),
+        "--seed",
+        "0",
+        "--out",
+        str(tmp_path / "deploy"),
     )
     with open(tmp_path / "deploy" / "deploy.csv") as f:
         rows = list(csv.DictReader(f))
     assert "model/learned" in {r["chosen"] for r in rows}
     _, client = start_node(
-        "ferret_learned", strategies=strategies, prior=str(prior), seed=0,
+        "ferret_learned",
+        strategies=strategies,
+        prior=str(prior),
+        seed=0,
         plan_from_robot_pose=False,
     )
     searches_as_deployed(client, nav, rows)
@@ -315,8 +380,12 @@ def test_without_nav2_goals_go_to_goal_pose(start_node, robot, house, tmp_path):
     targets = house.target_types()[:3]
     rows = deploy_rows(tmp_path, targets)
     _, client = start_node(
-        "ferret_goalpose", strategies=STRATEGIES, seed=0,
-        nav_action="no_nav2_here", nav_server_wait_s=0.2, nav_timeout_s=10.0,
+        "ferret_goalpose",
+        strategies=STRATEGIES,
+        seed=0,
+        nav_action="no_nav2_here",
+        nav_server_wait_s=0.2,
+        nav_timeout_s=10.0,
         plan_from_robot_pose=False,
     )
     for row in rows:
@@ -332,8 +401,11 @@ def test_without_nav2_goals_go_to_goal_pose(start_node, robot, house, tmp_path):
 def test_goal_pose_fallback_times_out_when_the_robot_never_arrives(start_node, robot):
     nav, _, _ = robot
     _, client = start_node(
-        "ferret_goalpose_stuck", strategies=["model/prior"],
-        nav_action="no_nav2_here", nav_server_wait_s=0.2, nav_timeout_s=1.0,
+        "ferret_goalpose_stuck",
+        strategies=["model/prior"],
+        nav_action="no_nav2_here",
+        nav_server_wait_s=0.2,
+        nav_timeout_s=1.0,
     )
     nav.reset()
     nav.mode, nav.fail_from = "hang", nav.goals + 1  # it ignores /goal_pose too
@@ -353,9 +425,21 @@ def ferret_serve(tmp_path):
         port = s.getsockname()[1]
     log = open(tmp_path / "serve.log", "w")
     proc = subprocess.Popen(
-        [ferret_bin(), "serve", "--scene", str(SCENE), "--strategies", ",".join(STRATEGIES),
-         "--listen", f"127.0.0.1:{port}", "--db", str(tmp_path / "serve.sqlite")],
-        stdout=log, stderr=subprocess.STDOUT, cwd=tmp_path,
+        [
+            ferret_bin(),
+            "serve",
+            "--scene",
+            str(SCENE),
+            "--strategies",
+            ",".join(STRATEGIES),
+            "--listen",
+            f"127.0.0.1:{port}",
+            "--db",
+            str(tmp_path / "serve.sqlite"),
+        ],
+        stdout=log,
+        stderr=subprocess.STDOUT,
+        cwd=tmp_path,
     )
     url = f"http://127.0.0.1:{port}"
     deadline = time.monotonic() + 30
@@ -366,7 +450,9 @@ def ferret_serve(tmp_path):
                     break
         except OSError:
             pass
-        assert proc.poll() is None and time.monotonic() < deadline, (tmp_path / "serve.log").read_text()
+        assert proc.poll() is None and time.monotonic() < deadline, (
+            tmp_path / "serve.log"
+        ).read_text()
         time.sleep(0.1)
     yield url
     proc.terminate()
@@ -381,8 +467,13 @@ def test_serve_backend_makes_the_same_searches(start_node, robot, house, ferret_
     targets = house.target_types()[:4]
     rows = deploy_rows(tmp_path, targets)
     _, client = start_node(
-        "ferret_serve_backend", backend="serve", serve_url=ferret_serve, serve_scene="apartment",
-        strategies=STRATEGIES, seed=0, plan_from_robot_pose=False,
+        "ferret_serve_backend",
+        backend="serve",
+        serve_url=ferret_serve,
+        serve_scene="apartment",
+        strategies=STRATEGIES,
+        seed=0,
+        plan_from_robot_pose=False,
     )
     searches_as_deployed(client, nav, rows)
     with urllib.request.urlopen(ferret_serve + "/deployments/1", timeout=5) as r:
@@ -397,8 +488,13 @@ def test_a_failed_search_is_abandoned_on_the_server(start_node, robot, ferret_se
     own."""
     nav, _, _ = robot
     _, client = start_node(
-        "ferret_serve_abandon", backend="serve", serve_url=ferret_serve, serve_scene="apartment",
-        strategies=STRATEGIES, seed=0, plan_from_robot_pose=False,
+        "ferret_serve_abandon",
+        backend="serve",
+        serve_url=ferret_serve,
+        serve_scene="apartment",
+        strategies=STRATEGIES,
+        seed=0,
+        plan_from_robot_pose=False,
     )
     nav.reset()
     nav.mode, nav.fail_from = "abort", nav.goals + 2

@@ -31,7 +31,9 @@ def ferret_bin():
     if not path:
         pytest.fail("FERRET_BIN is not set: run the tests with scripts/python-tests.sh")
     if not Path(path).is_file():
-        pytest.fail(f"FERRET_BIN={path}: no such file; build it with cargo build --release -p ferret-cli")
+        pytest.fail(
+            f"FERRET_BIN={path}: no such file; build it with cargo build --release -p ferret-cli"
+        )
     return path
 
 

@@ -7,8 +7,6 @@ import re
 import subprocess
 from pathlib import Path
 
-import pytest
-
 import ferret
 
 STUB = Path(ferret.__file__).parent / "_ferret.pyi"
@@ -50,7 +48,9 @@ def stub_items():
             cls = getattr(ferret, node.name)
             for item in node.body:
                 if isinstance(item, ast.FunctionDef) and not item.name.startswith("__len"):
-                    is_property = any(getattr(d, "id", None) == "property" for d in item.decorator_list)
+                    is_property = any(
+                        getattr(d, "id", None) == "property" for d in item.decorator_list
+                    )
                     name = f"{node.name}.{item.name}"
                     if is_property:
                         yield name, getattr(cls, item.name), None
@@ -86,7 +86,9 @@ def test_everything_has_a_docstring():
 
 
 def test_keyword_defaults_are_the_command_lines(ferret_bin):
-    help_text = subprocess.run([ferret_bin, "eval", "--help"], capture_output=True, text=True).stdout
+    help_text = subprocess.run(
+        [ferret_bin, "eval", "--help"], capture_output=True, text=True
+    ).stdout
     # clap wraps long help; join it so that each option's text is on one line.
     flat = " ".join(help_text.split())
 
@@ -96,18 +98,31 @@ def test_keyword_defaults_are_the_command_lines(ferret_bin):
         return m.group(1)
 
     ev = inspect.signature(ferret.evaluate).parameters
-    for option in ["resolution", "robot-radius", "wall-thickness", "max-containers", "exact-max",
-                   "search-cost", "seed", "reveal-fraction"]:
+    for option in [
+        "resolution",
+        "robot-radius",
+        "wall-thickness",
+        "max-containers",
+        "exact-max",
+        "search-cost",
+        "seed",
+        "reveal-fraction",
+    ]:
         assert float(cli_default(option)) == ev[option.replace("-", "_")].default, option
     assert cli_default("strategies") == ferret.DEFAULT_STRATEGIES
     s = inspect.signature(ferret.Search).parameters
     d = inspect.signature(ferret.House.distances).parameters
     for k in ["resolution", "robot_radius", "wall_thickness"]:
         assert s[k].default == d[k].default == ev[k].default
-    smoothing = subprocess.run([ferret_bin, "prior", "train", "--help"], capture_output=True,
-                               text=True).stdout
+    smoothing = subprocess.run(
+        [ferret_bin, "prior", "train", "--help"], capture_output=True, text=True
+    ).stdout
     m = re.search(r"--smoothing <[^>]+>.*?\[default: ([^\]]+)\]", " ".join(smoothing.split()))
-    assert m and float(m.group(1)) == inspect.signature(ferret.Prior.train).parameters["smoothing"].default
+    assert (
+        m
+        and float(m.group(1))
+        == inspect.signature(ferret.Prior.train).parameters["smoothing"].default
+    )
 
 
 def test_py_typed_ships():

@@ -26,9 +26,20 @@ def test_deployment_makes_ferret_deploys_choices(ferret_bin, tmp_path, method, s
     house = ferret.load_houses(str(SCENE))[0]
     targets = house.target_types()
     run_cli(
-        ferret_bin, "deploy", "--houses", str(SCENE), "--find", ",".join(targets),
-        "--strategies", ",".join(CANDIDATES), "--method", method, "--seed", str(seed),
-        "--out", str(tmp_path),
+        ferret_bin,
+        "deploy",
+        "--houses",
+        str(SCENE),
+        "--find",
+        ",".join(targets),
+        "--strategies",
+        ",".join(CANDIDATES),
+        "--method",
+        method,
+        "--seed",
+        str(seed),
+        "--out",
+        str(tmp_path),
     )
     rows = read_trials(tmp_path / "deploy.csv")
     d = ferret.Deployment(CANDIDATES, method=method, seed=seed)

@@ -16,8 +16,14 @@ def house_file(tmp_path, ferret_bin):
 
 
 def test_hierarchy():
-    for cls in (ferret.HouseError, ferret.StrategyError, ferret.PriorError, ferret.ConfigError,
-                ferret.LlmError, ferret.SearchError):
+    for cls in (
+        ferret.HouseError,
+        ferret.StrategyError,
+        ferret.PriorError,
+        ferret.ConfigError,
+        ferret.LlmError,
+        ferret.SearchError,
+    ):
         assert issubclass(cls, ferret.FerretError) and issubclass(cls, Exception)
     assert ferret.HouseError.__module__ == "ferret"
 
@@ -129,14 +135,13 @@ def test_llm_configuration_errors(tmp_path, houses):
 
 def test_an_unanswered_llm_question_offline_is_an_llm_error(tmp_path, houses):
     config = tmp_path / "ferret.toml"
-    config.write_text(
-        '[llm.local]\nbase_url = "http://127.0.0.1:9/v1"\nmodel = "m"\n'
-    )
+    config.write_text('[llm.local]\nbase_url = "http://127.0.0.1:9/v1"\nmodel = "m"\n')
     cache = tmp_path / "cache.sqlite"
     house = houses[0]
     target = house.target_types()[0]
     s = None
     with pytest.raises(ferret.LlmError, match="cache"):
-        s = ferret.Search(house, target, "llm+model/p-yesno/local", config=config,
-                          llm_cache=cache, offline=True)
+        s = ferret.Search(
+            house, target, "llm+model/p-yesno/local", config=config, llm_cache=cache, offline=True
+        )
         s.next_container()

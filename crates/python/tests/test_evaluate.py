@@ -13,8 +13,15 @@ STRATEGIES = ["optimistic+greedy", "model/uniform", "model/prior", "model/prior/
 
 def cli_eval(ferret_bin, out, *args):
     run_cli(
-        ferret_bin, "eval", "--generate", str(HOUSES), "--house-seed", str(HOUSE_SEED),
-        "--out", str(out), *args,
+        ferret_bin,
+        "eval",
+        "--generate",
+        str(HOUSES),
+        "--house-seed",
+        str(HOUSE_SEED),
+        "--out",
+        str(out),
+        *args,
     )
     return read_trials(out / "trials.csv")
 
@@ -50,13 +57,34 @@ def test_default_strategies_match_ferret_eval(houses, ferret_bin, tmp_path):
 
 
 def test_options_and_protocol_paper_match_ferret_eval(houses, ferret_bin, tmp_path):
-    args = dict(seed=2, trials_per_house=2, reveal_fraction=0.25, protocol="paper",
-                max_containers=5, search_cost=0.5, cells=True)
+    args = dict(
+        seed=2,
+        trials_per_house=2,
+        reveal_fraction=0.25,
+        protocol="paper",
+        max_containers=5,
+        search_cost=0.5,
+        cells=True,
+    )
     ev = ferret.evaluate(houses, "model/prior,model/uniform/exact,optimistic+greedy", **args)
     cli = cli_eval(
-        ferret_bin, tmp_path, "--strategies", "model/prior,model/uniform/exact,optimistic+greedy",
-        "--seed", "2", "--trials-per-house", "2", "--reveal-fraction", "0.25",
-        "--protocol", "paper", "--max-containers", "5", "--search-cost", "0.5", "--cells",
+        ferret_bin,
+        tmp_path,
+        "--strategies",
+        "model/prior,model/uniform/exact,optimistic+greedy",
+        "--seed",
+        "2",
+        "--trials-per-house",
+        "2",
+        "--reveal-fraction",
+        "0.25",
+        "--protocol",
+        "paper",
+        "--max-containers",
+        "5",
+        "--search-cost",
+        "0.5",
+        "--cells",
     )
     assert_same_trials(ev.rows, cli)
     assert ev.columns[-1] == "cost_cells"
@@ -69,8 +97,16 @@ def test_a_prior_object_and_its_file_match_ferret_eval_with_the_file(houses, fer
     prior = ferret.Prior.train(ferret.generate_houses(30, 77), smoothing=1.0)
     path = tmp_path / "prior.json"
     prior.save(path)
-    cli = cli_eval(ferret_bin, tmp_path / "out", "--strategies", "model/prior,model/prior/k4",
-                   "--prior", str(path), "--seed", "1")
+    cli = cli_eval(
+        ferret_bin,
+        tmp_path / "out",
+        "--strategies",
+        "model/prior,model/prior/k4",
+        "--prior",
+        str(path),
+        "--seed",
+        "1",
+    )
     by_object = ferret.evaluate(houses, ["model/prior", "model/prior/k4"], prior=prior, seed=1)
     by_path = ferret.evaluate(houses, ["model/prior", "model/prior/k4"], prior=str(path), seed=1)
     assert_same_trials(by_object.rows, cli)
@@ -92,7 +128,9 @@ def test_summary_and_strategies_as_one_string(houses):
         assert s["trials"] == len(costs) == 4
         assert s["mean_m"] == pytest.approx(sum(costs) / len(costs))
     oracle = {r["house_index"]: r["cost_m"] for r in ev.rows if r["strategy"] == "oracle"}
-    greedy = {r["house_index"]: r["cost_m"] for r in ev.rows if r["strategy"] == "optimistic+greedy"}
+    greedy = {
+        r["house_index"]: r["cost_m"] for r in ev.rows if r["strategy"] == "optimistic+greedy"
+    }
     assert all(oracle[h] <= greedy[h] + 1e-9 for h in oracle)
 
 

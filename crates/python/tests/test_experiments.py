@@ -36,8 +36,18 @@ def same_numbers(py_rows, cli_rows):
 def test_calibrate_matches_ferret_calibrate(houses, ferret_bin, tmp_path):
     result = ferret.calibrate(houses, targets_per_house=2, seed=4)
     run_cli(
-        ferret_bin, "calibrate", "--generate", str(HOUSES), "--house-seed", str(HOUSE_SEED),
-        "--targets-per-house", "2", "--seed", "4", "--out", str(tmp_path),
+        ferret_bin,
+        "calibrate",
+        "--generate",
+        str(HOUSES),
+        "--house-seed",
+        str(HOUSE_SEED),
+        "--targets-per-house",
+        "2",
+        "--seed",
+        "4",
+        "--out",
+        str(tmp_path),
     )
     same_numbers(result.rows, read_csv(tmp_path / "calibration.csv"))
     assert [r["source"] for r in result.rows] == ["model/uniform", "model/prior"]
@@ -72,8 +82,18 @@ def test_calibrate_refuses_what_it_cannot_score(houses):
 def cli_run(ferret_bin, tmp_path_factory):
     out = tmp_path_factory.mktemp("cli-eval")
     run_cli(
-        ferret_bin, "eval", "--generate", str(HOUSES), "--house-seed", str(HOUSE_SEED),
-        "--strategies", STRATEGIES, "--seed", "1", "--out", str(out),
+        ferret_bin,
+        "eval",
+        "--generate",
+        str(HOUSES),
+        "--house-seed",
+        str(HOUSE_SEED),
+        "--strategies",
+        STRATEGIES,
+        "--seed",
+        "1",
+        "--out",
+        str(out),
     )
     return out
 
@@ -87,9 +107,21 @@ def test_a_saved_evaluation_is_the_run_ferret_eval_writes(houses, cli_run, tmp_p
 def test_a_saved_evaluation_compares_what_paired_against_names(ferret_bin, houses, tmp_path):
     cli = tmp_path / "cli"
     run_cli(
-        ferret_bin, "eval", "--generate", str(HOUSES), "--house-seed", str(HOUSE_SEED),
-        "--strategies", STRATEGIES, "--seed", "1", "--cells",
-        "--paired-against", "model/uniform", "--out", str(cli),
+        ferret_bin,
+        "eval",
+        "--generate",
+        str(HOUSES),
+        "--house-seed",
+        str(HOUSE_SEED),
+        "--strategies",
+        STRATEGIES,
+        "--seed",
+        "1",
+        "--cells",
+        "--paired-against",
+        "model/uniform",
+        "--out",
+        str(cli),
     )
     evaluation = ferret.evaluate(houses, STRATEGIES, seed=1, cells=True)
     evaluation.save(tmp_path / "py", paired_against="model/uniform")
@@ -101,15 +133,27 @@ def test_a_saved_evaluation_compares_what_paired_against_names(ferret_bin, house
         evaluation.save(tmp_path / "bad", paired_against="no/such")
 
 
-def test_select_over_a_saved_evaluation_matches_ferret_select(houses, ferret_bin, cli_run, tmp_path):
+def test_select_over_a_saved_evaluation_matches_ferret_select(
+    houses, ferret_bin, cli_run, tmp_path
+):
     run = tmp_path / "run"
     ferret.evaluate(houses, STRATEGIES, seed=1).save(run)
     sel = ferret.select(run, deployments=40, trials_per_deployment=8, seed=2)
     assert (run / "replay.csv").is_file()
     out = tmp_path / "select"
     run_cli(
-        ferret_bin, "select", "--trials", str(cli_run), "--deployments", "40",
-        "--trials-per-deployment", "8", "--seed", "2", "--out", str(out),
+        ferret_bin,
+        "select",
+        "--trials",
+        str(cli_run),
+        "--deployments",
+        "40",
+        "--trials-per-deployment",
+        "8",
+        "--seed",
+        "2",
+        "--out",
+        str(out),
     )
     same_numbers(sel.rows, read_csv(out / "selection.csv"))
     same_numbers(sel.choices, read_csv(out / "choices.csv"))
@@ -134,7 +178,7 @@ def test_select_names_the_keyword_it_cannot_use(houses, tmp_path):
         ferret.select(run, deployments=3, trials_per_deployment=5)
     with pytest.raises(ferret.ConfigError, match="c=-1"):
         ferret.select(run, c=-1.0)
-    with pytest.raises(ferret.ConfigError, match="draw=\"sometimes\""):
+    with pytest.raises(ferret.ConfigError, match='draw="sometimes"'):
         ferret.select(run, draw="sometimes")
     with pytest.raises(ferret.FerretError, match="not a `ferret eval` output directory"):
         ferret.select(tmp_path / "nothing")
@@ -152,6 +196,8 @@ def test_save_refuses_what_run_json_cannot_name(houses, tmp_path):
         ferret.evaluate(houses[:2], "model/prior", prior=prior).save(tmp_path / "b")
     # A prior file is named by its absolute path, so the run can be replayed from elsewhere.
     prior.save(tmp_path / "prior.json")
-    ferret.evaluate(houses[:2], "model/prior", prior=str(tmp_path / "prior.json")).save(tmp_path / "c")
+    ferret.evaluate(houses[:2], "model/prior", prior=str(tmp_path / "prior.json")).save(
+        tmp_path / "c"
+    )
     info = json.loads((tmp_path / "c" / "run.json").read_text())
     assert info["planning"]["prior"] == str(tmp_path / "prior.json")

@@ -16,7 +16,9 @@ def test_generate_houses_is_deterministic_and_indexed():
     assert [h.name for h in a] == [h.name for h in b]
     assert [[c.id for c in h.containers] for h in a] == [[c.id for c in h.containers] for h in b]
     other = ferret.generate_houses(3, 12)
-    assert [[c.type for c in h.containers] for h in other] != [[c.type for c in h.containers] for h in a]
+    assert [[c.type for c in h.containers] for h in other] != [
+        [c.type for c in h.containers] for h in a
+    ]
 
 
 def test_house_parts(houses):
@@ -89,10 +91,24 @@ def test_scene_files_load(tmp_path):
     scene = {
         "ferret_scene": 1,
         "name": "flat",
-        "rooms": [{"name": "living", "type": "LivingRoom", "polygon": [[0, 0], [6, 0], [6, 4], [0, 4]]}],
+        "rooms": [
+            {"name": "living", "type": "LivingRoom", "polygon": [[0, 0], [6, 0], [6, 4], [0, 4]]}
+        ],
         "containers": [
-            {"id": "table", "type": "DiningTable", "room": "living", "pose": [4, 2, 0], "contents": ["Apple"]},
-            {"id": "shelf", "type": "Shelf", "room": "living", "pose": [1, 3, 0], "contents": ["Book"]},
+            {
+                "id": "table",
+                "type": "DiningTable",
+                "room": "living",
+                "pose": [4, 2, 0],
+                "contents": ["Apple"],
+            },
+            {
+                "id": "shelf",
+                "type": "Shelf",
+                "room": "living",
+                "pose": [1, 3, 0],
+                "contents": ["Book"],
+            },
         ],
         "start": [0.5, 0.5, 0],
     }

@@ -23,13 +23,22 @@ class Endpoint(BaseHTTPRequestHandler):
         type(self).requests += 1
         question = json.dumps(body["messages"], sort_keys=True).encode()
         answer = "Yes" if hashlib.sha256(question).digest()[0] % 3 == 0 else "No"
-        reply = json.dumps({
-            "id": "stand-in", "object": "chat.completion", "created": 1_752_000_000,
-            "model": body.get("model", "stand-in"),
-            "choices": [{"index": 0, "finish_reason": "stop",
-                         "message": {"role": "assistant", "content": answer}}],
-            "usage": {"prompt_tokens": 10, "completion_tokens": 1, "total_tokens": 11},
-        }).encode()
+        reply = json.dumps(
+            {
+                "id": "stand-in",
+                "object": "chat.completion",
+                "created": 1_752_000_000,
+                "model": body.get("model", "stand-in"),
+                "choices": [
+                    {
+                        "index": 0,
+                        "finish_reason": "stop",
+                        "message": {"role": "assistant", "content": answer},
+                    }
+                ],
+                "usage": {"prompt_tokens": 10, "completion_tokens": 1, "total_tokens": 11},
+            }
+        ).encode()
         self.send_response(200)
         self.send_header("Content-Type", "application/json")
         self.send_header("Content-Length", str(len(reply)))
@@ -56,7 +65,9 @@ def endpoint(tmp_path):
     thread.join()
 
 
-def test_llm_strategy_matches_ferret_eval_through_the_shared_cache(endpoint, tmp_path, houses, ferret_bin):
+def test_llm_strategy_matches_ferret_eval_through_the_shared_cache(
+    endpoint, tmp_path, houses, ferret_bin
+):
     cache = tmp_path / "answers.sqlite"
     specs = ["llm+model/p-yesno/stand-in", "model/uniform"]
     ev = ferret.evaluate(houses[:4], specs, config=endpoint, llm_cache=cache, seed=1)
@@ -65,10 +76,28 @@ def test_llm_strategy_matches_ferret_eval_through_the_shared_cache(endpoint, tmp
     llm_rows = [r for r in ev.rows if r["strategy"] == specs[0]]
     assert len(llm_rows) == 4
     # The command line answers from the same cache, offline: nothing is asked again.
-    run_cli(ferret_bin, "eval", "--generate", str(HOUSES), "--house-seed", str(HOUSE_SEED),
-            "--range", "0..4", "--strategies", ",".join(specs), "--seed", "1",
-            "--config", str(endpoint), "--llm-cache", str(cache), "--offline",
-            "--out", str(tmp_path / "out"), cwd=tmp_path)
+    run_cli(
+        ferret_bin,
+        "eval",
+        "--generate",
+        str(HOUSES),
+        "--house-seed",
+        str(HOUSE_SEED),
+        "--range",
+        "0..4",
+        "--strategies",
+        ",".join(specs),
+        "--seed",
+        "1",
+        "--config",
+        str(endpoint),
+        "--llm-cache",
+        str(cache),
+        "--offline",
+        "--out",
+        str(tmp_path / "out"),
+        cwd=tmp_path,
+    )
     assert Endpoint.requests == asked
     cli = read_trials(tmp_path / "out" / "trials.csv")
     assert [(c["strategy"], float(c["cost_m"]), c["searched"]) for c in cli] == [
@@ -80,7 +109,9 @@ def test_llm_strategy_matches_ferret_eval_through_the_shared_cache(endpoint, tmp
     # A Search over the cache, offline, makes the same decisions.
     row = llm_rows[2]
     house = houses[row["house_index"]]
-    s = ferret.Search(house, row["target"], specs[0], config=endpoint, llm_cache=cache, offline=True)
+    s = ferret.Search(
+        house, row["target"], specs[0], config=endpoint, llm_cache=cache, offline=True
+    )
     while (c := s.next_container()) is not None:
         s.record(c, row["target"] in house.contents(c), house.contents(c))
     assert s.cost == row["cost_m"] and " ".join(s.searched) == row["searched"]
@@ -97,7 +128,8 @@ def test_a_search_asks_the_endpoint_without_holding_the_gil(endpoint, tmp_path, 
     while (c := s.next_container()) is not None:
         s.record(c, target in house.contents(c), house.contents(c))
     assert Endpoint.requests > 0
-    ev = ferret.evaluate([house], [spec], config=endpoint, llm_cache=tmp_path / "live.sqlite",
-                         trials_per_house="all")
+    ev = ferret.evaluate(
+        [house], [spec], config=endpoint, llm_cache=tmp_path / "live.sqlite", trials_per_house="all"
+    )
     [row] = [r for r in ev.rows if r["target"] == target]
     assert s.cost == row["cost_m"] and " ".join(s.searched) == row["searched"]

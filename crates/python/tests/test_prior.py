@@ -28,8 +28,13 @@ def test_train_save_load_round_trip(tmp_path, houses):
 def test_probabilities_follow_the_training_houses():
     training = ferret.generate_houses(40, 3)
     prior = ferret.Prior.train(training)
-    held = {(o.type, c.type) for h in training for c in h.containers for o in h.objects
-            if o.container == c.id}
+    held = {
+        (o.type, c.type)
+        for h in training
+        for c in h.containers
+        for o in h.objects
+        if o.container == c.id
+    }
     target, container = sorted(held)[0]
     p = prior.probability(target, container)
     assert 0.0 < p <= 1.0
@@ -44,20 +49,37 @@ def test_default_prior_is_the_one_ferret_eval_uses(tmp_path, houses, ferret_bin)
     assert ferret.Prior.default() == default
     # ferret prior train on the same generated houses writes the same prior.
     path = tmp_path / "p.json"
-    run_cli(ferret_bin, "prior", "train", "--generate", "500", "--house-seed", "1000003",
-            "--out", str(path))
+    run_cli(
+        ferret_bin,
+        "prior",
+        "train",
+        "--generate",
+        "500",
+        "--house-seed",
+        "1000003",
+        "--out",
+        str(path),
+    )
     assert ferret.Prior.load(path) == default
-    assert ferret.evaluate(houses[:4], ["model/prior"], prior=default).rows == \
-        ferret.evaluate(houses[:4], ["model/prior"]).rows
+    assert (
+        ferret.evaluate(houses[:4], ["model/prior"], prior=default).rows
+        == ferret.evaluate(houses[:4], ["model/prior"]).rows
+    )
 
 
 def write_table(folder):
     """A tiny word table: kitchen words near one another, bedroom words near one another."""
     folder.mkdir()
     words = {
-        "kitchen": [1, 0, 0], "fridge": [0.9, 0.1, 0], "counter": [0.8, 0, 0.2],
-        "bedroom": [0, 1, 0], "bed": [0, 0.9, 0.1], "dresser": [0.1, 0.8, 0],
-        "living": [0, 0, 1], "room": [0.2, 0.2, 0.6], "sofa": [0, 0.1, 0.9],
+        "kitchen": [1, 0, 0],
+        "fridge": [0.9, 0.1, 0],
+        "counter": [0.8, 0, 0.2],
+        "bedroom": [0, 1, 0],
+        "bed": [0, 0.9, 0.1],
+        "dresser": [0.1, 0.8, 0],
+        "living": [0, 0, 1],
+        "room": [0.2, 0.2, 0.6],
+        "sofa": [0, 0.1, 0.9],
     }
     lines = [" ".join([w, *map(str, v)]) for w, v in words.items()]
     (folder / "vectors.txt").write_text("# id: tiny\n" + "\n".join(lines) + "\n")
@@ -75,17 +97,35 @@ def test_a_learned_prior_plans_as_ferret_eval_does_with_its_file(tmp_path, house
     specs = ["model/learned", "model/learned-head", "model/learned-head-random"]
     ev = ferret.evaluate(houses, specs, prior=prior, seed=2)
     out = tmp_path / "out"
-    run_cli(ferret_bin, "eval", "--generate", "12", "--house-seed", "3", "--seed", "2",
-            "--prior", str(path), "--strategies", ",".join(specs), "--out", str(out))
+    run_cli(
+        ferret_bin,
+        "eval",
+        "--generate",
+        "12",
+        "--house-seed",
+        "3",
+        "--seed",
+        "2",
+        "--prior",
+        str(path),
+        "--strategies",
+        ",".join(specs),
+        "--out",
+        str(out),
+    )
     import csv
+
     with open(out / "trials.csv", newline="") as f:
         cli = {(r["house_index"], r["strategy"]): float(r["cost_m"]) for r in csv.DictReader(f)}
     assert len(cli) == len(ev.rows) == 3 * len(houses)
     for r in ev.rows:
         assert r["cost_m"] == pytest.approx(cli[(str(r["house_index"]), r["strategy"])], abs=1e-9)
+
     # The heads over the names' vectors and over random ones plan differently somewhere: the
     # vectors are really used (model/learned is the prior here, where every name was seen).
-    by = lambda s: [r["searched"] for r in ev.rows if r["strategy"] == s]
+    def by(s):
+        return [r["searched"] for r in ev.rows if r["strategy"] == s]
+
     assert by("model/learned-head") != by("model/learned-head-random")
 
 
@@ -93,5 +133,8 @@ def test_learned_training_errors_name_the_folder(tmp_path):
     with pytest.raises(ferret.FerretError, match=r"nowhere"):
         ferret.Prior.train(ferret.generate_houses(10, 1), embeddings=str(tmp_path / "nowhere"))
     with pytest.raises(ferret.FerretError, match=r"folds"):
-        ferret.Prior.train(ferret.generate_houses(4, 1), embeddings=str(write_table(tmp_path / "t")),
-                           learned_folds=5)
+        ferret.Prior.train(
+            ferret.generate_houses(4, 1),
+            embeddings=str(write_table(tmp_path / "t")),
+            learned_folds=5,
+        )

@@ -29,8 +29,20 @@ def test_evaluate_matches_ferret_eval_on_real_houses(val, ferret_bin, tmp_path):
     houses = ferret.load_houses(path, asset_db=db, range="0..6")
     specs = "optimistic+greedy,model/prior,model/prior/exact"
     ev = ferret.evaluate(houses, specs, seed=0)
-    run_cli(ferret_bin, "eval", "--houses", str(path), "--asset-db", str(db), "--range", "0..6",
-            "--strategies", specs, "--out", str(tmp_path))
+    run_cli(
+        ferret_bin,
+        "eval",
+        "--houses",
+        str(path),
+        "--asset-db",
+        str(db),
+        "--range",
+        "0..6",
+        "--strategies",
+        specs,
+        "--out",
+        str(tmp_path),
+    )
     cli = read_trials(tmp_path / "trials.csv")
     assert len(cli) == len(ev.rows) == 18
     for r, c in zip(ev.rows, cli):
@@ -42,9 +54,22 @@ def test_protocol_paper_on_real_houses(val, ferret_bin, tmp_path):
     path, db = val
     houses = ferret.load_houses(path, asset_db=db, range="3..6", containers="furniture")
     ev = ferret.evaluate(houses, ["model/prior", "optimistic+greedy"], protocol="paper")
-    run_cli(ferret_bin, "eval", "--houses", str(path), "--asset-db", str(db), "--range", "3..6",
-            "--strategies", "model/prior,optimistic+greedy", "--protocol", "paper",
-            "--out", str(tmp_path))
+    run_cli(
+        ferret_bin,
+        "eval",
+        "--houses",
+        str(path),
+        "--asset-db",
+        str(db),
+        "--range",
+        "3..6",
+        "--strategies",
+        "model/prior,optimistic+greedy",
+        "--protocol",
+        "paper",
+        "--out",
+        str(tmp_path),
+    )
     cli = read_trials(tmp_path / "trials.csv")
     assert [r["cost_m"] for r in ev.rows] == [float(c["cost_m"]) for c in cli]
     # The paper's soft travel cost is reported, not the plain path length a Search travels.

@@ -23,8 +23,10 @@ def test_distances_are_a_metric(seed):
 
 
 @settings(max_examples=6)
-@given(seed=st.integers(min_value=0, max_value=2**32 - 1),
-       resolution=st.sampled_from([0.05, 0.08, 0.1]))
+@given(
+    seed=st.integers(min_value=0, max_value=2**32 - 1),
+    resolution=st.sampled_from([0.05, 0.08, 0.1]),
+)
 def test_a_search_travels_the_legs_of_the_matrix(seed, resolution):
     [house] = ferret.generate_houses(1, seed)
     d = house.distances(resolution=resolution)

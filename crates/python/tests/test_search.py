@@ -6,7 +6,13 @@ import pytest
 
 import ferret
 
-STRATEGIES = ["optimistic+greedy", "model/uniform", "model/prior", "model/prior/exact", "model/prior/k3"]
+STRATEGIES = [
+    "optimistic+greedy",
+    "model/uniform",
+    "model/prior",
+    "model/prior/exact",
+    "model/prior/k3",
+]
 
 
 def simulate(house, target, strategy, **kw):
@@ -35,13 +41,21 @@ def test_step_semantics(houses):
     target = house.target_types()[0]
     s = ferret.Search(house, target, "model/prior")
     assert (s.target, s.strategy, s.cost, s.searched, s.found, s.done) == (
-        target, "model/prior", 0.0, [], None, False)
+        target,
+        "model/prior",
+        0.0,
+        [],
+        None,
+        False,
+    )
     first = s.next_container()
     assert isinstance(first, ferret.Container)
     # Asking again without a search proposes the same container.
     assert s.next_container() == first
     # The robot may search another container than the one proposed; the leg is what it cost.
-    other = next(c for c in house.containers if c.id != first.id and target not in house.contents(c))
+    other = next(
+        c for c in house.containers if c.id != first.id and target not in house.contents(c)
+    )
     d = house.distances()
     leg = s.record(other.id, False, house.contents(other))
     assert leg == s.cost == d[0, other.index + 1]
@@ -119,7 +133,9 @@ def test_the_robot_loop_example_runs():
     from pathlib import Path
 
     example = Path(__file__).resolve().parents[3] / "examples" / "python_robot_loop.py"
-    out = subprocess.run([sys.executable, str(example), "--seed", "4"], capture_output=True, text=True)
+    out = subprocess.run(
+        [sys.executable, str(example), "--seed", "4"], capture_output=True, text=True
+    )
     assert out.returncode == 0, out.stderr
     last = out.stdout.strip().splitlines()[-1]
     assert last.startswith("found the ")
@@ -137,8 +153,11 @@ def test_a_container_of_another_house_is_refused(houses):
     other = next(h for h in houses[1:] if any(c.id in ids for c in h.containers))
     foreign = next(c for c in other.containers if c.id in ids)
     s = ferret.Search(home, home.target_types()[0], "optimistic+greedy")
-    for call in (lambda: s.record(foreign, False, []), lambda: s.distance_to(foreign),
-                 lambda: s.path_to(foreign)):
+    for call in (
+        lambda: s.record(foreign, False, []),
+        lambda: s.distance_to(foreign),
+        lambda: s.path_to(foreign),
+    ):
         with pytest.raises(ferret.SearchError, match="another house"):
             call()
     assert s.searched == [] and s.cost == 0.0

@@ -7,11 +7,12 @@ from pathlib import Path
 import pytest
 
 import ferret
-
 from conftest import HOUSE_SEED, HOUSES
 
 FILES = ("trials.csv", "summary.csv", "paired.csv", "summary.md")
-OPTIONS = dict(strategies="optimistic+greedy,model/uniform,model/prior,oracle", trials_per_house="all")
+OPTIONS = dict(
+    strategies="optimistic+greedy,model/uniform,model/prior,oracle", trials_per_house="all"
+)
 
 
 def one_machine(houses, directory: Path) -> Path:
@@ -54,9 +55,16 @@ def test_dask_local_cluster_shards_merge_into_the_one_machine_run(houses, tmp_pa
     import ferret.dask
 
     one = one_machine(houses, tmp_path / "one")
-    with distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
-    ) as cluster, distributed.Client(cluster) as client:
+    with (
+        distributed.LocalCluster(
+            n_workers=2,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address=None,
+        ) as cluster,
+        distributed.Client(cluster) as client,
+    ):
         result = ferret.dask.evaluate_sharded(
             client,
             functools.partial(ferret.generate_houses, HOUSES, HOUSE_SEED),

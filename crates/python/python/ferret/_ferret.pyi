@@ -303,7 +303,10 @@ class CalibrationResult:
         """One dict per scored source, with ``calibration.csv``'s columns."""
     @property
     def reliability(self) -> Dict[str, List[Dict[str, float]]]:
-        """Per source, its reliability bins (``lo``, ``hi``, ``count``, ``mean_p``, ``observed``)."""
+        """Per source, its reliability bins.
+
+        Each bin: ``lo``, ``hi``, ``count``, ``mean_p``, ``observed``.
+        """
     @property
     def trials(self) -> int:
         """(house, target) pairs scored."""
@@ -340,7 +343,10 @@ class SelectionResult:
         """The selection methods that ran (``ucb``, ``replay``)."""
     @property
     def curves(self) -> Dict[str, Dict[str, List[float]]]:
-        """Per method: ``avg_cost``, ``cum_regret``, ``paper_regret`` against k; ``best``: ``avg_cost``."""
+        """Per method: ``avg_cost``, ``cum_regret``, ``paper_regret`` against k.
+
+        ``best``: ``avg_cost``.
+        """
     @property
     def rows(self) -> List[Dict[str, Any]]:
         """The rows of ``selection.csv``."""

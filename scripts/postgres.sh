@@ -18,7 +18,8 @@ find_bin() {
         return
     fi
     local found
-    found="$(ls -d /usr/lib/postgresql/*/bin/"$name" 2>/dev/null | sort -V | tail -1 || true)"
+    found="$(find /usr/lib/postgresql -mindepth 3 -maxdepth 3 -path "*/bin/$name" 2>/dev/null \
+        | sort -V | tail -1 || true)"
     [ -n "$found" ] || {
         echo "postgres.sh: $name not found (install Debian's postgresql package)" >&2
         exit 1

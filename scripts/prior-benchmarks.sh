@@ -35,6 +35,7 @@ log "calibrated against raw: priors on all 1 500 training houses"
 "$ferret" prior train "${train[@]}" --also "$DATA/oneroom-train500.jsonl.gz" \
     --containers furniture --out prior-furniture.json
 both="optimistic+greedy,model/prior-raw,model/prior,model/prior-raw/exact,model/prior/exact,oracle"
+# shellcheck disable=SC2054 # one option value, a comma-separated list
 pairs=(--paired-against model/prior-raw,model/prior-raw/exact)
 for set in multiroom-val150 smallhouse-val100 oneroom-val100; do
     for per in 1 all; do

@@ -99,14 +99,16 @@ PY
     log "building llama-server (about 8 min on 2 cores, once): $CMAKE_FLAGS"
     rm -rf "$CACHE/llama-build"
     # shellcheck disable=SC2086 # the flags are words on purpose
-    "$CACHE/venv/bin/cmake" -S "$src/vendor/llama.cpp" -B "$CACHE/llama-build" -G Ninja \
+    if ! { "$CACHE/venv/bin/cmake" -S "$src/vendor/llama.cpp" -B "$CACHE/llama-build" -G Ninja \
         -DCMAKE_MAKE_PROGRAM="$CACHE/venv/bin/ninja" -DCMAKE_BUILD_TYPE=Release \
         -DLLAMA_BUILD_UI=OFF -DLLAMA_USE_PREBUILT_UI=OFF -DLLAMA_CURL=OFF -DLLAMA_OPENSSL=OFF \
         -DLLAMA_BUILD_TESTS=OFF -DLLAMA_BUILD_EXAMPLES=OFF $CMAKE_FLAGS \
         -DBUILD_SHARED_LIBS=OFF >"$CACHE/logs/llama-server.log" 2>&1 \
         && "$CACHE/venv/bin/cmake" --build "$CACHE/llama-build" --target llama-server \
-            -j "$(nproc)" >>"$CACHE/logs/llama-server.log" 2>&1 \
-        || { tail -20 "$CACHE/logs/llama-server.log" >&2; exit 1; }
+            -j "$(nproc)" >>"$CACHE/logs/llama-server.log" 2>&1; }; then
+        tail -20 "$CACHE/logs/llama-server.log" >&2
+        exit 1
+    fi
     mkdir -p "$CACHE/bin"
     cp "$CACHE/llama-build/bin/llama-server" "$CACHE/bin/llama-server"
     printf '%s' "$CMAKE_FLAGS" >"$CACHE/bin/llama-server.flags"
@@ -408,9 +410,11 @@ run_learned() {
     local llm=(--config "$OUT/ferret.toml" --llm-cache "$OUT/llm-cache.sqlite")
     local strategies="model/prior,model/learned,model/learned-random,llm+model/p-yesno/qwen"
     strategies+=",fused/p-yesno/qwen,fused/noise,fused-learned/p-yesno/qwen,fused-learned/noise"
+    # shellcheck disable=SC2054 # one option value, a comma-separated list
     local pairs=(--paired-against model/prior,model/learned,fused/noise,fused-learned/noise)
-    local sources="model/uniform,model/prior,model/learned,model/learned-random"
-    sources+=",llm+model/p-yesno/qwen,fused/p-yesno/qwen,fused/noise,fused-learned/p-yesno/qwen,fused-learned/noise"
+    local source_list="model/uniform,model/prior,model/learned,model/learned-random"
+    source_list+=",llm+model/p-yesno/qwen,fused/p-yesno/qwen,fused/noise"
+    source_list+=",fused-learned/p-yesno/qwen,fused-learned/noise"
     cd "$OUT"
     local t0=$SECONDS
     "$ferret" llm ping qwen --config ferret.toml
@@ -430,10 +434,10 @@ run_learned() {
         if [ "$e" = glove ]; then
             log "$e: calibration on val150 $ALL_RANGE (a target per house), unseen and seen types"
             "$ferret" calibrate "${val[@]}" "${common[@]}" --holdout-types "$FOLDS" \
-                --targets-per-house 1 --sources "$sources" --max-fallback-share "$MAX_FALLBACK" \
+                --targets-per-house 1 --sources "$source_list" --max-fallback-share "$MAX_FALLBACK" \
                 --out "learned-cal-unseen-$e"
             "$ferret" calibrate "${val[@]}" "${common[@]}" --targets-per-house 1 \
-                --sources "$sources" --max-fallback-share "$MAX_FALLBACK" --out "learned-cal-seen-$e"
+                --sources "$source_list" --max-fallback-share "$MAX_FALLBACK" --out "learned-cal-seen-$e"
             log "$e: unseen types, val150 $ALL_RANGE, each trial's target held out ($FOLDS folds)"
             "$ferret" eval "${val[@]}" "${common[@]}" --holdout-types "$FOLDS" \
                 --strategies "$strategies" "${pairs[@]}" --max-fallback-share "$MAX_FALLBACK" \
@@ -444,7 +448,7 @@ run_learned() {
         fi
         log "$e: the workshop scene"
         "$ferret" calibrate --houses "$ROOT/examples/workshop/scene.yaml" "${common[@]}" \
-            --embeddings "$folder" --sources "$sources" --max-fallback-share "$MAX_FALLBACK" \
+            --embeddings "$folder" --sources "$source_list" --max-fallback-share "$MAX_FALLBACK" \
             --out "learned-cal-workshop-$e"
         "$ferret" eval --houses "$ROOT/examples/workshop/scene.yaml" "${common[@]}" \
             --embeddings "$folder" --trials-per-house all --strategies "$strategies" "${pairs[@]}" \

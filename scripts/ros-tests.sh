@@ -46,7 +46,8 @@ if [ "$version" != 3.11 ]; then
     exit 1
 fi
 
-HASH="$(cat "$REQS" "$ROOT/ros/build_interfaces.sh" $(find "$ROOT/ros/interfaces" -type f | sort) | sha256sum | cut -c1-12)"
+HASH="$( { cat "$REQS" "$ROOT/ros/build_interfaces.sh"
+    find "$ROOT/ros/interfaces" -type f -print0 | sort -z | xargs -0 cat; } | sha256sum | cut -c1-12)"
 VENV="$CACHE/venv-$HASH"
 PY="$VENV/bin/python"
 

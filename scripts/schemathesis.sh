@@ -89,5 +89,5 @@ curl -sf -H "Authorization: Bearer $TOKEN" "$URL/openapi.json" -o "$WORK/openapi
 log "finished in $(( $(date +%s) - started )) s with status $status"
 if [ "$status" -ne 0 ]; then
     tail -n 40 "$WORK/serve.err" >&2
+    exit "$status"
 fi
-exit "$status"

@@ -1,3 +1,4 @@
+# shellcheck shell=bash
 # Sourced by the scripts that run the `ferret` binary: one answer to "which ferret?".
 #
 #   source "$ROOT/scripts/lib/ferret-bin.sh"

@@ -31,6 +31,12 @@ pub const MAX_OBJECTS: usize = 1000;
 /// An object or room type as the API takes it: ASCII letters and digits.
 pub const TYPE_NAME_PATTERN: &str = "^[A-Za-z0-9]{1,100}$";
 
+/// An object type as the API takes it ([`TYPE_NAME_PATTERN`]): ASCII letters and digits, as in
+/// `CellPhone`.
+pub(crate) fn is_type_name(s: &str) -> bool {
+    !s.is_empty() && s.len() <= MAX_TYPE_NAME && s.chars().all(|c| c.is_ascii_alphanumeric())
+}
+
 /// A name or id in an uploaded scene: printable ASCII, at least one character not a space.
 pub const UPLOAD_NAME_PATTERN: &str = "^[ -~]{0,99}[!-~][ -~]{0,99}$";
 
@@ -38,7 +44,7 @@ pub const UPLOAD_NAME_PATTERN: &str = "^[ -~]{0,99}[!-~][ -~]{0,99}$";
 /// limits. What it cannot say is refused with 422 naming the field: a container in no room,
 /// overlapping rooms, more grid cells or polygon vertices in all than the limits, an
 /// unreachable container.
-pub fn scene_schema(limits: &crate::service::SceneLimits) -> serde_json::Value {
+pub fn scene_schema(limits: &crate::model::SceneLimits) -> serde_json::Value {
     use serde_json::json;
     let max = ferret_world::procthor::MAX_COORDINATE;
     let coordinate = json!({"type": "number", "minimum": -max, "maximum": max});

@@ -142,3 +142,29 @@ pub struct StoredReply {
     /// JSON body.
     pub body: String,
 }
+
+/// What one uploaded scene and the store may hold. Planning a scene costs memory in proportion
+/// to its grid cells and time in proportion to cells × containers, so both are bounded before a
+/// grid is built.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SceneLimits {
+    /// Uploaded scenes the store may hold (413 past it).
+    pub max_scenes: usize,
+    /// Grid cells of an uploaded scene at the server's resolution (422 past it).
+    pub max_cells: u64,
+    /// Containers of an uploaded scene, and obstacles likewise (422 past it).
+    pub max_containers: usize,
+    /// Vertices of all room polygons of an uploaded scene together (422 past it).
+    pub max_vertices: usize,
+}
+
+impl Default for SceneLimits {
+    fn default() -> Self {
+        Self {
+            max_scenes: 1000,
+            max_cells: 4_000_000,
+            max_containers: 200,
+            max_vertices: 1000,
+        }
+    }
+}

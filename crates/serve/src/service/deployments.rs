@@ -9,14 +9,14 @@ use ferret_plan::{ReplayMode, Strategy};
 use ferret_select::DEFAULT_C;
 use ferret_world::TravelCost;
 
+use super::replies::Begun;
+use super::{Service, json};
 use crate::api::{
     CreateDeployment, DeploymentState, MAX_C, MAX_SEED, NextChoice, StrategyRow, TrialSummary,
 };
 use crate::error::{ApiError, ErrorKind};
 use crate::model::{ApiReply, DeploymentSpec, Outcome, StoredTrial, TrialStatus};
-use crate::replies::Begun;
 use crate::selectors::replayed;
-use crate::service::{Service, json};
 
 impl Service {
     pub(crate) fn spec(&self, id: i64) -> Result<DeploymentSpec, ApiError> {

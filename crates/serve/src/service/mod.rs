@@ -10,6 +10,12 @@
 //! read when a request needs them, and the grids and distances planning needs are built on
 //! demand into a cache of bounded size, a few at a time.
 
+mod deployments;
+mod replies;
+mod scenes;
+mod starts;
+mod trials;
+
 use std::collections::BTreeMap;
 use std::sync::{Arc, RwLock};
 
@@ -20,34 +26,8 @@ use serde::Serialize;
 use crate::api::SceneSummary;
 use crate::error::ApiError;
 use crate::grids::Grids;
-use crate::model::{ApiReply, Outcome};
+use crate::model::{ApiReply, Outcome, SceneLimits};
 use crate::store::Store;
-
-/// What one uploaded scene and the store may hold. Planning a scene costs memory in proportion
-/// to its grid cells and time in proportion to cells × containers, so both are bounded before a
-/// grid is built.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct SceneLimits {
-    /// Uploaded scenes the store may hold (413 past it).
-    pub max_scenes: usize,
-    /// Grid cells of an uploaded scene at the server's resolution (422 past it).
-    pub max_cells: u64,
-    /// Containers of an uploaded scene, and obstacles likewise (422 past it).
-    pub max_containers: usize,
-    /// Vertices of all room polygons of an uploaded scene together (422 past it).
-    pub max_vertices: usize,
-}
-
-impl Default for SceneLimits {
-    fn default() -> Self {
-        Self {
-            max_scenes: 1000,
-            max_cells: 4_000_000,
-            max_containers: 200,
-            max_vertices: 1000,
-        }
-    }
-}
 
 /// How the service bounds its work.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -121,7 +101,7 @@ pub struct Service {
     /// Deployments' selectors kept between requests.
     pub(crate) selectors: crate::selectors::Selectors,
     /// Trial starts waiting for their deployment's lock on this replica, made together.
-    pub(crate) starts: crate::gather::Gather<i64, crate::trials::StartJob, crate::trials::Gathered>,
+    pub(crate) starts: crate::gather::Gather<i64, starts::StartJob, starts::Gathered>,
     /// Request ids being run on this replica now.
     pub(crate) in_flight: std::sync::Mutex<std::collections::HashSet<String>>,
     /// Deployments' specs read so far: a spec never changes once stored, and every request of

@@ -5,10 +5,10 @@
 
 use sha2::{Digest, Sha256};
 
+use super::Service;
 use crate::api::MAX_REQUEST_ID;
 use crate::error::{ApiError, ErrorKind};
 use crate::model::{ApiReply, StoredReply};
-use crate::service::Service;
 use crate::store::{Claim, Final, FinalFailed, Reader, Writer, store_reply};
 
 /// How a write with a request id begins: answered from the stored reply, or claimed.

@@ -6,13 +6,14 @@ use std::sync::{Arc, PoisonError};
 use ferret_world::distance::Place;
 use ferret_world::{House, OccupancyGrid, Scene, SceneFile};
 
-use crate::api::{ContainerInfo, MAX_TYPE_NAME, RoomInfo, SceneDetail, SceneSummary, UploadScene};
+use super::replies::Begun;
+use super::{Scenes, Service, json};
+use crate::api::{
+    ContainerInfo, MAX_TYPE_NAME, RoomInfo, SceneDetail, SceneSummary, UploadScene, is_type_name,
+};
 use crate::error::{ApiError, ErrorKind};
 use crate::grids::Placed;
 use crate::model::{ApiReply, Outcome};
-use crate::replies::Begun;
-use crate::service::{Scenes, Service, json};
-use crate::trials::is_type_name;
 
 /// A name or id in an uploaded scene: printable ASCII, not only spaces, at most 100 characters
 /// (they appear in URLs and replies; the scene file format itself is more lenient).

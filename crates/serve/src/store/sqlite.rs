@@ -11,7 +11,9 @@ use rusqlite::config::DbConfig;
 use rusqlite::types::{ToSqlOutput, ValueRef};
 use rusqlite::{Connection, TransactionBehavior};
 
-use super::{Row, SCHEMA_VERSION, StoreError, Value};
+use super::SCHEMA_VERSION;
+use super::error::StoreError;
+use super::value::{Row, Value};
 
 /// Schema migrations, version `i + 1` at index `i`. Version 1 is the schema of the first
 /// servers, written with `IF NOT EXISTS` so that it also describes their files.
@@ -289,7 +291,7 @@ impl Sqlite {
 
     pub(super) fn write<T, E: From<StoreError>>(
         &self,
-        f: impl FnOnce(super::Conn<'_>) -> Result<T, E>,
+        f: impl FnOnce(&Connection) -> Result<T, E>,
     ) -> Result<T, E> {
         self.check_in_place()?;
         let mut conn = self.lock();
@@ -298,7 +300,7 @@ impl Sqlite {
         let tx = conn
             .transaction_with_behavior(TransactionBehavior::Immediate)
             .map_err(|e| self.sql(e))?;
-        let out = f(super::Conn::Sqlite(&tx, self))?;
+        let out = f(&tx)?;
         tx.commit().map_err(|e| self.sql(e))?;
         Ok(out)
     }
@@ -307,14 +309,14 @@ impl Sqlite {
 impl Sqlite {
     pub(super) fn write_finishing<T, E: From<StoreError>>(
         &self,
-        f: impl FnOnce(super::Conn<'_>) -> Result<(T, Vec<super::Final>), E>,
+        f: impl FnOnce(&Connection) -> Result<(T, Vec<super::Final>), E>,
     ) -> Result<Result<T, super::FinalFailed>, E> {
         self.check_in_place()?;
         let mut conn = self.lock();
         let tx = conn
             .transaction_with_behavior(TransactionBehavior::Immediate)
             .map_err(|e| self.sql(e))?;
-        let (out, finals) = f(super::Conn::Sqlite(&tx, self))?;
+        let (out, finals) = f(&tx)?;
         for (index, last) in finals.iter().enumerate() {
             if let Err(error) = query(&tx, self, last.sql, &last.params) {
                 // Dropping the transaction rolls it back.

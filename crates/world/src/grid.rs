@@ -54,7 +54,7 @@ impl Default for GridParams {
 
 impl GridParams {
     /// Smallest resolution accepted, metres: finer grids of whole houses do not fit in memory.
-    pub const MIN_RESOLUTION: f64 = 0.005;
+    pub const MIN_RESOLUTION: f64 = crate::raster::MIN_RESOLUTION;
 
     fn check(&self, house: &str) -> Result<()> {
         let bad = |message: String| {
@@ -143,9 +143,7 @@ const KIND_MASK: u8 = 0x07;
 /// Set on free cells connected to the start cell.
 const REACHABLE: u8 = 0x80;
 const NO_ROOM: u8 = u8::MAX;
-/// Largest number of cells in a grid (16.7 M, e.g. 200 m × 200 m at 0.05 m; 2 bytes per cell):
-/// protects against absurd coordinates in bad input and absurdly fine resolutions.
-pub const MAX_CELLS: u64 = 1 << 24;
+pub use crate::raster::MAX_CELLS;
 
 /// The origin, width and height (cells) of the grid over `bounds`: the bounds plus an Outside
 /// margin wide enough that inflation never needs to look past the border.

@@ -16,6 +16,7 @@ pub mod house;
 pub mod input;
 pub mod map;
 pub mod procthor;
+pub mod raster;
 pub mod rules;
 pub mod scene;
 pub mod soft;

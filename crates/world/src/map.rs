@@ -44,7 +44,7 @@ pub struct OccupancyMap {
 }
 
 /// The largest map accepted, in pixels (the same bound as ferret's own grids).
-pub const MAX_MAP_PIXELS: u64 = crate::grid::MAX_CELLS;
+pub const MAX_MAP_PIXELS: u64 = crate::raster::MAX_CELLS;
 
 /// The largest `map_server` YAML file read, bytes (they hold six fields).
 pub const MAX_MAP_YAML_BYTES: u64 = 1 << 20;
@@ -117,13 +117,13 @@ impl OccupancyMap {
                 format!("{} is not a positive number of metres", meta.resolution),
             ));
         }
-        if meta.resolution < crate::grid::GridParams::MIN_RESOLUTION {
+        if meta.resolution < crate::raster::MIN_RESOLUTION {
             return Err(err(
                 "resolution",
                 format!(
                     "{} m is finer than the finest grid ferret builds ({} m)",
                     meta.resolution,
-                    crate::grid::GridParams::MIN_RESOLUTION
+                    crate::raster::MIN_RESOLUTION
                 ),
             ));
         }

@@ -50,13 +50,14 @@ pub struct AssetDatabase {
 impl AssetDatabase {
     /// Reads `asset-database.json`.
     pub fn load(path: &Path) -> Result<AssetDatabase> {
-        // Bounded like house files, so that a wrong path (/dev/zero) cannot exhaust memory.
-        let text = crate::input::read_text(path, super::reader::MAX_LINE_BYTES as u64).map_err(
-            |source| WorldError::Io {
-                file: path.to_path_buf(),
-                source,
-            },
-        )?;
+        // Bounded like every file read whole, so that a wrong path cannot exhaust memory.
+        let text =
+            crate::input::read_text(path, crate::input::MAX_INPUT_BYTES).map_err(|source| {
+                WorldError::Io {
+                    file: path.to_path_buf(),
+                    source,
+                }
+            })?;
         Self::parse(&text, path)
     }
 

@@ -37,7 +37,14 @@ from ferret_interfaces.action import SearchObject
 from ferret_interfaces.msg import Belief, Detection
 
 from .maps import Grid, check_map, read_scene_map
-from .planners import AT_START_M, InProcessPlanner, Place, PlannerError, ServePlanner
+from .planners import (
+    AT_START_M,
+    InProcessPlanner,
+    Place,
+    PlannerError,
+    ServePlanner,
+    check_target,
+)
 
 Status = SearchObject.Result
 
@@ -273,6 +280,13 @@ class FerretNode(Node):
         log = self.get_logger()
         if not target:
             return self._end(handle, None, Status.REFUSED, "target_type is empty")
+        # Before waiting for the map: a misspelt target is refused at once, not after a search
+        # of every container.
+        try:
+            known = self.planner.object_types(goal.scene)
+            check_target(target, known, goal.scene or self.planner.scene_name)
+        except PlannerError as e:
+            return self._end(handle, None, Status.REFUSED, str(e))
         if self.get_parameter("require_map").value:
             try:
                 self._wait(handle, self.map_event, self.get_parameter("map_wait_s").value)

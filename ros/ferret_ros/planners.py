@@ -9,6 +9,7 @@ each trial (`ferret deploy`'s selection). `start(target, scene, deployment)` ope
 failure (selection learns nothing).
 """
 
+import difflib
 import json
 import math
 import os
@@ -32,6 +33,41 @@ PLACED_MAX = 32
 
 class PlannerError(Exception):
     """ferret refused or failed; the message says why, for the action's result."""
+
+
+def path_problem(path: str, error: Exception) -> str:
+    """`error` about reading `path`, saying which file a relative path that does not exist was
+    taken to be: the node (and the simulator) may run from any directory."""
+    message = f"{path}: {error}" if path not in str(error) else str(error)
+    if not os.path.isabs(path) and not os.path.exists(path):
+        message += (
+            f" (a relative path is read from the current directory, {os.getcwd()}: "
+            f"{os.path.abspath(path)} does not exist)"
+        )
+    return message
+
+
+def _squashed(name: str) -> str:
+    return "".join(c for c in name.casefold() if c.isalnum())
+
+
+def check_target(target: str, known: Sequence[str], scene: str) -> None:
+    """Refuses a target that is not one of the object types the scene lists (`known`): a search
+    for it could only end "not found" after visiting every container. A name that differs from a
+    known one only in case, spaces or punctuation ("wallet", "remote control"), or by a typo, is
+    suggested; otherwise the known names are listed. A scene that lists no objects (a real home,
+    where nobody wrote down what is where) has no vocabulary to check against."""
+    if not known or target in known:
+        return
+    same = [k for k in known if _squashed(k) == _squashed(target)]
+    close = same or difflib.get_close_matches(target.casefold(), [k.casefold() for k in known], 1)
+    if close:
+        match = next(k for k in known if k.casefold() == close[0].casefold())
+        raise PlannerError(f"unknown target {target!r}: did you mean {match!r}?")
+    raise PlannerError(
+        f"unknown target {target!r}: scene {scene!r} holds {len(known)} object types: "
+        + ", ".join(known)
+    )
 
 
 @dataclass(frozen=True)
@@ -64,7 +100,7 @@ class InProcessPlanner:
         try:
             houses = ferret.load_houses(scene)
         except ferret.FerretError as e:
-            raise PlannerError(f"scene {scene}: {e}") from e
+            raise PlannerError(f"scene {path_problem(scene, e)}") from e
         if len(houses) != 1:
             raise PlannerError(f"scene {scene}: holds {len(houses)} houses, the node needs one")
         self.house = houses[0]
@@ -110,6 +146,11 @@ class InProcessPlanner:
     def places(self, scene: str = "") -> List[Place]:
         self._check_scene(scene)
         return self._places
+
+    def object_types(self, scene: str = "") -> List[str]:
+        """The object types the scene lists in its containers, sorted."""
+        self._check_scene(scene)
+        return sorted({o.type for o in self.house.objects})
 
     def start_pose(self) -> Tuple[float, float]:
         return (self.house.start[0], self.house.start[1])
@@ -313,6 +354,11 @@ class ServePlanner:
                 )
             )
         return out
+
+    def object_types(self, scene: str = "") -> List[str]:
+        """The object types the scene lists in its containers, sorted."""
+        s = self._scene(scene)
+        return sorted({t for c in s["containers"] for t in c.get("contents") or []})
 
     def start_pose(self, scene: str = "") -> Tuple[float, float]:
         start = self._scene(scene)["start"]

@@ -240,6 +240,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 
     from .maps import read_scene_map
+    from .planners import path_problem
 
     args_in = rclpy.utilities.remove_ros_args(argv if argv is not None else sys.argv)[1:]
     ap = argparse.ArgumentParser(
@@ -250,16 +251,25 @@ def main(argv: Optional[List[str]] = None) -> int:
     )
     ap.add_argument("--speed", type=float, default=0.5, help="simulated driving speed, m/s")
     args = ap.parse_args(args_in)
-    rclpy.init(args=argv)
-    house = ferret.load_houses(args.scene)[0]
+    try:
+        house = ferret.load_houses(args.scene)[0]
+    except ferret.FerretError as e:
+        print(f"scene {path_problem(args.scene, e)}", file=sys.stderr)
+        return 1
     grid = read_scene_map(args.scene)
     if grid is None:
         print(f"{args.scene}: names no ROS map (map: {{ros: map.yaml}})", file=sys.stderr)
         return 1
+    rclpy.init(args=argv)
     nodes = [SimNav2(house, args.speed), SimDetector(house), MapServer(grid)]
     ex = MultiThreadedExecutor(num_threads=4)
     for n in nodes:
         ex.add_node(n)
+    # The line to wait for before starting the node (docs/ros2.md): everything is served.
+    nodes[0].get_logger().info(
+        f"ready: simulated robot in scene {house.name!r}: navigate_to_pose at {args.speed:g} m/s, "
+        f"a detector on detections, a {grid.width}×{grid.height} map on /map"
+    )
     try:
         ex.spin()
     except (KeyboardInterrupt, ExternalShutdownException):

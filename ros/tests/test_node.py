@@ -250,6 +250,30 @@ def test_unknown_scene_and_empty_target_are_refused(start_node, robot):
     assert r.status == Status.REFUSED and "another-house" in r.message, r.message
 
 
+def test_unknown_target_is_refused_with_the_known_name(start_node, robot, house):
+    nav, _, _ = robot
+    nav.reset()
+    _, client = start_node("ferret_vocabulary", strategies=["model/prior"])
+    # The detector's names are CamelCase; a name that differs only in case or spacing is refused
+    # at once with the one it most likely meant, before any container is searched.
+    for asked, meant in [("wallet", "Wallet"), ("remote control", "RemoteControl")]:
+        _, result, feedback = client.send(asked)
+        assert result.status == Status.REFUSED, result.message
+        assert result.message == f"unknown target {asked!r}: did you mean {meant!r}?"
+        assert not feedback and not result.searched_containers
+    # Nothing close: the scene's object types are listed.
+    _, result, _ = client.send("Spaceship")
+    types = sorted({o.type for o in house.objects})
+    assert result.status == Status.REFUSED
+    assert result.message == (
+        f"unknown target 'Spaceship': scene 'apartment' holds {len(types)} object types: "
+        + ", ".join(types)
+    )
+    # The same node still searches for a name it knows.
+    _, result, _ = client.send("Wallet")
+    assert result.status == Status.FOUND, result.message
+
+
 def searches_as_deployed(client, nav, rows):
     """Each row's target searched through the node: the strategy chosen, the container it was
     found in and the cost are those of `ferret deploy`'s row."""
@@ -547,6 +571,11 @@ def test_trials_start_where_the_robot_is(start_node, robot, house, ferret_serve)
     "params,message",
     [
         ({"scene": "no-such-scene.yaml"}, "no-such-scene.yaml: No such file or directory"),
+        (
+            {"scene": "no-such-scene.yaml"},
+            f"a relative path is read from the current directory, {os.getcwd()}: "
+            f"{os.path.join(os.getcwd(), 'no-such-scene.yaml')} does not exist",
+        ),
         ({"strategies": ["model/bogus"]}, "unknown strategy `model/bogus`"),
         ({"backend": "ros1"}, "parameter `backend`: 'ros1'"),
         ({"backend": "serve"}, "parameter `serve_url`"),

@@ -60,7 +60,10 @@ def check_target(target: str, known: Sequence[str], scene: str) -> None:
     if not known or target in known:
         return
     same = [k for k in known if _squashed(k) == _squashed(target)]
-    close = same or difflib.get_close_matches(target.casefold(), [k.casefold() for k in known], 1)
+    # 0.8: one letter off in a long name ("Walet", "AlarmClok"), not merely a similar word
+    # ("Toaster" is not "Tomato").
+    lower = [k.casefold() for k in known]
+    close = same or difflib.get_close_matches(target.casefold(), lower, 1, cutoff=0.8)
     if close:
         match = next(k for k in known if k.casefold() == close[0].casefold())
         raise PlannerError(f"unknown target {target!r}: did you mean {match!r}?")

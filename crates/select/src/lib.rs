@@ -35,11 +35,13 @@ pub use experiment::{
     DeploymentRecord, ExperimentOptions, ExperimentResult, MAX_EXPERIMENT_TRIALS, MethodRun,
     MethodSummary, run_experiment, run_on_table,
 };
-pub use live::{DeploymentEvent, FinishedTrial, LiveDeployment, StrategyStats, TrialEnd};
+pub use live::{DeploymentEvent, FinishedTrial, LiveDeployment, TrialEnd};
 pub use order::HouseOrder;
 pub use results::{
     ChoiceRow, PAPER_KS, SelectionRow, choice_rows, selection_rows, selection_table_markdown,
     strategy_table_markdown,
 };
-pub use selector::{DEFAULT_C, Method, ReplaySelection, Selector, SelectorVariant, Ucb};
+pub use selector::{
+    DEFAULT_C, Method, ReplaySelection, Selector, SelectorVariant, StrategyStats, Ucb,
+};
 pub use table::{CostTable, ORACLE, REPLAY_TOLERANCE};

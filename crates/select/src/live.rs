@@ -11,7 +11,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::SelectError;
-use crate::selector::{Method, Selector};
+use crate::selector::{Method, Selector, StrategyStats};
 
 /// A finished trial as selection sees it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -48,21 +48,6 @@ pub enum DeploymentEvent {
     },
     /// A trial (any open one) ended.
     Ended(TrialEnd),
-}
-
-/// Per-strategy statistics of a deployment.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct StrategyStats {
-    /// Trials in which this strategy was deployed (`n_i`).
-    pub deployed: usize,
-    /// Mean cost over those trials, metres; `None` before its first.
-    pub mean_cost: Option<f64>,
-    /// Mean over all trials of its real cost where deployed and its replay cost elsewhere
-    /// (`None` before the first trial).
-    pub replay_mean: Option<f64>,
-    /// Its selection score for the next trial (lower is chosen; `-inf` means "must be tried",
-    /// serialized as `null` in JSON).
-    pub score: f64,
 }
 
 /// A live deployment's selector state.

@@ -20,7 +20,21 @@ use rand::{Rng, RngCore};
 use serde::{Deserialize, Serialize};
 
 use crate::SelectError;
-use crate::live::StrategyStats;
+
+/// Per-strategy statistics of a deployment.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StrategyStats {
+    /// Trials in which this strategy was deployed (`n_i`).
+    pub deployed: usize,
+    /// Mean cost over those trials, metres; `None` before its first.
+    pub mean_cost: Option<f64>,
+    /// Mean over all trials of its real cost where deployed and its replay cost elsewhere
+    /// (`None` before the first trial).
+    pub replay_mean: Option<f64>,
+    /// Its selection score for the next trial (lower is chosen; `-inf` means "must be tried",
+    /// serialized as `null` in JSON).
+    pub score: f64,
+}
 
 /// Default exploration constant `c` in metres: the paper's 100 grid cells of 0.05 m.
 pub const DEFAULT_C: f64 = 5.0;

@@ -257,73 +257,187 @@ pub fn calibrate(
         )));
     }
     settings.specs_to_build()?;
-    let fitted = settings.fitted();
-    let mut sources: Vec<(String, Arc<dyn LikelihoodSource>)> = Vec::new();
-    for spec in &settings.sources {
-        let strategy = setup.registry.build(spec)?;
-        let source = strategy.likelihood_source().cloned().ok_or_else(|| {
-            LabError::invalid(format!(
-                "{spec} plans over no likelihood source (use model/... or llm+model/...)"
-            ))
-        })?;
-        sources.push((spec.clone(), source));
-    }
-    let holdout = settings.holdout;
-    let trials: Vec<(&House, ObjectType, &Scene)> = loaded
-        .scenes
-        .iter()
-        .flat_map(|s| {
-            targets_for(s, settings.targets_per_house, settings.seed)
-                .into_iter()
-                .filter(move |t| holdout.is_none_or(|h| h.includes_target(t)))
-                .map(move |t| (&s.house, t, s))
-        })
-        .collect();
-    if trials.is_empty() {
-        return Err(LabError::invalid(format!(
-            "no house in {} holds a target object",
-            loaded.source
-        )));
-    }
-    let pairs: Vec<(&House, &ObjectType)> = trials.iter().map(|(h, t, _)| (*h, t)).collect();
+    let mut sources = likelihood_sources(setup, settings)?;
+    let questions = Questions::new(loaded, settings, feedback)?;
+    let pairs: Vec<(&House, &ObjectType)> =
+        questions.trials.iter().map(|(h, t, _)| (*h, t)).collect();
     let dropped = prefetch(&setup.service, llm, &settings.sources, &pairs, feedback)?;
     sources.retain(|(spec, _)| !dropped.contains(spec));
-
-    let mut scored = Vec::new();
     let mut errors = Vec::new();
-    let holds: Vec<Vec<bool>> = trials
-        .iter()
-        .map(|(house, target, scene)| {
-            (0..house.containers.len())
-                .map(|c| scene.truth.holds(c, target))
-                .collect()
-        })
-        .collect();
-    // Each source's probabilities per trial (None where it failed), kept for the fusion fit.
-    let mut per_source: Vec<(String, Vec<Option<Vec<f64>>>)> = Vec::new();
-    for (spec, source) in &sources {
-        let probabilities =
-            source_probabilities(spec, source.as_ref(), &trials, &mut errors, feedback);
-        let all: Vec<(f64, bool)> = probabilities
-            .iter()
-            .zip(&holds)
-            .filter_map(|(p, h)| p.as_ref().map(|p| p.iter().copied().zip(h.iter().copied())))
-            .flatten()
-            .collect();
-        per_source.push((spec.clone(), probabilities));
-        let Some(c) = Calibration::score(&all, settings.bins) else {
-            errors.push(format!("{spec}: no pairs scored"));
-            continue;
-        };
-        scored.push((spec.clone(), c));
-    }
+    let (scored, per_source) = questions.score(&sources, &mut errors);
     let fusion = if settings.fit_fusion {
+        Some(questions.fit_fusions(setup, &per_source, &mut errors)?)
+    } else {
+        None
+    };
+    let markdown = crate::report::calibration_markdown(
+        &scored,
+        &loaded.source,
+        loaded.scenes.len(),
+        questions.trials.len(),
+        &settings.targets_per_house.per_house("target types"),
+    );
+    Ok(Calibrated {
+        scored,
+        fusion,
+        trials: questions.trials.len(),
+        markdown,
+        errors,
+    })
+}
+
+/// The likelihood source of every spec of `settings.sources`, in order.
+fn likelihood_sources(
+    setup: &Strategies,
+    settings: &CalibrationSettings,
+) -> Result<Vec<(String, Arc<dyn LikelihoodSource>)>> {
+    settings
+        .sources
+        .iter()
+        .map(|spec| {
+            let strategy = setup.registry.build(spec)?;
+            let source = strategy.likelihood_source().cloned().ok_or_else(|| {
+                LabError::invalid(format!(
+                    "{spec} plans over no likelihood source (use model/... or llm+model/...)"
+                ))
+            })?;
+            Ok((spec.clone(), source))
+        })
+        .collect()
+}
+
+/// One (house, target) question of a calibration: every container of the house is a pair.
+type Trial<'a> = (&'a House, ObjectType, &'a Scene);
+
+/// Each source's probabilities per trial (`None` where it failed), by source.
+type PerSource = Vec<(String, Vec<Option<Vec<f64>>>)>;
+
+/// A fusion base, the unseen folds its second view holds out (when it has one), and its views
+/// (`None` when the prior could not give them).
+type BaseViews = (FusionBase, Option<usize>, Option<Vec<PriorView>>);
+
+/// What every step of a calibration asks about: the houses' (house, target) trials, which
+/// containers hold each target, and the settings they were drawn under.
+struct Questions<'a> {
+    loaded: &'a LoadedHouses,
+    settings: &'a CalibrationSettings,
+    trials: Vec<Trial<'a>>,
+    /// Per trial, per container: whether it holds the target.
+    holds: Vec<Vec<bool>>,
+    feedback: &'a dyn Feedback,
+}
+
+impl<'a> Questions<'a> {
+    /// The trials of every house (targets of the held-out fold only, with one), and their
+    /// holders. Errors when no house holds a target.
+    fn new(
+        loaded: &'a LoadedHouses,
+        settings: &'a CalibrationSettings,
+        feedback: &'a dyn Feedback,
+    ) -> Result<Self> {
+        let holdout = settings.holdout;
+        let trials: Vec<Trial<'a>> = loaded
+            .scenes
+            .iter()
+            .flat_map(|s| {
+                targets_for(s, settings.targets_per_house, settings.seed)
+                    .into_iter()
+                    .filter(move |t| holdout.is_none_or(|h| h.includes_target(t)))
+                    .map(move |t| (&s.house, t, s))
+            })
+            .collect();
+        if trials.is_empty() {
+            return Err(LabError::invalid(format!(
+                "no house in {} holds a target object",
+                loaded.source
+            )));
+        }
+        let holds = trials
+            .iter()
+            .map(|(house, target, scene)| {
+                (0..house.containers.len())
+                    .map(|c| scene.truth.holds(c, target))
+                    .collect()
+            })
+            .collect();
+        Ok(Self {
+            loaded,
+            settings,
+            trials,
+            holds,
+            feedback,
+        })
+    }
+
+    /// Every source's calibration (a source with no pair scored is an error instead), and its
+    /// probabilities per trial, kept for the fusion fit.
+    fn score(
+        &self,
+        sources: &[(String, Arc<dyn LikelihoodSource>)],
+        errors: &mut Vec<String>,
+    ) -> (Vec<(String, Calibration)>, PerSource) {
+        let mut scored = Vec::new();
+        let mut per_source = Vec::new();
+        for (spec, source) in sources {
+            let probabilities =
+                source_probabilities(spec, source.as_ref(), &self.trials, errors, self.feedback);
+            let all: Vec<(f64, bool)> = probabilities
+                .iter()
+                .zip(&self.holds)
+                .filter_map(|(p, h)| p.as_ref().map(|p| p.iter().copied().zip(h.iter().copied())))
+                .flatten()
+                .collect();
+            per_source.push((spec.clone(), probabilities));
+            let Some(c) = Calibration::score(&all, self.settings.bins) else {
+                errors.push(format!("{spec}: no pairs scored"));
+                continue;
+            };
+            scored.push((spec.clone(), c));
+        }
+        (scored, per_source)
+    }
+
+    /// The fusion of every fitted source with each base (the prior, and the learned likelihood
+    /// when the prior has one); a fit that fails is an error, the others are kept.
+    fn fit_fusions(
+        &self,
+        setup: &Strategies,
+        per_source: &PerSource,
+        errors: &mut Vec<String>,
+    ) -> Result<FusionFile> {
         let prior = setup
             .prior
             .clone()
             .ok_or_else(|| LabError::invalid("--fit-fusion needs the prior"))?;
-        // The prior as it is, and (for the evidence-aware weights) the prior that never saw
-        // each target's fold: the same questions, once with evidence and once without.
+        let fitted = self.settings.fitted();
+        let views = self.fusion_views(&prior, errors);
+        let mut fits = Vec::new();
+        for (base, unseen_folds, views) in &views {
+            // A base some view could not give is not fitted (the error says why).
+            let Some(views) = views else { continue };
+            for (spec, probabilities) in per_source.iter().filter(|(s, _)| fitted.contains(s)) {
+                match fit_fusion(
+                    spec,
+                    *base,
+                    &prior,
+                    views,
+                    probabilities,
+                    &self.holds,
+                    &self.trained_on(*unseen_folds),
+                ) {
+                    Ok(f) => fits.push(f),
+                    Err(e) => errors.push(format!("--fit-fusion: {}: {spec}: {e}", base.kind())),
+                }
+            }
+        }
+        Ok(FusionFile::new(fits))
+    }
+
+    /// The views of every fusion base: the prior as it is and (for the evidence-aware weights)
+    /// the prior that never saw each target's fold — the same questions, once with evidence and
+    /// once without; likewise for the learned likelihood when the prior has a learned part.
+    fn fusion_views(&self, prior: &Arc<Prior>, errors: &mut Vec<String>) -> Vec<BaseViews> {
+        let (settings, trials, feedback) = (self.settings, &self.trials, self.feedback);
         let mut priors = vec![prior.clone()];
         if let Some(h) = HoldOut::every_fold(settings.fit_unseen_folds) {
             priors.push(Arc::new(prior.holding_out(h)));
@@ -331,7 +445,7 @@ pub fn calibrate(
         let mut views = vec![(
             FusionBase::Prior,
             (priors.len() > 1).then_some(settings.fit_unseen_folds),
-            prior_views(&priors, None, &trials, &mut errors, feedback),
+            prior_views(&priors, None, trials, errors, feedback),
         )];
         // With a learned part, the LLM sources are also fused with the learned likelihood
         // (`fused-learned/...`). Its heads answer for an unseen fold only in the folds they
@@ -346,66 +460,27 @@ pub fn calibrate(
             views.push((
                 FusionBase::Learned,
                 (priors.len() > 1).then_some(learned.settings.folds),
-                prior_views(
-                    &priors,
-                    Some(LearnedKind::Fused),
-                    &trials,
-                    &mut errors,
-                    feedback,
-                ),
+                prior_views(&priors, Some(LearnedKind::Fused), trials, errors, feedback),
             ));
         }
-        let trained_on = |unseen_folds: Option<usize>| {
-            let unseen = unseen_folds.map_or(String::new(), |k| {
-                format!("; every question also asked of the prior without its target's fold of {k}")
-            });
-            format!(
-                "{} houses from {}, {} ({} house–target pairs){unseen}",
-                loaded.scenes.len(),
-                loaded.source,
-                settings
-                    .targets_per_house
-                    .per_house("target types per house"),
-                trials.len()
-            )
-        };
-        let mut fits = Vec::new();
-        for (base, unseen_folds, views) in &views {
-            // A base some view could not give is not fitted (the error says why).
-            let Some(views) = views else { continue };
-            for (spec, probabilities) in per_source.iter().filter(|(s, _)| fitted.contains(s)) {
-                match fit_fusion(
-                    spec,
-                    *base,
-                    &prior,
-                    views,
-                    probabilities,
-                    &holds,
-                    &trained_on(*unseen_folds),
-                ) {
-                    Ok(f) => fits.push(f),
-                    Err(e) => errors.push(format!("--fit-fusion: {}: {spec}: {e}", base.kind())),
-                }
-            }
-        }
-        Some(FusionFile::new(fits))
-    } else {
-        None
-    };
-    let markdown = crate::report::calibration_markdown(
-        &scored,
-        &loaded.source,
-        loaded.scenes.len(),
-        trials.len(),
-        &settings.targets_per_house.per_house("target types"),
-    );
-    Ok(Calibrated {
-        scored,
-        fusion,
-        trials: trials.len(),
-        markdown,
-        errors,
-    })
+        views
+    }
+
+    /// What a fit was trained on, as its file records it.
+    fn trained_on(&self, unseen_folds: Option<usize>) -> String {
+        let unseen = unseen_folds.map_or(String::new(), |k| {
+            format!("; every question also asked of the prior without its target's fold of {k}")
+        });
+        format!(
+            "{} houses from {}, {} ({} house–target pairs){unseen}",
+            self.loaded.scenes.len(),
+            self.loaded.source,
+            self.settings
+                .targets_per_house
+                .per_house("target types per house"),
+            self.trials.len()
+        )
+    }
 }
 
 /// The probabilities `source` gives on every trial; a failure is recorded in `errors` and

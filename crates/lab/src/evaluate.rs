@@ -124,7 +124,7 @@ pub fn evaluate(
     ev
 }
 
-/// An evaluation of strategy specs, with what it was run on.
+/// An evaluation of strategy specs that kept every row ([`EvalContext::collect`]).
 pub struct SpecEvaluation {
     /// The strategies that ran, in the order of the specs: those of an LLM that failed are left
     /// out under `keep_going`.
@@ -133,36 +133,7 @@ pub struct SpecEvaluation {
     pub evaluation: Evaluation,
 }
 
-/// Evaluates the strategies `specs` of `setup` on `scenes` mapped on `grid`, keeping every row:
-/// [`evaluate_specs_each`] collecting what it hands over.
-///
-/// Errors: a spec the registry cannot build, and the errors of prefetching LLM answers.
-pub fn evaluate_specs(
-    scenes: &[Scene],
-    setup: &Strategies,
-    specs: &[String],
-    draw: &TrialDraw<'_>,
-    grid: &GridParams,
-    llm: &LlmSettings,
-    feedback: &dyn Feedback,
-) -> Result<SpecEvaluation> {
-    let mut rows = Vec::new();
-    let run = evaluate_specs_each(scenes, setup, specs, draw, grid, llm, feedback, &mut |h| {
-        rows.extend(h.rows);
-        Ok(())
-    })?;
-    Ok(SpecEvaluation {
-        strategies: run.strategies,
-        evaluation: Evaluation {
-            rows,
-            errors: run.errors,
-            houses_run: run.houses_run,
-            trials_run: run.trials_run,
-        },
-    })
-}
-
-/// One house evaluated, as [`evaluate_specs_each`] hands it over. Its map is dropped when the
+/// One house evaluated, as [`EvalContext::run`] hands it over. Its map is dropped when the
 /// callback returns: a caller that needs it later (to draw the house) clones it.
 pub struct HouseOutcome<'a> {
     /// The house.
@@ -215,91 +186,143 @@ pub struct EvaluationTotals {
 /// thread busy most of the time.
 const HOUSES_PER_THREAD_IN_FLIGHT: usize = 8;
 
-/// Houses read, mapped and run at once by [`evaluate_specs_each`] and [`evaluate_source_each`]
-/// on the current thread pool: a few per worker thread.
+/// Houses read, mapped and run at once by an [`EvalContext`] on the current thread pool: a few
+/// per worker thread.
 pub fn default_batch() -> usize {
     (rayon::current_num_threads() * HOUSES_PER_THREAD_IN_FLIGHT).max(1)
 }
 
-/// Evaluates the strategies `specs` of `setup` on `scenes` mapped on `grid`, as `ferret eval`
-/// does, handing each house's rows to `each` in house order as houses finish:
-/// [`evaluate_source_each`] over houses already in memory, [`default_batch`] at a time.
-///
-/// Errors: a spec the registry cannot build, the errors of prefetching LLM answers, and the
-/// first error of `each` (which stops the evaluation).
-#[allow(clippy::too_many_arguments)]
-pub fn evaluate_specs_each(
-    scenes: &[Scene],
-    setup: &Strategies,
-    specs: &[String],
-    draw: &TrialDraw<'_>,
-    grid: &GridParams,
-    llm: &LlmSettings,
-    feedback: &dyn Feedback,
-    each: &mut dyn FnMut(HouseOutcome<'_>) -> Result<()>,
-) -> Result<EvaluationTotals> {
-    let open = || -> Result<HouseStream<'_>> {
-        Ok(Box::new(
-            scenes
-                .iter()
-                .map(|s| Ok(HouseEvent::Scene(Box::new(s.clone())))),
-        ))
-    };
-    let houses = Houses {
-        open: &open,
-        len_hint: scenes.len(),
-    };
-    evaluate_batches(
-        &houses,
-        setup,
-        specs,
-        draw,
-        grid,
-        llm,
-        default_batch(),
-        feedback,
-        each,
-    )
+/// Where an evaluation's houses come from: already in memory, or read from a source batch by
+/// batch (see [`EvalContext::run`]).
+#[derive(Clone, Copy)]
+pub enum HouseInput<'a> {
+    /// Houses in memory.
+    Scenes(&'a [Scene]),
+    /// Houses read from an opened source as the run goes.
+    Source(&'a OpenSource<'a>),
 }
 
-/// Evaluates the strategies `specs` of `setup` on the houses of `source` mapped on `grid`, as
-/// `ferret eval` does, handing each house's rows to `each` in house order as houses finish. The
-/// houses are read `batch` at a time (at least one): the batch's houses read, mapped, their LLM
-/// questions asked (through the response cache) and their trials run in parallel, then the batch
-/// is dropped. Memory thus holds one batch of houses, maps and rows however many houses there
-/// are, and a caller that writes the rows out (a [`RunWriter`]) runs any number of houses in the
-/// same memory. The rows do not depend on `batch`.
-///
-/// With `keep_going` and an LLM strategy, the questions of every house are asked first, in a
-/// pass of their own over the source (batch by batch as well), so that the strategies of an LLM
-/// that fails are left out of every house, not only of those after the failure. Skipped houses
-/// go to `feedback` as notes (`skipped: …`) as they are read.
-///
-/// [`RunWriter`]: crate::runs::RunWriter
-///
-/// Errors: a spec the registry cannot build, the errors of reading the houses (an invalid house
-/// without `skip_invalid` stops the run there), of prefetching LLM answers, and the first error
-/// of `each` (which stops the evaluation).
-#[allow(clippy::too_many_arguments)]
-pub fn evaluate_source_each(
-    source: &OpenSource<'_>,
-    setup: &Strategies,
-    specs: &[String],
-    draw: &TrialDraw<'_>,
-    grid: &GridParams,
-    llm: &LlmSettings,
-    batch: usize,
-    feedback: &dyn Feedback,
-    each: &mut dyn FnMut(HouseOutcome<'_>) -> Result<()>,
-) -> Result<EvaluationTotals> {
-    let open = || source.houses();
-    let houses = Houses {
-        open: &open,
-        len_hint: source.len_hint(),
-    };
-    evaluate_batches(
-        &houses, setup, specs, draw, grid, llm, batch, feedback, each,
-    )
+/// Everything an evaluation of strategy specs runs with, as `ferret eval` runs it: the
+/// strategies and the LLM service behind them, which of them run, how trials are drawn, the
+/// grid of the maps, what a failed LLM means, how many houses are in flight at once, and where
+/// progress goes. Every evaluation of specs goes through one of these (an example is in the
+/// [crate documentation](crate)).
+#[derive(Clone, Copy)]
+pub struct EvalContext<'a> {
+    /// The registry that builds `specs`, and the LLM service behind LLM strategies.
+    pub setup: &'a Strategies,
+    /// The strategies to run, in order.
+    pub specs: &'a [String],
+    /// How each house's trials are drawn.
+    pub draw: &'a TrialDraw<'a>,
+    /// The grid every house is mapped on.
+    pub grid: &'a GridParams,
+    /// What a failed LLM means (`keep_going`), and the LLM settings of the run.
+    pub llm: &'a LlmSettings,
+    /// Houses read, mapped and run at once (at least one); [`default_batch`] unless set. The
+    /// rows do not depend on it.
+    pub batch: usize,
+    /// Where progress and remarks go.
+    pub feedback: &'a dyn Feedback,
+}
+
+impl<'a> EvalContext<'a> {
+    /// A context of [`default_batch`] houses in flight.
+    pub fn new(
+        setup: &'a Strategies,
+        specs: &'a [String],
+        draw: &'a TrialDraw<'a>,
+        grid: &'a GridParams,
+        llm: &'a LlmSettings,
+        feedback: &'a dyn Feedback,
+    ) -> Self {
+        Self {
+            setup,
+            specs,
+            draw,
+            grid,
+            llm,
+            batch: default_batch(),
+            feedback,
+        }
+    }
+
+    /// The same, `batch` houses at a time.
+    pub fn with_batch(self, batch: usize) -> Self {
+        Self { batch, ..self }
+    }
+
+    /// Evaluates the strategies on `houses`, handing each house's rows to `each` in house order
+    /// as houses finish. The houses are read [`batch`](Self::batch) at a time: the batch's
+    /// houses read, mapped, their LLM questions asked (through the response cache) and their
+    /// trials run in parallel, then the batch is dropped. Memory thus holds one batch of houses,
+    /// maps and rows however many houses there are, and a caller that writes the rows out (a
+    /// [`RunWriter`]) runs any number of houses in the same memory.
+    ///
+    /// With `keep_going` and an LLM strategy, the questions of every house are asked first, in
+    /// a pass of their own over the houses (batch by batch as well), so that the strategies of
+    /// an LLM that fails are left out of every house, not only of those after the failure.
+    /// Skipped houses go to the feedback as notes (`skipped: …`) as they are read.
+    ///
+    /// [`RunWriter`]: crate::runs::RunWriter
+    ///
+    /// Errors: a spec the registry cannot build, the errors of reading the houses (an invalid
+    /// house without `skip_invalid` stops the run there), of prefetching LLM answers, and the
+    /// first error of `each` (which stops the evaluation).
+    pub fn run(
+        &self,
+        houses: HouseInput<'_>,
+        each: &mut dyn FnMut(HouseOutcome<'_>) -> Result<()>,
+    ) -> Result<EvaluationTotals> {
+        match houses {
+            HouseInput::Scenes(scenes) => {
+                let open = || -> Result<HouseStream<'_>> {
+                    Ok(Box::new(
+                        scenes
+                            .iter()
+                            .map(|s| Ok(HouseEvent::Scene(Box::new(s.clone())))),
+                    ))
+                };
+                self.run_batches_of(
+                    &Houses {
+                        open: &open,
+                        len_hint: scenes.len(),
+                    },
+                    each,
+                )
+            }
+            HouseInput::Source(source) => {
+                let open = || source.houses();
+                self.run_batches_of(
+                    &Houses {
+                        open: &open,
+                        len_hint: source.len_hint(),
+                    },
+                    each,
+                )
+            }
+        }
+    }
+
+    /// [`run`](Self::run), keeping every row.
+    ///
+    /// Errors: those of [`run`](Self::run).
+    pub fn collect(&self, houses: HouseInput<'_>) -> Result<SpecEvaluation> {
+        let mut rows = Vec::new();
+        let run = self.run(houses, &mut |h| {
+            rows.extend(h.rows);
+            Ok(())
+        })?;
+        Ok(SpecEvaluation {
+            strategies: run.strategies,
+            evaluation: Evaluation {
+                rows,
+                errors: run.errors,
+                houses_run: run.houses_run,
+                trials_run: run.trials_run,
+            },
+        })
+    }
 }
 
 /// With one held-out fold (`--holdout-types K/N`), refuses a run none of whose trials has a
@@ -350,197 +373,175 @@ fn next_batch(
 
 /// Asks the LLM questions of a batch's mapped houses.
 fn prefetch_batch(
-    setup: &Strategies,
-    specs: &[String],
-    draw: &TrialDraw<'_>,
+    ctx: &EvalContext<'_>,
     scenes: &[Scene],
     maps: &[Mapped],
     before: &mut Prefetched,
 ) -> Result<PrefetchSummary> {
-    let targets = draw.targets(scenes, maps);
+    let targets = ctx.draw.targets(scenes, maps);
     let pairs: Vec<(&House, &ObjectType)> = targets.iter().map(|(h, t)| (*h, t)).collect();
-    prefetch_quiet(&setup.service, specs, &pairs, before)
+    prefetch_quiet(&ctx.setup.service, ctx.specs, &pairs, before)
 }
 
-#[allow(clippy::too_many_arguments)]
-fn evaluate_batches(
-    houses: &Houses<'_, '_>,
-    setup: &Strategies,
-    specs: &[String],
-    draw: &TrialDraw<'_>,
-    grid: &GridParams,
-    llm: &LlmSettings,
-    batch: usize,
-    feedback: &dyn Feedback,
-    each: &mut dyn FnMut(HouseOutcome<'_>) -> Result<()>,
-) -> Result<EvaluationTotals> {
-    let batch = batch.max(1);
-    let built: Vec<Arc<dyn Strategy>> = specs
-        .iter()
-        .map(|s| setup.registry.build(s))
-        .collect::<std::result::Result<_, _>>()?;
-    let asks = crate::strategies::asks_llm(specs);
-    let mut asked = PrefetchSummary::default();
-    // Under --keep-going a failed LLM's strategies leave every house, so every question is asked
-    // before the first trial; otherwise a failure stops the run and each batch asks its own.
-    let ask_first = asks && llm.keep_going;
-    let dropped = if ask_first {
-        feedback.begin("LLM questions", houses.len_hint);
-        let all = ask_every_batch(
-            houses, setup, specs, draw, grid, batch, feedback, &mut asked,
+/// The strategies an evaluation runs: built from the specs, less those of an LLM that failed.
+struct Running<'a> {
+    strategies: &'a [Arc<dyn Strategy>],
+    names: &'a [String],
+}
+
+impl EvalContext<'_> {
+    fn run_batches_of(
+        &self,
+        houses: &Houses<'_, '_>,
+        each: &mut dyn FnMut(HouseOutcome<'_>) -> Result<()>,
+    ) -> Result<EvaluationTotals> {
+        let (specs, llm, feedback) = (self.specs, self.llm, self.feedback);
+        let service = &self.setup.service;
+        let built: Vec<Arc<dyn Strategy>> = specs
+            .iter()
+            .map(|s| self.setup.registry.build(s))
+            .collect::<std::result::Result<_, _>>()?;
+        let asks = crate::strategies::asks_llm(specs);
+        let mut asked = PrefetchSummary::default();
+        // Under --keep-going a failed LLM's strategies leave every house, so every question is
+        // asked before the first trial; otherwise a failure stops the run and each batch asks
+        // its own.
+        let ask_first = asks && llm.keep_going;
+        let dropped = if ask_first {
+            feedback.begin("LLM questions", houses.len_hint);
+            let all = self.ask_every_batch(houses, &mut asked);
+            feedback.end();
+            all?;
+            prefetch_outcome(service, llm, specs, &asked, feedback)?
+        } else {
+            Vec::new()
+        };
+        let strategies: Vec<Arc<dyn Strategy>> = built
+            .into_iter()
+            .filter(|s| !dropped.iter().any(|d| d == s.name()))
+            .collect();
+        let names: Vec<String> = strategies.iter().map(|s| s.name().to_string()).collect();
+        let mut totals = EvaluationTotals {
+            strategies: strategies.clone(),
+            ..EvaluationTotals::default()
+        };
+        // Questions already asked by earlier batches, so that each is asked and counted once.
+        let mut prefetched = Prefetched::default();
+        feedback.begin("houses", houses.len_hint);
+        let result = self.run_batches(
+            houses,
+            each,
+            &Running {
+                strategies: &strategies,
+                names: &names,
+            },
+            (asks && !ask_first).then_some((&mut asked, &mut prefetched)),
+            &mut totals,
         );
         feedback.end();
-        all?;
-        prefetch_outcome(&setup.service, llm, specs, &asked, feedback)?
-    } else {
-        Vec::new()
-    };
-    let strategies: Vec<Arc<dyn Strategy>> = built
-        .into_iter()
-        .filter(|s| !dropped.iter().any(|d| d == s.name()))
-        .collect();
-    let names: Vec<String> = strategies.iter().map(|s| s.name().to_string()).collect();
-    let mut totals = EvaluationTotals {
-        strategies: strategies.clone(),
-        ..EvaluationTotals::default()
-    };
-    // Questions already asked by earlier batches, so that each is asked and counted once.
-    let mut prefetched = Prefetched::default();
-    feedback.begin("houses", houses.len_hint);
-    let result = run_batches(
-        houses,
-        setup,
-        specs,
-        draw,
-        grid,
-        llm,
-        batch,
-        feedback,
-        each,
-        &strategies,
-        &names,
-        (asks && !ask_first).then_some((&mut asked, &mut prefetched)),
-        &mut totals,
-    );
-    feedback.end();
-    result?;
-    if asks && !ask_first {
-        prefetch_outcome(&setup.service, llm, specs, &asked, feedback)?;
+        result?;
+        if asks && !ask_first {
+            prefetch_outcome(service, llm, specs, &asked, feedback)?;
+        }
+        Ok(totals)
     }
-    Ok(totals)
-}
 
-/// Asks the questions of every house, batch by batch, adding to `asked`, before any trial runs.
-#[allow(clippy::too_many_arguments)]
-fn ask_every_batch(
-    houses: &Houses<'_, '_>,
-    setup: &Strategies,
-    specs: &[String],
-    draw: &TrialDraw<'_>,
-    grid: &GridParams,
-    batch: usize,
-    feedback: &dyn Feedback,
-    asked: &mut PrefetchSummary,
-) -> Result<()> {
-    // Questions already asked by earlier batches, so that each is asked and counted once.
-    let mut prefetched = Prefetched::default();
-    let mut stream = (houses.open)()?;
-    let mut read = 0;
-    loop {
-        let scenes = next_batch(&mut stream, batch, &mut |_| {})?;
-        if scenes.is_empty() {
-            return Ok(());
-        }
-        read += scenes.len();
-        feedback.set_len(houses.len_hint.max(read));
-        let maps = build_maps(&scenes, grid, &crate::feedback::Silent);
-        let summary = prefetch_batch(setup, specs, draw, &scenes, &maps, &mut prefetched);
-        feedback.set_done(read);
-        add_summary(asked, summary?);
-    }
-}
-
-/// The run proper: batch after batch, each read, mapped, asked (with `ask`: the sum it adds
-/// to and the questions earlier batches asked) and run, its houses handed to `each`.
-#[allow(clippy::too_many_arguments)]
-fn run_batches(
-    houses: &Houses<'_, '_>,
-    setup: &Strategies,
-    specs: &[String],
-    draw: &TrialDraw<'_>,
-    grid: &GridParams,
-    llm: &LlmSettings,
-    batch: usize,
-    feedback: &dyn Feedback,
-    each: &mut dyn FnMut(HouseOutcome<'_>) -> Result<()>,
-    strategies: &[Arc<dyn Strategy>],
-    names: &[String],
-    mut ask: Option<(&mut PrefetchSummary, &mut Prefetched)>,
-    totals: &mut EvaluationTotals,
-) -> Result<()> {
-    let mut stream = (houses.open)()?;
-    loop {
-        if feedback.cancelled() {
-            return Err(crate::LabError::Cancelled);
-        }
-        let scenes = next_batch(&mut stream, batch, &mut |why| {
-            feedback.note(&format!("skipped: {why}"));
-            totals.skipped.push(why);
-        })?;
-        if scenes.is_empty() {
-            break;
-        }
-        let read = totals.houses.len() + scenes.len();
-        feedback.set_len(houses.len_hint.max(read));
-        totals.houses.extend(scenes.iter().map(|s| s.house.index));
-        let done: Vec<(Mapped, HouseRun)> = if let Some((sum, before)) = ask.as_mut() {
-            // The questions wait for the batch's maps (only mapped houses are asked about), so
-            // the maps are built first and the trials run after.
-            let maps = build_maps(&scenes, grid, &crate::feedback::Silent);
-            add_summary(
-                sum,
-                prefetch_batch(setup, specs, draw, &scenes, &maps, before)?,
-            );
-            if !setup.service.failed_llms().is_empty() {
-                // Without --keep-going a failed LLM stops the run; the outcome says why.
-                prefetch_outcome(&setup.service, llm, specs, sum, feedback)?;
+    /// Asks the questions of every house, batch by batch, adding to `asked`, before any trial
+    /// runs.
+    fn ask_every_batch(&self, houses: &Houses<'_, '_>, asked: &mut PrefetchSummary) -> Result<()> {
+        let batch = self.batch.max(1);
+        // Questions already asked by earlier batches, so that each is asked and counted once.
+        let mut prefetched = Prefetched::default();
+        let mut stream = (houses.open)()?;
+        let mut read = 0;
+        loop {
+            let scenes = next_batch(&mut stream, batch, &mut |_| {})?;
+            if scenes.is_empty() {
+                return Ok(());
             }
-            scenes
-                .par_iter()
-                .zip(maps)
-                .map(|(scene, map)| {
-                    let r = evaluate_house(scene, &map, strategies, draw);
-                    feedback.tick();
-                    (map, r)
-                })
-                .collect()
-        } else {
-            scenes
-                .par_iter()
-                .map(|scene| {
-                    let map = ferret_world::distance::build(&scene.house, grid);
-                    let r = evaluate_house(scene, &map, strategies, draw);
-                    feedback.tick();
-                    (map, r)
-                })
-                .collect()
-        };
-        for (scene, (map, (rows, errors, trials))) in scenes.iter().zip(done) {
-            totals.houses_run += usize::from(trials > 0);
-            totals.trials_run += trials;
-            let r = each(HouseOutcome {
-                scene,
-                map: &map,
-                rows,
-                errors: &errors,
-                trials,
-                strategies: names,
-            });
-            totals.errors.extend(errors);
-            r?;
+            read += scenes.len();
+            self.feedback.set_len(houses.len_hint.max(read));
+            let maps = build_maps(&scenes, self.grid, &crate::feedback::Silent);
+            let summary = prefetch_batch(self, &scenes, &maps, &mut prefetched);
+            self.feedback.set_done(read);
+            add_summary(asked, summary?);
         }
     }
-    Ok(())
+
+    /// The run proper: batch after batch, each read, mapped, asked (with `ask`: the sum it adds
+    /// to and the questions earlier batches asked) and run, its houses handed to `each`.
+    fn run_batches(
+        &self,
+        houses: &Houses<'_, '_>,
+        each: &mut dyn FnMut(HouseOutcome<'_>) -> Result<()>,
+        running: &Running<'_>,
+        mut ask: Option<(&mut PrefetchSummary, &mut Prefetched)>,
+        totals: &mut EvaluationTotals,
+    ) -> Result<()> {
+        let (feedback, draw, grid) = (self.feedback, self.draw, self.grid);
+        let strategies = running.strategies;
+        let batch = self.batch.max(1);
+        let mut stream = (houses.open)()?;
+        loop {
+            if feedback.cancelled() {
+                return Err(crate::LabError::Cancelled);
+            }
+            let scenes = next_batch(&mut stream, batch, &mut |why| {
+                feedback.note(&format!("skipped: {why}"));
+                totals.skipped.push(why);
+            })?;
+            if scenes.is_empty() {
+                break;
+            }
+            let read = totals.houses.len() + scenes.len();
+            feedback.set_len(houses.len_hint.max(read));
+            totals.houses.extend(scenes.iter().map(|s| s.house.index));
+            let done: Vec<(Mapped, HouseRun)> = if let Some((sum, before)) = ask.as_mut() {
+                // The questions wait for the batch's maps (only mapped houses are asked about),
+                // so the maps are built first and the trials run after.
+                let maps = build_maps(&scenes, grid, &crate::feedback::Silent);
+                add_summary(sum, prefetch_batch(self, &scenes, &maps, before)?);
+                if !self.setup.service.failed_llms().is_empty() {
+                    // Without --keep-going a failed LLM stops the run; the outcome says why.
+                    prefetch_outcome(&self.setup.service, self.llm, self.specs, sum, feedback)?;
+                }
+                scenes
+                    .par_iter()
+                    .zip(maps)
+                    .map(|(scene, map)| {
+                        let r = evaluate_house(scene, &map, strategies, draw);
+                        feedback.tick();
+                        (map, r)
+                    })
+                    .collect()
+            } else {
+                scenes
+                    .par_iter()
+                    .map(|scene| {
+                        let map = ferret_world::distance::build(&scene.house, grid);
+                        let r = evaluate_house(scene, &map, strategies, draw);
+                        feedback.tick();
+                        (map, r)
+                    })
+                    .collect()
+            };
+            for (scene, (map, (rows, errors, trials))) in scenes.iter().zip(done) {
+                totals.houses_run += usize::from(trials > 0);
+                totals.trials_run += trials;
+                let r = each(HouseOutcome {
+                    scene,
+                    map: &map,
+                    rows,
+                    errors: &errors,
+                    trials,
+                    strategies: running.names,
+                });
+                totals.errors.extend(errors);
+                r?;
+            }
+        }
+        Ok(())
+    }
 }
 
 /// One house's rows, failure messages and trials drawn.

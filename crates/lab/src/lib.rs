@@ -1,21 +1,67 @@
 //! # ferret-lab
 //!
-//! The experiment layer between the libraries ({world, plan, llm, select}) and ferret's
-//! faces (the command line, the HTTP service, Python). It owns what an experiment is made of:
-//! where houses come from and their maps ([`houses`]), strategy setup without a command line
-//! ([`strategies`]), evaluation of strategies on the same trials ([`evaluate`](mod@evaluate)), the run files
-//! `trials.csv` and `run.json` ([`runs`]), summaries ([`summary`]) and the paired statistics behind them ([`paired`]),
-//! calibration of likelihood sources ([`calibrate`]), word vectors for the learned likelihood
-//! ([`language`]), the replay table behind selection with its
-//! resumable cache ([`replay`]), selection over an evaluation run ([`selection`]), sharded evaluation and its merge
-//! ([`shard`]), batch
-//! deployments in simulation with their house order ([`deploy`](mod@deploy)), atomic
-//! output files ([`files`]), and how long work reports progress without printing
-//! ([`feedback`]). Faces parse their input, call these functions and print what they return.
+//! The experiment layer between the libraries ({world, plan, llm, select}) and ferret's faces
+//! (the command line, the HTTP service, Python): it owns what an experiment is made of, and the
+//! faces parse their input, call it and print what it returns. Its modules stack in layers,
+//! each using only those below it. At the bottom, depending on no other module: a run's rows
+//! and cost unit ([`rows`]), shards and their records ([`shard`]), errors ([`error`]), progress
+//! without printing ([`feedback`]), atomic output files ([`files`]) and paired statistics
+//! ([`paired`]). Above them, the figures of a run ([`summary`]) and every Markdown report,
+//! rendered in one place ([`report`]); then the setup of an experiment: where houses come from
+//! and their maps ([`houses`]), word vectors for the learned likelihood ([`language`]), and the
+//! strategies with the LLM service behind them, built by one builder ([`strategies`]). On those
+//! stand the run files `trials.csv` and `run.json` ([`runs`]) and the merge of shards' runs
+//! ([`merge`](mod@merge)); at the top, the work itself: evaluation of strategies on the same
+//! trials through one [`EvalContext`] ([`evaluate`](mod@evaluate)), an evaluation run into its
+//! directory ([`eval_run`]), calibration of likelihood sources ([`calibrate`]), the replay table
+//! behind selection with its resumable cache ([`replay`]), selection over an evaluation run
+//! ([`selection`]), and batch deployments in simulation ([`deploy`](mod@deploy)).
+//!
+//! An evaluation of two strategies on three generated houses, one trial each:
+//!
+//! ```
+//! # fn main() -> ferret_lab::Result<()> {
+//! use ferret_lab::{
+//!     EvalContext, HouseInput, LlmSettings, PlanningSettings, Silent, Strategies, TrialDraw,
+//! };
+//! use ferret_plan::{Protocol, TrialsPerHouse};
+//! use ferret_world::GridParams;
+//!
+//! let scenes = ferret_world::generate::default_scenes(3, 0)?;
+//! let specs = vec!["optimistic+greedy".to_string(), "model/uniform".to_string()];
+//! // No LLM strategy runs, so the response cache is never opened.
+//! let llm = LlmSettings::default();
+//! let planning = PlanningSettings::default();
+//! let setup = Strategies::builder(&planning, &llm).for_specs(&specs).build()?;
+//! let draw = TrialDraw {
+//!     seed: 0,
+//!     reveal_fraction: 0.0,
+//!     per_house: TrialsPerHouse::One,
+//!     protocol: &Protocol::FERRET,
+//!     holdout: None,
+//! };
+//! let grid = GridParams::default();
+//! let run = EvalContext::new(&setup, &specs, &draw, &grid, &llm, &Silent)
+//!     .collect(HouseInput::Scenes(&scenes))?;
+//!
+//! // Three trials, each run by both strategies, every target found at a finite, positive cost.
+//! let ev = &run.evaluation;
+//! assert!(ev.errors.is_empty(), "{:?}", ev.errors);
+//! assert_eq!((ev.houses_run, ev.trials_run), (3, 3));
+//! assert_eq!(ev.rows.len(), 3 * specs.len());
+//! assert!(ev.rows.iter().all(|r| r.found && r.cost_m.is_finite() && r.cost_m > 0.0));
+//! // The same trial for every strategy: each house's target is the same in both rows.
+//! for pair in ev.rows.chunks(2) {
+//!     assert_eq!((pair[0].house_index, &pair[0].target), (pair[1].house_index, &pair[1].target));
+//! }
+//! # Ok(())
+//! # }
+//! ```
 
 pub mod calibrate;
 pub mod deploy;
 pub mod error;
+pub mod eval_run;
 pub mod evaluate;
 pub mod feedback;
 pub mod files;
@@ -34,9 +80,10 @@ pub mod summary;
 
 pub use deploy::{DeploySettings, DeployedTrial, deploy, house_order};
 pub use error::{LabError, Result};
+pub use eval_run::{EvalDone, EvalJob, ShownHouse};
 pub use evaluate::{
-    Evaluation, EvaluationTotals, HouseOutcome, SpecEvaluation, TrialDraw, default_batch, evaluate,
-    evaluate_source_each, evaluate_specs, evaluate_specs_each, trial_row,
+    EvalContext, Evaluation, EvaluationTotals, HouseInput, HouseOutcome, SpecEvaluation, TrialDraw,
+    default_batch, evaluate, trial_row,
 };
 pub use feedback::{Feedback, Silent};
 pub use ferret_select::HouseOrder;
@@ -48,7 +95,6 @@ pub use rows::{CELL_M, TrialRow};
 pub use runs::{EvalRun, RunInfo, RunWriter, WrittenRun, sha256_hex};
 pub use shard::{MergeError, Shard, ShardError, ShardSpec};
 pub use strategies::{
-    DEFAULT_STRATEGIES, LlmSettings, PlanningSettings, Strategies, full_registry,
-    full_registry_with,
+    DEFAULT_STRATEGIES, LlmSettings, PlanningSettings, Strategies, StrategiesBuilder,
 };
 pub use summary::{CostTable, PairedRow, SummaryRow, paired_comparisons, summarize};

@@ -18,10 +18,10 @@ use serde::{Deserialize, Serialize};
 use crate::error::{LabError, Result};
 use crate::evaluate::TrialDraw;
 use crate::feedback::Feedback;
-use crate::houses::build_maps;
+use crate::houses::{Mapped, build_maps};
 use crate::rows::TrialRow;
 use crate::runs::{EvalRun, RunInfo, read_run_file};
-use crate::strategies::{LlmSettings, full_registry};
+use crate::strategies::{LlmSettings, Strategies};
 
 /// One row of `replay.csv`: the replay cost of `strategy` on the trial of `house_index` and
 /// `target` where `deployed` was run.
@@ -325,16 +325,17 @@ pub fn replay_table(
             need: min_houses,
         });
     }
-    let (replays, service) = load_or_compute_replays(
+    let (replays, service) = ReplayJob {
         info,
         llm,
-        &candidates,
-        &by_house,
+        candidates: &candidates,
+        by_house: &by_house,
         cache,
-        &key,
-        protocol.replay,
+        key: &key,
+        mode: protocol.replay,
         feedback,
-    )?;
+    }
+    .load_or_compute()?;
     let trials: Vec<TrialId> = by_house.keys().cloned().collect();
     let s = candidates.len();
     let mut cost = Vec::with_capacity(trials.len());
@@ -398,152 +399,203 @@ pub fn replay_table(
 /// Replay costs by key, and the LLM service that computed any new ones (to write its token use).
 type LoadedReplays = (HashMap<ReplayKey, f64>, Option<Arc<LlmService>>);
 
-#[allow(clippy::too_many_arguments)]
-fn load_or_compute_replays(
-    info: &RunInfo,
-    llm: &LlmSettings,
-    candidates: &[String],
-    by_house: &Trials<'_>,
-    path: &Path,
-    key: &str,
+/// The replays a run's replay table needs: its candidates on the trials every one finished,
+/// cached at `cache` under `key` (the run's identity and replay mode).
+struct ReplayJob<'a> {
+    info: &'a RunInfo,
+    llm: &'a LlmSettings,
+    candidates: &'a [String],
+    by_house: &'a Trials<'a>,
+    cache: &'a Path,
+    key: &'a str,
     mode: ReplayMode,
-    feedback: &dyn Feedback,
-) -> Result<LoadedReplays> {
-    let read = match read_run_file(path) {
-        Ok(text) => {
-            let read = parse_replay_cache(&text, key, candidates, by_house);
-            if let Some(why) = &read.stale {
-                feedback.note(&format!("{}: {why}; replaying again", path.display()));
-            }
-            const SHOWN: usize = 10;
-            for d in read.dropped.iter().take(SHOWN) {
-                feedback.note(&format!(
-                    "{}: {d}; row dropped and replayed again",
-                    path.display()
-                ));
-            }
-            if read.dropped.len() > SHOWN {
-                feedback.note(&format!(
-                    "{}: {} more rows dropped",
-                    path.display(),
-                    read.dropped.len() - SHOWN
-                ));
-            }
-            Some(read)
+    feedback: &'a dyn Feedback,
+}
+
+impl ReplayJob<'_> {
+    /// The replay costs: those the cache holds, and the missing ones computed (and appended).
+    fn load_or_compute(&self) -> Result<LoadedReplays> {
+        let mut known = self.read_cache()?;
+        let todo = self.houses_missing(&known);
+        if todo.is_empty() {
+            return Ok((known, None));
         }
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
-        Err(e) => return Err(LabError::io(format!("reading {}", path.display()), e)),
-    };
-    let needs_rewrite = read
-        .as_ref()
-        .is_none_or(|r| r.stale.is_some() || !r.dropped.is_empty());
-    let mut known = read.map(|r| r.known).unwrap_or_default();
-    if needs_rewrite {
-        rewrite_replay_cache(path, key, &known)?;
+        self.feedback.note(&format!(
+            "replaying {} strategies on {} houses (cached in {})",
+            self.candidates.len(),
+            todo.len(),
+            self.cache.display()
+        ));
+        let service = self.replay_houses(&todo, &mut known)?;
+        Ok((known, Some(service)))
     }
-    let missing = |h: &TrialId| {
-        candidates.iter().any(|j| {
-            candidates
-                .iter()
-                .any(|i| i != j && !known.contains_key(&(h.0, h.1.clone(), j.clone(), i.clone())))
-        })
-    };
-    let todo: Vec<usize> = by_house
-        .keys()
-        .filter(|h| missing(h))
-        .map(|h| h.0)
-        .collect::<BTreeSet<_>>()
-        .into_iter()
-        .collect();
-    if todo.is_empty() {
-        return Ok((known, None));
+
+    /// The cache's replays of this run; a cache of another run, or rows that do not fit this
+    /// one, are noted and the cache rewritten without them.
+    fn read_cache(&self) -> Result<HashMap<ReplayKey, f64>> {
+        let path = self.cache;
+        let read = match read_run_file(path) {
+            Ok(text) => {
+                let read = parse_replay_cache(&text, self.key, self.candidates, self.by_house);
+                self.note_dropped(&read);
+                Some(read)
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+            Err(e) => return Err(LabError::io(format!("reading {}", path.display()), e)),
+        };
+        let needs_rewrite = read
+            .as_ref()
+            .is_none_or(|r| r.stale.is_some() || !r.dropped.is_empty());
+        let known = read.map(|r| r.known).unwrap_or_default();
+        if needs_rewrite {
+            rewrite_replay_cache(path, self.key, &known)?;
+        }
+        Ok(known)
     }
-    feedback.note(&format!(
-        "replaying {} strategies on {} houses (cached in {})",
-        candidates.len(),
-        todo.len(),
-        path.display()
-    ));
-    let loaded = info.house_source().load_for(info.protocol.containers)?;
-    let scenes: Vec<Scene> = loaded
-        .scenes
-        .into_iter()
-        .filter(|s| todo.contains(&s.house.index))
-        .collect();
-    let maps = build_maps(&scenes, &info.grid_params(info.protocol.access), feedback);
-    let setup = full_registry(&info.planning, llm, candidates)?;
-    let strategies: Vec<Arc<dyn Strategy>> = candidates
-        .iter()
-        .map(|s| setup.registry.build(s))
-        .collect::<Result<_, _>>()?;
-    // Each house's replays are appended as soon as they finish, so that a killed run keeps them.
-    let cache = Mutex::new(
-        std::fs::OpenOptions::new()
-            .append(true)
-            .open(path)
-            .map_err(|e| LabError::io(format!("opening {}", path.display()), e))?,
-    );
-    feedback.begin("replays", scenes.len());
-    let results: Vec<Result<Vec<ReplayRow>>> = scenes
-        .par_iter()
-        .zip(maps.par_iter())
-        .map(|(scene, map)| {
-            let r = (|| {
-                let (_, distances) = map.as_ref().map_err(|e| LabError::invalid(e.to_string()))?;
-                let trials: Vec<(&String, &HashMap<&str, &TrialRow>)> = by_house
-                    .iter()
-                    .filter(|(k, _)| k.0 == scene.house.index)
-                    .map(|(k, m)| (&k.1, m))
-                    .collect();
-                let rows = replay_house(scene, distances, &strategies, &trials, info, mode)?;
-                // A house is replayed whole; rows already cached are not written twice.
-                let new: Vec<ReplayRow> = rows
-                    .iter()
-                    .filter(|r| {
-                        !known.contains_key(&(
-                            r.house_index,
-                            r.target.clone(),
-                            r.deployed.clone(),
-                            r.strategy.clone(),
-                        ))
-                    })
-                    .cloned()
-                    .collect();
-                let lines = replay_lines(&new)?;
-                let mut file = cache.lock().unwrap_or_else(|p| p.into_inner());
-                file.write_all(&lines)
-                    .and_then(|()| file.flush())
-                    .map_err(|e| LabError::io(format!("appending to {}", path.display()), e))?;
-                Ok(rows)
-            })();
-            feedback.tick();
-            r
-        })
-        .collect();
-    feedback.end();
-    let mut errors = Vec::new();
-    for r in results {
-        match r {
-            Ok(rows) => {
-                for r in rows {
-                    known.insert(
-                        (r.house_index, r.target, r.deployed, r.strategy),
-                        r.replay_cost_m,
-                    );
+
+    /// Says why the cache, or some of its rows, are replayed again (the first few rows only).
+    fn note_dropped(&self, read: &CacheRead) {
+        const SHOWN: usize = 10;
+        let path = self.cache.display();
+        if let Some(why) = &read.stale {
+            self.feedback
+                .note(&format!("{path}: {why}; replaying again"));
+        }
+        for d in read.dropped.iter().take(SHOWN) {
+            self.feedback
+                .note(&format!("{path}: {d}; row dropped and replayed again"));
+        }
+        if read.dropped.len() > SHOWN {
+            self.feedback.note(&format!(
+                "{path}: {} more rows dropped",
+                read.dropped.len() - SHOWN
+            ));
+        }
+    }
+
+    /// Indices of the houses with a trial some pair of candidates has no replay for, in order.
+    fn houses_missing(&self, known: &HashMap<ReplayKey, f64>) -> Vec<usize> {
+        let candidates = self.candidates;
+        let missing = |h: &TrialId| {
+            candidates.iter().any(|j| {
+                candidates.iter().any(|i| {
+                    i != j && !known.contains_key(&(h.0, h.1.clone(), j.clone(), i.clone()))
+                })
+            })
+        };
+        self.by_house
+            .keys()
+            .filter(|h| missing(h))
+            .map(|h| h.0)
+            .collect::<BTreeSet<_>>()
+            .into_iter()
+            .collect()
+    }
+
+    /// Replays every candidate on the houses `todo`, in parallel, adding their costs to `known`
+    /// and appending each house's new rows to the cache as soon as it finishes, so that a killed
+    /// run keeps them. Returns the LLM service the replays used.
+    fn replay_houses(
+        &self,
+        todo: &[usize],
+        known: &mut HashMap<ReplayKey, f64>,
+    ) -> Result<Arc<LlmService>> {
+        let (info, feedback, path) = (self.info, self.feedback, self.cache);
+        let loaded = info.house_source().load_for(info.protocol.containers)?;
+        let scenes: Vec<Scene> = loaded
+            .scenes
+            .into_iter()
+            .filter(|s| todo.contains(&s.house.index))
+            .collect();
+        let maps = build_maps(&scenes, &info.grid_params(info.protocol.access), feedback);
+        let setup = Strategies::builder(&info.planning, self.llm)
+            .for_specs(self.candidates)
+            .build()?;
+        let strategies: Vec<Arc<dyn Strategy>> = self
+            .candidates
+            .iter()
+            .map(|s| setup.registry.build(s))
+            .collect::<Result<_, _>>()?;
+        let cache = Mutex::new(
+            std::fs::OpenOptions::new()
+                .append(true)
+                .open(path)
+                .map_err(|e| LabError::io(format!("opening {}", path.display()), e))?,
+        );
+        feedback.begin("replays", scenes.len());
+        let known_before: &HashMap<ReplayKey, f64> = known;
+        let results: Vec<Result<Vec<ReplayRow>>> = scenes
+            .par_iter()
+            .zip(maps.par_iter())
+            .map(|(scene, map)| {
+                let r = self.replay_and_append(scene, map, &strategies, known_before, &cache);
+                feedback.tick();
+                r
+            })
+            .collect();
+        feedback.end();
+        let mut errors = Vec::new();
+        for r in results {
+            match r {
+                Ok(rows) => {
+                    for r in rows {
+                        known.insert(
+                            (r.house_index, r.target, r.deployed, r.strategy),
+                            r.replay_cost_m,
+                        );
+                    }
                 }
+                Err(e) => errors.push(ferret_world::error_chain(&e)),
             }
-            Err(e) => errors.push(ferret_world::error_chain(&e)),
         }
+        if !errors.is_empty() {
+            return Err(LabError::invalid(format!(
+                "{} house(s) could not be replayed; the others are cached in {}:\n{}",
+                errors.len(),
+                path.display(),
+                errors.join("\n")
+            )));
+        }
+        Ok(setup.service)
     }
-    if !errors.is_empty() {
-        return Err(LabError::invalid(format!(
-            "{} house(s) could not be replayed; the others are cached in {}:\n{}",
-            errors.len(),
-            path.display(),
-            errors.join("\n")
-        )));
+
+    /// One house's replays, its rows the cache lacks appended to `cache`.
+    fn replay_and_append(
+        &self,
+        scene: &Scene,
+        map: &Mapped,
+        strategies: &[Arc<dyn Strategy>],
+        known: &HashMap<ReplayKey, f64>,
+        cache: &Mutex<std::fs::File>,
+    ) -> Result<Vec<ReplayRow>> {
+        let (_, distances) = map.as_ref().map_err(|e| LabError::invalid(e.to_string()))?;
+        let trials: Vec<(&String, &HashMap<&str, &TrialRow>)> = self
+            .by_house
+            .iter()
+            .filter(|(k, _)| k.0 == scene.house.index)
+            .map(|(k, m)| (&k.1, m))
+            .collect();
+        let rows = replay_house(scene, distances, strategies, &trials, self.info, self.mode)?;
+        // A house is replayed whole; rows already cached are not written twice.
+        let new: Vec<ReplayRow> = rows
+            .iter()
+            .filter(|r| {
+                !known.contains_key(&(
+                    r.house_index,
+                    r.target.clone(),
+                    r.deployed.clone(),
+                    r.strategy.clone(),
+                ))
+            })
+            .cloned()
+            .collect();
+        let lines = replay_lines(&new)?;
+        let mut file = cache.lock().unwrap_or_else(|p| p.into_inner());
+        file.write_all(&lines)
+            .and_then(|()| file.flush())
+            .map_err(|e| LabError::io(format!("appending to {}", self.cache.display()), e))?;
+        Ok(rows)
     }
-    Ok((known, Some(setup.service)))
 }
 
 /// The replay costs of every strategy on one house's trials (`trials`: target and the rows of

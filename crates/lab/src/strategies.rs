@@ -131,21 +131,6 @@ impl PlanningSettings {
             cost: ferret_plan::CostModel::Paper,
         }
     }
-
-    /// The prior, when one of `specs` plans over it (`model/prior...`, `fused/...`): loaded, or
-    /// the default one trained. `None` when none does.
-    pub fn prior_for(&self, specs: &[String]) -> Result<Option<Arc<Prior>>> {
-        Ok(if needs_prior(specs) {
-            Some(Arc::new(self.prior()?))
-        } else {
-            None
-        })
-    }
-
-    /// The registry of built-in strategies under these settings over `prior`.
-    pub fn registry_with(&self, prior: Option<Arc<Prior>>) -> StrategyRegistry {
-        StrategyRegistry::builtin(prior, self.planner_config(), self.exact_max)
-    }
 }
 
 /// Where LLM endpoints and cached answers live, and what a failed endpoint means.
@@ -188,80 +173,135 @@ pub struct Strategies {
     pub prior: Option<Arc<Prior>>,
 }
 
-/// Built-in strategies plus the LLM kinds, for the strategies `specs` will build. The LLM
-/// service opens its cache only when an LLM is first asked, so runs without LLM strategies touch
-/// no cache file.
-pub fn full_registry(
-    planning: &PlanningSettings,
-    llm: &LlmSettings,
-    specs: &[String],
-) -> Result<Strategies> {
-    full_registry_with(planning, llm, specs, FailurePolicy::StopForRun)
+/// Which prior a [`StrategiesBuilder`] plans over.
+enum PriorChoice<'a> {
+    /// The prior these specs need, if any: loaded from the settings' file or the default one
+    /// trained.
+    ForSpecs(&'a [String]),
+    /// A prior the caller already holds, or none.
+    Held(Option<Arc<Prior>>),
 }
 
-/// The same, with what a failed LLM endpoint means for later questions (batch runs stop asking
-/// it; a server pauses and asks again).
-pub fn full_registry_with(
-    planning: &PlanningSettings,
-    llm: &LlmSettings,
-    specs: &[String],
+/// Builds [`Strategies`], the one way every face sets up its strategies: built-in kinds plus
+/// the LLM kinds under planning and LLM settings, over the prior the specs to build need
+/// ([`for_specs`](Self::for_specs)) or one the caller holds ([`prior`](Self::prior)), with what
+/// a failed LLM endpoint means for later questions ([`on_failure`](Self::on_failure); batch
+/// runs stop asking it, a server pauses and asks again).
+///
+/// The LLM service opens its cache only when an LLM is first asked, so runs without LLM
+/// strategies touch no cache file.
+pub struct StrategiesBuilder<'a> {
+    planning: &'a PlanningSettings,
+    llm: &'a LlmSettings,
+    prior: PriorChoice<'a>,
     on_failure: FailurePolicy,
-) -> Result<Strategies> {
-    full_registry_over(planning, llm, planning.prior_for(specs)?, on_failure)
 }
 
-/// The same over a prior the caller already holds (`planning.prior` is not read): a face that
-/// keeps a prior in memory (a Python `Prior` object) builds the very registry `ferret eval`
-/// builds from the same prior's file. `None` leaves `model/prior...` and `fused/...` specs
-/// unbuildable, as for [`StrategyRegistry::builtin`].
-pub fn full_registry_over(
-    planning: &PlanningSettings,
-    llm: &LlmSettings,
-    prior: Option<Arc<Prior>>,
-    on_failure: FailurePolicy,
-) -> Result<Strategies> {
-    // The hold-out applies to whichever prior the caller holds, once.
-    let prior = match (prior, planning.holdout) {
-        (Some(p), Some(h)) if p.holdout() != Some(h) => Some(Arc::new(p.holding_out(h))),
-        (p, _) => p,
+impl Strategies {
+    /// A builder under these settings: no prior (so `model/prior...` and `fused/...` specs are
+    /// unbuildable, as for [`StrategyRegistry::builtin`]) until [`for_specs`] or [`prior`] says
+    /// which, and a failed LLM stops being asked for the run.
+    ///
+    /// [`for_specs`]: StrategiesBuilder::for_specs
+    /// [`prior`]: StrategiesBuilder::prior
+    pub fn builder<'a>(
+        planning: &'a PlanningSettings,
+        llm: &'a LlmSettings,
+    ) -> StrategiesBuilder<'a> {
+        StrategiesBuilder {
+            planning,
+            llm,
+            prior: PriorChoice::Held(None),
+            on_failure: FailurePolicy::StopForRun,
+        }
     }
-    .map(|p| crate::language::with_embeddings(p, planning.embeddings.as_deref()));
-    let mut registry = planning.registry_with(prior.clone());
-    let fusion = match &llm.fusion {
-        Some(path) => Some((
-            path.display().to_string(),
-            Arc::new(FusionFile::load(path)?),
-        )),
-        None => None,
-    };
-    let config = LlmConfig::load_default(llm.config.as_deref())?;
-    let service = Arc::new(LlmService::new(
-        config,
-        LlmOptions {
-            cache_path: Some(llm.llm_cache.clone()),
-            offline: llm.offline,
+}
+
+impl<'a> StrategiesBuilder<'a> {
+    /// Plans over the prior `specs` need, when one of them plans over a prior ([`needs_prior`]):
+    /// the settings' prior file, or the default prior trained ([`PlanningSettings::prior`]).
+    pub fn for_specs(self, specs: &'a [String]) -> Self {
+        Self {
+            prior: PriorChoice::ForSpecs(specs),
+            ..self
+        }
+    }
+
+    /// Plans over a prior the caller already holds (the settings' prior file is not read): a
+    /// face that keeps a prior in memory (a Python `Prior` object) builds the very registry
+    /// `ferret eval` builds from the same prior's file.
+    pub fn prior(self, prior: Option<Arc<Prior>>) -> Self {
+        Self {
+            prior: PriorChoice::Held(prior),
+            ..self
+        }
+    }
+
+    /// What a failed LLM endpoint means for later questions.
+    pub fn on_failure(self, on_failure: FailurePolicy) -> Self {
+        Self { on_failure, ..self }
+    }
+
+    /// The registry and the LLM service.
+    ///
+    /// Errors: a prior file, fusion file or endpoint configuration that cannot be read, and an
+    /// LLM service that cannot start.
+    pub fn build(self) -> Result<Strategies> {
+        let Self {
+            planning,
+            llm,
+            prior,
             on_failure,
-        },
-    )?);
-    register_strategies(
-        &mut registry,
-        service.clone(),
-        planning.planner_config(),
-        planning.exact_max,
-    );
-    register_fused(
-        &mut registry,
-        service.clone(),
-        prior.clone(),
-        fusion,
-        planning.planner_config(),
-        planning.exact_max,
-    );
-    Ok(Strategies {
-        registry,
-        service,
-        prior,
-    })
+        } = self;
+        let prior = match prior {
+            PriorChoice::ForSpecs(specs) if needs_prior(specs) => Some(Arc::new(planning.prior()?)),
+            PriorChoice::ForSpecs(_) => None,
+            PriorChoice::Held(p) => p,
+        };
+        // The hold-out applies to whichever prior was chosen, once.
+        let prior = match (prior, planning.holdout) {
+            (Some(p), Some(h)) if p.holdout() != Some(h) => Some(Arc::new(p.holding_out(h))),
+            (p, _) => p,
+        }
+        .map(|p| crate::language::with_embeddings(p, planning.embeddings.as_deref()));
+        let mut registry =
+            StrategyRegistry::builtin(prior.clone(), planning.planner_config(), planning.exact_max);
+        let fusion = match &llm.fusion {
+            Some(path) => Some((
+                path.display().to_string(),
+                Arc::new(FusionFile::load(path)?),
+            )),
+            None => None,
+        };
+        let config = LlmConfig::load_default(llm.config.as_deref())?;
+        let service = Arc::new(LlmService::new(
+            config,
+            LlmOptions {
+                cache_path: Some(llm.llm_cache.clone()),
+                offline: llm.offline,
+                on_failure,
+            },
+        )?);
+        register_strategies(
+            &mut registry,
+            service.clone(),
+            planning.planner_config(),
+            planning.exact_max,
+        );
+        register_fused(
+            &mut registry,
+            service.clone(),
+            prior.clone(),
+            fusion,
+            planning.planner_config(),
+            planning.exact_max,
+        );
+        Ok(Strategies {
+            registry,
+            service,
+            prior,
+        })
+    }
 }
 
 /// True when one of `specs` asks an LLM for probabilities, i.e. when [`prefetch`] has questions
@@ -495,16 +535,13 @@ mod tests {
         };
         let planning = PlanningSettings::default();
         let prior = Arc::new(default_prior(5, 7).unwrap());
-        let over = full_registry_over(
-            &planning,
-            &llm,
-            Some(prior.clone()),
-            FailurePolicy::StopForRun,
-        )
-        .unwrap();
+        let over = Strategies::builder(&planning, &llm)
+            .prior(Some(prior.clone()))
+            .build()
+            .unwrap();
         assert!(over.registry.build("model/prior").is_ok());
         assert!(Arc::ptr_eq(over.prior.as_ref().unwrap(), &prior));
-        let none = full_registry_over(&planning, &llm, None, FailurePolicy::StopForRun).unwrap();
+        let none = Strategies::builder(&planning, &llm).build().unwrap();
         assert!(none.registry.build("model/prior").is_err());
         assert!(none.registry.build("model/uniform").is_ok());
         // Nothing was asked, so no cache file was made.

@@ -7,8 +7,8 @@ use ferret_lab::merge::merge_dirs;
 use ferret_lab::runs::{ReportView, RunWriter};
 use ferret_lab::shard::{SHARD_RULE, ShardRecord};
 use ferret_lab::{
-    EvalRun, HouseSource, LlmSettings, PlanningSettings, RunInfo, Shard, Silent, TrialDraw,
-    evaluate_source_each, full_registry, merge_runs,
+    EvalContext, EvalRun, HouseInput, HouseSource, LlmSettings, PlanningSettings, RunInfo, Shard,
+    Silent, Strategies, TrialDraw, merge_runs,
 };
 use ferret_plan::{Protocol, TrialsPerHouse};
 use ferret_world::{ContainerSet, GridParams};
@@ -76,29 +76,31 @@ fn eval(out: &Path, shard: Option<Shard>, batch: usize) -> Vec<usize> {
         llm_cache: out.join("cache.sqlite"),
         ..LlmSettings::default()
     };
-    let setup = full_registry(&PlanningSettings::default(), &llm, &specs()).unwrap();
+    let setup = Strategies::builder(&PlanningSettings::default(), &llm)
+        .for_specs(&specs())
+        .build()
+        .unwrap();
     let draw = draw();
     let src = source();
     let open = src.open(ContainerSet::Receptacles, shard).unwrap();
     let mut writer = RunWriter::create(out, false).unwrap();
     let mut seen = Vec::new();
-    let totals = evaluate_source_each(
-        &open,
+    let totals = EvalContext::new(
         &setup,
         &specs(),
         &draw,
         &GridParams::default(),
         &llm,
-        batch,
         &Silent,
-        &mut |h| {
-            seen.push(h.scene.house.index);
-            for r in &h.rows {
-                writer.push(r)?;
-            }
-            Ok(())
-        },
     )
+    .with_batch(batch)
+    .run(HouseInput::Source(&open), &mut |h| {
+        seen.push(h.scene.house.index);
+        for r in &h.rows {
+            writer.push(r)?;
+        }
+        Ok(())
+    })
     .unwrap();
     assert_eq!(totals.houses, seen);
     let record = shard.map(|sh| ShardRecord {
@@ -270,21 +272,16 @@ async fn questions_shared_by_batches_are_asked_and_counted_once() {
         let notes = Notes::default();
         let before = requests.load(std::sync::atomic::Ordering::SeqCst);
         let totals = tokio::task::block_in_place(|| {
-            let setup = full_registry(&PlanningSettings::default(), &llm, &specs).unwrap();
+            let setup = Strategies::builder(&PlanningSettings::default(), &llm)
+                .for_specs(&specs)
+                .build()
+                .unwrap();
             let src = source();
             let open = src.open(ContainerSet::Receptacles, None).unwrap();
-            evaluate_source_each(
-                &open,
-                &setup,
-                &specs,
-                &draw,
-                &GridParams::default(),
-                &llm,
-                batch,
-                &notes,
-                &mut |_| Ok(()),
-            )
-            .unwrap()
+            EvalContext::new(&setup, &specs, &draw, &GridParams::default(), &llm, &notes)
+                .with_batch(batch)
+                .run(HouseInput::Source(&open), &mut |_| Ok(()))
+                .unwrap()
         });
         assert!(totals.trials_run > 0);
         let sent = requests.load(std::sync::atomic::Ordering::SeqCst) - before;

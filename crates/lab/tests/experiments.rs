@@ -5,8 +5,8 @@ use std::sync::Arc;
 use ferret_lab::calibrate::{CalibrationSettings, TargetCount, calibrate, targets_for};
 use ferret_lab::selection::select;
 use ferret_lab::{
-    EvalRun, HouseSource, LlmSettings, PlanningSettings, RunInfo, Silent, TrialDraw, build_maps,
-    evaluate, full_registry,
+    EvalRun, HouseSource, LlmSettings, PlanningSettings, RunInfo, Silent, Strategies, TrialDraw,
+    build_maps, evaluate,
 };
 use ferret_plan::{Protocol, Strategy, TrialsPerHouse};
 use ferret_select::{ExperimentOptions, Method};
@@ -39,12 +39,11 @@ fn calibration_scores_every_container_of_every_target_and_the_prior_beats_unifor
         ..CalibrationSettings::default()
     };
     let llm = offline_llm(dir.path());
-    let setup = full_registry(
-        &PlanningSettings::default(),
-        &llm,
-        &settings.specs_to_build().unwrap(),
-    )
-    .unwrap();
+    let specs = settings.specs_to_build().unwrap();
+    let setup = Strategies::builder(&PlanningSettings::default(), &llm)
+        .for_specs(&specs)
+        .build()
+        .unwrap();
     let done = calibrate(&loaded, &setup, &llm, &settings, &Silent).unwrap();
     assert!(done.errors.is_empty(), "{:?}", done.errors);
     // Every (house, target, container) is one pair; holders are the containers holding it.
@@ -97,7 +96,10 @@ fn calibration_refuses_a_strategy_without_probabilities_and_a_fit_without_an_llm
             Ok(specs) => specs,
             Err(e) => return e.to_string(),
         };
-        let setup = full_registry(&PlanningSettings::default(), &llm, &specs).unwrap();
+        let setup = Strategies::builder(&PlanningSettings::default(), &llm)
+            .for_specs(&specs)
+            .build()
+            .unwrap();
         calibrate(&loaded, &setup, &llm, &settings, &Silent)
             .err()
             .map(|e| e.to_string())
@@ -123,9 +125,14 @@ fn eval_run(dir: &std::path::Path, count: usize) -> EvalRun {
     let specs = ["optimistic+greedy", "model/uniform", "model/prior"];
     let planning = PlanningSettings::default();
     let names: Vec<String> = specs.iter().map(|s| s.to_string()).collect();
-    let registry = planning.registry_with(planning.prior_for(&names).unwrap());
-    let strategies: Vec<Arc<dyn Strategy>> =
-        specs.iter().map(|s| registry.build(s).unwrap()).collect();
+    let setup = Strategies::builder(&planning, &LlmSettings::default())
+        .for_specs(&names)
+        .build()
+        .unwrap();
+    let strategies: Vec<Arc<dyn Strategy>> = specs
+        .iter()
+        .map(|s| setup.registry.build(s).unwrap())
+        .collect();
     let draw = TrialDraw {
         seed: 0,
         reveal_fraction: 0.0,

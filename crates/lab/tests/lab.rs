@@ -5,8 +5,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use ferret_lab::{
-    DeploySettings, Feedback, PlanningSettings, Silent, TrialDraw, build_maps, deploy, evaluate,
-    house_order, summarize,
+    DeploySettings, Feedback, LlmSettings, PlanningSettings, Silent, Strategies, TrialDraw,
+    build_maps, deploy, evaluate, house_order, summarize,
 };
 use ferret_plan::{
     DrawMode, Protocol, ReplayMode, SearchProblem, Strategy, TrialsPerHouse, replay_costs,
@@ -17,12 +17,15 @@ use ferret_world::{GridParams, TravelCost};
 use proptest::prelude::*;
 
 fn strategies(specs: &[&str]) -> Vec<Arc<dyn Strategy>> {
-    let planning = PlanningSettings::default();
-    let prior = planning
-        .prior_for(&specs.iter().map(|s| s.to_string()).collect::<Vec<_>>())
+    let names: Vec<String> = specs.iter().map(|s| s.to_string()).collect();
+    let setup = Strategies::builder(&PlanningSettings::default(), &LlmSettings::default())
+        .for_specs(&names)
+        .build()
         .unwrap();
-    let registry = planning.registry_with(prior);
-    specs.iter().map(|s| registry.build(s).unwrap()).collect()
+    specs
+        .iter()
+        .map(|s| setup.registry.build(s).unwrap())
+        .collect()
 }
 
 #[derive(Default)]

@@ -8,8 +8,8 @@ use std::sync::Arc;
 use ferret_lab::runs::{ReportView, RunWriter};
 use ferret_lab::shard::{SHARD_RULE, ShardRecord};
 use ferret_lab::{
-    EvalRun, HouseSource, LlmSettings, PlanningSettings, RunInfo, Silent, TrialDraw, TrialRow,
-    build_maps, evaluate, evaluate_specs_each, full_registry,
+    EvalContext, EvalRun, HouseInput, HouseSource, LlmSettings, PlanningSettings, RunInfo, Silent,
+    Strategies, TrialDraw, TrialRow, build_maps, evaluate,
 };
 use ferret_plan::{Protocol, Strategy, TrialsPerHouse};
 use ferret_world::GridParams;
@@ -90,7 +90,10 @@ fn a_streamed_evaluation_writes_the_in_memory_run_byte_for_byte() {
         llm_cache: dir.path().join("cache.sqlite"),
         ..LlmSettings::default()
     };
-    let setup = full_registry(&PlanningSettings::default(), &llm, &specs).unwrap();
+    let setup = Strategies::builder(&PlanningSettings::default(), &llm)
+        .for_specs(&specs)
+        .build()
+        .unwrap();
     let draw = TrialDraw {
         seed: 0,
         reveal_fraction: 0.0,
@@ -153,23 +156,15 @@ fn a_streamed_evaluation_writes_the_in_memory_run_byte_for_byte() {
         let mut writer = RunWriter::create(&streamed, cells).unwrap();
         let mut batches_seen = Vec::new();
         let totals = pool.install(|| {
-            evaluate_specs_each(
-                &loaded.scenes,
-                &setup,
-                &specs,
-                &draw,
-                &grid,
-                &llm,
-                &Silent,
-                &mut |h| {
+            EvalContext::new(&setup, &specs, &draw, &grid, &llm, &Silent)
+                .run(HouseInput::Scenes(&loaded.scenes), &mut |h| {
                     batches_seen.push(h.scene.house.index);
                     for r in &h.rows {
                         writer.push(r)?;
                     }
                     Ok(())
-                },
-            )
-            .unwrap()
+                })
+                .unwrap()
         });
         assert_eq!(batches_seen, houses, "houses are handed over in order");
         assert_eq!(

@@ -6,7 +6,6 @@ use std::path::PathBuf;
 use ferret_lab::LoadedHouses;
 use ferret_lab::calibrate::{CalibrationSettings, DEFAULT_SOURCES, TargetCount};
 use ferret_lab::report::fusion_markdown;
-use ferret_llm::FailurePolicy;
 use ferret_plan::{Calibration, FusionFile};
 use ferret_world::Scene;
 use pyo3::prelude::*;
@@ -118,14 +117,14 @@ impl PyCalibration {
 /// `fused/<prompt>/<llm>`; only their probabilities count. `fit_fusion=True` also fits the
 /// fusion of the prior with each `llm+model` source (its JSON in `.fusion`). LLM questions go
 /// through the same configuration and response cache as `evaluate`, each asked once. Releases
-/// the GIL; `progress` prints progress to stderr.
+/// the GIL; `progress` shows progress as in `evaluate`: `True` on stderr, or a callable
+/// `progress(what, done, total)`.
 #[pyfunction]
 #[pyo3(signature = (
     houses, sources = None, *, targets_per_house = None, seed = 0, bins = 10, fit_fusion = false,
     prior = None, max_containers = 8, exact_max = 16, search_cost = 0.0, config = None,
-    llm_cache = None, offline = false, keep_going = false, fusion = None, progress = false
+    llm_cache = None, offline = false, keep_going = false, fusion = None, progress = None
 ))]
-#[allow(clippy::too_many_arguments)]
 pub fn calibrate(
     py: Python<'_>,
     houses: Vec<Py<House>>,
@@ -143,7 +142,7 @@ pub fn calibrate(
     offline: bool,
     keep_going: bool,
     fusion: Option<PathBuf>,
-    progress: bool,
+    progress: Option<progress::Progress>,
 ) -> PyResult<PyCalibration> {
     let planning = Planning::new(prior, max_containers, exact_max, search_cost)?;
     let specs = match sources.filter(|s| !s.is_none()) {
@@ -183,15 +182,19 @@ pub fn calibrate(
         skipped: Vec::new(),
         source: "a Python list".into(),
     };
-    let feedback = progress::feedback(progress);
+    let feedback = progress::Interruptible::new(progress);
     let done = py.allow_threads(|| {
         errors::guarded("calibrate", || {
-            let setup = settings::registry(&planning, &llm, &needed, FailurePolicy::StopForRun)
-                .map_err(errors::lab)?;
-            ferret_lab::calibrate::calibrate(&loaded, &setup, &llm, &settings, feedback.as_ref())
+            let setup = settings::registry(&planning, &llm, &needed).map_err(errors::lab)?;
+            ferret_lab::calibrate::calibrate(&loaded, &setup, &llm, &settings, &feedback)
                 .map_err(errors::lab)
         })
-    })?;
+    });
+    // The progress callable's exception (or Ctrl-C), not the stop it caused.
+    if let Some(raised) = feedback.take() {
+        return Err(raised);
+    }
+    let done = done?;
     if !done.errors.is_empty() {
         let warnings = py.import("warnings")?;
         warnings.call_method1(

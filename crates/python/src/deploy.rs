@@ -5,7 +5,6 @@
 use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard};
 
-use ferret_llm::FailurePolicy;
 use ferret_plan::{SearchProblem, TrialSpec, hindsight_truth};
 use ferret_select::{DeploymentLoop, Method};
 use ferret_world::ObjectType;
@@ -52,7 +51,6 @@ impl PyDeployment {
         config = None, llm_cache = None, offline = false, fusion = None, max_containers = 8,
         exact_max = 16, search_cost = 0.0, protocol = "ferret"
     ))]
-    #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
         strategies: Vec<String>,
@@ -95,8 +93,7 @@ impl PyDeployment {
         let llm = settings::llm(config, llm_cache, offline, false, fusion);
         let candidates = py.allow_threads(|| {
             errors::guarded("Deployment", || {
-                let setup = settings::registry(&planning, &llm, &names, FailurePolicy::StopForRun)
-                    .map_err(errors::lab)?;
+                let setup = settings::registry(&planning, &llm, &names).map_err(errors::lab)?;
                 names
                     .iter()
                     .map(|s| setup.registry.build(s).map_err(errors::plan))

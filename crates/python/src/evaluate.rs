@@ -7,8 +7,7 @@ use std::sync::Arc;
 use ferret_lab::runs::{EvalRun, ReportView, RunInfo, RunWriter};
 use ferret_lab::shard::{SHARD_RULE, Shard, ShardRecord};
 use ferret_lab::{CELL_M, TrialRow};
-use ferret_lab::{DEFAULT_STRATEGIES, TrialDraw};
-use ferret_llm::FailurePolicy;
+use ferret_lab::{DEFAULT_STRATEGIES, EvalContext, HouseInput, TrialDraw};
 use ferret_plan::TrialsPerHouse;
 use ferret_world::Scene;
 use pyo3::prelude::*;
@@ -195,8 +194,16 @@ impl PyEvaluation {
 /// prior. `protocol` is `"ferret"` or `"paper"` (houses of ProcTHOR files must then be loaded
 /// with `containers="furniture"`, as `ferret eval --protocol paper` reads them). LLM strategies
 /// use the endpoint configuration `config` (default `ferret.toml` when present) and the SQLite
-/// response cache `llm_cache`; their questions are asked before the trials run. `progress`
-/// prints progress to stderr. `shard=(i, n)` runs only the houses whose file index is i
+/// response cache `llm_cache`; their questions are asked before the trials run.
+///
+/// `progress` shows how far the work is: `True` prints a line per step to stderr (`houses:
+/// 40/150 (3.2 s)`, redrawn in place on a terminal), a callable is called as
+/// `progress(what, done, total)` with the step's name (`"houses"`, `"LLM questions"`), the
+/// items done and the step's length (0 while unknown) — at each step's start and end and at
+/// most every hundredth of it in between — and `None` or `False` (the default) shows nothing.
+/// An exception the callable raises stops the evaluation and is raised by `evaluate`.
+///
+/// `shard=(i, n)` runs only the houses whose file index is i
 /// modulo n (as `ferret eval --shard i/n`): exactly the trials one machine runs on them; `save`
 /// records the shard, and `ferret.merge` joins the shards' directories into the run of all
 /// houses. Raises `FerretError` when no trial finished.
@@ -206,9 +213,8 @@ impl PyEvaluation {
     reveal_fraction = 0.0, protocol = "ferret", cells = false, max_containers = 8,
     exact_max = 16, search_cost = 0.0, config = None, llm_cache = None, offline = false,
     keep_going = false, fusion = None, resolution = 0.05, robot_radius = 0.18,
-    wall_thickness = 0.05, progress = false, shard = None
+    wall_thickness = 0.05, progress = None, shard = None
 ))]
-#[allow(clippy::too_many_arguments)]
 pub fn evaluate(
     py: Python<'_>,
     houses: Vec<Py<House>>,
@@ -230,7 +236,7 @@ pub fn evaluate(
     resolution: f64,
     robot_radius: f64,
     wall_thickness: f64,
-    progress: bool,
+    progress: Option<progress::Progress>,
     shard: Option<(usize, usize)>,
 ) -> PyResult<PyEvaluation> {
     // Every argument is checked before any work, as the command line checks its options.
@@ -285,16 +291,14 @@ pub fn evaluate(
             )));
         }
     }
-    let run_info = run_info(
-        &houses,
-        &planning,
-        &grid,
+    let draw = TrialDraw {
         seed,
         reveal_fraction,
         per_house,
-        protocol,
-        &specs,
-    );
+        protocol: &protocol,
+        holdout: None,
+    };
+    let run_info = run_info(&houses, &planning, &grid, &draw, &specs);
     let source = houses
         .first()
         .map(|h| h.get().origin.describe())
@@ -306,24 +310,10 @@ pub fn evaluate(
     let feedback = progress::Interruptible::new(progress);
     let outcome = py.allow_threads(|| {
         errors::guarded("evaluate", || {
-            let setup = settings::registry(&planning, &llm, &specs, FailurePolicy::StopForRun)
+            let setup = settings::registry(&planning, &llm, &specs).map_err(errors::lab)?;
+            let run = EvalContext::new(&setup, &specs, &draw, &params, &llm, &feedback)
+                .collect(HouseInput::Scenes(&scenes))
                 .map_err(errors::lab)?;
-            let run = ferret_lab::evaluate_specs(
-                &scenes,
-                &setup,
-                &specs,
-                &TrialDraw {
-                    seed,
-                    reveal_fraction,
-                    per_house,
-                    protocol: &protocol,
-                    holdout: None,
-                },
-                &params,
-                &llm,
-                &feedback,
-            )
-            .map_err(errors::lab)?;
             Ok(run.evaluation)
         })
     });
@@ -378,15 +368,11 @@ pub fn evaluate(
 /// What `run.json` says of an evaluation of `houses` under these settings: one house source,
 /// and a prior that a file names (paths made absolute, since the run may be replayed from
 /// another working directory).
-#[allow(clippy::too_many_arguments)]
 fn run_info(
     houses: &[Py<House>],
     planning: &Planning,
     grid: &Grid,
-    seed: u64,
-    reveal_fraction: f64,
-    trials_per_house: TrialsPerHouse,
-    protocol: ferret_plan::Protocol,
+    draw: &TrialDraw<'_>,
     strategies: &[String],
 ) -> Result<RunInfo, String> {
     let Some(first) = houses.first().map(|h| h.get().origin.clone()) else {
@@ -419,10 +405,10 @@ fn run_info(
         house_seed: first.house_seed,
         grid: [grid.resolution, grid.robot_radius, grid.wall_thickness],
         planning: planning_settings,
-        seed,
-        reveal_fraction,
-        trials_per_house,
-        protocol,
+        seed: draw.seed,
+        reveal_fraction: draw.reveal_fraction,
+        trials_per_house: draw.per_house,
+        protocol: *draw.protocol,
         strategies: strategies.to_vec(),
         trials_sha256: None,
         shard: None,

@@ -1,12 +1,46 @@
-//! Progress of long work on stderr, when asked for: the experiment layer's `Feedback` as lines a
-//! terminal, a log or a notebook's console can show (the work runs without the GIL, on Rust
-//! threads, so it writes to the process's stderr rather than `sys.stderr`).
+//! Progress of long work, when asked for (`progress=` of `evaluate`, `calibrate` and `select`):
+//! the experiment layer's `Feedback` as lines on stderr a terminal, a log or a notebook's
+//! console can show (the work runs without the GIL, on Rust threads, so it writes to the
+//! process's stderr rather than `sys.stderr`), or as calls of a Python callable.
 
 use std::io::{IsTerminal, Write};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use ferret_lab::Feedback;
+use pyo3::prelude::*;
+
+/// What the `progress` argument asks for: nothing (`None`, `False`), lines on stderr (`True`),
+/// or calls `progress(what, done, total)` of a callable.
+pub enum Progress {
+    /// No progress.
+    Off,
+    /// Lines on stderr ([`Stderr`]).
+    Stderr,
+    /// Calls of a Python callable ([`Callback`]).
+    Call(Py<PyAny>),
+}
+
+impl<'py> FromPyObject<'py> for Progress {
+    fn extract_bound(arg: &Bound<'py, PyAny>) -> PyResult<Self> {
+        if arg.is_none() {
+            Ok(Progress::Off)
+        } else if let Ok(on) = arg.downcast::<pyo3::types::PyBool>() {
+            Ok(if on.is_true() {
+                Progress::Stderr
+            } else {
+                Progress::Off
+            })
+        } else if arg.is_callable() {
+            Ok(Progress::Call(arg.clone().unbind()))
+        } else {
+            Err(pyo3::exceptions::PyTypeError::new_err(format!(
+                "progress: expected True, False or a callable progress(what, done, total), got {}",
+                arg.get_type().name()?
+            )))
+        }
+    }
+}
 
 /// Prints each step's progress to stderr: redrawn in place on a terminal, and every tenth of
 /// the step otherwise.
@@ -98,34 +132,97 @@ impl Feedback for Stderr {
     }
 }
 
-/// Progress on stderr when asked for, else none.
-pub fn feedback(progress: bool) -> Box<dyn Feedback + Send> {
-    if progress {
-        Box::new(Stderr::default())
-    } else {
-        Box::new(ferret_lab::Silent)
+/// Progress handed to a Python callable as `progress(what, done, total)` (`total` 0 while
+/// unknown): when a step begins and ends, and at most every hundredth of it in between, so a
+/// slow callable does not slow the work. Remarks are not passed on. An exception the callable
+/// raises is kept (the first one), stops the work at its next check and is raised by the call.
+pub struct Callback {
+    func: Py<PyAny>,
+    state: Mutex<Step>,
+    raised: Arc<Mutex<Option<PyErr>>>,
+}
+
+impl Callback {
+    fn call(&self, s: &mut Step) {
+        s.shown = s.done;
+        let mut raised = self.raised.lock().unwrap_or_else(|p| p.into_inner());
+        if raised.is_some() {
+            return;
+        }
+        let result = Python::with_gil(|py| self.func.call1(py, (s.what.as_str(), s.done, s.len)));
+        if let Err(e) = result {
+            *raised = Some(e);
+        }
+    }
+
+    fn update(&self, f: impl FnOnce(&mut Step)) {
+        let mut s = self.state.lock().unwrap_or_else(|p| p.into_inner());
+        f(&mut s);
+        let hundredth = (s.len / 100).max(1);
+        if s.done >= s.shown + hundredth || (s.len > 0 && s.done == s.len && s.shown != s.done) {
+            self.call(&mut s);
+        }
     }
 }
 
-/// Progress as [`feedback`] shows it, and Ctrl-C: between batches of houses long work asks
+impl Feedback for Callback {
+    fn begin(&self, what: &str, len: usize) {
+        let mut s = self.state.lock().unwrap_or_else(|p| p.into_inner());
+        *s = Step {
+            what: what.to_string(),
+            len,
+            ..Step::default()
+        };
+        self.call(&mut s);
+    }
+
+    fn set_len(&self, len: usize) {
+        self.update(|s| s.len = len);
+    }
+
+    fn set_done(&self, done: usize) {
+        self.update(|s| s.done = done);
+    }
+
+    fn tick(&self) {
+        self.update(|s| s.done += 1);
+    }
+
+    fn end(&self) {
+        let mut s = self.state.lock().unwrap_or_else(|p| p.into_inner());
+        if s.shown != s.done {
+            self.call(&mut s);
+        }
+    }
+}
+
+/// Progress as `progress` asks for it, and Ctrl-C: between batches of houses long work asks
 /// [`Feedback::cancelled`] from the thread that called it, and this lets Python run its signal
 /// handlers there (with the GIL, which the work released; only the main thread runs them),
 /// keeping the exception (`KeyboardInterrupt`) to raise once the work has stopped.
 pub struct Interruptible {
     inner: Box<dyn Feedback + Send>,
-    raised: Mutex<Option<pyo3::PyErr>>,
+    raised: Arc<Mutex<Option<pyo3::PyErr>>>,
 }
 
 impl Interruptible {
-    /// Progress on stderr when `progress`.
-    pub fn new(progress: bool) -> Self {
-        Self {
-            inner: feedback(progress),
-            raised: Mutex::new(None),
-        }
+    /// Progress as `progress` asks for it (none when `None`).
+    pub fn new(progress: Option<Progress>) -> Self {
+        let raised = Arc::new(Mutex::new(None));
+        let inner: Box<dyn Feedback + Send> = match progress.unwrap_or(Progress::Off) {
+            Progress::Off => Box::new(ferret_lab::Silent),
+            Progress::Stderr => Box::new(Stderr::default()),
+            Progress::Call(func) => Box::new(Callback {
+                func,
+                state: Mutex::new(Step::default()),
+                raised: raised.clone(),
+            }),
+        };
+        Self { inner, raised }
     }
 
-    /// The exception a signal handler raised, if the work was stopped by one.
+    /// The exception a signal handler or the progress callable raised, if one stopped the
+    /// work; to raise once the work has returned.
     pub fn take(&self) -> Option<pyo3::PyErr> {
         self.raised.lock().unwrap_or_else(|p| p.into_inner()).take()
     }

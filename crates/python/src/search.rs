@@ -4,7 +4,6 @@
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
-use ferret_llm::FailurePolicy;
 use ferret_plan::{Protocol, Search, SearchProblem, Strategy, TrialSpec};
 use ferret_world::{ObjectType, Place, Scene};
 use pyo3::prelude::*;
@@ -107,7 +106,6 @@ impl PySearch {
         resolution = 0.05, robot_radius = 0.18, wall_thickness = 0.05,
         protocol = "ferret"
     ))]
-    #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
         house: Py<House>,
@@ -140,8 +138,7 @@ impl PySearch {
         let built = py.allow_threads(|| {
             errors::guarded("Search", || {
                 // Each search has its own LLM service: a failed endpoint fails this trial only.
-                let setup = settings::registry(&planning, &llm, &spec, FailurePolicy::StopForRun)
-                    .map_err(errors::lab)?;
+                let setup = settings::registry(&planning, &llm, &spec).map_err(errors::lab)?;
                 setup.registry.build(&spec[0]).map_err(errors::plan)
             })
         })?;

@@ -147,14 +147,14 @@ const KEYWORDS: &[(&str, &str)] = &[
 /// `replay` (`"pessimistic"` or `"counterfactual"`) and `draw` (`"distinct"` or
 /// `"replacement"`) override the run's protocol; every other protocol setting is the run's.
 /// Replays of LLM strategies ask through `config` and `llm_cache` as `evaluate` does. Releases
-/// the GIL; `progress` prints progress to stderr.
+/// the GIL; `progress` shows progress as in `evaluate`: `True` on stderr, or a callable
+/// `progress(what, done, total)`.
 #[pyfunction]
 #[pyo3(signature = (
     trials, *, deployments = 500, trials_per_deployment = 100, c = 5.0, seed = 0,
     replay_untried_first = false, replay = None, draw = None, config = None, llm_cache = None,
-    offline = false, keep_going = false, fusion = None, progress = false
+    offline = false, keep_going = false, fusion = None, progress = None
 ))]
-#[allow(clippy::too_many_arguments)]
 pub fn select(
     py: Python<'_>,
     trials: PathBuf,
@@ -170,7 +170,7 @@ pub fn select(
     offline: bool,
     keep_going: bool,
     fusion: Option<PathBuf>,
-    progress: bool,
+    progress: Option<progress::Progress>,
 ) -> PyResult<PySelection> {
     let options = ExperimentOptions {
         deployments,
@@ -194,7 +194,7 @@ pub fn select(
         })
         .transpose()?;
     let llm = settings::llm(config, llm_cache, offline, keep_going, fusion);
-    let feedback = progress::feedback(progress);
+    let feedback = progress::Interruptible::new(progress);
     let done = py.allow_threads(|| {
         errors::guarded("select", || {
             let run = EvalRun::read(&trials).map_err(errors::lab)?;
@@ -205,17 +205,15 @@ pub fn select(
             if let Some(d) = draw {
                 protocol.draw = d;
             }
-            ferret_lab::selection::select(
-                &run,
-                &trials,
-                &protocol,
-                &llm,
-                &options,
-                feedback.as_ref(),
-            )
-            .map_err(|e| errors::lab_as_keywords(e, KEYWORDS))
+            ferret_lab::selection::select(&run, &trials, &protocol, &llm, &options, &feedback)
+                .map_err(|e| errors::lab_as_keywords(e, KEYWORDS))
         })
-    })?;
+    });
+    // The progress callable's exception (or Ctrl-C), not the stop it caused.
+    if let Some(raised) = feedback.take() {
+        return Err(raised);
+    }
+    let done = done?;
     Ok(PySelection {
         result: done.result,
         markdown: done.markdown,

@@ -6,9 +6,8 @@
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
-use ferret_lab::strategies::{Strategies, default_prior, full_registry_over, needs_prior};
+use ferret_lab::strategies::{Strategies, default_prior, needs_prior};
 use ferret_lab::{LlmSettings, PlanningSettings};
-use ferret_llm::FailurePolicy;
 use ferret_plan::{Prior, Protocol, ProtocolName};
 use ferret_world::GridParams;
 use pyo3::prelude::*;
@@ -216,12 +215,13 @@ pub fn registry(
     planning: &Planning,
     llm: &LlmSettings,
     specs: &[String],
-    on_failure: FailurePolicy,
 ) -> Result<Strategies, ferret_lab::LabError> {
     let prior = if needs_prior(specs) {
         Some(planning.prior.resolve()?)
     } else {
         None
     };
-    full_registry_over(&planning.settings, llm, prior, on_failure)
+    Strategies::builder(&planning.settings, llm)
+        .prior(prior)
+        .build()
 }

@@ -265,7 +265,9 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
         let store = ferret_serve::Store::open(std::path::Path::new(&db))?;
         let candidates = {
             let setup =
-                super::llm_setup::full_registry(&args.planning, &args.llm, &args.strategies)?;
+                ferret_lab::Strategies::builder(&args.planning.settings(), &args.llm.settings())
+                    .for_specs(&args.strategies)
+                    .build()?;
             args.strategies
                 .iter()
                 .map(|s| setup.registry.build(s))

@@ -7,6 +7,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
+use ferret_lab::Strategies;
 use ferret_lab::calibrate::{CalibrationSettings, DEFAULT_SOURCES, TargetCount, calibrate};
 use ferret_plan::Calibration;
 
@@ -113,7 +114,9 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
     let specs = settings.specs_to_build()?;
     // Claimed before the work, so that a second run into the same directory stops at once.
     let mut out_lock = ferret_lab::files::DirLock::acquire(&args.out)?;
-    let setup = super::llm_setup::full_registry(&args.planning, &args.llm, &specs)?;
+    let setup = Strategies::builder(&args.planning.settings(), &args.llm.settings())
+        .for_specs(&specs)
+        .build()?;
     let done = calibrate(
         &loaded,
         &setup,

@@ -6,13 +6,13 @@ use std::process::ExitCode;
 use std::sync::Arc;
 
 use anyhow::{Result, bail};
-use ferret_lab::{DEFAULT_STRATEGIES, DeploySettings, deploy};
+use ferret_lab::{DEFAULT_STRATEGIES, DeploySettings, Strategies, deploy};
 use ferret_plan::{DrawMode, Protocol, Strategy, TrialsPerHouse};
 use ferret_select::{DeploymentLoop, Method, ORACLE};
 use ferret_world::ObjectType;
 use serde::Serialize;
 
-use super::llm_setup::{LlmArgs, full_registry};
+use super::llm_setup::LlmArgs;
 use crate::args::PlanningArgs;
 use crate::common::{Bars, GridArgs, HouseArgs, ProtocolArgs};
 use crate::output::write_csv;
@@ -104,7 +104,9 @@ pub fn run(args: Args) -> Result<ExitCode> {
     }
     // Claimed before the work, so that a second run into the same directory stops at once.
     let mut out_lock = ferret_lab::files::DirLock::acquire(&args.out)?;
-    let setup = full_registry(&args.planning, &args.llm, &args.strategies)?;
+    let setup = Strategies::builder(&args.planning.settings(), &args.llm.settings())
+        .for_specs(&args.strategies)
+        .build()?;
     let candidates: Vec<Arc<dyn Strategy>> = args
         .strategies
         .iter()

@@ -5,10 +5,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::Result;
-use ferret_lab::TrialRow;
-use ferret_lab::runs::{ReportView, RunInfo, RunWriter};
-use ferret_lab::shard::{SHARD_RULE, ShardRecord};
-use ferret_lab::{CostTable, HouseSource, TrialDraw, evaluate_source_each};
+use ferret_lab::{CostTable, EvalJob, ShownHouse, TrialRow};
 use ferret_plan::{Protocol, TrialOutcome, TrialSpec, TrialsPerHouse};
 use ferret_report::{
     TrajectoryOptions, TrajectoryPanel, ViolinOptions, draw_trajectories, draw_violins,
@@ -99,153 +96,31 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
     // previous run's results.
     args.grid.validate()?;
     args.planning.validate()?;
-    if !(0.0..=1.0).contains(&args.reveal_fraction) {
-        anyhow::bail!(
-            "--reveal-fraction {}: must be a fraction between 0 and 1",
-            args.reveal_fraction
-        );
-    }
-    crate::common::check_distinct("--strategies", &args.strategies)?;
-    if let Some(s) = args
-        .paired_against
-        .iter()
-        .find(|s| !args.strategies.contains(s))
-    {
-        anyhow::bail!("--paired-against {s}: not one of --strategies");
-    }
     let protocol = args.protocol.resolve(Protocol::FERRET)?;
-    let source = args.houses.source();
-    let open = source.open(protocol.containers, shard)?;
-    // A shard draws no pictures and may not hold the house: the merge draws it. Only that house
-    // is read here; the others are read once, by the run.
-    if let Some(i) = args.show_house
-        && shard.is_none()
-        && !has_house(&source, protocol.containers, i)?
-    {
-        anyhow::bail!(
-            "--show-house {i}: no house with that index in {}",
-            source.describe()
-        );
-    }
-    let setup = super::llm_setup::full_registry(&args.planning, &args.llm, &args.strategies)?;
-    let draw = TrialDraw {
-        seed: args.seed,
-        reveal_fraction: args.reveal_fraction,
-        per_house: args.trials_per_house,
-        protocol: &protocol,
-        holdout: args.planning.holdout_types,
-    };
-    ferret_lab::evaluate::check_holdout_has_trials(&open, &draw)?;
-    // Claimed before the evaluation, so that a second run into the same directory stops at
-    // once rather than after its work, its files then replacing this one's.
-    let mut out_lock = ferret_lab::files::DirLock::acquire(&args.out)?;
-    // Rows go to trials.csv as houses finish and only their costs stay in memory; of the maps,
-    // only the shown house's is kept (a shard draws no pictures: the merge draws them once).
-    let mut writer = RunWriter::create(&args.out, args.cells)?;
-    let mut shown: Option<Shown> = None;
-    let totals = evaluate_source_each(
-        &open,
-        &setup,
-        &args.strategies,
-        &draw,
-        &args.grid.params_for(protocol.access),
-        &args.llm.settings(),
-        ferret_lab::default_batch(),
-        &Bars::default(),
-        &mut |h| {
-            if shard.is_none()
-                && shown.is_none()
-                && args.show_house.is_none_or(|i| h.scene.house.index == i)
-                && h.every_strategy_finished()
-                && let Ok((_, distances)) = h.map
-            {
-                shown = Some(Shown {
-                    scene: h.scene.clone(),
-                    distances: distances.clone(),
-                    rows: h.rows.clone(),
-                });
-            }
-            for r in &h.rows {
-                writer.push(r)?;
-            }
-            Ok(())
-        },
-    )?;
-    if let Some(sh) = shard {
-        eprintln!(
-            "shard {sh}: {} houses (file index mod {} = {})",
-            totals.houses.len(),
-            sh.count,
-            sh.index
-        );
-    }
-    if totals.houses.is_empty() {
-        match shard {
-            Some(sh) => anyhow::bail!(
-                "shard {sh}: no house of {} has a file index that is {} modulo {}; use fewer shards",
-                source.describe(),
-                sh.index,
-                sh.count
-            ),
-            None => anyhow::bail!("no houses to evaluate in {}", source.describe()),
-        }
-    }
-    for e in &totals.errors {
-        eprintln!("error: {e}");
-    }
-    if writer.rows() == 0 {
-        anyhow::bail!(
-            "no trial finished; {} was left as it was",
-            args.out.display()
-        );
-    }
-    out_lock.used();
-    let info = RunInfo {
-        houses: args.houses.houses.clone(),
-        range: args.houses.range.as_ref().map(ToString::to_string),
-        asset_db: args.houses.asset_db.clone(),
-        generate: args.houses.generate,
-        house_seed: args.houses.house_seed,
-        grid: [
-            args.grid.resolution,
-            args.grid.robot_radius,
-            args.grid.wall_thickness,
-        ],
-        planning: args.planning.settings(),
+    let (source, planning, llm) = (
+        args.houses.source(),
+        args.planning.settings(),
+        args.llm.settings(),
+    );
+    let done = EvalJob {
+        source: &source,
+        grid: args.grid.params(),
+        planning: &planning,
+        llm: &llm,
+        specs: &args.strategies,
         seed: args.seed,
         reveal_fraction: args.reveal_fraction,
         trials_per_house: args.trials_per_house,
-        protocol,
-        strategies: args.strategies.clone(),
-        trials_sha256: None,
-        shard: shard.map(|sh| ShardRecord {
-            index: sh.index,
-            count: sh.count,
-            rule: SHARD_RULE.into(),
-            houses: totals.houses.clone(),
-            houses_run: totals.houses_run,
-            trials_run: totals.trials_run,
-            failures: totals.errors.len(),
-            paired_against: args.paired_against.clone(),
-            cells: args.cells,
-            show_house: args.show_house,
-        }),
-        merged_from: Vec::new(),
-    };
-    let source_name = source.describe();
-    let rows = writer.rows();
-    let written = writer.finish(
-        info,
-        &ReportView {
-            source: &source_name,
-            houses: &totals.houses,
-            houses_run: totals.houses_run,
-            trials_run: totals.trials_run,
-            paired_against: &args.paired_against,
-            cells: args.cells,
-        },
-    )?;
-    let names: Vec<String> = totals
+        protocol: &protocol,
+        cells: args.cells,
+        paired_against: &args.paired_against,
+        show_house: args.show_house,
+        shard,
+        out: &args.out,
+    }
+    .run(&Bars::default())?;
+    let names: Vec<String> = done
+        .totals
         .strategies
         .iter()
         .map(|s| s.name().to_string())
@@ -258,69 +133,35 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
                 out: &args.out,
                 strategies: &args.strategies,
                 ran: &names,
-                houses: totals.houses.len(),
+                houses: done.totals.houses.len(),
                 seed: args.seed,
             },
-            &written.costs,
-            shown.as_ref(),
+            &done.written.costs,
+            done.shown.as_ref(),
         )?
     };
-    if shard.is_none() && shown.is_none() {
+    if shard.is_none() && done.shown.is_none() {
         no_trajectories(args.show_house);
     }
-    println!("{}", written.report.markdown);
-    super::llm_setup::write_token_report(&setup.service, &args.out)?;
-    super::llm_setup::check_fallback_gate(&setup.service, &args.llm)?;
+    println!("{}", done.written.report.markdown);
+    super::llm_setup::write_token_report(&done.setup.service, &args.out)?;
+    super::llm_setup::check_fallback_gate(&done.setup.service, &args.llm)?;
     println!(
         "{} trials on {} houses in {:.1} s; wrote {}/{{trials.csv,summary.csv,summary.md{},run.json{}}}",
-        rows,
-        totals.houses_run,
+        done.rows,
+        done.totals.houses_run,
         started.elapsed().as_secs_f64(),
         args.out.display(),
         if shard.is_some() { "" } else { ",paired.csv" },
         pictures.iter().map(|p| format!(",{p}")).collect::<String>()
     );
-    if totals.errors.is_empty() {
+    let failed = done.totals.errors.len();
+    if failed == 0 {
         Ok(ExitCode::SUCCESS)
     } else {
-        eprintln!(
-            "{} trial(s) failed; every finished trial was written",
-            totals.errors.len()
-        );
+        eprintln!("{failed} trial(s) failed; every finished trial was written");
         Ok(ExitCode::FAILURE)
     }
-}
-
-/// Whether `source` holds a valid house of index `i` (inside its range), reading that house
-/// alone. Errors of the file other than the range are the file's.
-fn has_house(
-    source: &HouseSource,
-    containers: ferret_world::ContainerSet,
-    i: usize,
-) -> Result<bool> {
-    if source.range.is_some_and(|r| !r.contains(i)) {
-        return Ok(false);
-    }
-    let one = HouseSource {
-        range: Some(ferret_world::procthor::HouseRange::single(i)),
-        ..source.clone()
-    };
-    match one.load_for(containers) {
-        Ok(loaded) => Ok(loaded.scenes.iter().any(|s| s.house.index == i)),
-        Err(ferret_lab::LabError::World(ferret_world::WorldError::Range { .. })) => Ok(false),
-        Err(e) => Err(e.into()),
-    }
-}
-
-/// The house whose trajectories are drawn: the first (in house order) where every strategy that
-/// ran finished a trial, or `--show-house`; all of it that the picture needs.
-pub struct Shown {
-    /// The house.
-    pub scene: Scene,
-    /// Its distances (and routes).
-    pub distances: Distances,
-    /// Its rows.
-    pub rows: Vec<TrialRow>,
 }
 
 /// What the pictures of a run need besides its costs and the shown house.
@@ -354,7 +195,7 @@ pub fn no_trajectories(show_house: Option<usize>) {
 pub fn draw_pictures(
     p: &Pictures<'_>,
     costs: &CostTable,
-    shown: Option<&Shown>,
+    shown: Option<&ShownHouse>,
 ) -> Result<Vec<&'static str>> {
     let mut drawn = Vec::new();
     let series: Vec<(String, Vec<f64>)> = p

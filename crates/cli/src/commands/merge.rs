@@ -13,7 +13,8 @@ use ferret_lab::runs::RunInfo;
 use ferret_llm::ResponseCache;
 use ferret_world::procthor::HouseRange;
 
-use super::eval::{Pictures, SHARD_CACHE, Shown, draw_pictures, no_trajectories};
+use super::eval::{Pictures, SHARD_CACHE, draw_pictures, no_trajectories};
+use ferret_lab::ShownHouse;
 
 /// Merge the shards of an evaluation (`ferret eval --shard i/n --out DIR_i`) into one run:
 /// trials.csv in the order one machine writes it (byte for byte the same file), summary.csv,
@@ -176,7 +177,7 @@ fn house_rows(path: &Path, index: usize) -> Result<Vec<TrialRow>> {
 }
 
 /// House `index` of the run's source, mapped as the run mapped it, with its rows.
-fn shown_house(info: &RunInfo, index: usize, rows: &[TrialRow]) -> Result<Shown> {
+fn shown_house(info: &RunInfo, index: usize, rows: &[TrialRow]) -> Result<ShownHouse> {
     let source = HouseSource {
         range: Some(HouseRange::single(index)),
         ..info.house_source()
@@ -189,7 +190,7 @@ fn shown_house(info: &RunInfo, index: usize, rows: &[TrialRow]) -> Result<Shown>
         .with_context(|| format!("not in {}", source.describe()))?;
     let (_, distances) =
         ferret_world::distance::build(&scene.house, &info.grid_params(info.protocol.access))?;
-    Ok(Shown {
+    Ok(ShownHouse {
         scene,
         distances,
         rows: rows

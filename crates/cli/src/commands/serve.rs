@@ -20,7 +20,7 @@ use ferret_world::Scene;
 use ferret_world::procthor::HouseRange;
 
 use super::eval::{DEFAULT_STRATEGIES, PlanningArgs};
-use super::llm_setup::{LlmArgs, full_registry_with};
+use super::llm_setup::LlmArgs;
 use crate::common::{GridArgs, HouseArgs};
 
 /// Serve scenes, deployments and trials over HTTP (JSON; OpenAPI at /openapi.json). A robot
@@ -281,7 +281,10 @@ fn load(args: &Args, llm_retry_after: Duration) -> Result<Loaded> {
     let policy = FailurePolicy::Breaker {
         pause: llm_retry_after,
     };
-    let setup = full_registry_with(planning, llm, &specs, policy)?;
+    let setup = ferret_lab::Strategies::builder(&planning.settings(), &llm.settings())
+        .for_specs(&specs)
+        .on_failure(policy)
+        .build()?;
     let candidates: Vec<Arc<dyn Strategy>> = specs
         .iter()
         .map(|s| setup.registry.build(s))

@@ -18,8 +18,9 @@ use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 use crate::error::PlanError;
-use crate::likelihood::{LikelihoodSource, Prior};
+use crate::likelihood::LikelihoodSource;
 use crate::logistic::{logit, sigmoid};
+use crate::prior::Prior;
 use crate::probability::Probability;
 
 /// Fused probabilities are kept in [FUSED_MIN, 1 − FUSED_MIN].

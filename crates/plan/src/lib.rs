@@ -75,6 +75,7 @@ pub mod logistic;
 pub mod plan_memo;
 pub mod planner;
 pub mod policy;
+pub mod prior;
 pub mod probability;
 pub mod problem;
 pub mod protocol;
@@ -93,13 +94,11 @@ pub use fusion::{
 };
 pub use holdout::HoldOut;
 pub use learned::{Embedder, Learned, LearnedKind, LearnedSettings, LearnedSource, NameVectors};
-pub use likelihood::{
-    CALIBRATION_FOLDS, Evidence, LikelihoodSource, Noise, OracleLikelihood, Prior,
-    PriorCalibration, RawPrior, Uniform,
-};
+pub use likelihood::{Evidence, LikelihoodSource, Noise, OracleLikelihood, Uniform};
 pub use plan_memo::PlanMemo;
 pub use planner::{Plan, TourProblem, solve_brute_force, solve_exact};
 pub use policy::{CandidateLimit, CostModel, Greedy, Oracle, Planner, PlannerConfig, Policy};
+pub use prior::{CALIBRATION_FOLDS, Prior, PriorCalibration, RawPrior};
 pub use probability::Probability;
 pub use problem::{SearchProblem, TrialSpec};
 pub use protocol::{

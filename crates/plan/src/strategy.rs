@@ -9,8 +9,9 @@ use ferret_world::GroundTruth;
 
 use crate::error::PlanError;
 use crate::learned::{LearnedKind, LearnedSource};
-use crate::likelihood::{LikelihoodSource, Noise, Prior, RawPrior, Uniform};
+use crate::likelihood::{LikelihoodSource, Noise, Uniform};
 use crate::policy::{CandidateLimit, CostModel, Greedy, Oracle, Planner, PlannerConfig, Policy};
+use crate::prior::{Prior, RawPrior};
 use crate::problem::SearchProblem;
 
 /// What a strategy needs to start a trial.

@@ -1,5 +1,9 @@
+use super::train::{kind_folds, weighted_auroc};
 use super::*;
 use crate::HoldOut;
+use crate::likelihood::LikelihoodSource;
+use crate::logistic::fit_counts;
+use crate::prior::Prior;
 use ferret_world::generate;
 use proptest::prelude::*;
 

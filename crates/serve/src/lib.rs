@@ -60,6 +60,7 @@ pub mod error;
 mod gather;
 mod grids;
 pub mod http;
+pub mod load;
 pub mod model;
 mod searches;
 mod selectors;

@@ -3,13 +3,13 @@
 //! goes through a gate of its own, so requests waiting for the same grid get its result instead
 //! of repeating it.
 
-use std::collections::HashMap;
+use std::collections::{BTreeSet, HashMap};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 
 use ferret_plan::{PlanMemo, ReplayMemo, SearchProblem, TrialSpec};
 use ferret_world::distance::{self, Place};
-use ferret_world::{Distances, GridParams, House, OccupancyGrid, Point, Pose, Scene};
+use ferret_world::{Distances, GridParams, House, ObjectType, OccupancyGrid, Point, Pose, Scene};
 
 use crate::error::{ApiError, ErrorKind};
 
@@ -34,6 +34,9 @@ pub(crate) struct Placed {
     /// First steps of the plans solved in this scene, shared with the scene at every start on
     /// the same grid (a plan over containers does not depend on where the robot starts).
     pub(crate) plans: Arc<PlanMemo>,
+    /// The object types the scene lists in its containers: the names a trial may look for
+    /// (any, when it lists none).
+    pub(crate) targets: Arc<BTreeSet<ObjectType>>,
 }
 
 /// A traced path: `[x, y]` corners on the floor.
@@ -48,6 +51,7 @@ impl Placed {
         distances: Distances,
         kept_replays: usize,
         plans: Arc<PlanMemo>,
+        targets: Arc<BTreeSet<ObjectType>>,
     ) -> Self {
         Self {
             house,
@@ -55,6 +59,7 @@ impl Placed {
             paths: Mutex::default(),
             replays: ReplayMemo::new(kept_replays),
             plans,
+            targets,
         }
     }
 
@@ -310,6 +315,7 @@ impl Grids {
     pub(crate) fn build(
         &self,
         house: &House,
+        targets: Arc<BTreeSet<ObjectType>>,
         pose: Option<[f64; 3]>,
         field: &str,
     ) -> Result<Arc<Placed>, ApiError> {
@@ -338,6 +344,7 @@ impl Grids {
             distances,
             self.kept_replays,
             Arc::new(PlanMemo::new(self.kept_plans)),
+            targets,
         )))
     }
 
@@ -393,7 +400,8 @@ impl Grids {
             None => {
                 let scene = load()?;
                 let field = if pose.is_some() { "pose" } else { "scene" };
-                let b = self.build(&scene.house, None, field)?;
+                let targets = Arc::new(scene.truth.target_types());
+                let b = self.build(&scene.house, targets, None, field)?;
                 self.lock_cache().insert(base_key, b.clone());
                 b
             }
@@ -433,7 +441,7 @@ impl Grids {
     /// containers can be reached from there).
     fn moved(&self, base: &Placed, pose: [f64; 3]) -> Result<Arc<Placed>, ApiError> {
         let Some(grid) = base.distances.grid() else {
-            return self.build(&base.house, Some(pose), "pose");
+            return self.build(&base.house, base.targets.clone(), Some(pose), "pose");
         };
         let mut house = base.house.clone();
         house.start = Pose {
@@ -453,7 +461,7 @@ impl Grids {
             .map_err(invalid)?
         else {
             drop(permit);
-            return self.build(&base.house, Some(pose), "pose");
+            return self.build(&base.house, base.targets.clone(), Some(pose), "pose");
         };
         check_shift(&grid, &house, pose, "pose")?;
         let distances = base.distances.with_start(&house, &grid).map_err(invalid)?;
@@ -463,6 +471,7 @@ impl Grids {
             distances,
             self.kept_replays,
             Arc::clone(&base.plans),
+            base.targets.clone(),
         )))
     }
 

@@ -286,6 +286,13 @@ async fn bad_input_is_a_4xx_naming_the_field() {
             422,
             "scene",
         ),
+        // Not an object type the scene lists: a search for it could only end "not found".
+        (
+            format!("/deployments/{id}/trials"),
+            json!({"scene": "flat", "target": "wallet"}),
+            422,
+            "target",
+        ),
         (
             format!("/deployments/{id}/trials"),
             json!({"scene": "flat", "target": "Wallet"}),
@@ -361,6 +368,17 @@ async fn bad_input_is_a_4xx_naming_the_field() {
         }
         assert!(!reply["error"]["message"].as_str().unwrap().is_empty());
     }
+    // The refusal of a name the scene does not list says which one was meant.
+    let (_, reply) = s
+        .post(
+            &format!("/deployments/{id}/trials"),
+            json!({"scene": "flat", "target": "Walet"}),
+        )
+        .await;
+    assert_eq!(
+        reply["error"]["message"], "unknown target \"Walet\": did you mean \"Wallet\"?",
+        "{reply}"
+    );
     let (st, reply) = s
         .post_raw(
             &format!("/trials/{tid}/observations"),

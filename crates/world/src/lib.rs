@@ -20,6 +20,7 @@ pub mod raster;
 pub mod rules;
 pub mod scene;
 pub mod soft;
+pub mod target_name;
 
 pub use distance::{Distances, Place};
 pub use error::{HouseLocation, Result, WorldError, error_chain};
@@ -33,3 +34,4 @@ pub use map::{MapCell, OccupancyMap};
 pub use rules::{AccessRule, ContainerSet, TravelCost};
 pub use scene::SceneFile;
 pub use soft::{SoftCache, SoftGrid};
+pub use target_name::{UnknownTarget, check_target};

@@ -56,7 +56,8 @@ impl Service {
                 format!("a scene named {name:?} exists already"),
             ));
         }
-        let placed = self.grids.build(&scene.house, None, "scene")?;
+        let targets = Arc::new(scene.truth.target_types());
+        let placed = self.grids.build(&scene.house, targets, None, "scene")?;
         let s = summary(name, &scene);
         self.write_scenes()
             .fixed
@@ -167,7 +168,10 @@ impl Service {
             Some(_) => return Err(taken(&name)),
             None => {}
         }
-        let placed = self.grids.build(&scene.house, None, "scene.containers")?;
+        let targets = Arc::new(scene.truth.target_types());
+        let placed = self
+            .grids
+            .build(&scene.house, targets, None, "scene.containers")?;
         let detail = json(Outcome::Created, &scene_detail(&name, &scene, &placed)?)?;
         let max = self.options.limits.max_scenes;
         let reply = claim.complete(ROUTE, body, |w| {

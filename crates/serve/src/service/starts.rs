@@ -50,13 +50,16 @@ impl Service {
         }
         // The route's resource is the deployment (404 when missing); a scene named in the body
         // that does not exist makes the body unusable: 422.
-        self.placed(&req.scene, req.pose).map_err(|e| {
+        let placed = self.placed(&req.scene, req.pose).map_err(|e| {
             if e.kind == ErrorKind::NotFound {
                 ApiError::new(ErrorKind::Invalid, e.field, e.message)
             } else {
                 e
             }
         })?;
+        // A target the scene does not list could only end "not found" after every container.
+        ferret_world::check_target(&req.target, &placed.targets)
+            .map_err(|e| ApiError::new(ErrorKind::Invalid, "target", e.to_string()))?;
         self.stored_candidates(deployment, &spec)?;
         // Made alone: the trial as stored is kept, so that planning it needs no read.
         let alone = || {

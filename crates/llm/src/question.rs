@@ -252,8 +252,8 @@ pub fn json_instruction(field: &str, expect: &Expect) -> String {
 /// `{"percent": "<1..100>%"}`: one of the strings `1%` … `100%`. Strings with the `%` rather than
 /// an integer because constrained decoding otherwise bends the answer: a model about to write
 /// "10%" may not write `%` inside an integer, and its next choice is often `0`, so "10%" became
-/// 100 for every question (Qwen2.5-Coder-1.5B on llama-cpp-python; see the README's "Real
-/// models"). An enum rather than a pattern: llama.cpp's grammar converter compiles enums
+/// 100 for every question (Qwen2.5-Coder-1.5B on llama-cpp-python; see docs/real-models.md).
+/// An enum rather than a pattern: llama.cpp's grammar converter compiles enums
 /// everywhere.
 fn percent_schema() -> Value {
     let values: Vec<String> = (1..=100).map(|p| format!("{p}%")).collect();

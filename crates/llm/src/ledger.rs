@@ -20,6 +20,17 @@ use serde::Serialize;
 use crate::answer::{AnswerClass, MatchKind};
 use crate::client::TokenUsage;
 
+/// What asking one prompt took: its tokens, its price and its time.
+#[derive(Clone, Copy, Debug)]
+pub struct Spent<'a> {
+    /// Tokens sent and received.
+    pub usage: &'a TokenUsage,
+    /// Price, US dollars.
+    pub cost_usd: f64,
+    /// Seconds the answer took (0 when not measured).
+    pub seconds: f64,
+}
+
 /// Token counts and cost of a set of requests.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct TokenCounts {
@@ -357,23 +368,30 @@ impl Ledger {
         cost_usd: f64,
         outcome: AnswerOutcome,
     ) {
-        self.record_answers(llm, strategy, key, usage, cost_usd, 0.0, &[outcome]);
+        let spent = Spent {
+            usage,
+            cost_usd,
+            seconds: 0.0,
+        };
+        self.record_answers(llm, strategy, key, spent, &[outcome]);
     }
 
-    /// Like [`Self::record_answer`], with the `seconds` the answer took when it was asked, for an
-    /// answer that may give several readings (a percentage per place, P-BATCH): its tokens, cost
-    /// and seconds once, each reading as an answer of its own.
-    #[allow(clippy::too_many_arguments)] // one call's facts; a struct would only rename them
+    /// Like [`Self::record_answer`], with the seconds the answer took when it was asked, for an
+    /// answer that may give several readings (a percentage per place, P-BATCH): what it
+    /// [`Spent`] once, each reading as an answer of its own.
     pub fn record_answers(
         &self,
         llm: &str,
         strategy: &str,
         key: &str,
-        usage: &TokenUsage,
-        cost_usd: f64,
-        seconds: f64,
+        spent: Spent<'_>,
         outcomes: &[AnswerOutcome],
     ) {
+        let Spent {
+            usage,
+            cost_usd,
+            seconds,
+        } = spent;
         let mut inner = self.lock();
         if !inner
             .seen

@@ -66,7 +66,7 @@ pub use context::{
 };
 pub use error::{CacheError, ConfigError, LlmError, Result};
 pub use ledger::{
-    AnswerCounts, AnswerOutcome, Ledger, LogprobUse, TokenCounts, TokenReport, UsageRow,
+    AnswerCounts, AnswerOutcome, Ledger, LogprobUse, Spent, TokenCounts, TokenReport, UsageRow,
 };
 pub use likelihood::{Asked, LlmLikelihood, QuestionSet, Resolved, Shape, question_set};
 pub use logprobs::{

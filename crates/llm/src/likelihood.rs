@@ -35,7 +35,7 @@ use crate::client::TokenUsage;
 use crate::config::ProbabilityFrom;
 use crate::context::{HouseContext, Listing, ListingContext, ProbabilityQuery, QueryPlan};
 use crate::error::{LlmError, Result};
-use crate::ledger::{AnswerOutcome, LogprobUse};
+use crate::ledger::{AnswerOutcome, LogprobUse, Spent};
 use crate::logprobs::{expected_percentage, label_distribution, yes_probability};
 use crate::message::ChatMessage;
 use crate::prompts::{PromptKind, PromptLibrary};
@@ -505,9 +505,11 @@ impl LlmLikelihood {
             self.llm.name(),
             &self.strategy,
             &r.key,
-            &r.usage,
-            r.cost_usd,
-            r.seconds,
+            Spent {
+                usage: &r.usage,
+                cost_usd: r.cost_usd,
+                seconds: r.seconds,
+            },
             &r.outcomes,
         );
     }

@@ -27,7 +27,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use crate::answer::{MatchKind, match_location};
 use crate::context::{DirectContext, HouseContext};
 use crate::error::{LlmError, Result};
-use crate::ledger::AnswerOutcome;
+use crate::ledger::{AnswerOutcome, Spent};
 use crate::likelihood::{Asked, LlmLikelihood};
 use crate::message::ChatMessage;
 use crate::question::{Expect, LOCATION_REMINDER, Question};
@@ -247,9 +247,11 @@ impl LlmDirectPolicy<'_> {
             s.llm.name(),
             &s.name,
             &first_key,
-            &answer.usage,
-            answer.cost_usd,
-            answer.latency.as_secs_f64(),
+            Spent {
+                usage: &answer.usage,
+                cost_usd: answer.cost_usd,
+                seconds: answer.latency.as_secs_f64(),
+            },
             &[AnswerOutcome::Direct(kind)],
         );
         Ok(choice)

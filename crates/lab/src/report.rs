@@ -110,7 +110,7 @@ pub fn summary_markdown(
     md
 }
 
-/// [`reference_means`] as Markdown, in metres and cells.
+/// [`reference_means`](crate::summary::reference_means) as Markdown, in metres and cells.
 pub fn reference_means_markdown(means: &[(String, f64)]) -> String {
     let mut md = String::from(
         "\n## As the reference code averages\n\nEach mean weighted by how often 500 seeded runs of 100 draws with replacement (numpy's legacy generator, as the reference's results script) pick each house.\n\n| strategy | mean cost (m) | mean cost (cells) |\n|---|---:|---:|\n",

@@ -190,7 +190,7 @@ pub enum ShardError {
     Env(String),
 }
 
-/// What a shard's run.json records besides the run's settings: enough for [`merge_runs`] to
+/// What a shard's run.json records besides the run's settings: enough for [`merge_runs`](crate::merge::merge_runs) to
 /// check the shards and to write the report one machine writes.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ShardRecord {

@@ -14,8 +14,9 @@ use pyo3::types::{PyDict, PyList};
 use crate::convert;
 use crate::errors;
 use crate::houses::{House, scenes_of};
+use crate::planning::{self, Planning};
 use crate::progress;
-use crate::settings::{self, Planning};
+use crate::settings;
 
 /// The result of `ferret.calibrate`: one row per scored source (the columns of
 /// `calibration.csv`), each source's reliability bins, and the fitted fusions when asked for.
@@ -185,7 +186,7 @@ pub fn calibrate(
     let feedback = progress::Interruptible::new(progress);
     let done = py.allow_threads(|| {
         errors::guarded("calibrate", || {
-            let setup = settings::registry(&planning, &llm, &needed).map_err(errors::lab)?;
+            let setup = planning::registry(&planning, &llm, &needed).map_err(errors::lab)?;
             ferret_lab::calibrate::calibrate(&loaded, &setup, &llm, &settings, &feedback)
                 .map_err(errors::lab)
         })

@@ -12,6 +12,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::errors;
+use crate::planning;
 use crate::search::PySearch;
 use crate::settings;
 
@@ -89,11 +90,11 @@ impl PyDeployment {
             .parse()
             .map_err(|e| errors::config(format!("method: {e}")))?;
         let protocol = settings::protocol(protocol)?;
-        let planning = settings::Planning::new(prior, max_containers, exact_max, search_cost)?;
+        let planning = planning::Planning::new(prior, max_containers, exact_max, search_cost)?;
         let llm = settings::llm(config, llm_cache, offline, false, fusion);
         let candidates = py.allow_threads(|| {
             errors::guarded("Deployment", || {
-                let setup = settings::registry(&planning, &llm, &names).map_err(errors::lab)?;
+                let setup = planning::registry(&planning, &llm, &names).map_err(errors::lab)?;
                 names
                     .iter()
                     .map(|s| setup.registry.build(s).map_err(errors::plan))

@@ -16,8 +16,9 @@ use pyo3::types::PyList;
 use crate::convert;
 use crate::errors;
 use crate::houses::{House, scenes_of};
+use crate::planning::{self, Planning, PriorArg};
 use crate::progress;
-use crate::settings::{self, Grid, Planning, PriorArg};
+use crate::settings::{self, Grid};
 
 /// The result of `ferret.evaluate`: one row per trial and strategy that finished, houses in
 /// order, each a dict with exactly the columns of `ferret eval`'s `trials.csv`.
@@ -310,7 +311,7 @@ pub fn evaluate(
     let feedback = progress::Interruptible::new(progress);
     let outcome = py.allow_threads(|| {
         errors::guarded("evaluate", || {
-            let setup = settings::registry(&planning, &llm, &specs).map_err(errors::lab)?;
+            let setup = planning::registry(&planning, &llm, &specs).map_err(errors::lab)?;
             let run = EvalContext::new(&setup, &specs, &draw, &params, &llm, &feedback)
                 .collect(HouseInput::Scenes(&scenes))
                 .map_err(errors::lab)?;

@@ -5,7 +5,7 @@
 //! ([`houses`]), priors ([`prior`]), a search driven step by step ([`search`]), evaluations
 //! with `trials.csv`'s rows ([`evaluate`]), calibration of likelihood sources ([`calibrate`]),
 //! selection over an evaluation run ([`select`]), a live deployment's selector ([`deploy`]), the keyword arguments they share
-//! ([`settings`]), progress on stderr ([`progress`]) and exception classes carrying the command
+//! ([`settings`], and the planner's and prior's with the strategy registry: [`planning`]), progress on stderr ([`progress`]) and exception classes carrying the command
 //! line's messages ([`errors`]). It plans, simulates and evaluates nothing itself: every call
 //! goes to the crates `ferret eval` and `ferret serve` use.
 
@@ -17,6 +17,7 @@ pub mod deploy;
 pub mod errors;
 pub mod evaluate;
 pub mod houses;
+pub mod planning;
 pub mod prior;
 pub mod progress;
 pub mod search;

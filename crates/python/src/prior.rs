@@ -2,7 +2,7 @@
 //! strategies plan over.
 
 use std::path::PathBuf;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use ferret_plan::Prior;
 use ferret_world::ObjectType;
@@ -83,9 +83,7 @@ impl PyPrior {
     #[staticmethod]
     fn default(py: Python<'_>) -> PyResult<Self> {
         let inner = py.allow_threads(|| {
-            errors::guarded("Prior.default", || {
-                crate::settings::default().map_err(errors::lab)
-            })
+            errors::guarded("Prior.default", || default_prior().map_err(errors::lab))
         })?;
         Ok(Self { inner })
     }
@@ -145,4 +143,18 @@ impl PyPrior {
             self.inner.smoothing
         )
     }
+}
+
+/// The prior `ferret eval` uses when given none, trained on first use and kept: it depends on
+/// nothing but constants.
+pub fn default_prior() -> Result<Arc<Prior>, ferret_lab::LabError> {
+    static DEFAULT: Mutex<Option<Arc<Prior>>> = Mutex::new(None);
+    let mut held = DEFAULT.lock().unwrap_or_else(|p| p.into_inner());
+    if let Some(p) = held.as_ref() {
+        return Ok(p.clone());
+    }
+    let (houses, seed) = ferret_lab::strategies::DEFAULT_PRIOR_HOUSES;
+    let p = Arc::new(ferret_lab::strategies::default_prior(houses, seed)?);
+    *held = Some(p.clone());
+    Ok(p)
 }

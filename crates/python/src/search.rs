@@ -11,7 +11,8 @@ use self_cell::self_cell;
 
 use crate::errors;
 use crate::houses::{House, Map, PyContainer};
-use crate::settings::{self, Grid, Planning};
+use crate::planning::{self, Planning};
+use crate::settings::{self, Grid};
 
 /// What a search borrows from: the house, its map, the trial and the strategy.
 struct Owner {
@@ -138,7 +139,7 @@ impl PySearch {
         let built = py.allow_threads(|| {
             errors::guarded("Search", || {
                 // Each search has its own LLM service: a failed endpoint fails this trial only.
-                let setup = settings::registry(&planning, &llm, &spec).map_err(errors::lab)?;
+                let setup = planning::registry(&planning, &llm, &spec).map_err(errors::lab)?;
                 setup.registry.build(&spec[0]).map_err(errors::plan)
             })
         })?;

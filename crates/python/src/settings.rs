@@ -1,19 +1,16 @@
-//! Keyword arguments several functions share — grid, planner and prior, LLM — turned into the
-//! experiment layer's settings and checked with the command line's rules, and the strategy
-//! registry built from them. A new function over strategies (a calibration, a selection) takes
-//! these and calls [`registry`].
+//! Keyword arguments several functions share — grid, protocol, LLM, lists of specs — turned
+//! into the experiment layer's settings and checked with the command line's rules (the planner
+//! and prior keywords, and the strategy registry built from them, are in
+//! [`planning`](crate::planning)).
 
 use std::path::PathBuf;
-use std::sync::{Arc, Mutex};
 
-use ferret_lab::strategies::{Strategies, default_prior, needs_prior};
-use ferret_lab::{LlmSettings, PlanningSettings};
-use ferret_plan::{Prior, Protocol, ProtocolName};
+use ferret_lab::LlmSettings;
+use ferret_plan::{Protocol, ProtocolName};
 use ferret_world::GridParams;
 use pyo3::prelude::*;
 
 use crate::errors;
-use crate::prior::PyPrior;
 
 /// Occupancy-grid options (`resolution`, `robot_radius`, `wall_thickness`), as `--resolution`,
 /// `--robot-radius` and `--wall-thickness`.
@@ -85,105 +82,6 @@ pub fn protocol(name: &str) -> PyResult<Protocol> {
         .map_err(|e| errors::config(format!("protocol={name:?}: {e}")))
 }
 
-/// Where the prior of `model/prior...` strategies comes from.
-#[derive(Clone)]
-pub enum PriorArg {
-    /// A `Prior` object.
-    Held(Arc<Prior>),
-    /// A prior file.
-    File(PathBuf),
-    /// The default prior (see `Prior.default`).
-    Default,
-}
-
-impl PriorArg {
-    /// `None`, a `Prior` or a path.
-    pub fn from_py(arg: Option<&Bound<'_, PyAny>>) -> PyResult<Self> {
-        let Some(arg) = arg.filter(|a| !a.is_none()) else {
-            return Ok(Self::Default);
-        };
-        if let Ok(p) = arg.downcast::<PyPrior>() {
-            return Ok(Self::Held(p.get().inner.clone()));
-        }
-        if let Ok(path) = arg.extract::<PathBuf>() {
-            return Ok(Self::File(path));
-        }
-        Err(errors::config(
-            "prior: expected a ferret.Prior, a path to a prior file, or None",
-        ))
-    }
-
-    /// The prior itself: the object, the file read, or the default prior trained once per
-    /// process.
-    pub fn resolve(&self) -> Result<Arc<Prior>, ferret_lab::LabError> {
-        match self {
-            Self::Held(p) => Ok(p.clone()),
-            Self::File(path) => Ok(Arc::new(Prior::load(path)?)),
-            Self::Default => default(),
-        }
-    }
-}
-
-/// The prior `ferret eval` uses when given none, trained on first use and kept: it depends on
-/// nothing but constants.
-pub fn default() -> Result<Arc<Prior>, ferret_lab::LabError> {
-    static DEFAULT: Mutex<Option<Arc<Prior>>> = Mutex::new(None);
-    let mut held = DEFAULT.lock().unwrap_or_else(|p| p.into_inner());
-    if let Some(p) = held.as_ref() {
-        return Ok(p.clone());
-    }
-    let (houses, seed) = ferret_lab::strategies::DEFAULT_PRIOR_HOUSES;
-    let p = Arc::new(default_prior(houses, seed)?);
-    *held = Some(p.clone());
-    Ok(p)
-}
-
-/// Planner and prior keywords (`prior`, `max_containers`, `exact_max`, `search_cost`), as
-/// `--prior`, `--max-containers`, `--exact-max` and `--search-cost`.
-#[derive(Clone)]
-pub struct Planning {
-    /// The planner settings, with the prior's file when one is named.
-    pub settings: PlanningSettings,
-    /// The prior as given: the default, a file, or a `Prior` object.
-    pub prior: PriorArg,
-}
-
-impl Planning {
-    /// The keywords, refused as the command line refuses them.
-    pub fn new(
-        prior: Option<&Bound<'_, PyAny>>,
-        max_containers: usize,
-        exact_max: usize,
-        search_cost: f64,
-    ) -> PyResult<Self> {
-        let prior = PriorArg::from_py(prior)?;
-        let settings = PlanningSettings {
-            prior: match &prior {
-                PriorArg::File(p) => Some(p.clone()),
-                _ => None,
-            },
-            max_containers,
-            exact_max,
-            search_cost,
-            holdout: None,
-            // A learned prior finds vectors of names its file lacks through FERRET_EMBEDDINGS.
-            embeddings: None,
-        };
-        // The command line names its options; here they are keywords.
-        settings.validate().map_err(|e| {
-            errors::lab_as_keywords(
-                e,
-                &[
-                    ("--search-cost ", "search_cost="),
-                    ("--max-containers ", "max_containers="),
-                    ("--exact-max ", "exact_max="),
-                ],
-            )
-        })?;
-        Ok(Self { settings, prior })
-    }
-}
-
 /// LLM keywords (`config`, `llm_cache`, `offline`, `keep_going`, `fusion`), as `--config`,
 /// `--llm-cache`, `--offline`, `--keep-going` and `--fusion`.
 pub fn llm(
@@ -207,21 +105,4 @@ pub fn llm(
 /// Refuses a spec given twice, as `--strategies a,b,a` is refused.
 pub fn check_distinct(name: &str, specs: &[String]) -> PyResult<()> {
     ferret_lab::strategies::check_distinct(name, specs).map_err(errors::lab)
-}
-
-/// The full registry (built-in and LLM kinds) for `specs`, over the prior only when one of them
-/// plans over it — the registry `ferret eval` builds.
-pub fn registry(
-    planning: &Planning,
-    llm: &LlmSettings,
-    specs: &[String],
-) -> Result<Strategies, ferret_lab::LabError> {
-    let prior = if needs_prior(specs) {
-        Some(planning.prior.resolve()?)
-    } else {
-        None
-    };
-    Strategies::builder(&planning.settings, llm)
-        .prior(prior)
-        .build()
 }

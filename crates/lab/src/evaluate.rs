@@ -1,4 +1,6 @@
-//! Evaluation: every strategy on the same trials of every house, in parallel over houses.
+//! Evaluation: every strategy on the same trials of every house, in parallel over houses —
+//! [`EvalContext`] for strategy specs, houses in memory or read from a source batch by batch,
+//! and [`evaluate`] for strategies already built on houses already mapped.
 
 use std::sync::Arc;
 

@@ -62,6 +62,56 @@ pub fn paired_markdown(paired: &[PairedRow]) -> String {
     md
 }
 
+/// What a run's `summary.md` shows.
+#[derive(Clone, Copy, Debug)]
+pub struct RunFigures<'a> {
+    /// The paper's table I, one row per strategy.
+    pub summary: &'a [SummaryRow],
+    /// Where the houses came from.
+    pub source: &'a str,
+    /// Houses with at least one finished trial.
+    pub houses_run: usize,
+    /// How trials were drawn per house.
+    pub trials_per_house: TrialsPerHouse,
+    /// Trials drawn on those houses.
+    pub trials_run: usize,
+    /// Costs in grid cells too.
+    pub cells: bool,
+    /// The reference code's weighted means, when its draws apply.
+    pub reference_means: Option<&'a [(String, f64)]>,
+    /// The shard (index, count) a shard's run is; its comparisons are the merge's.
+    pub shard: Option<(usize, usize)>,
+    /// The paired comparisons (none for a shard).
+    pub paired: &'a [PairedRow],
+}
+
+/// A run's `summary.md`: table I, then in cells, the reference code's means and the paired
+/// comparisons as the run has them.
+pub fn run_markdown(f: &RunFigures<'_>) -> String {
+    let mut md = summary_markdown(
+        f.summary,
+        f.source,
+        f.houses_run,
+        f.trials_per_house,
+        f.trials_run,
+    );
+    if f.cells {
+        md += &cells_markdown(f.summary);
+    }
+    if let Some(means) = f.reference_means {
+        md += &reference_means_markdown(means);
+    }
+    match f.shard {
+        Some((index, count)) => {
+            md += &format!(
+                "\nShard {index}/{count}: the paired comparisons (and the pictures) are made by `ferret merge` over every shard.\n"
+            );
+        }
+        None => md += &paired_markdown(f.paired),
+    }
+    md
+}
+
 /// The paper's table I as Markdown; `trials` trials were drawn on `houses` houses.
 pub fn summary_markdown(
     summary: &[SummaryRow],

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Context, LabError, Result};
 use crate::houses::HouseSource;
-use crate::report::{cells_markdown, paired_markdown, reference_means_markdown, summary_markdown};
+use crate::report::{RunFigures, run_markdown};
 use crate::rows::{CELL_M, TrialRow};
 use crate::shard::{MergedShard, ShardRecord};
 use crate::strategies::PlanningSettings;
@@ -253,31 +253,20 @@ pub fn run_report(info: &RunInfo, costs: &CostTable, view: &ReportView<'_>) -> R
     } else {
         paired_comparisons_of(costs, &info.strategies, view.paired_against, info.seed)
     };
-    let mut markdown = summary_markdown(
-        &summary,
-        view.source,
-        view.houses_run,
-        info.trials_per_house,
-        view.trials_run,
-    );
-    if view.cells {
-        markdown += &cells_markdown(&summary);
-    }
-    if info.protocol.rng == ferret_plan::TrialRng::Python
-        && info.trials_per_house == TrialsPerHouse::One
-    {
-        markdown +=
-            &reference_means_markdown(&reference_means_of(costs, &info.strategies, view.houses));
-    }
-    match &info.shard {
-        Some(sh) => {
-            markdown += &format!(
-                "\nShard {}/{}: the paired comparisons (and the pictures) are made by `ferret merge` over every shard.\n",
-                sh.index, sh.count
-            );
-        }
-        None => markdown += &paired_markdown(&paired),
-    }
+    let reference_means = (info.protocol.rng == ferret_plan::TrialRng::Python
+        && info.trials_per_house == TrialsPerHouse::One)
+        .then(|| reference_means_of(costs, &info.strategies, view.houses));
+    let markdown = run_markdown(&RunFigures {
+        summary: &summary,
+        source: view.source,
+        houses_run: view.houses_run,
+        trials_per_house: info.trials_per_house,
+        trials_run: view.trials_run,
+        cells: view.cells,
+        reference_means: reference_means.as_deref(),
+        shard: info.shard.as_ref().map(|sh| (sh.index, sh.count)),
+        paired: &paired,
+    });
     RunReport {
         summary,
         paired,

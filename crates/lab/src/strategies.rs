@@ -1,6 +1,7 @@
-//! Strategy setup without a command line: planner and prior settings, LLM settings, the full
-//! registry (built-in kinds plus the LLM crate's), prefetching LLM answers, and what the LLM
-//! service reports after a run.
+//! Strategy setup without a command line: planner and prior settings, LLM settings, the one
+//! builder of the strategies ([`Strategies::builder`]: built-in kinds plus the LLM crate's, over
+//! the prior the specs need), prefetching LLM answers, and what the LLM service reports after a
+//! run.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

@@ -8,9 +8,11 @@ import ferret
 
 def test_a_callable_sees_each_step_from_start_to_end(houses):
     calls = []
-    ev = ferret.evaluate(
-        houses[:3], ["model/uniform"], progress=lambda what, done, total: calls.append((what, done, total))
-    )
+
+    def record(what, done, total):
+        calls.append((what, done, total))
+
+    ev = ferret.evaluate(houses[:3], ["model/uniform"], progress=record)
     assert len(ev) == 3
     houses_calls = [c for c in calls if c[0] == "houses"]
     assert houses_calls[0][1] == 0, "called when the step begins"

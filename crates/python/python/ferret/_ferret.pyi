@@ -1,7 +1,7 @@
 """Type stubs of ferret's extension module (re-exported by ``ferret``)."""
 
 import os
-from typing import Any, Dict, List, Literal, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Literal, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -13,6 +13,8 @@ DEFAULT_STRATEGIES: str
 _Path = Union[str, "os.PathLike[str]"]
 _Protocol = Literal["ferret", "paper"]
 _ContainerArg = Union[str, "Container"]
+# ``progress=``: True prints to stderr; a callable is called as ``progress(what, done, total)``.
+_Progress = Union[bool, None, Callable[[str, int, int], object]]
 
 class FerretError(Exception):
     """Base class of every error ferret raises."""
@@ -399,7 +401,7 @@ def evaluate(
     resolution: float = 0.05,
     robot_radius: float = 0.18,
     wall_thickness: float = 0.05,
-    progress: bool = False,
+    progress: _Progress = None,
     shard: Optional[Tuple[int, int]] = None,
 ) -> Evaluation:
     """Evaluates strategies on houses as ``ferret eval`` does (identical costs); with
@@ -431,7 +433,7 @@ def calibrate(
     offline: bool = False,
     keep_going: bool = False,
     fusion: Optional[_Path] = None,
-    progress: bool = False,
+    progress: _Progress = None,
 ) -> CalibrationResult:
     """Scores likelihood sources against the houses' ground truth as ``ferret calibrate`` does."""
 
@@ -450,6 +452,6 @@ def select(
     offline: bool = False,
     keep_going: bool = False,
     fusion: Optional[_Path] = None,
-    progress: bool = False,
+    progress: _Progress = None,
 ) -> SelectionResult:
     """UCB and replay selection over an evaluation run, as ``ferret select --trials`` does."""

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Lints what cargo does not: every Python file (ruff: its formatting and its lints, configured in
-# ruff.toml), every shell script (shellcheck) and the relative links of README.md and docs/*.md
-# (scripts/check-links.py: files that exist, anchors that name a heading).
+# ruff.toml), every shell script (shellcheck), the relative links of README.md and docs/*.md
+# (scripts/check-links.py: files that exist, anchors that name a heading) and the imports between
+# each crate's modules (scripts/module-cycles.py: no circle).
 #
 #   scripts/lint.sh              # check everything; exits 1 if anything is off
 #   scripts/lint.sh install      # only make the cached venv
@@ -46,9 +47,14 @@ failed=()
 "$VENV/bin/shellcheck" -x -e SC2119 scripts/*.sh scripts/lib/*.sh .ci/run ros/*.sh \
     || failed+=(shellcheck)
 python3 scripts/check-links.py README.md docs/*.md || failed+=("relative links")
+# Each crate's modules import one another without a circle (scripts/module-cycles.py prints any).
+python3 scripts/module-cycles.py crates >/dev/null || {
+    python3 scripts/module-cycles.py crates || true
+    failed+=("module cycles")
+}
 
 if [ "${#failed[@]}" -gt 0 ]; then
     for check in "${failed[@]}"; do log "failed: $check"; done
     exit 1
 fi
-log "Python, shell scripts and links: all clean"
+log "Python, shell scripts, links and module imports: all clean"

@@ -98,6 +98,30 @@ fn deploy_costs(dir: &Path, seed: &str) -> Vec<(String, f64)> {
         .collect()
 }
 
+/// A type to `--find` that no house holds is refused before any trial, naming the type meant.
+#[test]
+fn deploy_refuses_a_target_no_house_holds_with_the_name_meant() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = ferret(&[
+        "deploy",
+        "--houses",
+        s(&apartment()),
+        "--find",
+        "Blanket,wallet",
+        "--strategies",
+        STRATEGIES,
+        "--out",
+        s(&dir.path().join("deploy")),
+    ]);
+    assert!(!o.status.success(), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains(r#"--find: unknown target "wallet": did you mean "Wallet"?"#),
+        "{err}"
+    );
+    assert!(!dir.path().join("deploy/deploy.csv").exists());
+}
+
 #[test]
 fn the_paper_targets_through_the_python_client_cost_what_deploy_says() {
     let dir = tempfile::tempdir().unwrap();

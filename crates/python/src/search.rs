@@ -99,7 +99,8 @@ impl PySearch {
     /// strategy `strategy` (a spec as in `ferret eval --strategies`, e.g. `"model/prior"`,
     /// `"model/prior/exact"`, `"optimistic+greedy"`, `"llm+model/p-yesno/<llm>"`). Planner,
     /// prior, LLM and grid keywords are those of `ferret.evaluate`. Raises `StrategyError` for
-    /// an unknown spec, `HouseError` for a house that cannot be mapped.
+    /// an unknown spec, `HouseError` for a house that cannot be mapped, `ConfigError` for a
+    /// target the house's containers do not hold (naming the type most likely meant).
     #[new]
     #[pyo3(signature = (
         house, target, strategy = "model/prior", *, prior = None, config = None, llm_cache = None,
@@ -149,11 +150,14 @@ impl PySearch {
                 built.name()
             )));
         }
+        // A target the house does not hold could only end "not found" after every container.
+        let target = ferret_world::check_target(target, &h.scene.truth.target_types())
+            .map_err(|e| errors::config(e.to_string()))?;
         let owner = Owner {
             scene: h.scene.clone(),
             map: map.clone(),
             trial: TrialSpec {
-                target: ObjectType::new(target),
+                target: target.clone(),
                 revealed: Vec::new(),
             },
             strategy: built,

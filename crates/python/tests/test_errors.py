@@ -81,6 +81,16 @@ def test_unknown_strategy(houses):
         ferret.Search(houses[0], "Apple", "teleport")
 
 
+def test_a_target_the_house_does_not_hold_is_refused_with_the_name_meant(houses):
+    house = houses[0]
+    held = house.target_types()[0]
+    with pytest.raises(ferret.ConfigError, match=f'did you mean "{held}"'):
+        ferret.Search(house, held.lower(), "model/uniform")
+    with pytest.raises(ferret.ConfigError, match="the scene holds"):
+        ferret.Search(house, "Xylophone", "model/uniform")
+    assert ferret.Search(house, held, "model/uniform").next_container() is not None
+
+
 def test_bad_prior_file(tmp_path, houses):
     bad = tmp_path / "prior.json"
     bad.write_text('{"smoothing": "a lot"}')

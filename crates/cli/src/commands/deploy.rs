@@ -134,11 +134,20 @@ pub fn run(args: Args) -> Result<ExitCode> {
         args.seed,
         (protocol.replay, protocol.travel_cost),
     )?;
+    // A type no house holds could only end "not found" after every container of every house.
+    let held: std::collections::BTreeSet<ObjectType> = loaded
+        .scenes
+        .iter()
+        .flat_map(|s| s.truth.target_types())
+        .collect();
     let find: Vec<ObjectType> = args
         .find
         .iter()
-        .map(|t| ObjectType::new(t.trim()))
-        .collect();
+        .map(|t| {
+            ferret_world::check_target(t.trim(), &held)
+                .map_err(|e| anyhow::anyhow!("--find: {e} (in {})", loaded.source))
+        })
+        .collect::<Result<_>>()?;
     let grid = args.grid.params_for(protocol.access);
     let settings = DeploySettings {
         trials,

@@ -145,6 +145,11 @@ fn show(args: &ShowArgs) -> Result<ExitCode> {
     let scene = load_scene(args)?;
     let house = &scene.house;
     let target = ObjectType::new(args.target.clone());
+    // A prompt for a type the house does not hold is still worth reading (how a model is asked
+    // about things it will not find), so a name the house does not list is only flagged.
+    if let Err(e) = ferret_world::check_target(&args.target, &scene.truth.target_types()) {
+        eprintln!("warning: {e}; showing the prompt for {target} anyway");
+    }
     let container = match &args.container {
         None => None,
         Some(id) => Some(house.container_index(id).ok_or_else(|| {

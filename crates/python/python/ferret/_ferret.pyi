@@ -194,7 +194,10 @@ class Search:
         wall_thickness: float = 0.05,
         protocol: _Protocol = "ferret",
     ) -> None:
-        """Starts a search for ``target`` in ``house`` with the strategy spec ``strategy``."""
+        """Starts a search for ``target`` in ``house`` with the strategy spec ``strategy``.
+
+        Raises ConfigError for a target no container of the house holds, naming the type most
+        likely meant (``"wallet"``: did you mean ``"Wallet"``?)."""
     def next_container(self) -> Optional[Container]:
         """The container to search next, or None once found or everything was searched."""
     def record(

@@ -99,7 +99,10 @@ def test_deployment_refuses_what_it_cannot_run():
     unfinished = ferret.Search(house, "Wallet", chosen)
     with pytest.raises(ferret.SearchError, match="not found its target"):
         d.finish(unfinished)
-    nowhere = drive(house, "Toaster", chosen)
+    # The robot's detector never sees the wallet: every container searched, nothing found.
+    nowhere = ferret.Search(house, "Wallet", chosen)
+    while (c := nowhere.next_container()) is not None:
+        nowhere.record(c, False)
     assert nowhere.found is None
     with pytest.raises(ferret.SearchError, match="abandon"):
         d.finish(nowhere)

@@ -79,7 +79,8 @@ def test_step_semantics(houses):
 
 def test_exhausted_search_ends_with_none(houses):
     house = houses[0]
-    s = ferret.Search(house, "NoSuchThing", "optimistic+greedy")
+    # A held type that the robot never sees (its detector misses it): every container searched.
+    s = ferret.Search(house, house.target_types()[0], "optimistic+greedy")
     steps = 0
     while (c := s.next_container()) is not None:
         s.record(c, False)

@@ -144,7 +144,7 @@ impl LikelihoodSource for Noise {
     }
 }
 
-/// The evidence gaps of one question ([`Prior::evidence`]), each in (0, 1]: 1 where the training
+/// The evidence gaps of one question ([`Prior::evidence`](crate::Prior::evidence)), each in (0, 1]: 1 where the training
 /// houses showed nothing, near 0 where they showed much.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Evidence {

@@ -98,12 +98,12 @@ impl Conn<'_> {
     }
 }
 
-/// Read access inside [`Store::read`] (also available to writers).
+/// Read access inside [`Store::read`](super::Store::read) (also available to writers).
 pub struct Reader<'a> {
     pub(super) conn: Conn<'a>,
 }
 
-/// Write access inside [`Store::write`].
+/// Write access inside [`Store::write`](super::Store::write).
 pub struct Writer<'a> {
     pub(super) conn: Conn<'a>,
 }

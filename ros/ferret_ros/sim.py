@@ -92,8 +92,9 @@ class SimNav2(Node):
         if at == c.id:
             return [tuple(c.access)], 0.0
         # A search that has "searched" the container the robot is at stands where the robot
-        # stands; its target is never looked for.
-        s = ferret.Search(self.house, "SimulatorNothing", "optimistic+greedy")
+        # stands; its target (one the scene holds, as a search needs) is never looked for.
+        held = self.house.target_types()
+        s = ferret.Search(self.house, held[0] if held else "_", "optimistic+greedy")
         if at is not None:
             s.record(at, False, [])
         return s.path_to(c), s.distance_to(c)

@@ -15,9 +15,9 @@ use pyo3::prelude::*;
 pub enum Progress {
     /// No progress.
     Off,
-    /// Lines on stderr ([`Stderr`]).
+    /// Lines on stderr: redrawn in place on a terminal, every tenth of a step otherwise.
     Stderr,
-    /// Calls of a Python callable ([`Callback`]).
+    /// Calls of a Python callable.
     Call(Py<PyAny>),
 }
 
@@ -42,13 +42,7 @@ impl<'py> FromPyObject<'py> for Progress {
     }
 }
 
-/// Prints each step's progress to stderr: redrawn in place on a terminal, and every tenth of
-/// the step otherwise.
-pub struct Stderr {
-    state: Mutex<Step>,
-    terminal: bool,
-}
-
+/// The step under way, as either kind of progress shows it.
 #[derive(Default)]
 struct Step {
     what: String,
@@ -58,47 +52,53 @@ struct Step {
     started: Option<Instant>,
 }
 
-impl Default for Stderr {
-    fn default() -> Self {
-        Self {
-            state: Mutex::new(Step::default()),
-            terminal: std::io::stderr().is_terminal(),
-        }
-    }
+/// Where a step's progress goes, and when: [`Stepped`] keeps the step and asks.
+trait Show: Send + Sync {
+    /// Shows `s` (`last`: the step has ended).
+    fn show(&self, s: &Step, last: bool);
+    /// Whether `s`, just updated, is to be shown.
+    fn due(&self, s: &Step) -> bool;
+    /// Whether `s`, ending, is to be shown once more.
+    fn due_at_end(&self, s: &Step) -> bool;
+    /// A remark beside the progress.
+    fn note(&self, _message: &str) {}
 }
 
-impl Stderr {
+/// The lab's [`Feedback`] over one [`Show`]: the current step's counts, shown when it says.
+struct Stepped<S> {
+    state: Mutex<Step>,
+    out: S,
+}
+
+impl<S: Show> Stepped<S> {
+    fn new(out: S) -> Self {
+        Self {
+            state: Mutex::new(Step::default()),
+            out,
+        }
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Step> {
+        self.state.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
     fn show(&self, s: &mut Step, last: bool) {
-        let secs = s.started.map_or(0.0, |t| t.elapsed().as_secs_f64());
-        let line = if s.len > 0 {
-            format!("{}: {}/{} ({secs:.1} s)", s.what, s.done, s.len)
-        } else {
-            format!("{}: {} ({secs:.1} s)", s.what, s.done)
-        };
-        let mut err = std::io::stderr().lock();
-        // Progress is a courtesy: a closed stderr must not fail the work.
-        let _ = if self.terminal {
-            write!(err, "\r{line}\x1b[K{}", if last { "\n" } else { "" })
-        } else {
-            writeln!(err, "{line}")
-        };
-        let _ = err.flush();
+        self.out.show(s, last);
         s.shown = s.done;
     }
 
     fn update(&self, f: impl FnOnce(&mut Step)) {
-        let mut s = self.state.lock().unwrap_or_else(|p| p.into_inner());
+        let mut s = self.lock();
         f(&mut s);
-        let tenth = (s.len / 10).max(1);
-        if self.terminal || s.done >= s.shown + tenth || (s.len > 0 && s.done == s.len) {
+        if self.out.due(&s) {
             self.show(&mut s, false);
         }
     }
 }
 
-impl Feedback for Stderr {
+impl<S: Show> Feedback for Stepped<S> {
     fn begin(&self, what: &str, len: usize) {
-        let mut s = self.state.lock().unwrap_or_else(|p| p.into_inner());
+        let mut s = self.lock();
         *s = Step {
             what: what.to_string(),
             len,
@@ -121,10 +121,48 @@ impl Feedback for Stderr {
     }
 
     fn end(&self) {
-        let mut s = self.state.lock().unwrap_or_else(|p| p.into_inner());
-        if s.shown != s.done || self.terminal {
+        let mut s = self.lock();
+        if self.out.due_at_end(&s) {
             self.show(&mut s, true);
         }
+    }
+
+    fn note(&self, message: &str) {
+        self.out.note(message);
+    }
+}
+
+/// Each step's progress on stderr: redrawn in place on a terminal, and every tenth of the step
+/// otherwise.
+struct Stderr {
+    terminal: bool,
+}
+
+impl Show for Stderr {
+    fn show(&self, s: &Step, last: bool) {
+        let secs = s.started.map_or(0.0, |t| t.elapsed().as_secs_f64());
+        let line = if s.len > 0 {
+            format!("{}: {}/{} ({secs:.1} s)", s.what, s.done, s.len)
+        } else {
+            format!("{}: {} ({secs:.1} s)", s.what, s.done)
+        };
+        let mut err = std::io::stderr().lock();
+        // Progress is a courtesy: a closed stderr must not fail the work.
+        let _ = if self.terminal {
+            write!(err, "\r{line}\x1b[K{}", if last { "\n" } else { "" })
+        } else {
+            writeln!(err, "{line}")
+        };
+        let _ = err.flush();
+    }
+
+    fn due(&self, s: &Step) -> bool {
+        let tenth = (s.len / 10).max(1);
+        self.terminal || s.done >= s.shown + tenth || (s.len > 0 && s.done == s.len)
+    }
+
+    fn due_at_end(&self, s: &Step) -> bool {
+        s.shown != s.done || self.terminal
     }
 
     fn note(&self, message: &str) {
@@ -136,15 +174,13 @@ impl Feedback for Stderr {
 /// unknown): when a step begins and ends, and at most every hundredth of it in between, so a
 /// slow callable does not slow the work. Remarks are not passed on. An exception the callable
 /// raises is kept (the first one), stops the work at its next check and is raised by the call.
-pub struct Callback {
+struct Callback {
     func: Py<PyAny>,
-    state: Mutex<Step>,
     raised: Arc<Mutex<Option<PyErr>>>,
 }
 
-impl Callback {
-    fn call(&self, s: &mut Step) {
-        s.shown = s.done;
+impl Show for Callback {
+    fn show(&self, s: &Step, _last: bool) {
         let mut raised = self.raised.lock().unwrap_or_else(|p| p.into_inner());
         if raised.is_some() {
             return;
@@ -155,44 +191,13 @@ impl Callback {
         }
     }
 
-    fn update(&self, f: impl FnOnce(&mut Step)) {
-        let mut s = self.state.lock().unwrap_or_else(|p| p.into_inner());
-        f(&mut s);
+    fn due(&self, s: &Step) -> bool {
         let hundredth = (s.len / 100).max(1);
-        if s.done >= s.shown + hundredth || (s.len > 0 && s.done == s.len && s.shown != s.done) {
-            self.call(&mut s);
-        }
-    }
-}
-
-impl Feedback for Callback {
-    fn begin(&self, what: &str, len: usize) {
-        let mut s = self.state.lock().unwrap_or_else(|p| p.into_inner());
-        *s = Step {
-            what: what.to_string(),
-            len,
-            ..Step::default()
-        };
-        self.call(&mut s);
+        s.done >= s.shown + hundredth || (s.len > 0 && s.done == s.len && s.shown != s.done)
     }
 
-    fn set_len(&self, len: usize) {
-        self.update(|s| s.len = len);
-    }
-
-    fn set_done(&self, done: usize) {
-        self.update(|s| s.done = done);
-    }
-
-    fn tick(&self) {
-        self.update(|s| s.done += 1);
-    }
-
-    fn end(&self) {
-        let mut s = self.state.lock().unwrap_or_else(|p| p.into_inner());
-        if s.shown != s.done {
-            self.call(&mut s);
-        }
+    fn due_at_end(&self, s: &Step) -> bool {
+        s.shown != s.done
     }
 }
 
@@ -211,12 +216,13 @@ impl Interruptible {
         let raised = Arc::new(Mutex::new(None));
         let inner: Box<dyn Feedback + Send> = match progress.unwrap_or(Progress::Off) {
             Progress::Off => Box::new(ferret_lab::Silent),
-            Progress::Stderr => Box::new(Stderr::default()),
-            Progress::Call(func) => Box::new(Callback {
+            Progress::Stderr => Box::new(Stepped::new(Stderr {
+                terminal: std::io::stderr().is_terminal(),
+            })),
+            Progress::Call(func) => Box::new(Stepped::new(Callback {
                 func,
-                state: Mutex::new(Step::default()),
                 raised: raised.clone(),
-            }),
+            })),
         };
         Self { inner, raised }
     }

@@ -467,6 +467,55 @@ pub struct DeploymentState {
     pub next: NextChoice,
 }
 
+/// A deployment in the list (`GET /deployments`).
+#[derive(Debug, Serialize, ToSchema)]
+pub struct DeploymentSummary {
+    /// Its id.
+    pub id: i64,
+    /// `replay` or `ucb`.
+    pub selector: String,
+    /// One trial at a time.
+    pub sequential: bool,
+    /// Candidates, in order.
+    pub strategies: Vec<String>,
+    /// Trials started so far.
+    pub trials: usize,
+    /// Trials in progress, in the order they started.
+    pub open_trials: Vec<i64>,
+}
+
+/// The newest deployments `GET /deployments` lists, at most.
+pub const MAX_LISTED_DEPLOYMENTS: usize = 1000;
+
+/// One container searched, as the robot reported it.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct ObservationInfo {
+    /// The container's id.
+    pub container: String,
+    /// Whether the target was in it.
+    pub found: bool,
+    /// Other object types seen in it.
+    pub objects: Vec<String>,
+}
+
+/// `GET /trials/{id}/view`: a trial with what a picture of it needs.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct TrialView {
+    /// The trial, as `GET /trials/{id}` gives it.
+    pub trial: TrialState,
+    /// Where it started `[x, y, yaw°]`.
+    pub start: [f64; 3],
+    /// The way travelled so far: cell centres from the start through each searched container's
+    /// access point, in order.
+    pub route: Vec<[f64; 2]>,
+    /// What each searched container held, in the order searched.
+    pub observations: Vec<ObservationInfo>,
+    /// The probability that the target is in each container now, by container id: the
+    /// strategy's likelihood for containers not yet searched, 0 for searched ones without the
+    /// target, 1 where it was found. Null for a strategy that plans without a likelihood.
+    pub likelihoods: Option<BTreeMap<String, f64>>,
+}
+
 /// Error body.
 #[derive(Debug, Serialize, Deserialize, ToSchema)]
 pub struct ErrorBody {

@@ -57,6 +57,7 @@
 
 pub mod api;
 pub mod error;
+pub mod events;
 mod gather;
 mod grids;
 pub mod http;

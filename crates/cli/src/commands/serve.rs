@@ -126,6 +126,14 @@ pub struct Args {
     /// make room. Lowered to fit the process's open-file limit.
     #[arg(long, value_name = "N", default_value_t = ServeOptions::default().max_connections)]
     max_connections: usize,
+    /// Most live event streams (`GET /events`, one per open browser page) at once; past it a
+    /// page is answered 503 and retries. Each stream holds one of --max-connections.
+    #[arg(long, value_name = "N", default_value_t = ferret_serve::events::DEFAULT_MAX_STREAMS)]
+    max_event_streams: usize,
+    /// Serve the page and every GET route but refuse every write (403): a screen on the wall,
+    /// a replica on the fleet's PostgreSQL that robots cannot drive.
+    #[arg(long)]
+    view_only: bool,
     /// Seconds an LLM endpoint that failed (after its retries) is not asked: trials of its
     /// strategies are refused with 503 at once meanwhile; then one question checks whether it
     /// is back.
@@ -160,6 +168,7 @@ fn check(args: &Args) -> Result<Checked> {
         ("--grid-cache-mib", args.grid_cache_mib),
         ("--max-body-kib", args.max_body_kib),
         ("--max-connections", args.max_connections),
+        ("--max-event-streams", args.max_event_streams),
     ] {
         if v == 0 {
             bail!("{name} 0: must be at least 1");
@@ -209,6 +218,7 @@ fn check(args: &Args) -> Result<Checked> {
             grid_cache_bytes: args.grid_cache_mib.saturating_mul(1 << 20),
             kept_replays: args.kept_replays,
             kept_plans: args.kept_plans,
+            max_event_streams: args.max_event_streams,
             ..ServiceOptions::default()
         },
         serve: ServeOptions {
@@ -344,17 +354,25 @@ pub fn run(args: Args) -> Result<ExitCode> {
         listen: Some(addr),
         allowed_hosts: args.allow_host.clone(),
         max_body_bytes: checked.max_body_bytes,
+        view_only: args.view_only,
     };
     let names = service.strategy_names();
-    let app = ferret_serve::router(Arc::new(service), &options)
+    let service = Arc::new(service);
+    let app = ferret_serve::router(service.clone(), &options)
         .map_err(|e| anyhow::anyhow!("--{}: {}", e.field, e.message))?;
+    // Open event streams would hold the stop up until the drain's deadline: they end first.
+    let stopping = async move {
+        shutdown().await;
+        service.events().close();
+    };
     runtime.block_on(async move {
         // Tests and scripts read this line to learn the port (with --listen 127.0.0.1:0).
         println!(
-            "ferret serve: listening on http://{addr} (db {db}; strategies {})",
-            names.join(", ")
+            "ferret serve: listening on http://{addr} (db {db}; strategies {}){}",
+            names.join(", "),
+            if args.view_only { "; view-only" } else { "" }
         );
-        ferret_serve::serve(listener, app, checked.serve, shutdown())
+        ferret_serve::serve(listener, app, checked.serve, stopping)
             .await
             .context("serving HTTP")
     })?;

@@ -5,7 +5,7 @@ use std::net::{IpAddr, SocketAddr};
 use std::sync::Arc;
 
 use axum::extract::{Request, State};
-use axum::http::{HeaderMap, header};
+use axum::http::{HeaderMap, Method, header};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 
@@ -99,6 +99,7 @@ pub(super) struct Guards {
     pub(super) origins: Vec<String>,
     pub(super) hosts: Option<Hosts>,
     pub(super) max_body_bytes: usize,
+    pub(super) view_only: bool,
 }
 
 impl Guards {
@@ -151,10 +152,19 @@ impl Guards {
                 "the Host header names another server (start the server with --allow-host for names it is reached by)",
             ));
         }
+        // The page the server itself serves is of the server's own origin: its requests name
+        // the Host checked above (so not a DNS-rebinding page's).
+        let own_origin = |o: &str| {
+            self.hosts.is_some()
+                && host
+                    .and_then(|h| h.to_str().ok())
+                    .zip(o.strip_prefix("http://"))
+                    .is_some_and(|(h, rest)| rest.eq_ignore_ascii_case(h))
+        };
         if let Some(origin) = headers.get(header::ORIGIN)
-            && !origin
-                .to_str()
-                .is_ok_and(|o| self.origins.iter().any(|a| a.eq_ignore_ascii_case(o)))
+            && !origin.to_str().is_ok_and(|o| {
+                own_origin(o) || self.origins.iter().any(|a| a.eq_ignore_ascii_case(o))
+            })
         {
             return Err(ApiError::new(
                 ErrorKind::Forbidden,
@@ -164,6 +174,7 @@ impl Guards {
         }
         if let Some(token) = &self.token
             && req.uri().path() != "/health"
+            && !super::view::is_page(req.uri().path())
         {
             let given = headers
                 .get(header::AUTHORIZATION)
@@ -178,6 +189,13 @@ impl Guards {
                     "a valid `Authorization: Bearer <token>` header is required",
                 ));
             }
+        }
+        if self.view_only && !matches!(*req.method(), Method::GET | Method::HEAD) {
+            return Err(ApiError::new(
+                ErrorKind::Forbidden,
+                "",
+                "this server is view-only (--view-only): it serves the page and GET routes, no writes",
+            ));
         }
         Ok(())
     }

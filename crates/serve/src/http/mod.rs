@@ -13,6 +13,7 @@
 mod extract;
 mod guards;
 mod openapi;
+mod view;
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -29,8 +30,8 @@ use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
 use crate::api::{
-    AbandonTrial, CreateDeployment, DeploymentState, ErrorBody, Observe, SceneDetail, SceneSummary,
-    StartTrial, TrialState, UploadScene,
+    AbandonTrial, CreateDeployment, DeploymentState, DeploymentSummary, ErrorBody, Observe,
+    SceneDetail, SceneSummary, StartTrial, TrialState, TrialView, UploadScene,
 };
 use crate::error::{ApiError, ErrorKind};
 use crate::model::ApiReply;
@@ -62,6 +63,8 @@ pub struct HttpOptions {
     pub allowed_hosts: Vec<String>,
     /// Largest request body, bytes (413 past it).
     pub max_body_bytes: usize,
+    /// Serve the page and every `GET` route, refuse every write (403): a screen on the wall.
+    pub view_only: bool,
 }
 
 impl Default for HttpOptions {
@@ -72,6 +75,7 @@ impl Default for HttpOptions {
             listen: None,
             allowed_hosts: Vec::new(),
             max_body_bytes: DEFAULT_MAX_BODY_BYTES,
+            view_only: false,
         }
     }
 }
@@ -165,6 +169,11 @@ async fn create_deployment(
     blocking(move || s.create_deployment(b.value, &b.raw)).await
 }
 
+#[utoipa::path(get, path = "/deployments", responses((status = 200, description = "The newest 1000 deployments, ascending", body = [DeploymentSummary])))]
+async fn list_deployments(State(s): State<Arc<Service>>) -> Response {
+    blocking(move || s.list_deployments()).await
+}
+
 #[utoipa::path(get, path = "/deployments/{id}", params(("id" = i64, Path, description = "Deployment id", minimum = 1)),
     responses((status = 200, body = DeploymentState),
         (status = 404, description = "No deployment of that id", body = ErrorBody)))]
@@ -191,6 +200,14 @@ async fn start_trial(
         (status = 503, description = "A strategy could not plan (an LLM endpoint is down); retry later", body = ErrorBody)))]
 async fn get_trial(State(s): State<Arc<Service>>, Id(trial, _): Id<TrialId>) -> Response {
     blocking(move || s.get_trial(trial)).await
+}
+
+#[utoipa::path(get, path = "/trials/{id}/view", params(("id" = i64, Path, description = "Trial id", minimum = 1)),
+    responses((status = 200, description = "The trial with its way so far, what it saw and the likelihood of every container now (the live page's picture)", body = TrialView),
+        (status = 404, description = "No trial of that id", body = ErrorBody),
+        (status = 503, description = "A strategy could not plan (an LLM endpoint is down); retry later", body = ErrorBody)))]
+async fn trial_view(State(s): State<Arc<Service>>, Id(trial, _): Id<TrialId>) -> Response {
+    blocking(move || s.trial_view(trial)).await
 }
 
 #[utoipa::path(post, path = "/trials/{id}/observations", request_body = Observe,
@@ -228,12 +245,14 @@ fn routes() -> (Router<Arc<Service>>, utoipa::openapi::OpenApi) {
         .routes(routes!(health))
         .routes(routes!(list_scenes, upload_scene))
         .routes(routes!(get_scene))
-        .routes(routes!(create_deployment))
+        .routes(routes!(create_deployment, list_deployments))
         .routes(routes!(get_deployment))
         .routes(routes!(start_trial))
         .routes(routes!(get_trial))
         .routes(routes!(post_observation))
         .routes(routes!(abandon_trial))
+        .routes(routes!(trial_view))
+        .routes(routes!(view::events))
         .split_for_parts()
 }
 
@@ -266,6 +285,7 @@ pub fn router(service: Arc<Service>, options: &HttpOptions) -> Result<Router, Ap
         origins: options.cors_origins.clone(),
         hosts,
         max_body_bytes: options.max_body_bytes,
+        view_only: options.view_only,
     });
     let doc: Arc<str> = Arc::from(
         document(
@@ -275,8 +295,14 @@ pub fn router(service: Arc<Service>, options: &HttpOptions) -> Result<Router, Ap
         )
         .to_string(),
     );
-    let mut app = routes()
-        .0
+    let mut api = routes().0;
+    for (path, content_type, body) in view::PAGE {
+        api = api.route(
+            path,
+            get(move || async move { view::page_file(content_type, body) }),
+        );
+    }
+    let mut app = api
         .route(
             "/openapi.json",
             get(move || {

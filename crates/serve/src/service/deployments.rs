@@ -12,7 +12,8 @@ use ferret_world::TravelCost;
 use super::replies::Begun;
 use super::{Service, json};
 use crate::api::{
-    CreateDeployment, DeploymentState, MAX_C, MAX_SEED, NextChoice, StrategyRow, TrialSummary,
+    CreateDeployment, DeploymentState, DeploymentSummary, MAX_C, MAX_LISTED_DEPLOYMENTS, MAX_SEED,
+    NextChoice, StrategyRow, TrialSummary,
 };
 use crate::error::{ApiError, ErrorKind};
 use crate::model::{ApiReply, DeploymentSpec, Outcome, StoredTrial, TrialStatus};
@@ -148,11 +149,36 @@ impl Service {
             sequential: req.sequential.unwrap_or(false),
         };
         self.candidates_of(&spec)?;
-        claim.complete("POST /deployments", body, |w| {
+        let mut created = None;
+        let reply = claim.complete("POST /deployments", body, |w| {
             let id = w.insert_deployment(&spec)?;
+            created = Some(id);
             let state = self.deployment_state(id, &spec, &w.reader().trials_of(id)?)?;
             json(Outcome::Created, &state)
-        })
+        })?;
+        if let Some(id) = created {
+            self.events.deployment(id);
+        }
+        Ok(reply)
+    }
+
+    /// `GET /deployments`: the newest [`MAX_LISTED_DEPLOYMENTS`], ascending.
+    pub fn list_deployments(&self) -> Result<ApiReply, ApiError> {
+        let listed = self
+            .store
+            .read(|r| r.listed_deployments(MAX_LISTED_DEPLOYMENTS))?;
+        let list: Vec<DeploymentSummary> = listed
+            .into_iter()
+            .map(|d| DeploymentSummary {
+                id: d.id,
+                selector: d.spec.selector.name().to_string(),
+                sequential: d.spec.sequential,
+                strategies: d.spec.strategies,
+                trials: d.trials,
+                open_trials: d.open,
+            })
+            .collect();
+        json(Outcome::Done, &list)
     }
 
     /// `GET /deployments/{id}`.

@@ -25,6 +25,7 @@ use serde::Serialize;
 
 use crate::api::SceneSummary;
 use crate::error::ApiError;
+use crate::events::{Events, Frame};
 use crate::grids::Grids;
 use crate::model::{ApiReply, Outcome, SceneLimits};
 use crate::store::Store;
@@ -53,6 +54,8 @@ pub struct ServiceOptions {
     /// [`ferret_plan::PlanMemo`]; about 500 bytes each), for searches and replays that meet a
     /// set another one solved: the same decisions without solving; 0 solves every time.
     pub kept_plans: usize,
+    /// Event streams (`GET /events`, the live page's) open at once, at most.
+    pub max_event_streams: usize,
 }
 
 impl Default for ServiceOptions {
@@ -66,6 +69,7 @@ impl Default for ServiceOptions {
             live_searches: 64,
             kept_replays: 4096,
             kept_plans: 2048,
+            max_event_streams: crate::events::DEFAULT_MAX_STREAMS,
         }
     }
 }
@@ -108,6 +112,8 @@ pub struct Service {
     /// a trial needs its deployment's.
     pub(crate) specs:
         std::sync::Mutex<std::collections::HashMap<i64, crate::model::DeploymentSpec>>,
+    /// What changed, for the pages watching.
+    pub(crate) events: Arc<Events>,
 }
 
 impl std::fmt::Debug for Service {
@@ -185,7 +191,20 @@ impl Service {
                 (name, s)
             })
             .collect();
+        let events = Arc::new(Events::new(options.max_event_streams));
+        let hub = events.clone();
+        let deliver: crate::store::Deliver = Arc::new(move |text: Option<String>| match text {
+            Some(text) => match Frame::decode(&text) {
+                Some(frame) => hub.deliver(frame),
+                None => tracing::debug!("ignored a notification that is not an event"),
+            },
+            None => hub.resync_all(),
+        });
+        if let Some(outbox) = store.feed(crate::events::CHANNEL, crate::events::RING, deliver)? {
+            events.route_through(outbox);
+        }
         Ok(Service {
+            events,
             store,
             candidates,
             options,
@@ -217,6 +236,30 @@ impl Service {
     /// Planner decisions taken from plans kept in the scenes now cached instead of solved.
     pub fn plans_reused(&self) -> u64 {
         self.grids.plans_reused()
+    }
+
+    /// True when the store is PostgreSQL, which other replicas may share (their events reach
+    /// this replica's watchers).
+    pub fn is_shared(&self) -> bool {
+        self.store.is_shared()
+    }
+
+    /// The hub of live events (`GET /events`).
+    pub fn events(&self) -> &Events {
+        &self.events
+    }
+
+    /// Tells the pages watching about the trial a write's reply states, and hands the reply on.
+    fn announce_trial(&self, reply: Result<ApiReply, ApiError>) -> Result<ApiReply, ApiError> {
+        if let Ok(r) = &reply
+            && self.events.wanted()
+        {
+            match serde_json::from_str::<crate::api::TrialState>(&r.body) {
+                Ok(state) => self.events.trial(&state),
+                Err(e) => tracing::warn!("a trial's reply did not read back for its event: {e}"),
+            }
+        }
+        reply
     }
 
     /// The limits it enforces.

@@ -32,7 +32,7 @@ fn summary(name: &str, scene: &Scene) -> SceneSummary {
     }
 }
 
-fn start_pose(house: &House) -> [f64; 3] {
+pub(super) fn start_pose(house: &House) -> [f64; 3] {
     let start = &house.start;
     [
         start.position.x,

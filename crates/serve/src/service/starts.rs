@@ -32,6 +32,11 @@ impl Service {
         req: StartTrial,
         body: &[u8],
     ) -> Result<ApiReply, ApiError> {
+        let reply = self.start(deployment, req, body);
+        self.announce_trial(reply)
+    }
+
+    fn start(&self, deployment: i64, req: StartTrial, body: &[u8]) -> Result<ApiReply, ApiError> {
         let route = format!("POST /deployments/{deployment}/trials");
         let claim = match self.begin(req.request_id.as_deref(), &route, body)? {
             Begun::Replied(reply) => return self.planned_start(reply, None, None),

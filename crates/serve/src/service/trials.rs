@@ -12,7 +12,8 @@ use super::deployments::ROBOT_REPLAY;
 use super::replies::Begun;
 use super::{Service, json};
 use crate::api::{
-    AbandonTrial, MAX_OBJECTS, MAX_TRAVELLED_M, NextContainer, Observe, TrialState, is_type_name,
+    AbandonTrial, MAX_OBJECTS, MAX_TRAVELLED_M, NextContainer, ObservationInfo, Observe,
+    TrialState, TrialView, is_type_name,
 };
 use crate::error::{ApiError, ErrorKind, plan_error};
 use crate::grids::Placed;
@@ -52,9 +53,14 @@ impl Service {
 
     /// `GET /trials/{id}`.
     pub fn get_trial(&self, id: i64) -> Result<ApiReply, ApiError> {
+        let (_, state) = self.trial_now(id)?;
+        json(Outcome::Done, &state)
+    }
+
+    /// A stored trial with its state now (the next container planned while it searches).
+    fn trial_now(&self, id: i64) -> Result<(LoadedTrial, TrialState), ApiError> {
         let row = self.trial_row(id)?;
         let t = self.stored_trial(&row)?;
-        let (observations, spec) = (&t.observations, &t.spec);
         let mut search = t.search()?;
         let next = match row.status {
             TrialStatus::Searching => {
@@ -66,10 +72,76 @@ impl Service {
             }
             _ => None,
         };
-        json(
-            Outcome::Done,
-            &trial_state(&row, spec, observations, search.belief().travelled(), next),
-        )
+        let travelled = search.belief().travelled();
+        drop(search);
+        let state = trial_state(&row, &t.spec, &t.observations, travelled, next);
+        Ok((t, state))
+    }
+
+    /// `GET /trials/{id}/view`: the trial with its way so far, what it saw and its likelihoods
+    /// now, for a picture of it.
+    pub fn trial_view(&self, id: i64) -> Result<ApiReply, ApiError> {
+        let (t, state) = self.trial_now(id)?;
+        let house = &t.placed.house;
+        let mut searched = Vec::with_capacity(t.observations.len());
+        for o in &t.observations {
+            let c = house.container_index(&o.container).ok_or_else(|| {
+                ApiError::internal(format!(
+                    "trial {id}: stored container {:?} is not in the scene",
+                    o.container
+                ))
+            })?;
+            searched.push((c, o.found));
+        }
+        let start = super::scenes::start_pose(house);
+        let mut route = vec![[start[0], start[1]]];
+        let mut from = Place::Start;
+        for &(c, _) in &searched {
+            let to = Place::Container(c);
+            // Each leg begins where the last ended.
+            route.extend(t.placed.path(from, to).iter().skip(1).copied());
+            from = to;
+        }
+        let likelihoods = match t.strategy.likelihood_source() {
+            Some(source) => {
+                let mut ps: Vec<f64> = source
+                    .likelihoods(house, &t.trial.target)
+                    .map_err(plan_error)?
+                    .iter()
+                    .map(|p| p.get())
+                    .collect();
+                for &(c, found) in &searched {
+                    if let Some(p) = ps.get_mut(c) {
+                        *p = if found { 1.0 } else { 0.0 };
+                    }
+                }
+                Some(
+                    house
+                        .containers
+                        .iter()
+                        .zip(ps)
+                        .map(|(c, p)| (c.id.clone(), p))
+                        .collect(),
+                )
+            }
+            None => None,
+        };
+        let view = TrialView {
+            trial: state,
+            start,
+            route,
+            observations: t
+                .observations
+                .iter()
+                .map(|o| ObservationInfo {
+                    container: o.container.clone(),
+                    found: o.found,
+                    objects: o.objects.clone(),
+                })
+                .collect(),
+            likelihoods,
+        };
+        json(Outcome::Done, &view)
     }
 
     /// `POST /trials/{id}/observations`.
@@ -79,6 +151,11 @@ impl Service {
         req: Observe,
         body: &[u8],
     ) -> Result<ApiReply, ApiError> {
+        let reply = self.observe(id, req, body);
+        self.announce_trial(reply)
+    }
+
+    fn observe(&self, id: i64, req: Observe, body: &[u8]) -> Result<ApiReply, ApiError> {
         let route = format!("POST /trials/{id}/observations");
         let claim = match self.begin(req.request_id.as_deref(), &route, body)? {
             Begun::Replied(reply) => return Ok(reply),
@@ -236,6 +313,11 @@ impl Service {
         req: AbandonTrial,
         body: &[u8],
     ) -> Result<ApiReply, ApiError> {
+        let reply = self.abandon(id, req, body);
+        self.announce_trial(reply)
+    }
+
+    fn abandon(&self, id: i64, req: AbandonTrial, body: &[u8]) -> Result<ApiReply, ApiError> {
         let route = format!("POST /trials/{id}/abandon");
         let claim = match self.begin(req.request_id.as_deref(), &route, body)? {
             Begun::Replied(reply) => return Ok(reply),

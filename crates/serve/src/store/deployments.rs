@@ -129,4 +129,60 @@ impl Reader<'_> {
             .map(|r| self.conn.int(r, 0, "deployment id"))
             .collect()
     }
+
+    /// The newest `limit` deployments, ascending, each with how many trials it started and its
+    /// trials still searching (in the order they started).
+    ///
+    /// # Errors
+    /// The database refuses, or a row does not parse.
+    pub fn listed_deployments(&self, limit: usize) -> Result<Vec<ListedDeployment>, StoreError> {
+        let c = &self.conn;
+        let limit = i64::try_from(limit).unwrap_or(i64::MAX);
+        let mut listed: Vec<ListedDeployment> = c
+            .query(
+                "SELECT d.id, d.spec, (SELECT count(*) FROM trials AS t WHERE t.deployment = d.id)
+                 FROM deployments AS d ORDER BY d.id DESC LIMIT $1",
+                &[limit.into()],
+            )?
+            .iter()
+            .map(|r| {
+                let spec = c.some_text(r, 1, "deployment spec")?;
+                Ok(ListedDeployment {
+                    id: c.int(r, 0, "deployment id")?,
+                    spec: serde_json::from_str(&spec)
+                        .map_err(|e| c.corrupt(format!("deployment spec: {e}")))?,
+                    trials: usize::try_from(c.int(r, 2, "trial count")?).unwrap_or(0),
+                    open: Vec::new(),
+                })
+            })
+            .collect::<Result<_, StoreError>>()?;
+        listed.reverse();
+        let Some(first) = listed.first().map(|d| d.id) else {
+            return Ok(listed);
+        };
+        for r in c.query(
+            "SELECT deployment, id FROM trials WHERE deployment >= $1 AND end_seq IS NULL
+             ORDER BY deployment, k",
+            &[first.into()],
+        )? {
+            let (deployment, trial) = (c.int(&r, 0, "deployment id")?, c.int(&r, 1, "trial id")?);
+            if let Ok(i) = listed.binary_search_by_key(&deployment, |d| d.id) {
+                listed[i].open.push(trial);
+            }
+        }
+        Ok(listed)
+    }
+}
+
+/// A deployment as the list of deployments shows it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ListedDeployment {
+    /// Its id.
+    pub id: i64,
+    /// How it was created.
+    pub spec: DeploymentSpec,
+    /// Trials it started.
+    pub trials: usize,
+    /// Its trials still searching, in the order they started.
+    pub open: Vec<i64>,
 }

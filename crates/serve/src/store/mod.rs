@@ -22,7 +22,7 @@ use std::path::Path;
 
 use conn::Conn;
 pub use conn::{Reader, Writer};
-pub use deployments::DeploymentNow;
+pub use deployments::{DeploymentNow, ListedDeployment};
 pub use error::StoreError;
 pub use postgres::PostgresOptions;
 pub use requests::store_reply;
@@ -207,6 +207,25 @@ impl Store {
         }
     }
 
+    /// Connects this replica to the events every replica publishes: on PostgreSQL, a session
+    /// listens on `channel` (calling `deliver` with each notification's text, or `None` after
+    /// a lost session came back) and the returned sender's texts go out as notifications, at
+    /// most `queue` waiting. On SQLite (one server) there is nobody else: `None`.
+    ///
+    /// # Errors
+    /// The PostgreSQL client's runtime is gone.
+    pub fn feed(
+        &self,
+        channel: &'static str,
+        queue: usize,
+        deliver: Deliver,
+    ) -> Result<Option<tokio::sync::mpsc::Sender<String>>, StoreError> {
+        match &self.backend {
+            Backend::Sqlite(_) => Ok(None),
+            Backend::Postgres(p) => p.feed(channel, queue, deliver).map(Some),
+        }
+    }
+
     /// Claims `key` for one request across every replica of the database while the returned
     /// guard lives: `None` when another replica holds it. On SQLite (one server per file) there
     /// is nothing to claim across processes and this always succeeds.
@@ -244,6 +263,10 @@ impl Store {
         }
     }
 }
+
+/// What a replica's listener hands on ([`Store::feed`]): a notification's text, or `None` when
+/// notifications may have been missed (its session was lost and is back).
+pub type Deliver = std::sync::Arc<dyn Fn(Option<String>) + Send + Sync>;
 
 /// A request key held across replicas; released when dropped (or when the replica holding it
 /// dies, since the lock belongs to its database session).

@@ -14,6 +14,7 @@ use tokio_postgres::NoTls;
 use tokio_postgres::types::ToSql;
 
 mod conn;
+mod feed;
 
 use super::SCHEMA_VERSION;
 use super::error::StoreError;

@@ -1,0 +1,371 @@
+//! What changed, told live to whoever watches (the browser page of `GET /events`): a trial
+//! started, searched a container, ended; a deployment was created. The service tells the
+//! [`Events`] hub after each write has committed, so a watcher that reads on an event sees what
+//! the event announced.
+//!
+//! On SQLite (one server) the hub hands an event to its watchers at once. On PostgreSQL the
+//! event goes out as a `NOTIFY` and every replica's listening session (this one's too) hands it
+//! to its own watchers, so a page on one replica sees the trials a robot drives through another.
+//!
+//! Memory is bounded whatever the watchers do: every watcher reads the same ring of the last
+//! [`RING`] events; one that falls further behind (a client that stops reading) loses the oldest
+//! and is told to read everything again (`resync`), rather than the server keeping a queue per
+//! watcher. Open streams are capped (`max_streams`); past the cap a watcher is refused.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use serde::{Deserialize, Serialize};
+use tokio::sync::{broadcast, mpsc, watch};
+
+use crate::api::TrialState;
+use crate::model::TrialStatus;
+
+/// Events kept for watchers that are behind; older ones are dropped for the slowest.
+pub const RING: usize = 1024;
+
+/// Default most event streams open at once.
+pub const DEFAULT_MAX_STREAMS: usize = 32;
+
+/// The PostgreSQL channel events travel on between replicas.
+pub(crate) const CHANNEL: &str = "ferret_events";
+
+/// One event as a stream sends it: its name and its JSON data (one line).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Frame {
+    /// `trial`, `deployment` or `resync`.
+    pub name: String,
+    /// Its data: compact JSON, no newline.
+    pub data: String,
+}
+
+impl Frame {
+    /// The frame as one text (name, newline, data), how it travels between replicas.
+    pub(crate) fn encode(&self) -> String {
+        format!("{}\n{}", self.name, self.data)
+    }
+
+    /// A frame from [`Frame::encode`]'s text; `None` for anything else (a stranger's `NOTIFY` on
+    /// the channel is ignored, not passed on to pages).
+    pub(crate) fn decode(text: &str) -> Option<Frame> {
+        let (name, data) = text.split_once('\n')?;
+        let known = matches!(name, "trial" | "deployment");
+        (known && !data.contains('\n') && serde_json::from_str::<serde_json::Value>(data).is_ok())
+            .then(|| Frame {
+                name: name.to_string(),
+                data: data.to_string(),
+            })
+    }
+}
+
+/// A trial as its event tells it: enough for a page's list of trials, not its whole state.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrialEvent {
+    /// Its id.
+    pub trial: i64,
+    /// Its deployment.
+    pub deployment: i64,
+    /// 1-based position in the deployment.
+    pub k: i64,
+    /// The scene's name.
+    pub scene: String,
+    /// The target.
+    pub target: String,
+    /// The strategy chosen for it.
+    pub strategy: String,
+    /// Where it stands.
+    pub status: TrialStatus,
+    /// Containers searched so far.
+    pub searched: usize,
+    /// The container to search next, while searching.
+    pub next: Option<String>,
+    /// Map distance travelled so far (its cost once ended), metres.
+    pub cost_m: f64,
+}
+
+impl From<&TrialState> for TrialEvent {
+    fn from(t: &TrialState) -> Self {
+        TrialEvent {
+            trial: t.trial,
+            deployment: t.deployment,
+            k: t.k,
+            scene: t.scene.clone(),
+            target: t.target.clone(),
+            strategy: t.strategy.clone(),
+            status: t.status,
+            searched: t.searched.len(),
+            next: t.next.as_ref().map(|n| n.container.clone()),
+            cost_m: t.cost_m,
+        }
+    }
+}
+
+/// Where the hub's events come from and go.
+enum Route {
+    /// One server: straight to this replica's watchers.
+    Local,
+    /// Replicas on PostgreSQL: to the database, which tells every replica's listener.
+    Shared(mpsc::Sender<String>),
+}
+
+/// The hub: publishes events and hands out streams of them.
+pub struct Events {
+    ring: broadcast::Sender<Arc<Frame>>,
+    route: std::sync::RwLock<Route>,
+    open: Arc<AtomicUsize>,
+    max_streams: AtomicUsize,
+    closed: watch::Sender<bool>,
+}
+
+impl std::fmt::Debug for Events {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Events")
+            .field("open", &self.open.load(Ordering::Relaxed))
+            .finish_non_exhaustive()
+    }
+}
+
+impl Default for Events {
+    fn default() -> Self {
+        Self::new(DEFAULT_MAX_STREAMS)
+    }
+}
+
+/// Refused: as many streams are open as allowed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TooManyStreams {
+    /// The cap.
+    pub max: usize,
+}
+
+impl Events {
+    /// A hub handing events straight to its watchers, with at most `max_streams` open.
+    pub fn new(max_streams: usize) -> Self {
+        let (ring, _) = broadcast::channel(RING);
+        let (closed, _) = watch::channel(false);
+        Self {
+            ring,
+            route: std::sync::RwLock::new(Route::Local),
+            open: Arc::new(AtomicUsize::new(0)),
+            max_streams: AtomicUsize::new(max_streams),
+            closed,
+        }
+    }
+
+    /// Sets the most streams open at once (streams open now stay).
+    pub fn set_max_streams(&self, max: usize) {
+        self.max_streams.store(max, Ordering::SeqCst);
+    }
+
+    /// From now on, events go to the database (`outbox`), and come back to the watchers through
+    /// [`Events::deliver`] from the replica's listener.
+    pub(crate) fn route_through(&self, outbox: mpsc::Sender<String>) {
+        *self
+            .route
+            .write()
+            .unwrap_or_else(std::sync::PoisonError::into_inner) = Route::Shared(outbox);
+    }
+
+    /// Tells every watcher `frame` (from the listener, or directly on one server).
+    pub(crate) fn deliver(&self, frame: Frame) {
+        // No watcher is not an error: nobody is looking.
+        let _ = self.ring.send(Arc::new(frame));
+    }
+
+    /// Publishes `frame`: to this replica's watchers, or to every replica's through the
+    /// database. Never waits: when the database falls behind by a whole ring, the event is
+    /// dropped (watchers see it in the next state they read).
+    pub(crate) fn publish(&self, frame: Frame) {
+        let route = self
+            .route
+            .read()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        match &*route {
+            Route::Local => self.deliver(frame),
+            Route::Shared(outbox) => {
+                if outbox.try_send(frame.encode()).is_err() {
+                    tracing::warn!("event dropped: the database is behind on notifications");
+                }
+            }
+        }
+    }
+
+    /// Whether an event would reach anyone: always through the database (other replicas'
+    /// pages), else only while this replica has a watcher.
+    pub(crate) fn wanted(&self) -> bool {
+        let route = self
+            .route
+            .read()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        matches!(*route, Route::Shared(_)) || self.ring.receiver_count() > 0
+    }
+
+    /// Publishes a trial's state after a write.
+    pub(crate) fn trial(&self, state: &TrialState) {
+        if let Ok(data) = serde_json::to_string(&TrialEvent::from(state)) {
+            self.publish(Frame {
+                name: "trial".into(),
+                data,
+            });
+        }
+    }
+
+    /// Publishes a new deployment.
+    pub(crate) fn deployment(&self, id: i64) {
+        self.publish(Frame {
+            name: "deployment".into(),
+            data: serde_json::json!({ "deployment": id }).to_string(),
+        });
+    }
+
+    /// Every watcher told to read everything again (the listener lost its session, and with it
+    /// the events meanwhile).
+    pub(crate) fn resync_all(&self) {
+        self.deliver(Frame {
+            name: "resync".into(),
+            data: serde_json::json!({ "missed": null }).to_string(),
+        });
+    }
+
+    /// Streams open now.
+    pub fn open_streams(&self) -> usize {
+        self.open.load(Ordering::SeqCst)
+    }
+
+    /// Ends every stream (the server is stopping) and refuses new ones.
+    pub fn close(&self) {
+        let _ = self.closed.send(true);
+    }
+
+    /// A new watcher's stream.
+    ///
+    /// # Errors
+    /// [`TooManyStreams`] when the cap is reached.
+    pub fn watch(&self) -> Result<Watcher, TooManyStreams> {
+        let max = self.max_streams.load(Ordering::SeqCst);
+        let taken = self
+            .open
+            .fetch_update(Ordering::SeqCst, Ordering::SeqCst, |n| {
+                (n < max && !*self.closed.borrow()).then_some(n + 1)
+            });
+        if taken.is_err() {
+            return Err(TooManyStreams { max });
+        }
+        Ok(Watcher {
+            ring: self.ring.subscribe(),
+            closed: self.closed.subscribe(),
+            _slot: Slot(self.open.clone()),
+        })
+    }
+}
+
+/// A stream's place under the cap, given back when the stream ends however it ends.
+#[derive(Debug)]
+struct Slot(Arc<AtomicUsize>);
+
+impl Drop for Slot {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+/// One watcher's events.
+#[derive(Debug)]
+pub struct Watcher {
+    ring: broadcast::Receiver<Arc<Frame>>,
+    closed: watch::Receiver<bool>,
+    _slot: Slot,
+}
+
+impl Watcher {
+    /// The next event; `resync` when the watcher fell behind the ring, `None` once the hub is
+    /// closed.
+    pub async fn next(&mut self) -> Option<Arc<Frame>> {
+        if *self.closed.borrow() {
+            return None;
+        }
+        tokio::select! {
+            got = self.ring.recv() => match got {
+                Ok(frame) => Some(frame),
+                Err(broadcast::error::RecvError::Lagged(missed)) => Some(Arc::new(Frame {
+                    name: "resync".into(),
+                    data: serde_json::json!({ "missed": missed }).to_string(),
+                })),
+                Err(broadcast::error::RecvError::Closed) => None,
+            },
+            _ = self.closed.wait_for(|c| *c) => None,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(i: usize) -> Frame {
+        Frame {
+            name: "deployment".into(),
+            data: format!("{{\"deployment\":{i}}}"),
+        }
+    }
+
+    #[tokio::test]
+    async fn a_watcher_that_stops_reading_is_told_to_resync_and_costs_no_more_than_the_ring() {
+        let events = Events::new(4);
+        let mut slow = events.watch().expect("a slot");
+        let mut live = events.watch().expect("a slot");
+        for i in 0..10 * RING {
+            events.publish(frame(i));
+            if i % RING == 0 {
+                // A watcher that reads keeps up whatever the other does.
+                while let Ok(Some(f)) =
+                    tokio::time::timeout(std::time::Duration::from_millis(1), live.next()).await
+                {
+                    assert_eq!(f.name, "deployment");
+                }
+            }
+        }
+        // The ring holds at most RING events, whoever is behind.
+        assert!(events.ring.len() <= RING);
+        let first = slow.next().await.expect("an event");
+        assert_eq!(first.name, "resync");
+        let missed: serde_json::Value = serde_json::from_str(&first.data).expect("json");
+        assert_eq!(missed["missed"], 10 * RING - RING);
+        // Then the newest RING events, in order.
+        let next = slow.next().await.expect("an event");
+        assert_eq!(*next, frame(10 * RING - RING));
+    }
+
+    #[tokio::test]
+    async fn streams_past_the_cap_are_refused_and_a_closed_one_frees_its_slot() {
+        let events = Events::new(2);
+        let a = events.watch().expect("first");
+        let _b = events.watch().expect("second");
+        assert_eq!(events.watch().unwrap_err(), TooManyStreams { max: 2 });
+        assert_eq!(events.open_streams(), 2);
+        drop(a);
+        assert_eq!(events.open_streams(), 1);
+        let mut c = events.watch().expect("a freed slot");
+        events.close();
+        assert!(c.next().await.is_none(), "a closed hub ends its streams");
+        assert!(events.watch().is_err(), "and opens none");
+    }
+
+    #[test]
+    fn only_our_own_frames_pass_between_replicas() {
+        let f = Frame {
+            name: "trial".into(),
+            data: r#"{"trial":1}"#.into(),
+        };
+        assert_eq!(Frame::decode(&f.encode()), Some(f));
+        for stranger in [
+            "hello",
+            "trial\nnot json",
+            "resync\n{}",
+            "script\n{}",
+            "trial\n{}\n{}",
+        ] {
+            assert_eq!(Frame::decode(stranger), None, "{stranger:?}");
+        }
+    }
+}

@@ -1,0 +1,118 @@
+//! Notifications between replicas: what one replica publishes goes out as `NOTIFY` on a
+//! channel, and a session of every replica that `LISTEN`s on it hears it (the sender too), so
+//! each replica tells its own watchers. PostgreSQL delivers a notification only once the
+//! transaction that sent it commits, and to sessions listening then: a replica whose listening
+//! session dropped is told so (`None`) when it listens again, since it may have missed some.
+
+use std::time::Duration;
+
+use deadpool_postgres::Pool;
+use tokio::sync::mpsc;
+use tokio_postgres::{AsyncMessage, NoTls};
+
+use super::Postgres;
+use crate::store::Deliver;
+use crate::store::error::StoreError;
+
+/// Notifications sent in one statement at most.
+const BATCH: usize = 256;
+
+impl Postgres {
+    /// Starts listening on `channel` (calling `deliver` for each notification) and returns
+    /// where to put texts to notify; both run on the store's runtime until the store is
+    /// dropped. `queue` texts may wait to be sent; more are refused by the sender.
+    pub(in crate::store) fn feed(
+        &self,
+        channel: &'static str,
+        queue: usize,
+        deliver: Deliver,
+    ) -> Result<mpsc::Sender<String>, StoreError> {
+        let Some(rt) = &self.runtime else {
+            return Err(StoreError::Unreachable {
+                db: self.db.clone(),
+                what: "the client's runtime is gone".into(),
+            });
+        };
+        let (outbox, inbox) = mpsc::channel(queue.max(1));
+        rt.spawn(listen(
+            self.config.clone(),
+            self.db.clone(),
+            channel,
+            deliver,
+        ));
+        rt.spawn(notify(self.pool.clone(), self.db.clone(), channel, inbox));
+        Ok(outbox)
+    }
+}
+
+/// Listens on `channel` for good, on a session of its own, opening a new one after a loss.
+async fn listen(config: tokio_postgres::Config, db: String, channel: &str, deliver: Deliver) {
+    let mut first = true;
+    loop {
+        match config.connect(NoTls).await {
+            Ok((client, mut connection)) => {
+                let hear = deliver.clone();
+                // The connection's messages: the LISTEN's own reply goes to `client`, the
+                // notifications come out here.
+                let driver = async move {
+                    loop {
+                        match futures_util::future::poll_fn(|cx| connection.poll_message(cx)).await
+                        {
+                            Some(Ok(AsyncMessage::Notification(n))) => {
+                                hear(Some(n.payload().to_string()));
+                            }
+                            Some(Ok(_)) => {}
+                            Some(Err(e)) => return e.to_string(),
+                            None => return "closed".to_string(),
+                        }
+                    }
+                };
+                tokio::pin!(driver);
+                let sql = format!("LISTEN {channel}");
+                let listening = tokio::select! {
+                    r = client.batch_execute(&sql) => r.map_err(|e| e.to_string()),
+                    why = &mut driver => Err(why),
+                };
+                match listening {
+                    Ok(()) => {
+                        if !first {
+                            deliver(None);
+                        }
+                        first = false;
+                        let why = driver.await;
+                        tracing::warn!("{db}: the session listening for events ended ({why})");
+                    }
+                    Err(why) => tracing::warn!("{db}: cannot listen for events: {why}"),
+                }
+                drop(client);
+            }
+            Err(e) => tracing::warn!("{db}: cannot open a session to listen for events: {e}"),
+        }
+        tokio::time::sleep(Duration::from_secs(1)).await;
+    }
+}
+
+/// Sends what is put in `inbox` as notifications on `channel`, as many at once as are waiting.
+async fn notify(pool: Pool, db: String, channel: &str, mut inbox: mpsc::Receiver<String>) {
+    let mut batch = Vec::with_capacity(BATCH);
+    while inbox.recv_many(&mut batch, BATCH).await > 0 {
+        let sent = async {
+            let client = pool.get().await.map_err(|e| e.to_string())?;
+            client
+                .execute(
+                    "SELECT pg_notify($1, t) FROM unnest($2::text[]) AS t",
+                    &[&channel, &batch],
+                )
+                .await
+                .map_err(|e| e.to_string())
+        }
+        .await;
+        if let Err(e) = sent {
+            tracing::warn!(
+                "{db}: {} events not sent to other replicas: {e}",
+                batch.len()
+            );
+        }
+        batch.clear();
+    }
+}

@@ -9,8 +9,9 @@ access point (or, with no Nav2 action server, a PoseStamped on /goal_pose and wa
 robot's pose to get there), waits for a ferret_interfaces/Detection from the detector for a
 bounded time, records what was seen and repeats until the target is found or every container
 was searched. Every wait has a timeout; a failed or timed-out step ends the goal with a status
-and a sentence saying why. The belief (per-container probability) is published on `~/belief`.
-See docs/ros2.md for the parameters and topics.
+and a sentence saying why. The belief (per-container probability) is published on `~/belief`,
+drawn for rviz2 and Foxglove on `~/markers` (visualization_msgs/MarkerArray), and the route to
+the next container on `~/path` (nav_msgs/Path). See docs/ros2.md for the parameters and topics.
 """
 
 import math
@@ -26,17 +27,19 @@ import rclpy
 from action_msgs.msg import GoalStatus
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from nav2_msgs.action import NavigateToPose
-from nav_msgs.msg import OccupancyGrid
+from nav_msgs.msg import OccupancyGrid, Path
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from visualization_msgs.msg import MarkerArray
 
 from ferret_interfaces.action import SearchObject
 from ferret_interfaces.msg import Belief, Detection
 
 from .maps import Grid, check_map, read_scene_map
+from .markers import container_markers, probabilities, route
 from .planners import (
     AT_START_M,
     InProcessPlanner,
@@ -182,6 +185,9 @@ class FerretNode(Node):
             PoseWithCovarianceStamped, g("robot_pose_topic"), self._on_pose, 10, callback_group=io
         )
         self.belief_pub = self.create_publisher(Belief, "~/belief", latched)
+        # Latched too: rviz2 or Foxglove opened in the middle of a search draws it at once.
+        self.markers_pub = self.create_publisher(MarkerArray, "~/markers", latched)
+        self.path_pub = self.create_publisher(Path, "~/path", latched)
         self.goal_pose_pub = self.create_publisher(PoseStamped, g("goal_pose_topic"), 10)
         self.nav = ActionClient(
             self, NavigateToPose, g("nav_action"), callback_group=self.reentrant
@@ -317,11 +323,6 @@ class FerretNode(Node):
         timing = GoalTiming(target)
         self.timings.append(timing)
         places = {p.id: p for p in self.planner.places(goal.scene)}
-        try:
-            likelihoods = trial.likelihoods()
-        except Exception as e:  # a failing LLM source must not stop the search itself
-            log.warning(f"no belief to publish: {e}")
-            likelihoods = None
         found_at = None
         try:
             while True:
@@ -331,12 +332,12 @@ class FerretNode(Node):
                     break
                 timing.steps.append(StepTiming(step.id))
                 st = timing.steps[-1]
-                self._publish_belief(trial, likelihoods, target, places, None)
                 fb = SearchObject.Feedback()
                 fb.next_container = step.id
                 fb.next_container_type = step.type
                 fb.next_room = step.room
                 fb.next_pose = self._pose_for(step)
+                self._publish_belief(trial, target, places, None, step, fb.next_pose)
                 fb.travelled_m = trial.cost
                 fb.searched = len(trial.searched)
                 handle.publish_feedback(fb)
@@ -368,11 +369,12 @@ class FerretNode(Node):
                     break
         except StepFailed as e:
             self._abandon(trial)
-            self._publish_belief(trial, likelihoods, target, places, found_at)
+            self._publish_belief(trial, target, places, found_at)
             timing.total_s = time.perf_counter() - started
             return self._end(handle, trial, e.status, str(e))
         except PlannerError as e:
             self._abandon(trial)
+            self._publish_belief(trial, target, places, found_at)
             timing.total_s = time.perf_counter() - started
             return self._end(handle, trial, Status.PLANNER_ERROR, str(e))
         try:
@@ -380,7 +382,7 @@ class FerretNode(Node):
         except Exception as e:  # selection failed to learn; the search itself is complete
             log.error(f"selection could not learn from this trial: {e}")
             replays = None
-        self._publish_belief(trial, likelihoods, target, places, found_at)
+        self._publish_belief(trial, target, places, found_at)
         timing.total_s = time.perf_counter() - started
         if found_at is not None:
             msg = (
@@ -574,28 +576,42 @@ class FerretNode(Node):
             )
         return seen
 
-    def _publish_belief(self, trial, likelihoods, target, places, found_at) -> None:
+    def _publish_belief(self, trial, target, places, found_at, step=None, goal=None) -> None:
+        """The belief, its markers and the route to `step` (none once the search has ended)."""
+        log = self.get_logger()
+        try:
+            now = trial.belief()
+        except Exception as e:  # a failing likelihood source must not stop the search itself
+            log.warning(f"no probabilities for the belief: {e}")
+            now = None
+        ids = list(places)
+        searched = set(trial.searched)
         b = Belief()
         b.header.frame_id = self.frame
         b.header.stamp = self.get_clock().now().to_msg()
         b.target_type = target
         b.strategy = trial.strategy
-        searched = set(trial.searched)
-        ids = list(places)
         b.containers = ids
         b.searched = [i in searched for i in ids]
-        probs = []
-        for k, i in enumerate(ids):
-            if i == found_at:
-                probs.append(1.0)
-            elif i in searched:
-                probs.append(0.0)
-            elif likelihoods is not None and k < len(likelihoods):
-                probs.append(float(likelihoods[k]))
-            else:
-                probs.append(float("nan"))
-        b.probability = probs
+        b.probability = probabilities(ids, now, trial.searched, found_at)
         self.belief_pub.publish(b)
+        self.markers_pub.publish(
+            container_markers(
+                self.frame,
+                list(places.values()),
+                b.probability,
+                b.searched,
+                found_at,
+                step.id if step is not None else None,
+            )
+        )
+        points = []
+        if step is not None:
+            try:
+                points = trial.path_to(step)
+            except PlannerError as e:  # the goal pose alone still shows where the robot goes
+                log.warning(f"no path to {step.id}: {e}")
+        self.path_pub.publish(route(self.frame, points, goal))
 
 
 def main(argv=None) -> int:

@@ -6,7 +6,9 @@ A *planner* holds the scene and, across trials, the deployment that selects the 
 each trial (`ferret deploy`'s selection). `start(target, scene, deployment)` opens a *trial*:
 `next()` says which container to search (None once exhausted), `record()` what was seen there,
 `finish()` ends it (selection learns from a found target) and `abandon()` ends it after a
-failure (selection learns nothing).
+failure (selection learns nothing). `belief()` gives the probability that each container holds
+the target now (None when the strategy has no likelihood), `path_to()` the planner's route to a
+container.
 """
 
 import difflib
@@ -32,7 +34,12 @@ PLACED_MAX = 32
 
 
 class PlannerError(Exception):
-    """ferret refused or failed; the message says why, for the action's result."""
+    """ferret refused or failed; the message says why, for the action's result. `status` is the
+    HTTP status when `ferret serve` answered with an error."""
+
+    def __init__(self, message: str, status: Optional[int] = None):
+        super().__init__(message)
+        self.status = status
 
 
 def path_problem(path: str, error: Exception) -> str:
@@ -237,6 +244,8 @@ class InProcessTrial:
         self.strategy = search.strategy
         self.ended = False
         self._by_id = {p.id: p for p in planner._places}
+        self._likelihoods: Optional[List[float]] = None
+        self._asked = False
 
     def next(self) -> Optional[Place]:
         try:
@@ -251,8 +260,34 @@ class InProcessTrial:
         except ferret.FerretError as e:
             raise PlannerError(str(e)) from e
 
-    def likelihoods(self) -> Optional[List[float]]:
-        return self.search.likelihoods()
+    def belief(self) -> Optional[Dict[str, float]]:
+        """Per container id: the strategy's likelihood before the search, 0 once searched in
+        vain, 1 where found (what `ferret serve`'s trial view gives); None without a likelihood
+        source. The source is asked once per trial: an LLM source that fails is not asked again
+        at every step."""
+        if not self._asked:
+            self._asked = True
+            self._likelihoods = self.search.likelihoods()
+        if self._likelihoods is None:
+            return None
+        searched = set(self.search.searched)
+        found = self.search.found
+        out = {}
+        for p, likelihood in zip(self.planner._places, self._likelihoods):
+            if found is not None and p.id == found.id:
+                out[p.id] = 1.0
+            elif p.id in searched:
+                out[p.id] = 0.0
+            else:
+                out[p.id] = float(likelihood)
+        return out
+
+    def path_to(self, place: Place) -> List[Tuple[float, float]]:
+        """ferret's grid path from where the robot is to `place`'s access point."""
+        try:
+            return [tuple(p) for p in self.search.path_to(place.id)]
+        except ferret.FerretError as e:
+            raise PlannerError(str(e)) from e
 
     @property
     def searched(self) -> List[str]:
@@ -308,6 +343,8 @@ class ServePlanner:
         self.method, self.c, self.seed = method, c, seed
         self.deployment_id = 0
         self._scenes: Dict[str, dict] = {}
+        # Cleared when the server turns out to have no trial view (one older than the node).
+        self.has_view = True
         if scene:
             self.places(scene)
 
@@ -330,7 +367,9 @@ class ServePlanner:
                 message = err.get("message", "")
             except (ValueError, AttributeError):
                 message = ""
-            raise PlannerError(f"ferret serve: {method} {path} -> {e.code}: {message}") from e
+            raise PlannerError(
+                f"ferret serve: {method} {path} -> {e.code}: {message}", status=e.code
+            ) from e
         except (urllib.error.URLError, OSError) as e:
             raise PlannerError(f"ferret serve at {self.url} unreachable: {e}") from e
 
@@ -427,9 +466,34 @@ class ServeTrial:
         )
         return (self.state.get("cost_m") or 0.0) - before
 
-    def likelihoods(self) -> Optional[List[float]]:
-        # The server does not publish its strategies' probabilities.
-        return None
+    def belief(self) -> Optional[Dict[str, float]]:
+        """The trial view's likelihoods (`GET /trials/{id}/view`): what the server's web page
+        shows, already 0 where searched in vain and 1 where found; None for a strategy without
+        a likelihood, or from a server without the view (said once, by the PlannerError)."""
+        if not self.planner.has_view:
+            return None
+        try:
+            view = self.planner.request("GET", f"/trials/{self.state['trial']}/view")
+        except PlannerError as e:
+            # The trial exists (the server just answered for it): a 404 or 405 is the route.
+            if e.status in (404, 405):
+                self.planner.has_view = False
+                raise PlannerError(
+                    f"{e} (this ferret serve has no trial view: the belief's probabilities are NaN)"
+                ) from e
+            raise
+        ps = view.get("likelihoods")
+        if ps is None:
+            return None
+        return {k: float(v) for k, v in ps.items()}
+
+    def path_to(self, place: Place) -> List[Tuple[float, float]]:
+        """The server's path to its next container (`next.path`): cell centres from where the
+        robot is to the access point; empty for any other container."""
+        n = self.state.get("next") or {}
+        if n.get("container") != place.id:
+            return []
+        return [(float(x), float(y)) for x, y in n.get("path") or []]
 
     @property
     def searched(self) -> List[str]:

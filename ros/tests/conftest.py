@@ -3,11 +3,14 @@ simulated robot (Nav2, detector, map server) and the action client run in this p
 node on its own executor thread. Everything talks over Fast DDS, on a domain of its own
 (ROS_DOMAIN_ID from scripts/ros-tests.sh, or one picked here) and only on this host."""
 
+import json
 import os
+import socket
 import subprocess
 import sys
 import threading
 import time
+import urllib.request
 from pathlib import Path
 
 import pytest
@@ -18,15 +21,18 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
 
 import rclpy  # noqa: E402
+from nav_msgs.msg import Path as PathMsg  # noqa: E402
 from rclpy.action import ActionClient  # noqa: E402
 from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 import ferret  # noqa: E402
 from ferret_interfaces.action import SearchObject  # noqa: E402
 from ferret_interfaces.msg import Belief  # noqa: E402
 from ferret_ros.maps import read_scene_map  # noqa: E402
-from ferret_ros.sim import LATCHED, MapServer, SimDetector, SimNav2  # noqa: E402
+from ferret_ros.sim import MapServer, SimDetector, SimNav2  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENE = ROOT / "examples" / "apartment" / "scene.yaml"
@@ -35,6 +41,20 @@ STRATEGIES = ["model/prior", "model/uniform", "optimistic+greedy"]
 # Generous bounds: the machine may be busy; a hang still fails the test in bounded time.
 START_TIMEOUT_S = 30.0
 GOAL_TIMEOUT_S = 60.0
+# The node's outputs are latched with depth 1; the client keeps every one it receives, so that a
+# slow callback here never drops a step's belief or picture.
+KEEP_ALL = QoSProfile(
+    depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE
+)
+
+
+def ferret_bin():
+    path = os.environ.get("FERRET_BIN")
+    if not path or not os.access(path, os.X_OK):
+        pytest.fail(
+            "FERRET_BIN must name the ferret binary to compare with (scripts/ros-tests.sh sets it)"
+        )
+    return path
 
 
 @pytest.fixture(scope="session")
@@ -80,14 +100,23 @@ def robot(ros, house):
 
 
 class Client:
-    """The action client a user's code would be, plus a belief listener."""
+    """The action client a user's code would be, plus listeners of the belief, the markers and
+    the path."""
 
     def __init__(self, node_name):
         self.node = Node("test_client_" + node_name.replace("-", "_"))
         self.action = ActionClient(self.node, SearchObject, f"/{node_name}/search_object")
         self.beliefs = []
+        self.markers = []
+        self.paths = []
         self.node.create_subscription(
-            Belief, f"/{node_name}/belief", lambda m: self.beliefs.append(m), LATCHED
+            Belief, f"/{node_name}/belief", lambda m: self.beliefs.append(m), KEEP_ALL
+        )
+        self.node.create_subscription(
+            MarkerArray, f"/{node_name}/markers", lambda m: self.markers.append(m), KEEP_ALL
+        )
+        self.node.create_subscription(
+            PathMsg, f"/{node_name}/path", lambda m: self.paths.append(m), KEEP_ALL
         )
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(self.node)
@@ -200,3 +229,46 @@ def start_node(ros, robot, tmp_path):
         c.close()
         p.stop()
         sys.stderr.write(f"--- {p.name} log ---\n{p.text()}\n")
+
+
+@pytest.fixture
+def ferret_serve(tmp_path):
+    """`ferret serve` on a free loopback port, the apartment as its scene."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    log = open(tmp_path / "serve.log", "w")
+    proc = subprocess.Popen(
+        [
+            ferret_bin(),
+            "serve",
+            "--scene",
+            str(SCENE),
+            "--strategies",
+            ",".join(STRATEGIES),
+            "--listen",
+            f"127.0.0.1:{port}",
+            "--db",
+            str(tmp_path / "serve.sqlite"),
+        ],
+        stdout=log,
+        stderr=subprocess.STDOUT,
+        cwd=tmp_path,
+    )
+    url = f"http://127.0.0.1:{port}"
+    deadline = time.monotonic() + 30
+    while True:
+        try:
+            with urllib.request.urlopen(url + "/health", timeout=1) as r:
+                if json.loads(r.read()).get("status") == "ok":
+                    break
+        except OSError:
+            pass
+        assert proc.poll() is None and time.monotonic() < deadline, (
+            tmp_path / "serve.log"
+        ).read_text()
+        time.sleep(0.1)
+    yield url
+    proc.terminate()
+    proc.wait(10)
+    log.close()

@@ -5,7 +5,6 @@ import dataclasses
 import json
 import math
 import os
-import socket
 import subprocess
 import time
 import urllib.request
@@ -13,20 +12,11 @@ import urllib.request
 import pytest
 
 import ferret
-from conftest import SCENE, STRATEGIES
+from conftest import SCENE, STRATEGIES, ferret_bin
 from ferret_interfaces.action import SearchObject
 from ferret_ros.maps import read_scene_map
 
 Status = SearchObject.Result
-
-
-def ferret_bin():
-    path = os.environ.get("FERRET_BIN")
-    if not path or not os.access(path, os.X_OK):
-        pytest.fail(
-            "FERRET_BIN must name the ferret binary to compare with (scripts/ros-tests.sh sets it)"
-        )
-    return path
 
 
 def run_ferret(*args):
@@ -439,49 +429,6 @@ def test_goal_pose_fallback_times_out_when_the_robot_never_arrives(start_node, r
         nav.mode = "ok"
     assert result.status == Status.NAVIGATION_FAILED
     assert "did not reach" in result.message and "/goal_pose" in result.message, result.message
-
-
-@pytest.fixture
-def ferret_serve(tmp_path):
-    """`ferret serve` on a free loopback port, the apartment as its scene."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    log = open(tmp_path / "serve.log", "w")
-    proc = subprocess.Popen(
-        [
-            ferret_bin(),
-            "serve",
-            "--scene",
-            str(SCENE),
-            "--strategies",
-            ",".join(STRATEGIES),
-            "--listen",
-            f"127.0.0.1:{port}",
-            "--db",
-            str(tmp_path / "serve.sqlite"),
-        ],
-        stdout=log,
-        stderr=subprocess.STDOUT,
-        cwd=tmp_path,
-    )
-    url = f"http://127.0.0.1:{port}"
-    deadline = time.monotonic() + 30
-    while True:
-        try:
-            with urllib.request.urlopen(url + "/health", timeout=1) as r:
-                if json.loads(r.read()).get("status") == "ok":
-                    break
-        except OSError:
-            pass
-        assert proc.poll() is None and time.monotonic() < deadline, (
-            tmp_path / "serve.log"
-        ).read_text()
-        time.sleep(0.1)
-    yield url
-    proc.terminate()
-    proc.wait(10)
-    log.close()
 
 
 def test_serve_backend_makes_the_same_searches(start_node, robot, house, ferret_serve, tmp_path):

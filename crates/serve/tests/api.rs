@@ -4,6 +4,7 @@
 
 mod support;
 
+use support::server::{Server, start, start_with};
 use support::{SCENE, TARGETS, strategies};
 
 use std::path::Path;
@@ -11,108 +12,9 @@ use std::sync::Arc;
 
 use ferret_plan::{ReplayMode, SearchProblem, TrialSpec, replay_costs, run_trial};
 use ferret_select::{LiveDeployment, Method};
-use ferret_serve::{HttpOptions, ServeOptions, Service, ServiceOptions, Store};
+use ferret_serve::{ServeOptions, ServiceOptions};
 use ferret_world::{GridParams, ObjectType, SceneFile, TravelCost};
 use serde_json::{Value, json};
-
-struct Server {
-    url: String,
-    client: reqwest::Client,
-    handle: tokio::task::JoinHandle<()>,
-    service: Arc<Service>,
-}
-
-impl Drop for Server {
-    fn drop(&mut self) {
-        self.handle.abort();
-    }
-}
-
-async fn start(db: Option<&Path>, token: Option<&str>) -> Server {
-    start_with(
-        db,
-        token,
-        ServiceOptions::default(),
-        ServeOptions::default(),
-    )
-    .await
-}
-
-/// A server on 127.0.0.1 with these options, offering the scene `flat`.
-async fn start_with(
-    db: Option<&Path>,
-    token: Option<&str>,
-    service_options: ServiceOptions,
-    serve_options: ServeOptions,
-) -> Server {
-    // The store waits on its database from blocking threads, as the service runs it.
-    let service = tokio::task::block_in_place(|| {
-        let store = match db {
-            Some(p) => Store::open(p).unwrap(),
-            None => support::store(),
-        };
-        let service =
-            Service::with_options(store, GridParams::default(), strategies(), service_options)
-                .unwrap();
-        service.add_scene("flat", support::flat()).unwrap();
-        service
-    });
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-    let addr = listener.local_addr().unwrap();
-    let options = HttpOptions {
-        token: token.map(str::to_string),
-        listen: Some(addr),
-        ..HttpOptions::default()
-    };
-    let service = Arc::new(service);
-    let app = ferret_serve::router(service.clone(), &options).unwrap();
-    let handle = tokio::spawn(async move {
-        ferret_serve::serve(listener, app, serve_options, std::future::pending())
-            .await
-            .unwrap();
-    });
-    Server {
-        url: format!("http://{addr}"),
-        client: reqwest::Client::new(),
-        handle,
-        service,
-    }
-}
-
-impl Server {
-    async fn post(&self, path: &str, body: Value) -> (u16, Value) {
-        let r = self
-            .client
-            .post(format!("{}{path}", self.url))
-            .json(&body)
-            .send()
-            .await
-            .unwrap();
-        (r.status().as_u16(), r.json().await.unwrap())
-    }
-
-    async fn post_raw(&self, path: &str, body: &'static str) -> (u16, Value) {
-        let r = self
-            .client
-            .post(format!("{}{path}", self.url))
-            .header("content-type", "application/json")
-            .body(body)
-            .send()
-            .await
-            .unwrap();
-        (r.status().as_u16(), r.json().await.unwrap())
-    }
-
-    async fn get(&self, path: &str) -> (u16, Value) {
-        let r = self
-            .client
-            .get(format!("{}{path}", self.url))
-            .send()
-            .await
-            .unwrap();
-        (r.status().as_u16(), r.json().await.unwrap())
-    }
-}
 
 /// A simulated robot: searches what it is told, reports the scene file's contents.
 fn contents(scene: &Value, container: &str) -> Vec<String> {

@@ -7,11 +7,15 @@ mod support;
 
 use std::collections::BTreeSet;
 use std::sync::Arc;
+use std::time::Duration;
 
 use ferret_serve::{HttpOptions, ServeOptions, Service};
 use ferret_world::GridParams;
 use serde_json::{Value, json};
+use support::events::Stream;
 use support::{TARGETS, strategies};
+
+const SECOND: std::time::Duration = std::time::Duration::from_secs(1);
 
 /// A replica: its own service, store (pool and claims session) and port.
 async fn replica(url: &str) -> (String, tokio::task::JoinHandle<()>) {
@@ -276,6 +280,84 @@ async fn a_request_id_is_one_request_across_replicas() {
         assert_eq!(r.status().as_u16(), 422);
     }
     tokio::task::block_in_place(|| drop(holder));
+    ha.abort();
+    hb.abort();
+}
+
+/// A page on one replica sees, within a second of each reply, the deployment and every step of
+/// a trial that a robot drives through the other replica; when its replica's listening session
+/// is lost, the page is told to read everything again, and events flow once it is back.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_page_on_one_replica_sees_a_trial_driven_through_another() {
+    let Some(url) =
+        support::postgres_or_skip("a_page_on_one_replica_sees_a_trial_driven_through_another")
+    else {
+        return;
+    };
+    let (a, ha) = replica(&url).await;
+    let (b, hb) = replica(&url).await;
+    let client = reqwest::Client::new();
+    let mut page = Stream::open_at(&client, &a, None).await.1.unwrap();
+    assert_eq!(
+        page.next(SECOND).await,
+        ("hello".into(), json!({"shared": true}))
+    );
+    let robot = |path: &str, body: Value| {
+        let (client, url) = (client.clone(), format!("{b}{path}"));
+        async move {
+            let r = client.post(url).json(&body).send().await.unwrap();
+            assert!(r.status().is_success());
+            r.json::<Value>().await.unwrap()
+        }
+    };
+    let d = robot("/deployments", json!({})).await;
+    let id = d["id"].as_i64().unwrap();
+    assert_eq!(
+        page.next(SECOND).await,
+        ("deployment".into(), json!({"deployment": id}))
+    );
+    let mut trial = robot(
+        &format!("/deployments/{id}/trials"),
+        json!({"scene": "flat", "target": "Wallet"}),
+    )
+    .await;
+    let tid = trial["trial"].as_i64().unwrap();
+    let mut steps = 0;
+    loop {
+        let (name, e) = page.next(SECOND).await;
+        assert_eq!(name, "trial");
+        assert_eq!(
+            (e["trial"].as_i64(), e["searched"].as_i64()),
+            (Some(tid), Some(steps))
+        );
+        assert_eq!(e["next"], trial["next"]["container"]);
+        if trial["status"] != "searching" {
+            break;
+        }
+        let c = trial["next"]["container"].as_str().unwrap().to_string();
+        trial = robot(
+            &format!("/trials/{tid}/observations"),
+            json!({"container": c, "found": contents(&c).contains(&"Wallet"), "objects": contents(&c)}),
+        )
+        .await;
+        steps += 1;
+    }
+    assert_eq!(trial["status"], "done");
+
+    // Both replicas' listening sessions are cut, as a database restart would.
+    tokio::task::block_in_place(|| {
+        support::psql(
+            &url,
+            "SELECT pg_terminate_backend(pid) FROM pg_stat_activity WHERE query LIKE 'LISTEN%' AND pid <> pg_backend_pid()",
+        );
+    });
+    let (name, _) = page.next(Duration::from_secs(5)).await;
+    assert_eq!(name, "resync", "the page is told it may have missed events");
+    let d = robot("/deployments", json!({})).await;
+    assert_eq!(
+        page.next(SECOND).await,
+        ("deployment".into(), json!({"deployment": d["id"]}))
+    );
     ha.abort();
     hb.abort();
 }

@@ -4,6 +4,9 @@
 //! both), so the same tests check both backends.
 #![allow(dead_code)]
 
+pub mod events;
+pub mod server;
+
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use std::sync::Arc;

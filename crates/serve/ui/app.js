@@ -1,0 +1,1267 @@
+// The live view of `ferret serve`: the watched trial on its floor plan, the selected deployment's
+// strategies and choices, updated from the server's event stream (GET /events).
+//
+// The requests follow the pattern the server is sized for (docs/serve.md, "A live view in the
+// browser"): a few GETs on load, then one refetch per change that events announce, coalesced, and
+// never a polling loop. The page is served with a strict Content-Security-Policy, so there is no
+// inline script or style here: elements get classes and SVG presentation attributes only.
+"use strict";
+
+(() => {
+  const TOKEN_KEY = "ferret-serve-token";
+  const SVGNS = "http://www.w3.org/2000/svg";
+  // Between reconnections of the event stream; reset once the server says hello.
+  const BACKOFF_MS = [500, 1000, 2000, 4000, 8000, 15000];
+  const DEPLOYMENT_REFETCH_GAP_MS = 500;
+  // A categorical palette without reds and yellows, which the likelihood scale uses.
+  const STRATEGY_COLOURS = [
+    "#1f77b4", "#2ca02c", "#9467bd", "#17becf", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22",
+    "#393b79", "#637939",
+  ];
+  const ROOM_FILLS = ["#eaf1fb", "#efeafa", "#e8f5ec", "#fbf1e2", "#f8e9ef", "#e6f4f5", "#f2f2e6"];
+  // YlOrRd, applied to the square root of the likelihood so that the small probabilities of a
+  // house with many containers still differ from one another.
+  const LIKELIHOOD_STOPS = [
+    [0, [255, 255, 204]], [0.25, [254, 217, 118]], [0.5, [253, 141, 60]], [0.75, [227, 26, 28]],
+    [1, [128, 0, 38]],
+  ];
+  const NO_LIKELIHOOD = "#c4c8cf";
+
+  const $ = (id) => document.getElementById(id);
+
+  // Everything the page knows. `epoch` changes with every start (a new token, a refusal), and
+  // answers to requests of an older epoch are dropped, so nothing of a refused session shows.
+  const S = {
+    epoch: 0,
+    token: "",
+    loaded: false,
+    streamAbort: null,
+    retryTimer: null,
+    backoff: 0,
+    droppedSinceLoad: false,
+    shared: null,
+    scenes: [],
+    sceneCache: new Map(),
+    deployments: [],
+    depId: null,
+    depPicked: false,
+    dep: null,
+    live: new Map(),
+    watchedId: null,
+    follow: true,
+    view: null,
+    scene: null,
+    lastError: "",
+  };
+
+  class Stale extends Error {}
+  class HttpError extends Error {
+    constructor(status, message) {
+      super(message);
+      this.status = status;
+    }
+  }
+
+  // ---------------------------------------------------------------- requests
+
+  function headers() {
+    const h = { Accept: "application/json" };
+    if (S.token) h.Authorization = "Bearer " + S.token;
+    return h;
+  }
+
+  async function api(path) {
+    const epoch = S.epoch;
+    const res = await fetch(path, { headers: headers(), cache: "no-store" });
+    if (epoch !== S.epoch) throw new Stale();
+    if (res.status === 401) {
+      refuse();
+      throw new Stale();
+    }
+    if (!res.ok) {
+      let message = res.statusText;
+      try {
+        message = (await res.json()).error.message;
+      } catch (_) {
+        // not the server's JSON error; the status says enough
+      }
+      throw new HttpError(res.status, `${path}: ${res.status} ${message}`);
+    }
+    const body = await res.json();
+    if (epoch !== S.epoch) throw new Stale();
+    return body;
+  }
+
+  const seg = (v) => encodeURIComponent(String(v));
+
+  function showError(e) {
+    if (e instanceof Stale) return;
+    S.lastError = e && e.message ? e.message : String(e);
+    const el = $("load-error");
+    el.textContent = "Could not load " + S.lastError;
+    el.hidden = false;
+  }
+
+  function clearError() {
+    $("load-error").hidden = true;
+  }
+
+  // One request at a time per kind: a trigger while one is in flight asks for exactly one more
+  // after it, however many triggers came; `gapMs` spaces the requests at least that far apart.
+  function coalesced(fn, gapMs) {
+    let busy = false;
+    let again = false;
+    let last = -Infinity;
+    async function go() {
+      busy = true;
+      const wait = last + gapMs - performance.now();
+      if (wait > 0) await new Promise((r) => setTimeout(r, wait));
+      again = false;
+      last = performance.now();
+      try {
+        await fn();
+        clearError();
+      } catch (e) {
+        showError(e);
+      }
+      busy = false;
+      if (again) go();
+    }
+    return () => {
+      if (busy) again = true;
+      else go();
+    };
+  }
+
+  const refetchList = coalesced(fetchList, 0);
+  const refetchDeployment = coalesced(fetchDeployment, DEPLOYMENT_REFETCH_GAP_MS);
+  const refetchView = coalesced(fetchView, 0);
+
+  function getScene(name) {
+    let p = S.sceneCache.get(name);
+    if (!p) {
+      p = api(`/scenes/${seg(name)}`);
+      S.sceneCache.set(name, p);
+      p.catch(() => S.sceneCache.delete(name));
+    }
+    return p;
+  }
+
+  async function loadAll() {
+    S.loaded = true;
+    const epoch = S.epoch;
+    try {
+      S.scenes = await api("/scenes");
+    } catch (e) {
+      showError(e);
+    }
+    if (epoch === S.epoch) refetchList();
+  }
+
+  function resync() {
+    refetchList();
+    if (S.depId != null) refetchDeployment();
+    if (S.watchedId != null) refetchView();
+  }
+
+  async function fetchList() {
+    const list = await api("/deployments");
+    S.deployments = list;
+    const newest = list.length ? list[list.length - 1].id : null;
+    const known = list.some((d) => d.id === S.depId);
+    if (newest == null) {
+      S.depId = null;
+      S.dep = null;
+      renderDeploymentSelect();
+      renderDeployment();
+      if (S.watchedId == null) await showSceneOnly();
+      return;
+    }
+    renderDeploymentSelect();
+    if ((!S.depPicked && newest !== S.depId) || !known) {
+      selectDeployment(newest, false);
+    }
+  }
+
+  function selectDeployment(id, picked) {
+    S.depId = id;
+    S.depPicked = picked;
+    S.dep = null;
+    S.follow = true;
+    renderDeploymentSelect();
+    renderDeployment();
+    refetchDeployment();
+  }
+
+  async function fetchDeployment() {
+    const id = S.depId;
+    if (id == null) return;
+    const dep = await api(`/deployments/${seg(id)}`);
+    if (id !== S.depId) return; // another was selected meanwhile; its own fetch follows
+    S.dep = dep;
+    const item = S.deployments.find((d) => d.id === id);
+    if (item) {
+      item.trials = dep.trials.length;
+      item.open_trials = dep.open_trials.slice();
+      renderDeploymentSelect();
+    }
+    renderDeployment();
+    if (S.follow) followNewest();
+  }
+
+  // The trial a follower watches: the newest open one, but a trial still being searched is not
+  // left for a newer one (with several robots, the view would jump at every start).
+  function followNewest() {
+    const dep = S.dep;
+    if (!dep) return;
+    const open = dep.open_trials.slice().sort((a, b) => a - b);
+    const newestOpen = open.length ? open[open.length - 1] : null;
+    const watchedHere = watchedInDeployment();
+    if (newestOpen != null && (!watchedHere || watchedEnded())) {
+      if (newestOpen !== S.watchedId) watch(newestOpen, false);
+      return;
+    }
+    if (!watchedHere) {
+      const trials = dep.trials.slice().sort((a, b) => a.k - b.k);
+      if (trials.length) {
+        watch(trials[trials.length - 1].trial, false);
+      } else {
+        S.watchedId = null;
+        S.view = null;
+        showSceneOnly().catch(showError);
+      }
+    }
+  }
+
+  function watchedInDeployment() {
+    return S.watchedId != null && !!S.dep && S.dep.trials.some((t) => t.trial === S.watchedId);
+  }
+
+  function watchedEnded() {
+    if (S.watchedId == null) return true;
+    const ev = S.live.get(S.watchedId);
+    if (ev) return ev.status !== "searching";
+    return !!(S.view && S.view.trial.trial === S.watchedId && S.view.trial.status !== "searching");
+  }
+
+  function watch(id, picked) {
+    if (picked) S.follow = false;
+    S.watchedId = id;
+    renderFollow();
+    renderOpenTrials();
+    renderCurve();
+    refetchView();
+  }
+
+  async function fetchView() {
+    const id = S.watchedId;
+    if (id == null) return;
+    const view = await api(`/trials/${seg(id)}/view`);
+    const scene = await getScene(view.trial.scene);
+    if (id !== S.watchedId) return;
+    S.view = view;
+    S.scene = scene;
+    renderTrial();
+    renderPlan();
+    renderOpenTrials();
+    renderCurve();
+  }
+
+  // Before any trial: the first scene's plan, so that a wall screen shows the house.
+  async function showSceneOnly() {
+    if (S.view || !S.scenes.length) {
+      renderTrial();
+      return;
+    }
+    const scene = await getScene(S.scenes[0].name);
+    if (S.view || S.watchedId != null) return;
+    S.scene = scene;
+    renderTrial();
+    renderPlan();
+  }
+
+  // ---------------------------------------------------------------- the event stream
+
+  function setConnection(state, text, title) {
+    const el = $("connection");
+    el.dataset.state = state;
+    el.textContent = text;
+    el.title = title || "";
+  }
+
+  async function openStream() {
+    const epoch = S.epoch;
+    const ctrl = new AbortController();
+    S.streamAbort = ctrl;
+    let res;
+    try {
+      res = await fetch("/events", {
+        headers: { ...headers(), Accept: "text/event-stream" },
+        cache: "no-store",
+        signal: ctrl.signal,
+      });
+    } catch (e) {
+      if (epoch === S.epoch) streamDown(epoch, 0, "no connection");
+      return;
+    }
+    if (epoch !== S.epoch) return;
+    if (res.status === 401) {
+      refuse();
+      return;
+    }
+    if (!res.ok || !res.body) {
+      ctrl.abort();
+      const retryAfter = Number(res.headers.get("Retry-After")) || 0;
+      const why = res.status === 503 ? "the server has too many open views" : `HTTP ${res.status}`;
+      streamDown(epoch, retryAfter, why);
+      return;
+    }
+    setConnection("live", "live", "event stream open");
+    // The subscription exists once the headers are in, so what is fetched from here on misses
+    // no event; after a drop, whatever changed meanwhile is fetched again.
+    if (!S.loaded) loadAll();
+    else if (S.droppedSinceLoad) resync();
+    S.droppedSinceLoad = false;
+    try {
+      await readEvents(res.body, epoch);
+    } catch (_) {
+      // a dropped connection: reconnect below
+    }
+    if (epoch === S.epoch) streamDown(epoch, 0, "the stream ended");
+  }
+
+  function streamDown(epoch, retryAfterS, why) {
+    S.droppedSinceLoad = true;
+    if (!S.loaded) loadAll();
+    const base = BACKOFF_MS[Math.min(S.backoff, BACKOFF_MS.length - 1)];
+    const delay = Math.max(base * (0.8 + 0.4 * Math.random()), retryAfterS * 1000);
+    S.backoff += 1;
+    const secs = Math.max(1, Math.round(delay / 1000));
+    setConnection("reconnecting", `reconnecting (${secs} s)`, `${why}; trying again in ${secs} s`);
+    clearTimeout(S.retryTimer);
+    S.retryTimer = setTimeout(() => {
+      if (epoch === S.epoch) openStream();
+    }, delay);
+  }
+
+  // Server-Sent Events read by hand: EventSource cannot send the Authorization header.
+  async function readEvents(body, epoch) {
+    const reader = body.pipeThrough(new TextDecoderStream()).getReader();
+    let buf = "";
+    let type = "";
+    let data = [];
+    for (;;) {
+      const { value, done } = await reader.read();
+      if (done || epoch !== S.epoch) return;
+      buf += value;
+      let nl;
+      while ((nl = buf.indexOf("\n")) >= 0) {
+        const line = buf.slice(0, nl).replace(/\r$/, "");
+        buf = buf.slice(nl + 1);
+        if (line === "") {
+          if (data.length) dispatch(type || "message", data.join("\n"));
+          type = "";
+          data = [];
+        } else if (!line.startsWith(":")) {
+          const colon = line.indexOf(":");
+          const field = colon < 0 ? line : line.slice(0, colon);
+          let val = colon < 0 ? "" : line.slice(colon + 1);
+          if (val.startsWith(" ")) val = val.slice(1);
+          if (field === "event") type = val;
+          else if (field === "data") data.push(val);
+        }
+      }
+    }
+  }
+
+  function dispatch(type, raw) {
+    let d;
+    try {
+      d = JSON.parse(raw);
+    } catch (_) {
+      return;
+    }
+    if (type === "hello") {
+      S.backoff = 0;
+      S.shared = !!d.shared;
+      setConnection(
+        "live",
+        S.shared ? "live · every replica" : "live",
+        S.shared
+          ? "event stream open; trials served by every replica of this database arrive"
+          : "event stream open",
+      );
+    } else if (type === "trial") {
+      onTrialEvent(d);
+    } else if (type === "deployment") {
+      refetchList();
+    } else if (type === "resync") {
+      resync();
+    }
+  }
+
+  function onTrialEvent(e) {
+    const isNew = !S.live.has(e.trial);
+    S.live.set(e.trial, e);
+    const item = S.deployments.find((d) => d.id === e.deployment);
+    if (!item) {
+      refetchList();
+    } else {
+      const open = new Set(item.open_trials || []);
+      if (e.status === "searching") {
+        if (!open.has(e.trial) && isNew && e.searched === 0) item.trials += 1;
+        open.add(e.trial);
+      } else {
+        open.delete(e.trial);
+      }
+      item.open_trials = [...open].sort((a, b) => a - b);
+      renderDeploymentSelect();
+    }
+    if (S.dep && e.deployment === S.dep.id) {
+      let row = S.dep.trials.find((t) => t.trial === e.trial);
+      if (!row) {
+        row = { trial: e.trial, k: e.k, target: e.target, strategy: e.strategy, cost_m: null };
+        S.dep.trials.push(row);
+      }
+      row.status = e.status;
+      if (e.status !== "searching") row.cost_m = e.cost_m;
+      const open = new Set(S.dep.open_trials);
+      if (e.status === "searching") open.add(e.trial);
+      else open.delete(e.trial);
+      S.dep.open_trials = [...open].sort((a, b) => a - b);
+      renderDeployment();
+      if (e.status !== "searching") refetchDeployment();
+    }
+    if (e.trial === S.watchedId) {
+      refetchView();
+    } else if (
+      S.follow &&
+      e.deployment === S.depId &&
+      e.status === "searching" &&
+      (watchedEnded() || !watchedInDeployment())
+    ) {
+      watch(e.trial, false);
+    }
+  }
+
+  // ---------------------------------------------------------------- token
+
+  function refuse() {
+    const hadToken = !!S.token;
+    stop();
+    clearAll();
+    setConnection("refused", "refused", "the server refused the token");
+    $("view").hidden = true;
+    $("token-panel").hidden = false;
+    const err = $("auth-error");
+    err.textContent = hadToken
+      ? "The server refused this token. Enter the token it was started with."
+      : "This server needs a token (it was started with FERRET_SERVE_TOKEN). Enter it to see the live view.";
+    err.hidden = false;
+    $("token-input").value = "";
+    $("token-input").focus();
+  }
+
+  // Ends everything of the current epoch: requests in flight are dropped when they answer.
+  function stop() {
+    S.epoch += 1;
+    if (S.streamAbort) S.streamAbort.abort();
+    S.streamAbort = null;
+    clearTimeout(S.retryTimer);
+  }
+
+  function clearAll() {
+    Object.assign(S, {
+      loaded: false,
+      backoff: 0,
+      droppedSinceLoad: false,
+      shared: null,
+      scenes: [],
+      sceneCache: new Map(),
+      deployments: [],
+      depId: null,
+      depPicked: false,
+      dep: null,
+      live: new Map(),
+      watchedId: null,
+      follow: true,
+      view: null,
+      scene: null,
+    });
+    clearError();
+    renderDeploymentSelect();
+    renderDeployment();
+    renderTrial();
+    renderPlan();
+  }
+
+  function start() {
+    stop();
+    clearAll();
+    $("token-panel").hidden = true;
+    $("auth-error").hidden = true;
+    $("view").hidden = false;
+    setConnection("connecting", "connecting…", "");
+    openStream();
+  }
+
+  function readToken() {
+    try {
+      return sessionStorage.getItem(TOKEN_KEY) || "";
+    } catch (_) {
+      return "";
+    }
+  }
+
+  function saveToken(t) {
+    try {
+      if (t) sessionStorage.setItem(TOKEN_KEY, t);
+      else sessionStorage.removeItem(TOKEN_KEY);
+    } catch (_) {
+      // storage switched off: the token lives as long as the page
+    }
+  }
+
+  // ---------------------------------------------------------------- helpers for drawing
+
+  function el(tag, attrs, text) {
+    const e = document.createElement(tag);
+    for (const [k, v] of Object.entries(attrs || {})) {
+      if (v == null || v === false) continue;
+      if (k === "class") e.className = v;
+      else e.setAttribute(k, v === true ? "" : String(v));
+    }
+    if (text != null) e.textContent = text;
+    return e;
+  }
+
+  function svg(tag, attrs, text) {
+    const e = document.createElementNS(SVGNS, tag);
+    for (const [k, v] of Object.entries(attrs || {})) {
+      if (v == null || v === false) continue;
+      e.setAttribute(k, String(v));
+    }
+    if (text != null) e.textContent = text;
+    return e;
+  }
+
+  function titled(node, text) {
+    node.appendChild(svg("title", {}, text));
+    return node;
+  }
+
+  const fmtM = (v) => (v == null || !Number.isFinite(v) ? "–" : v.toFixed(2));
+  const pct = (p) => (p >= 0.995 ? "100 %" : p < 0.001 && p > 0 ? "<0.1 %" : (p * 100).toFixed(p < 0.1 ? 1 : 0) + " %");
+
+  // "CounterTop" -> "Counter top", "TVStand" -> "TV stand", "DiningRoom" -> "Dining room".
+  function words(type) {
+    const parts = String(type).match(/[A-Z]+(?![a-z])|[A-Z]?[a-z]+|\d+/g);
+    if (!parts) return String(type);
+    return parts
+      .map((p, i) => (i === 0 || p.length > 1 && p === p.toUpperCase() ? p : p.toLowerCase()))
+      .join(" ");
+  }
+
+  function likelihoodColour(p) {
+    if (p == null || !Number.isFinite(p)) return NO_LIKELIHOOD;
+    const t = Math.sqrt(Math.min(1, Math.max(0, p)));
+    for (let i = 1; i < LIKELIHOOD_STOPS.length; i++) {
+      const [t1, c1] = LIKELIHOOD_STOPS[i];
+      const [t0, c0] = LIKELIHOOD_STOPS[i - 1];
+      if (t <= t1) {
+        const f = (t - t0) / (t1 - t0);
+        const c = c0.map((v, j) => Math.round(v + f * (c1[j] - v)));
+        return "#" + c.map((v) => v.toString(16).padStart(2, "0")).join("");
+      }
+    }
+    return "#800026";
+  }
+
+  function strategyColour(strategy) {
+    const list = S.dep ? S.dep.strategies : [];
+    const i = list.indexOf(strategy);
+    return STRATEGY_COLOURS[(i < 0 ? 0 : i) % STRATEGY_COLOURS.length];
+  }
+
+  const plural = (n, one, many) => `${n} ${n === 1 ? one : many || one + "s"}`;
+
+  function ordinal(n) {
+    const s = ["th", "st", "nd", "rd"];
+    const v = n % 100;
+    return n + (s[(v - 20) % 10] || s[v] || s[0]);
+  }
+
+  function insidePolygon(x, y, poly) {
+    let inside = false;
+    for (let i = 0, j = poly.length - 1; i < poly.length; j = i++) {
+      const [xi, yi] = poly[i];
+      const [xj, yj] = poly[j];
+      if (yi > y !== yj > y && x < ((xj - xi) * (y - yi)) / (yj - yi) + xi) inside = !inside;
+    }
+    return inside;
+  }
+
+  const overlap = (a, b) =>
+    Math.max(0, Math.min(a.x2, b.x2) - Math.max(a.x1, b.x1)) *
+    Math.max(0, Math.min(a.y2, b.y2) - Math.max(a.y1, b.y1));
+
+  // ---------------------------------------------------------------- the floor plan
+
+  function renderPlan() {
+    const plan = $("plan");
+    plan.replaceChildren();
+    const scene = S.scene;
+    if (!scene) return;
+    const W = Math.max(200, plan.clientWidth);
+    const H = Math.max(200, plan.clientHeight);
+    plan.setAttribute("viewBox", `0 0 ${W} ${H}`);
+
+    const view = S.view && S.view.trial.scene === scene.name ? S.view : null;
+    const trial = view ? view.trial : null;
+    const xs = [];
+    const ys = [];
+    for (const r of scene.rooms) for (const [x, y] of r.polygon) xs.push(x), ys.push(y);
+    for (const c of scene.containers) xs.push(c.x), ys.push(c.y);
+    xs.push(scene.start[0]);
+    ys.push(scene.start[1]);
+    const minX = Math.min(...xs);
+    const maxX = Math.max(...xs);
+    const minY = Math.min(...ys);
+    const maxY = Math.max(...ys);
+    const margin = 28;
+    const s = Math.min((W - 2 * margin) / Math.max(maxX - minX, 1), (H - 2 * margin) / Math.max(maxY - minY, 1));
+    const ox = (W - s * (maxX - minX)) / 2;
+    const oy = (H - s * (maxY - minY)) / 2;
+    // Map frame: y grows north, so it is flipped for the screen.
+    const X = (x) => ox + (x - minX) * s;
+    const Y = (y) => oy + (maxY - y) * s;
+    const pts = (list) => list.map(([x, y]) => `${X(x).toFixed(1)},${Y(y).toFixed(1)}`).join(" ");
+
+    const gRooms = svg("g", { class: "rooms" });
+    const gLinks = svg("g", { class: "links" });
+    const gPaths = svg("g", { class: "paths" });
+    const gMarks = svg("g", { class: "containers" });
+    const gLabels = svg("g", { class: "labels" });
+    plan.append(gRooms, gLinks, gPaths, gMarks, gLabels);
+
+    scene.rooms.forEach((r, i) => {
+      const poly = svg("polygon", {
+        points: pts(r.polygon),
+        fill: ROOM_FILLS[i % ROOM_FILLS.length],
+        stroke: "#5b6577",
+        "stroke-width": 2,
+        "stroke-linejoin": "round",
+        "data-room": r.name,
+      });
+      titled(poly, `${r.name} (${r.type})`);
+      gRooms.appendChild(poly);
+    });
+
+    // Obstacles for label placement, in screen pixels.
+    const taken = [];
+    const markerR = Math.max(6, Math.min(10, s * 0.18));
+    for (const c of scene.containers) {
+      const cx = X(c.x);
+      const cy = Y(c.y);
+      taken.push({ x1: cx - markerR - 2, y1: cy - markerR - 2, x2: cx + markerR + 2, y2: cy + markerR + 2 });
+    }
+    const sx = X(scene.start[0]);
+    const sy = Y(scene.start[1]);
+    taken.push({ x1: sx - 10, y1: sy - 10, x2: sx + 10, y2: sy + 10 });
+
+    // Room labels: the spot inside the room farthest from its containers, top first.
+    for (const r of scene.rooms) {
+      const rx = r.polygon.map((p) => p[0]);
+      const ry = r.polygon.map((p) => p[1]);
+      const [x0, x1, y0, y1] = [Math.min(...rx), Math.max(...rx), Math.min(...ry), Math.max(...ry)];
+      const label = svg("text", { class: "room-label", "text-anchor": "middle" }, words(r.type));
+      gLabels.appendChild(label);
+      const w = label.getComputedTextLength() + 6;
+      const h = 14;
+      let best = null;
+      for (const fy of [0.9, 0.1, 0.5, 0.75, 0.25]) {
+        for (const fx of [0.5, 0.25, 0.75]) {
+          const mx = x0 + fx * (x1 - x0);
+          const my = y0 + fy * (y1 - y0);
+          if (!insidePolygon(mx, my, r.polygon)) continue;
+          const box = { x1: X(mx) - w / 2, x2: X(mx) + w / 2, y1: Y(my) - h / 2, y2: Y(my) + h / 2 };
+          const hit = taken.reduce((a, b) => a + overlap(box, b), 0);
+          if (!best || hit < best.hit) best = { box, hit };
+          if (hit === 0) break;
+        }
+        if (best && best.hit === 0) break;
+      }
+      if (!best) {
+        label.remove();
+        continue;
+      }
+      label.setAttribute("x", ((best.box.x1 + best.box.x2) / 2).toFixed(1));
+      label.setAttribute("y", (best.box.y2 - 3).toFixed(1));
+      taken.push(best.box);
+    }
+
+    // Access points, and a thin line to each from its container.
+    for (const c of scene.containers) {
+      if (!c.access) continue;
+      const ax = X(c.access[0]);
+      const ay = Y(c.access[1]);
+      gLinks.appendChild(svg("line", { x1: X(c.x), y1: Y(c.y), x2: ax, y2: ay, stroke: "#9aa3b2", "stroke-width": 1 }));
+      const d = 3.5;
+      const ap = svg("polygon", {
+        class: "access",
+        points: `${ax},${ay - d} ${ax + d},${ay} ${ax},${ay + d} ${ax - d},${ay}`,
+        fill: "#6b7280",
+        "data-access": c.id,
+      });
+      titled(ap, `access point of ${c.id}: where the robot stands to search it`);
+      gLinks.appendChild(ap);
+    }
+
+    // The start pose: an arrow along its yaw.
+    const yaw = (scene.start[2] * Math.PI) / 180;
+    const ux = Math.cos(yaw);
+    const uy = -Math.sin(yaw);
+    const start = svg("polygon", {
+      id: "start-pose",
+      points: [
+        [sx + 11 * ux, sy + 11 * uy],
+        [sx - 7 * ux - 6 * uy, sy - 7 * uy + 6 * ux],
+        [sx - 7 * ux + 6 * uy, sy - 7 * uy - 6 * ux],
+      ]
+        .map((p) => p.map((v) => v.toFixed(1)).join(","))
+        .join(" "),
+      fill: "#15803d",
+      stroke: "#fff",
+      "stroke-width": 1.5,
+    });
+    titled(start, `start pose (${scene.start[0]}, ${scene.start[1]}, ${scene.start[2]}°)`);
+    gMarks.appendChild(start);
+
+    // The route so far and the path to the next container.
+    if (view && view.route && view.route.length > 1) {
+      const route = svg("polyline", {
+        id: "route",
+        points: pts(view.route),
+        fill: "none",
+        stroke: "#1d4ed8",
+        "stroke-width": 3.5,
+        "stroke-linejoin": "round",
+        "stroke-linecap": "round",
+        "stroke-opacity": 0.85,
+        "data-points": view.route.length,
+      });
+      titled(route, `route so far: ${fmtM(trial.cost_m)} m`);
+      gPaths.appendChild(route);
+    }
+    const next = trial && trial.status === "searching" ? trial.next : null;
+    if (next && next.path && next.path.length > 1) {
+      const path = svg("polyline", {
+        id: "next-path",
+        points: pts(next.path),
+        fill: "none",
+        stroke: "#0f172a",
+        "stroke-width": 2.5,
+        "stroke-dasharray": "7 5",
+        "stroke-linecap": "round",
+        "data-container": next.container,
+      });
+      titled(path, `path to the next container, ${next.container}: ${fmtM(next.distance_m)} m`);
+      gPaths.appendChild(path);
+    }
+
+    // Containers, coloured by likelihood, searched ones numbered in order.
+    const likelihoods = view ? view.likelihoods : null;
+    const obs = new Map();
+    if (view) view.observations.forEach((o, i) => obs.set(o.container, { ...o, order: i + 1 }));
+    const searchedOrder = new Map();
+    if (trial) trial.searched.forEach((id, i) => searchedOrder.set(id, i + 1));
+    const placed = [];
+    for (const c of scene.containers) {
+      const cx = X(c.x);
+      const cy = Y(c.y);
+      const order = searchedOrder.get(c.id);
+      const o = obs.get(c.id);
+      const found = !!(o && o.found);
+      const isNext = !!(next && next.container === c.id);
+      const p = likelihoods && c.id in likelihoods ? likelihoods[c.id] : null;
+      const g = svg("g", {
+        class: "container" + (isNext ? " is-next" : "") + (found ? " is-found" : ""),
+        "data-container": c.id,
+        "data-type": c.type,
+        "data-searched": order ? "true" : "false",
+        "data-found": found ? "true" : "false",
+        "data-next": isNext ? "true" : "false",
+        "data-likelihood": p == null ? "none" : String(p),
+        "data-order": order || null,
+      });
+      if (isNext) {
+        g.appendChild(svg("circle", { class: "next-ring", cx, cy, r: markerR + 7, fill: "none", stroke: "#0f172a", "stroke-width": 2.5 }));
+      }
+      if (found) {
+        g.appendChild(svg("circle", { cx, cy, r: markerR + 5, fill: "none", stroke: "#16a34a", "stroke-width": 4 }));
+      }
+      g.appendChild(
+        svg("circle", {
+          class: "marker",
+          cx,
+          cy,
+          r: markerR,
+          fill: likelihoodColour(p),
+          stroke: order ? "#111827" : "#4b5563",
+          "stroke-width": order ? 2.5 : 1.5,
+        }),
+      );
+      if (order) {
+        const dark = p != null && p > 0.35;
+        g.appendChild(svg("text", { class: "order" + (dark ? " on-dark" : ""), x: cx, y: cy + 4, "text-anchor": "middle" }, String(order)));
+      }
+      let tip = `${words(c.type)} (${c.id})` + (c.room ? ` in the ${c.room}` : "");
+      if (p != null) tip += `\nlikelihood the target is here: ${pct(p)}`;
+      if (order) tip += `\nsearched ${ordinal(order)}` + (o ? `: ${found ? "FOUND the target" : "not there"}` : "");
+      if (o && o.objects.length) tip += `\nseen: ${o.objects.join(", ")}`;
+      if (isNext) tip += `\nnext to search, ${fmtM(next.distance_m)} m away`;
+      titled(g, tip);
+      gMarks.appendChild(g);
+      const rank = isNext ? 0 : found ? 1 : order ? 2 : 3;
+      placed.push({ c, cx, cy, p, order, found, isNext, rank });
+    }
+
+    // Container labels beside their markers, placed where they overlap nothing if they can.
+    placed.sort((a, b) => a.rank - b.rank || a.cy - b.cy || a.cx - b.cx);
+    const d = markerR + 4;
+    for (const m of placed) {
+      const text = svg("text", { class: "container-label" + (m.isNext ? " next" : "") + (m.found ? " found" : "") });
+      text.appendChild(svg("tspan", {}, words(m.c.type)));
+      if (m.found) text.appendChild(svg("tspan", { class: "pct" }, " · found"));
+      else if (m.p != null && !m.order) text.appendChild(svg("tspan", { class: "pct" }, ` ${pct(m.p)}`));
+      gLabels.appendChild(text);
+      const w = text.getComputedTextLength();
+      const h = 13;
+      const spots = [
+        [m.cx + d, m.cy + 4, "start"],
+        [m.cx - d, m.cy + 4, "end"],
+        [m.cx, m.cy - d - 3, "middle"],
+        [m.cx, m.cy + d + 11, "middle"],
+        [m.cx + d - 2, m.cy - d, "start"],
+        [m.cx + d - 2, m.cy + d + 8, "start"],
+        [m.cx - d + 2, m.cy - d, "end"],
+        [m.cx - d + 2, m.cy + d + 8, "end"],
+      ];
+      let best = null;
+      for (const [x, y, anchor] of spots) {
+        const x1 = anchor === "start" ? x : anchor === "end" ? x - w : x - w / 2;
+        const box = { x1: x1 - 1, x2: x1 + w + 1, y1: y - h + 2, y2: y + 3 };
+        let hit = taken.reduce((a, b) => a + overlap(box, b), 0);
+        if (box.x1 < 2 || box.x2 > W - 2 || box.y1 < 2 || box.y2 > H - 2) hit += 1e6;
+        if (!best || hit < best.hit) best = { x, y, anchor, box, hit };
+        if (hit === 0) break;
+      }
+      text.setAttribute("x", best.x.toFixed(1));
+      text.setAttribute("y", best.y.toFixed(1));
+      text.setAttribute("text-anchor", best.anchor);
+      text.setAttribute("data-container", m.c.id);
+      taken.push(best.box);
+    }
+
+    // Where the robot is: the end of its route (the start before its first search).
+    if (trial) {
+      const at = view.route && view.route.length ? view.route[view.route.length - 1] : scene.start;
+      const robot = svg("circle", { id: "robot", cx: X(at[0]), cy: Y(at[1]), r: 6, fill: "#1d4ed8", stroke: "#fff", "stroke-width": 2 });
+      titled(robot, "the robot, where it last reported");
+      gMarks.appendChild(robot);
+    }
+
+    // A scale bar of a round number of metres, bottom left.
+    const nice = [0.5, 1, 2, 5, 10, 20, 50].find((m) => m * s >= 60) || 50;
+    const bx = 12;
+    const by = H - 12;
+    const bar = svg("g", { class: "scale-bar" });
+    bar.appendChild(svg("path", { d: `M${bx},${by - 5}v5h${nice * s}v-5`, fill: "none", stroke: "#374151", "stroke-width": 1.5 }));
+    bar.appendChild(svg("text", { x: bx + (nice * s) / 2, y: by - 8, "text-anchor": "middle" }, `${nice} m`));
+    plan.appendChild(bar);
+  }
+
+  // ---------------------------------------------------------------- the legend
+
+  function renderLegend() {
+    const box = $("legend");
+    box.replaceChildren();
+    if (!S.scene) return;
+    const view = S.view;
+    const hasLikelihoods = !!(view && view.likelihoods);
+    const scale = el("div", { class: "legend-scale", id: "likelihood-legend", "data-likelihoods": hasLikelihoods ? "true" : "false" });
+    if (hasLikelihoods) {
+      scale.appendChild(el("span", { class: "legend-title" }, "Likelihood the target is there"));
+      const w = 260;
+      const pad = 16;
+      const bar = svg("svg", { width: w + 2 * pad, height: 30, viewBox: `0 0 ${w + 2 * pad} 30` });
+      const grad = svg("linearGradient", { id: "likelihood-gradient", x1: 0, x2: 1, y1: 0, y2: 0 });
+      for (let i = 0; i <= 10; i++) {
+        grad.appendChild(svg("stop", { offset: i / 10, "stop-color": likelihoodColour((i / 10) ** 2) }));
+      }
+      bar.appendChild(svg("defs", {}).appendChild(grad).parentNode);
+      bar.appendChild(svg("rect", { x: pad, y: 2, width: w, height: 12, fill: "url(#likelihood-gradient)", stroke: "#6b7280", "stroke-width": 0.5 }));
+      for (const p of [0, 0.05, 0.25, 0.5, 1]) {
+        const x = pad + Math.sqrt(p) * w;
+        bar.appendChild(svg("line", { x1: x, x2: x, y1: 14, y2: 18, stroke: "#374151" }));
+        bar.appendChild(svg("text", { x, y: 28, "text-anchor": "middle", class: "tick" }, `${Math.round(p * 100)} %`));
+      }
+      scale.appendChild(bar);
+    } else {
+      const sw = svg("svg", { width: 16, height: 16, viewBox: "0 0 16 16" });
+      sw.appendChild(svg("circle", { cx: 8, cy: 8, r: 6, fill: NO_LIKELIHOOD, stroke: "#4b5563" }));
+      scale.appendChild(sw);
+      scale.appendChild(
+        el("span", {}, view ? `grey: ${view.trial.strategy} plans without likelihoods` : "grey: no trial, no likelihoods"),
+      );
+    }
+    box.appendChild(scale);
+
+    const items = el("div", { class: "legend-items" });
+    const item = (draw, label) => {
+      const s = svg("svg", { width: 30, height: 20, viewBox: "0 0 30 20" });
+      draw(s);
+      const span = el("span", { class: "legend-item" });
+      span.append(s, document.createTextNode(label));
+      items.appendChild(span);
+    };
+    item((s) => {
+      s.appendChild(svg("circle", { cx: 15, cy: 10, r: 7, fill: likelihoodColour(0), stroke: "#111827", "stroke-width": 2.5 }));
+      s.appendChild(svg("text", { x: 15, y: 14, "text-anchor": "middle", class: "order" }, "1"));
+    }, "searched, in order");
+    item((s) => {
+      s.appendChild(svg("circle", { cx: 15, cy: 10, r: 8, fill: "none", stroke: "#16a34a", "stroke-width": 3 }));
+      s.appendChild(svg("circle", { cx: 15, cy: 10, r: 5, fill: likelihoodColour(1) }));
+    }, "found");
+    item((s) => {
+      s.appendChild(svg("circle", { cx: 15, cy: 10, r: 8, fill: "none", stroke: "#0f172a", "stroke-width": 2 }));
+      s.appendChild(svg("circle", { cx: 15, cy: 10, r: 4, fill: "#fed976", stroke: "#4b5563" }));
+    }, "next");
+    item((s) => s.appendChild(svg("line", { x1: 2, x2: 28, y1: 10, y2: 10, stroke: "#0f172a", "stroke-width": 2.5, "stroke-dasharray": "5 3" })), "path to next");
+    item((s) => {
+      s.appendChild(svg("line", { x1: 2, x2: 22, y1: 10, y2: 10, stroke: "#1d4ed8", "stroke-width": 3.5 }));
+      s.appendChild(svg("circle", { cx: 23, cy: 10, r: 5, fill: "#1d4ed8", stroke: "#fff", "stroke-width": 1.5 }));
+    }, "route so far, robot");
+    item((s) => s.appendChild(svg("polygon", { points: "24,10 10,4 10,16", fill: "#15803d" })), "start");
+    item((s) => s.appendChild(svg("polygon", { points: "15,6 19,10 15,14 11,10", fill: "#6b7280" })), "access point");
+    box.appendChild(items);
+  }
+
+  // ---------------------------------------------------------------- the trial
+
+  function renderTrial() {
+    const view = S.view;
+    const trial = view ? view.trial : null;
+    const card = $("plan-card");
+    card.dataset.trial = trial ? trial.trial : "";
+    card.dataset.status = trial ? trial.status : "";
+    const status = $("trial-status");
+    status.textContent = trial ? trial.status : "";
+    status.dataset.status = trial ? trial.status : "";
+
+    if (!trial) {
+      $("trial-title").textContent = S.scene ? `No trial yet · ${S.scene.name}` : S.loaded ? "No trial yet" : "";
+      $("trial-summary").textContent = S.scene
+        ? "The scene's floor plan; a robot's trial shows here as it searches."
+        : S.loaded
+          ? "Waiting for a robot to start a trial."
+          : "";
+      $("trial-facts").replaceChildren();
+      $("next-container").hidden = true;
+      $("searched-list").replaceChildren();
+      $("replays-box").hidden = true;
+      renderLegend();
+      renderFollow();
+      return;
+    }
+
+    const found = view.observations.find((o) => o.found);
+    $("trial-title").textContent = `Trial ${trial.trial}: looking for ${trial.target}`;
+    const ended = trial.status !== "searching";
+    $("trial-summary").textContent =
+      `${trial.strategy} · deployment ${trial.deployment}, trial k = ${trial.k} · scene ${trial.scene} · ` +
+      (ended
+        ? `${trial.status === "done" ? "found" : trial.status} after ${fmtM(trial.cost_m)} m`
+        : `${fmtM(trial.cost_m)} m so far`);
+
+    const facts = $("trial-facts");
+    facts.replaceChildren();
+    const fact = (k, v, id) => {
+      facts.append(el("dt", {}, k), el("dd", { id }, v));
+    };
+    fact("target", trial.target, "fact-target");
+    fact("strategy", trial.strategy, "fact-strategy");
+    fact(ended ? "cost" : "cost so far", `${fmtM(trial.cost_m)} m`, "fact-cost");
+    if (trial.travelled_m != null) fact("odometry", `${fmtM(trial.travelled_m)} m`, "fact-travelled");
+    const total = S.scene ? S.scene.containers.length : null;
+    fact("searched", `${trial.searched.length}${total != null ? ` of ${total}` : ""}`, "fact-searched");
+
+    const nextEl = $("next-container");
+    const next = ended ? null : trial.next;
+    if (next) {
+      nextEl.replaceChildren(
+        el("strong", {}, "Next: "),
+        document.createTextNode(`${words(next.type)} (${next.container})${next.room ? ` in the ${next.room}` : ""}, ${fmtM(next.distance_m)} m away`),
+      );
+      const p = view.likelihoods ? view.likelihoods[next.container] : null;
+      if (p != null) nextEl.append(document.createTextNode(` · likelihood ${pct(p)}`));
+      nextEl.dataset.container = next.container;
+      nextEl.hidden = false;
+    } else {
+      nextEl.hidden = true;
+      nextEl.dataset.container = "";
+    }
+
+    const list = $("searched-list");
+    list.replaceChildren();
+    const types = new Map((S.scene ? S.scene.containers : []).map((c) => [c.id, c]));
+    const obs = new Map(view.observations.map((o) => [o.container, o]));
+    for (const id of trial.searched) {
+      const o = obs.get(id);
+      const c = types.get(id);
+      const li = el("li", { "data-container": id, "data-found": o && o.found ? "true" : "false" });
+      li.appendChild(el("span", { class: "what" }, c ? `${words(c.type)} (${id})` : id));
+      if (o && o.found) li.appendChild(el("span", { class: "badge found" }, `found ${trial.target}`));
+      else li.appendChild(el("span", { class: "muted" }, " not there"));
+      if (o && o.objects.length) li.appendChild(el("span", { class: "seen" }, `seen: ${o.objects.join(", ")}`));
+      list.appendChild(li);
+    }
+    if (!trial.searched.length) list.appendChild(el("li", { class: "muted empty" }, "nothing yet"));
+    if (found && !trial.searched.includes(found.container)) {
+      list.appendChild(el("li", { "data-container": found.container }, `found in ${found.container}`));
+    }
+
+    const box = $("replays-box");
+    if (trial.replays_m && ended) {
+      const body = $("replays").tBodies[0];
+      body.replaceChildren();
+      const rows = Object.entries(trial.replays_m).map(([strategy, cost]) => ({ strategy, cost, own: false }));
+      if (!(trial.strategy in trial.replays_m)) rows.push({ strategy: trial.strategy, cost: trial.cost_m, own: true });
+      rows.sort((a, b) => a.cost - b.cost);
+      for (const r of rows) {
+        const tr = el("tr", { "data-strategy": r.strategy, "data-cost": r.cost, class: r.own ? "own" : "" });
+        tr.append(
+          el("td", {}, r.strategy),
+          el("td", {}, fmtM(r.cost)),
+          el("td", { class: "muted" }, r.own ? "deployed" : `${r.cost - trial.cost_m >= 0 ? "+" : "−"}${fmtM(Math.abs(r.cost - trial.cost_m))}`),
+        );
+        body.appendChild(tr);
+      }
+      box.hidden = false;
+    } else {
+      box.hidden = true;
+    }
+    renderLegend();
+    renderFollow();
+  }
+
+  function renderFollow() {
+    $("follow-box").hidden = S.follow || !S.dep;
+  }
+
+  // ---------------------------------------------------------------- the deployment
+
+  function renderDeploymentSelect() {
+    const sel = $("deployment-select");
+    const keep = document.activeElement === sel;
+    sel.replaceChildren();
+    for (const d of S.deployments.slice().reverse()) {
+      const open = (d.open_trials || []).length;
+      const label =
+        `#${d.id} · ${d.selector} · ${plural(d.strategies.length, "strategy", "strategies")} · ${plural(d.trials, "trial")}` +
+        (open ? `, ${open} open` : "");
+      sel.appendChild(el("option", { value: d.id, selected: d.id === S.depId }, label));
+    }
+    if (S.depId != null) sel.value = String(S.depId);
+    sel.disabled = !S.deployments.length;
+    if (keep) sel.focus();
+  }
+
+  function renderDeployment() {
+    const dep = S.dep;
+    const card = $("deployment-card");
+    card.dataset.deployment = dep ? dep.id : "";
+    const body = $("strategy-table").tBodies[0];
+    body.replaceChildren();
+    if (!dep) {
+      $("deployment-title").textContent = "Deployment";
+      $("deployment-summary").textContent = S.loaded && !S.deployments.length ? "No deployment yet." : "";
+      $("next-strategy").textContent = "";
+      $("strategy-table").hidden = true;
+      renderCurve();
+      renderOpenTrials();
+      return;
+    }
+    $("strategy-table").hidden = false;
+    const ended = dep.trials.filter((t) => t.status !== "searching").length;
+    $("deployment-title").textContent = `Deployment ${dep.id}`;
+    $("deployment-summary").textContent =
+      `selector ${dep.selector}` +
+      (dep.selector === "ucb" ? ` (c = ${dep.c})` : "") +
+      ` · seed ${dep.seed}` +
+      (dep.sequential ? " · one trial at a time" : "") +
+      ` · ${plural(dep.trials.length, "trial")}, ${ended} ended, ${dep.open_trials.length} open`;
+    for (const r of dep.per_strategy) {
+      const isNext = dep.next && dep.next.strategy === r.strategy;
+      const tr = el("tr", { "data-strategy": r.strategy, class: isNext ? "next-pick" : "", title: isNext ? dep.next.why : null });
+      const name = el("td", { class: "strategy" });
+      const sw = svg("svg", { width: 12, height: 12, viewBox: "0 0 12 12", class: "swatch" });
+      sw.appendChild(svg("circle", { cx: 6, cy: 6, r: 5, fill: strategyColour(r.strategy) }));
+      name.append(sw, document.createTextNode(r.strategy));
+      if (isNext) name.appendChild(el("span", { class: "badge next" }, "next"));
+      tr.append(name, el("td", {}, String(r.deployed)), el("td", {}, fmtM(r.mean_cost_m)), el("td", {}, fmtM(r.replay_mean_m)), el("td", {}, fmtM(r.score)));
+      body.appendChild(tr);
+    }
+    $("next-strategy").textContent = dep.next ? `Next trial: ${dep.next.why}` : "";
+    renderCurve();
+    renderOpenTrials();
+    renderFollow();
+  }
+
+  // The strategy chosen at each trial: one row per strategy, one mark per trial at x = k.
+  function renderCurve() {
+    const box = $("selection-curve");
+    box.replaceChildren();
+    const dep = S.dep;
+    if (!dep) {
+      box.setAttribute("height", 0);
+      return;
+    }
+    const W = Math.max(240, $("curve-wrap").clientWidth);
+    const rows = dep.strategies;
+    const rowH = 22;
+    const top = 6;
+    const labelW = Math.min(190, Math.max(...rows.map((r) => r.length)) * 6.6 + 12);
+    const H = top + rows.length * rowH + 26;
+    box.setAttribute("viewBox", `0 0 ${W} ${H}`);
+    box.setAttribute("height", H);
+    const trials = dep.trials.slice().sort((a, b) => a.k - b.k);
+    const maxK = Math.max(10, ...trials.map((t) => t.k));
+    const x0 = labelW + 18;
+    const x1 = W - 14;
+    const X = (k) => x0 + ((k - 1) / Math.max(1, maxK - 1)) * (x1 - x0);
+    const step = (x1 - x0) / Math.max(1, maxK - 1);
+    rows.forEach((name, i) => {
+      const y = top + i * rowH + rowH / 2;
+      box.appendChild(svg("line", { x1: x0 - 4, x2: x1 + 4, y1: y, y2: y, stroke: "#e5e7eb" }));
+      const t = svg("text", { x: labelW, y: y + 4, "text-anchor": "end", class: "curve-label", fill: strategyColour(name) }, name);
+      titled(t, name);
+      box.appendChild(t);
+    });
+    // Axis: trial k.
+    const axisY = top + rows.length * rowH + 4;
+    box.appendChild(svg("line", { x1: x0 - 4, x2: x1 + 4, y1: axisY, y2: axisY, stroke: "#9ca3af" }));
+    const tickEvery = [1, 2, 5, 10, 20, 50, 100, 200, 500, 1000].find((n) => n * step >= 28) || 1000;
+    for (let k = 1; k <= maxK; k++) {
+      if (k !== 1 && k % tickEvery) continue;
+      box.appendChild(svg("line", { x1: X(k), x2: X(k), y1: axisY, y2: axisY + 4, stroke: "#9ca3af" }));
+      box.appendChild(svg("text", { x: X(k), y: axisY + 15, "text-anchor": "middle", class: "tick" }, String(k)));
+    }
+    box.appendChild(svg("text", { x: x0 - 10, y: axisY + 15, "text-anchor": "end", class: "tick" }, "trial k"));
+
+    const r = Math.max(2.5, Math.min(6, step * 0.35));
+    const showCost = step >= 30;
+    for (const t of trials) {
+      const i = rows.indexOf(t.strategy);
+      if (i < 0) continue;
+      const x = X(t.k);
+      const y = top + i * rowH + rowH / 2;
+      const colour = strategyColour(t.strategy);
+      const status = t.status || "searching";
+      const g = svg("g", {
+        class: "mark" + (t.trial === S.watchedId ? " watched" : ""),
+        "data-k": t.k,
+        "data-trial": t.trial,
+        "data-strategy": t.strategy,
+        "data-status": status,
+        "data-cost": t.cost_m == null ? null : t.cost_m,
+      });
+      if (t.trial === S.watchedId) g.appendChild(svg("circle", { cx: x, cy: y, r: r + 3.5, fill: "none", stroke: "#0f172a", "stroke-width": 1.5 }));
+      if (status === "done") {
+        g.appendChild(svg("circle", { cx: x, cy: y, r, fill: colour }));
+      } else if (status === "searching") {
+        g.appendChild(svg("circle", { cx: x, cy: y, r: r - 0.75, fill: "#fff", stroke: colour, "stroke-width": 1.5 }));
+      } else {
+        g.appendChild(svg("path", { d: `M${x - r},${y - r}L${x + r},${y + r}M${x - r},${y + r}L${x + r},${y - r}`, stroke: colour, "stroke-width": 2 }));
+      }
+      if (showCost && t.cost_m != null && status !== "searching") {
+        g.appendChild(svg("text", { x, y: y - r - 2, "text-anchor": "middle", class: "cost" }, t.cost_m.toFixed(1)));
+      }
+      // A generous, invisible target for the click.
+      g.appendChild(svg("rect", { x: x - Math.max(step / 2, 4), y: y - rowH / 2, width: Math.max(step, 8), height: rowH, fill: "transparent" }));
+      titled(
+        g,
+        `trial ${t.trial} (k = ${t.k}): ${t.strategy}, looking for ${t.target}, ${status}` +
+          (t.cost_m != null && status !== "searching" ? `, ${fmtM(t.cost_m)} m` : "") +
+          "\nclick to watch it",
+      );
+      g.addEventListener("click", () => watch(t.trial, true));
+      box.appendChild(g);
+    }
+  }
+
+  function renderOpenTrials() {
+    const list = $("open-trials");
+    list.replaceChildren();
+    const dep = S.dep;
+    if (!dep) return;
+    const rows = new Map(dep.trials.map((t) => [t.trial, t]));
+    for (const id of dep.open_trials) {
+      const t = rows.get(id) || {};
+      const ev = S.live.get(id);
+      const watched = id === S.watchedId;
+      const b = el("button", { type: "button", "data-trial": id, "aria-current": watched ? "true" : null, class: watched ? "watched" : "" });
+      const parts = [`trial ${id}`, t.target || (ev && ev.target) || "?", t.strategy || (ev && ev.strategy) || "?"];
+      if (ev) parts.push(`${ev.searched} searched`, `${fmtM(ev.cost_m)} m`, ev.next ? `next ${ev.next}` : "");
+      b.textContent = parts.filter(Boolean).join(" · ") + (watched ? "  (watching)" : "");
+      b.addEventListener("click", () => watch(id, true));
+      const li = el("li", { "data-trial": id });
+      li.appendChild(b);
+      list.appendChild(li);
+    }
+    if (!dep.open_trials.length) list.appendChild(el("li", { class: "muted empty" }, "none: no robot is searching"));
+  }
+
+  // ---------------------------------------------------------------- wiring
+
+  function init() {
+    $("token-form").addEventListener("submit", (ev) => {
+      ev.preventDefault();
+      S.token = $("token-input").value.trim();
+      saveToken(S.token);
+      $("token-input").value = "";
+      start();
+    });
+    $("token-button").addEventListener("click", () => {
+      const panel = $("token-panel");
+      panel.hidden = !panel.hidden;
+      if (!panel.hidden) $("token-input").focus();
+    });
+    $("deployment-select").addEventListener("change", (ev) => {
+      const id = Number(ev.target.value);
+      if (Number.isFinite(id)) {
+        S.watchedId = null;
+        S.view = null;
+        selectDeployment(id, true);
+      }
+    });
+    $("follow").addEventListener("click", () => {
+      S.follow = true;
+      renderFollow();
+      followNewest();
+    });
+    let resizeTimer = null;
+    window.addEventListener("resize", () => {
+      clearTimeout(resizeTimer);
+      resizeTimer = setTimeout(() => {
+        renderPlan();
+        renderCurve();
+      }, 150);
+    });
+    S.token = readToken();
+    start();
+  }
+
+  if (document.readyState === "loading") document.addEventListener("DOMContentLoaded", init);
+  else init();
+})();

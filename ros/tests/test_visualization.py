@@ -193,6 +193,7 @@ def test_serve_belief_and_markers_carry_the_trial_view(start_node, robot, house,
         during["belief"] = client.beliefs[-1]
         during["markers"] = client.markers[-1]
         during["path"] = client.paths[-1]
+        nav.speed = 200.0  # the rest of the search at full speed
 
     nav.reset()
     # Slow: the first leg takes a second, time enough to read the view before the robot looks.

@@ -968,6 +968,7 @@
           : "";
       $("trial-facts").replaceChildren();
       $("next-container").hidden = true;
+      delete $("next-container").dataset.container;
       $("searched-list").replaceChildren();
       $("replays-box").hidden = true;
       renderLegend();
@@ -1009,7 +1010,7 @@
       nextEl.hidden = false;
     } else {
       nextEl.hidden = true;
-      nextEl.dataset.container = "";
+      delete nextEl.dataset.container;
     }
 
     const list = $("searched-list");
@@ -1247,6 +1248,7 @@
     });
     $("follow").addEventListener("click", () => {
       S.follow = true;
+      S.watchedId = null;
       renderFollow();
       followNewest();
     });

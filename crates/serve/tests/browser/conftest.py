@@ -59,7 +59,9 @@ def pytest_terminal_summary(terminalreporter):
 def ferret_bin():
     path = Path(os.environ.get("FERRET_BIN") or ROOT / "target" / "release" / "ferret")
     if not path.is_file():
-        pytest.fail(f"{path}: no ferret binary (cargo build --release -p ferret-cli, or FERRET_BIN)")
+        pytest.fail(
+            f"{path}: no ferret binary (cargo build --release -p ferret-cli, or FERRET_BIN)"
+        )
     return str(path)
 
 

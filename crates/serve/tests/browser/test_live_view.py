@@ -141,7 +141,10 @@ def test_a_robots_search_shows_live(serve, view):
     assert "No deployment yet" in v.page.inner_text("#deployment-summary")
 
     robot = Robot(server.api)
-    dep = robot.deploy(strategies=["model/prior", "model/uniform", "optimistic+greedy"])
+    # UCB tries every strategy early, so the selection curve has a mark in each row.
+    dep = robot.deploy(
+        strategies=["model/prior", "model/uniform", "optimistic+greedy"], selector="ucb"
+    )
     v.within(
         """(id) => document.querySelector("#deployment-card").dataset.deployment === String(id)
             && !!document.querySelector(`#deployment-select option[value="${id}"]`)
@@ -163,7 +166,7 @@ def test_a_robots_search_shows_live(serve, view):
                 "trial" not in shots
                 and trial["status"] == "searching"
                 and len(trial["searched"]) >= 2
-                and view_["likelihoods"] is not None
+                and len(set((view_["likelihoods"] or {}).values())) > 2
             ):
                 v.shot("serve-view-trial.png")
                 shots.add("trial")
@@ -219,7 +222,9 @@ def test_the_page_asks_only_for_what_changed(serve, view):
 
     def gets_since(t):
         return [
-            u.split("/", 3)[3] for ts, m, u in v.requests if ts >= t and m == "GET" and "/ui/" not in u
+            u.split("/", 3)[3]
+            for ts, m, u in v.requests
+            if ts >= t and m == "GET" and "/ui/" not in u
         ]
 
     loaded = gets_since(0)
@@ -322,7 +327,9 @@ def test_the_csp_is_served_and_a_violation_would_be_caught(serve, view):
     v.wait_live()
     assert not [m for m in v.console if "Content Security Policy" in m]
     # The check of every test sees a violation: an inline style, as a careless page would set.
-    v.page.evaluate("() => { document.body.insertAdjacentHTML('beforeend', '<b style=\"color:red\">x</b>'); }")
+    v.page.evaluate(
+        "() => { document.body.insertAdjacentHTML('beforeend', '<b style=\"color:red\">x</b>'); }"
+    )
     v.page.wait_for_timeout(200)
     assert [m for m in v.console if "Content Security Policy" in m], v.console
     v.console.clear()
@@ -421,7 +428,9 @@ def test_past_the_cap_of_event_streams_a_page_still_shows_and_retries(serve, vie
     first.wait_live()
     second = view(server).open(TOKEN)
     second.page.wait_for_selector('#connection[data-state="reconnecting"]', timeout=3000)
-    second.within("() => document.querySelectorAll('#plan g.container').length === 9", budget_ms=3000)
+    second.within(
+        "() => document.querySelectorAll('#plan g.container').length === 9", budget_ms=3000
+    )
     # It retries with a growing backoff, not in a tight loop.
     second.page.wait_for_timeout(3000)
     tries = [u for _, _, u in second.requests if u.endswith("/events")]

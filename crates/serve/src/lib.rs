@@ -63,6 +63,7 @@ mod grids;
 pub mod http;
 pub mod load;
 pub mod model;
+mod recent;
 mod searches;
 mod selectors;
 pub mod server;

@@ -291,6 +291,9 @@ async fn a_trial_view_shows_its_way_what_it_saw_and_the_likelihoods_now() {
             .1;
         searched.push((c.clone(), found));
         let view = s.get(&format!("/trials/{tid}/view")).await.1;
+        // The state the write answered, as planning it again from the rows gives it.
+        assert_eq!(view["trial"], trial);
+        assert_eq!(view["trial"], s.get(&format!("/trials/{tid}")).await.1);
         let ps = view["likelihoods"].as_object().unwrap();
         for (id, p) in ps {
             let expected = match searched.iter().find(|(s, _)| s == id) {
@@ -351,6 +354,14 @@ async fn a_trial_view_shows_its_way_what_it_saw_and_the_likelihoods_now() {
         .await;
     let view = s.get(&format!("/trials/{}/view", t["trial"])).await.1;
     assert_eq!(view["likelihoods"], Value::Null);
+    // Abandoned after its start: the picture says so, not the state its start answered.
+    let (status, abandoned) = s
+        .post(&format!("/trials/{}/abandon", t["trial"]), json!({}))
+        .await;
+    assert_eq!(status, 200);
+    let view = s.get(&format!("/trials/{}/view", t["trial"])).await.1;
+    assert_eq!(view["trial"], abandoned);
+    assert_eq!(view["trial"]["status"], "abandoned");
     assert_eq!(s.get("/trials/999/view").await.0, 404);
 }
 

@@ -89,6 +89,15 @@ pub struct ServeArgs {
     /// servers of --serve-bin, which may predate it).
     #[arg(long, value_name = "N")]
     kept_plans: Option<usize>,
+    /// Browser pages watching the fleet, spread over the replicas: each reads the live event
+    /// stream (`GET /events`) and fetches what the live page would (the watched trial's
+    /// picture on its events, its deployment when a trial ends), to measure what open pages
+    /// cost the robots.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pages: usize,
+    /// Pages that open the event stream and never read it (clients that stopped reading).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    stalled_pages: usize,
     /// PostgreSQL connections per replica.
     #[arg(long, value_name = "N", default_value_t = ferret_serve::PostgresOptions::default().pool_size)]
     db_pool: usize,
@@ -158,6 +167,8 @@ const MAX_BENCH_DEPLOYMENTS: usize = 10_000;
 const MAX_BENCH_TRIALS: usize = 1_000_000;
 /// The most `ferret serve` processes it starts.
 const MAX_BENCH_REPLICAS: usize = 64;
+/// The most watching pages (each an open connection).
+const MAX_BENCH_PAGES: usize = 1_000;
 
 fn serve(args: ServeArgs) -> Result<ExitCode> {
     check_serve_args(&args)?;
@@ -212,6 +223,8 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
         kill_first_after: args
             .kill_replica_after
             .map(std::time::Duration::from_secs_f64),
+        pages: args.pages,
+        stalled_pages: args.stalled_pages,
     };
     let run = load::drive(&runtime, urls, plans, settings, &mut replicas, on_trial);
     bar.finish_and_clear();
@@ -266,6 +279,13 @@ fn check_serve_args(args: &ServeArgs) -> Result<()> {
             args.deployments,
             args.trials,
             args.replicas
+        );
+    }
+    if args.pages + args.stalled_pages > MAX_BENCH_PAGES {
+        anyhow::bail!(
+            "--pages {} + --stalled-pages {}: at most {MAX_BENCH_PAGES} in all",
+            args.pages,
+            args.stalled_pages
         );
     }
     if !in_process(args) && args.houses.houses.is_none() {
@@ -432,6 +452,17 @@ fn print_serve_line(line: &ServeLine) {
     }
     if let Some(k) = m.killed_after_s {
         println!("replica 0 killed (SIGKILL) after {k:.1} s");
+    }
+    if let Some(p) = &m.pages {
+        println!(
+            "pages: {} reading, {} stalled; {} events received ({} resync), {} fetches, {} stream errors",
+            p.pages, p.stalled_pages, p.events, p.resyncs, p.fetches, p.stream_errors
+        );
+    }
+    if let Some([first, max, last]) = m.server_rss_mib {
+        println!(
+            "replica 0 resident memory from a quarter into the run: {first:.1} MiB, {max:.1} MiB at most, {last:.1} MiB at the end"
+        );
     }
     println!(
         "read back: {} acknowledged observations, {} lost, {} duplicated; {} deployments with other trials than their robot started{}",

@@ -5,6 +5,7 @@
 //! be stored exactly once. The servers are this crate's own router in the caller's process
 //! ([`serve_in_process`]) or `ferret serve` processes ([`Replica::spawn`]).
 
+mod pages;
 mod replica;
 mod report;
 mod robot;
@@ -13,6 +14,7 @@ mod work;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+pub use pages::PagesReport;
 pub use replica::{Replica, serve_in_process};
 pub use report::{EARLY_FROM, KindLine, LoadReport, TIMED_STARTS};
 pub use work::{RobotTrial, robot_trials};
@@ -65,6 +67,11 @@ pub struct FleetSettings {
     /// Kill (SIGKILL) the first replica this long into the run; its robots carry on against the
     /// others.
     pub kill_first_after: Option<Duration>,
+    /// Browser pages watching, page `p` on replica `p % replicas` (see `pages`): they read the
+    /// event stream and fetch what the live page fetches.
+    pub pages: usize,
+    /// Pages that open the event stream and never read it.
+    pub stalled_pages: usize,
 }
 
 /// What a fleet did: each robot's requests and latencies, and what was read back.
@@ -73,6 +80,9 @@ pub struct FleetRun {
     seconds: f64,
     killed_after: Option<f64>,
     verified: Verified,
+    pages: Option<PagesReport>,
+    /// The first replica's resident memory, bytes, sampled every half second while robots run.
+    rss: Vec<u64>,
 }
 
 /// Runs one robot per entry of `plans` against the servers at `urls` (robot `r` starts on
@@ -110,6 +120,36 @@ pub fn drive(
             } else {
                 None
             };
+        let (stop_pages, stopped) = tokio::sync::watch::channel(false);
+        let counts = Arc::new(pages::Counts::default());
+        let mut watchers = Vec::new();
+        for p in 0..settings.pages + settings.stalled_pages {
+            let url = urls[p % urls.len()].clone();
+            let (counts, stopped) = (counts.clone(), stopped.clone());
+            watchers.push(if p < settings.pages {
+                tokio::spawn(pages::page(client.clone(), url, counts, stopped))
+            } else {
+                tokio::spawn(pages::stalled_page(url, counts, stopped))
+            });
+        }
+        if !watchers.is_empty() {
+            // The pages are open before the first robot starts, as they would be.
+            tokio::time::sleep(Duration::from_millis(300)).await;
+        }
+        let sampler = replicas.first().map(|r| {
+            let pid = r.pid();
+            let stopped = stopped.clone();
+            tokio::spawn(async move {
+                let mut samples = Vec::new();
+                while !*stopped.borrow() {
+                    if let Some(b) = replica::resident_bytes(pid) {
+                        samples.push(b);
+                    }
+                    tokio::time::sleep(Duration::from_millis(500)).await;
+                }
+                samples
+            })
+        });
         let started = Instant::now();
         let tasks: Vec<_> = plans
             .into_iter()
@@ -139,6 +179,16 @@ pub fn drive(
             );
         }
         let seconds = started.elapsed().as_secs_f64();
+        let _ = stop_pages.send(true);
+        for w in watchers {
+            let _ = w.await;
+        }
+        let rss = match sampler {
+            Some(s) => s.await.unwrap_or_default(),
+            None => Vec::new(),
+        };
+        let pages = (settings.pages + settings.stalled_pages > 0)
+            .then(|| counts.report(settings.pages, settings.stalled_pages));
         // Read every trial back from a replica that is still up.
         let alive = usize::from(killed_after.is_some()).min(urls.len() - 1);
         let check = Robot::new(client.clone(), Arc::new(urls[alive..].to_vec()), 0);
@@ -151,6 +201,8 @@ pub fn drive(
             seconds,
             killed_after,
             verified,
+            pages,
+            rss,
         })
     })
 }

@@ -64,6 +64,12 @@ pub struct LoadReport {
     pub start_early_p50_ms: Option<f64>,
     /// See [`start_early_p50_ms`](Self::start_early_p50_ms).
     pub start_late_p50_ms: Option<f64>,
+    /// What the watching pages did, when there were any.
+    pub pages: Option<super::PagesReport>,
+    /// The first replica process's resident memory, MiB, sampled every half second from a
+    /// quarter into the run (once the grids of the scenes in use are built): the first sample,
+    /// the largest and the last (`ferret serve` processes only).
+    pub server_rss_mib: Option<[f64; 3]>,
 }
 
 impl LoadReport {
@@ -153,6 +159,19 @@ impl FleetRun {
             mismatched_deployments: v.mismatched,
             start_early_p50_ms: by_history(false),
             start_late_p50_ms: by_history(true),
+            pages: self.pages.clone(),
+            server_rss_mib: {
+                let mib = |b: u64| b as f64 / (1024.0 * 1024.0);
+                // From a quarter into the run: by then the grids of the scenes in use are
+                // built, and what grows after is what the run keeps.
+                let rest = &self.rss[self.rss.len() / 4..];
+                match (rest.first(), rest.iter().max(), rest.last()) {
+                    (Some(&first), Some(&max), Some(&last)) => {
+                        Some([mib(first), mib(max), mib(last)])
+                    }
+                    _ => None,
+                }
+            },
         }
     }
 }

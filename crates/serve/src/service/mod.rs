@@ -23,7 +23,7 @@ use ferret_plan::Strategy;
 use ferret_world::{GridParams, Scene};
 use serde::Serialize;
 
-use crate::api::SceneSummary;
+use crate::api::{SceneSummary, TrialState};
 use crate::error::ApiError;
 use crate::events::{Events, Frame};
 use crate::grids::Grids;
@@ -83,6 +83,9 @@ pub(crate) struct Scenes {
     pub(crate) uploaded: BTreeMap<String, SceneSummary>,
 }
 
+/// Trials whose latest state a replica keeps for reads (a few hundred bytes to a few KB each).
+const KEPT_STATES: usize = 4096;
+
 /// The most trial starts of one deployment stored in one transaction: enough for a fleet's
 /// burst, few enough that one failed statement costs little to redo.
 const MAX_STARTS_TOGETHER: usize = 64;
@@ -114,6 +117,8 @@ pub struct Service {
         std::sync::Mutex<std::collections::HashMap<i64, crate::model::DeploymentSpec>>,
     /// What changed, for the pages watching.
     pub(crate) events: Arc<Events>,
+    /// Trials' states as their last writes answered them.
+    pub(crate) recent: crate::recent::RecentStates,
 }
 
 impl std::fmt::Debug for Service {
@@ -205,6 +210,7 @@ impl Service {
         }
         Ok(Service {
             events,
+            recent: crate::recent::RecentStates::new(KEPT_STATES),
             store,
             candidates,
             options,
@@ -249,17 +255,13 @@ impl Service {
         &self.events
     }
 
-    /// Tells the pages watching about the trial a write's reply states, and hands the reply on.
-    fn announce_trial(&self, reply: Result<ApiReply, ApiError>) -> Result<ApiReply, ApiError> {
-        if let Ok(r) = &reply
-            && self.events.wanted()
-        {
-            match serde_json::from_str::<crate::api::TrialState>(&r.body) {
-                Ok(state) => self.events.trial(&state),
-                Err(e) => tracing::warn!("a trial's reply did not read back for its event: {e}"),
-            }
+    /// What a write that committed made of a trial: kept for reads of it, and told to the
+    /// pages watching.
+    pub(crate) fn told(&self, state: TrialState) {
+        if self.events.wanted() {
+            self.events.trial(&state);
         }
-        reply
+        self.recent.keep(Arc::new(state));
     }
 
     /// The limits it enforces.

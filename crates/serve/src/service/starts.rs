@@ -32,11 +32,6 @@ impl Service {
         req: StartTrial,
         body: &[u8],
     ) -> Result<ApiReply, ApiError> {
-        let reply = self.start(deployment, req, body);
-        self.announce_trial(reply)
-    }
-
-    fn start(&self, deployment: i64, req: StartTrial, body: &[u8]) -> Result<ApiReply, ApiError> {
         let route = format!("POST /deployments/{deployment}/trials");
         let claim = match self.begin(req.request_id.as_deref(), &route, body)? {
             Begun::Replied(reply) => return self.planned_start(reply, None, None),
@@ -262,27 +257,26 @@ impl Service {
             .with_dependent_mut(|_, search| search.next_container())
             .map_err(plan_error)?
             .map(|c| next_container(&placed, Place::Start, c));
-        let reply = json(
-            Outcome::Created,
-            &TrialState {
-                trial: id,
-                deployment: row.deployment,
-                k: row.k,
-                scene: row.scene.clone(),
-                target: row.target.clone(),
-                strategy: spec.strategies[row.chosen].clone(),
-                status: TrialStatus::Searching,
-                searched: Vec::new(),
-                cost_m: 0.0,
-                travelled_m: None,
-                next,
-                replays_m: None,
-            },
-        )?;
+        let state = TrialState {
+            trial: id,
+            deployment: row.deployment,
+            k: row.k,
+            scene: row.scene.clone(),
+            target: row.target.clone(),
+            strategy: spec.strategies[row.chosen].clone(),
+            status: TrialStatus::Searching,
+            searched: Vec::new(),
+            cost_m: 0.0,
+            travelled_m: None,
+            next,
+            replays_m: None,
+        };
+        let reply = json(Outcome::Created, &state)?;
         if let Some(claim) = claim {
             claim.replace(&reply)?;
         }
         self.searches.keep(id, 0, live);
+        self.told(state);
         Ok(reply)
     }
 }

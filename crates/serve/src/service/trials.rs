@@ -61,6 +61,12 @@ impl Service {
     fn trial_now(&self, id: i64) -> Result<(LoadedTrial, TrialState), ApiError> {
         let row = self.trial_row(id)?;
         let t = self.stored_trial(&row)?;
+        let state = Self::state_of(&row, &t)?;
+        Ok((t, state))
+    }
+
+    /// The state of a stored trial, planned again from its observations.
+    fn state_of(row: &StoredTrial, t: &LoadedTrial) -> Result<TrialState, ApiError> {
         let mut search = t.search()?;
         let next = match row.status {
             TrialStatus::Searching => {
@@ -73,15 +79,20 @@ impl Service {
             _ => None,
         };
         let travelled = search.belief().travelled();
-        drop(search);
-        let state = trial_state(&row, &t.spec, &t.observations, travelled, next);
-        Ok((t, state))
+        Ok(trial_state(row, &t.spec, &t.observations, travelled, next))
     }
 
     /// `GET /trials/{id}/view`: the trial with its way so far, what it saw and its likelihoods
     /// now, for a picture of it.
+    /// A trial just written (the last observation of the trial a page watches) is not
+    /// planned again: its state is the one the write answered.
     pub fn trial_view(&self, id: i64) -> Result<ApiReply, ApiError> {
-        let (t, state) = self.trial_now(id)?;
+        let row = self.trial_row(id)?;
+        let t = self.stored_trial(&row)?;
+        let state = match self.recent.get(id, t.observations.len(), row.status) {
+            Some(kept) => TrialState::clone(&kept),
+            None => Self::state_of(&row, &t)?,
+        };
         let house = &t.placed.house;
         let mut searched = Vec::with_capacity(t.observations.len());
         for o in &t.observations {
@@ -151,11 +162,6 @@ impl Service {
         req: Observe,
         body: &[u8],
     ) -> Result<ApiReply, ApiError> {
-        let reply = self.observe(id, req, body);
-        self.announce_trial(reply)
-    }
-
-    fn observe(&self, id: i64, req: Observe, body: &[u8]) -> Result<ApiReply, ApiError> {
         let route = format!("POST /trials/{id}/observations");
         let claim = match self.begin(req.request_id.as_deref(), &route, body)? {
             Begun::Replied(reply) => return Ok(reply),
@@ -268,6 +274,7 @@ impl Service {
                 None => (TrialStatus::Exhausted, None, None),
             }
         };
+        let mut told = None;
         let reply = claim.complete_with(&route, body, |w| {
             // Every observation holds its trial's row, so one observation per sequence number
             // is kept; an end then holds its deployment's too (the order trials end in is the
@@ -290,12 +297,16 @@ impl Service {
             updated.status = status;
             updated.cost = (status != TrialStatus::Searching).then_some(cost);
             updated.replays = replays.clone();
-            let reply = json(
-                Outcome::Done,
-                &trial_state(&updated, spec, &all, cost, next.clone()),
-            )?;
+            let state = trial_state(&updated, spec, &all, cost, next.clone());
+            let reply = json(Outcome::Done, &state)?;
+            told = Some(state);
             Ok((reply, last))
         });
+        if reply.is_ok()
+            && let Some(state) = told
+        {
+            self.told(state);
+        }
         if reply.is_ok() && status == TrialStatus::Searching {
             self.searches.keep(id, observations.len() + 1, live);
         } else {
@@ -313,11 +324,6 @@ impl Service {
         req: AbandonTrial,
         body: &[u8],
     ) -> Result<ApiReply, ApiError> {
-        let reply = self.abandon(id, req, body);
-        self.announce_trial(reply)
-    }
-
-    fn abandon(&self, id: i64, req: AbandonTrial, body: &[u8]) -> Result<ApiReply, ApiError> {
         let route = format!("POST /trials/{id}/abandon");
         let claim = match self.begin(req.request_id.as_deref(), &route, body)? {
             Begun::Replied(reply) => return Ok(reply),
@@ -328,6 +334,7 @@ impl Service {
         let observations = self.store.read(|r| r.observations(id))?;
         let spec = self.spec(row.deployment)?;
         let cost: f64 = observations.iter().map(|o| o.leg).sum();
+        let mut told = None;
         let reply = claim.complete_with(&route, body, |w| {
             // As any trial's end: the trial's row, then the deployment's.
             lock_unchanged(w, id, observations.len(), "it was being abandoned")?;
@@ -343,13 +350,17 @@ impl Service {
             let mut ended = row.clone();
             ended.status = TrialStatus::Abandoned;
             ended.cost = Some(cost);
-            let reply = json(
-                Outcome::Done,
-                &trial_state(&ended, &spec, &observations, cost, None),
-            )?;
+            let state = trial_state(&ended, &spec, &observations, cost, None);
+            let reply = json(Outcome::Done, &state)?;
+            told = Some(state);
             Ok((reply, last))
         });
         self.searches.forget(id);
+        if reply.is_ok()
+            && let Some(state) = told
+        {
+            self.told(state);
+        }
         reply
     }
 }

@@ -833,7 +833,8 @@
       const text = svg("text", { class: "container-label" + (m.isNext ? " next" : "") + (m.found ? " found" : "") });
       text.appendChild(svg("tspan", {}, words(m.c.type)));
       if (m.found) text.appendChild(svg("tspan", { class: "pct" }, " · found"));
-      else if (m.p != null && !m.order) text.appendChild(svg("tspan", { class: "pct" }, ` ${pct(m.p)}`));
+      // Near-zero likelihoods go without a number: the colour says it, and the labels stay short.
+      else if (m.p != null && !m.order && m.p >= 0.005) text.appendChild(svg("tspan", { class: "pct" }, ` ${pct(m.p)}`));
       gLabels.appendChild(text);
       const w = text.getComputedTextLength();
       const h = 13;
@@ -1036,7 +1037,11 @@
     if (trial.replays_m && ended) {
       const body = $("replays").tBodies[0];
       body.replaceChildren();
-      const rows = Object.entries(trial.replays_m).map(([strategy, cost]) => ({ strategy, cost, own: false }));
+      const rows = Object.entries(trial.replays_m).map(([strategy, cost]) => ({
+        strategy,
+        cost,
+        own: strategy === trial.strategy,
+      }));
       if (!(trial.strategy in trial.replays_m)) rows.push({ strategy: trial.strategy, cost: trial.cost_m, own: true });
       rows.sort((a, b) => a.cost - b.cost);
       for (const r of rows) {
@@ -1131,7 +1136,7 @@
     const W = Math.max(240, $("curve-wrap").clientWidth);
     const rows = dep.strategies;
     const rowH = 22;
-    const top = 6;
+    const top = 16;
     const labelW = Math.min(190, Math.max(...rows.map((r) => r.length)) * 6.6 + 12);
     const H = top + rows.length * rowH + 26;
     box.setAttribute("viewBox", `0 0 ${W} ${H}`);
@@ -1186,7 +1191,8 @@
         g.appendChild(svg("path", { d: `M${x - r},${y - r}L${x + r},${y + r}M${x - r},${y + r}L${x + r},${y - r}`, stroke: colour, "stroke-width": 2 }));
       }
       if (showCost && t.cost_m != null && status !== "searching") {
-        g.appendChild(svg("text", { x, y: y - r - 2, "text-anchor": "middle", class: "cost" }, t.cost_m.toFixed(1)));
+        const above = t.trial === S.watchedId ? r + 5 : r + 2;
+        g.appendChild(svg("text", { x, y: y - above, "text-anchor": "middle", class: "cost" }, t.cost_m.toFixed(1)));
       }
       // A generous, invisible target for the click.
       g.appendChild(svg("rect", { x: x - Math.max(step / 2, 4), y: y - rowH / 2, width: Math.max(step, 8), height: rowH, fill: "transparent" }));

@@ -10,7 +10,9 @@ For each target it opens a trial, then repeats: ask where to search next, "drive
 inside, report what was seen; until the target is found (`done`) or every container was searched
 (`exhausted`). Stopped with Ctrl-C in the middle of a search, it tells the server it gave the
 trial up (`abandoned`), so the trial is not left open. The simulated robot's eyes are the
-`contents` of each container in the scene listing (GET /scenes/{name}).
+`contents` of each container in the scene listing (GET /scenes/{name}). With `--pace 1` it waits
+a second before each search, so that a person can follow it on the server's live view (open the
+server's address in a browser).
 
 On a real robot (a ROS node, say) only `search_container()` changes: send a navigation goal to the
 proposal's `path` end / access point, run the detector, and report the object types it saw and the
@@ -152,9 +154,10 @@ def open_trial_id(state):
     return t
 
 
-def run_trial(api, trial_id, target, strategy, reply, containers, log):
+def run_trial(api, trial_id, target, strategy, reply, containers, log, pace=0.0):
     """Searches until the trial ends. `reply` is the reply that opened (or resumed) the trial;
-    returns the trial's summary for the output."""
+    returns the trial's summary for the output. `pace` seconds pass before each search, as a
+    real robot's drive would take."""
     searched = []
     status = reply.get("status", "searching")
     # The server ends a trial itself after at most one search per container; the bound only
@@ -167,6 +170,7 @@ def run_trial(api, trial_id, target, strategy, reply, containers, log):
             raise SystemExit(
                 f"error: trial {trial_id} is {status!r} but the server proposed no container"
             )
+        time.sleep(pace)
         cid, seen, travelled = search_container(proposal, containers, target)
         found = target in seen
         log(
@@ -191,7 +195,7 @@ def run_trial(api, trial_id, target, strategy, reply, containers, log):
     }
 
 
-def resume_open_trial(api, trial_id, containers, log):
+def resume_open_trial(api, trial_id, containers, log, pace=0.0):
     """Finishes a trial left open (the client stopped mid-trial). GET /trials/{id} gives the trial
     so far; its `next` is the container still to search."""
     trial = api.get(f"/trials/{quote(trial_id)}")
@@ -202,7 +206,7 @@ def resume_open_trial(api, trial_id, containers, log):
             f"resume (GET /trials/{trial_id} gave no target or no next container)"
         )
     log(f"resuming open trial {trial_id} ({target}, {strategy})")
-    summary = run_trial(api, trial_id, target, strategy, trial, containers, log)
+    summary = run_trial(api, trial_id, target, strategy, trial, containers, log, pace)
     # The searches made before the client stopped count too.
     before = [s.get("container") if isinstance(s, dict) else s for s in trial.get("searched") or []]
     summary["searched"] = [c for c in before if c] + summary["searched"]
@@ -283,6 +287,14 @@ def parse_args(argv):
         "/trials/{id}/abandon) instead of finishing it",
     )
     ap.add_argument(
+        "--pace",
+        type=float,
+        default=0.0,
+        metavar="SECONDS",
+        help="wait this long before each search and after each trial, so that a person can "
+        "follow the search on the live view (http://<server>/); default 0",
+    )
+    ap.add_argument(
         "--json",
         action="store_true",
         help="print one JSON object with the results instead of the table",
@@ -291,6 +303,8 @@ def parse_args(argv):
         "-v", "--verbose", action="store_true", help="log each search and retry to stderr"
     )
     args = ap.parse_args(argv)
+    if not 0 <= args.pace <= 3600:
+        ap.error("--pace is 0 to 3600 seconds")
     args.targets = [t.strip() for t in args.targets.split(",") if t.strip()]
     if not args.targets:
         ap.error("--targets names no object type")
@@ -340,7 +354,7 @@ def run(args, log):
         if not args.json:
             print_trial(len(trials), trials[-1])
     elif open_id is not None:
-        summary = resume_open_trial(api, open_id, containers, log)
+        summary = resume_open_trial(api, open_id, containers, log, args.pace)
         trials.append(summary)
         if summary["target"] in targets:
             targets.remove(summary["target"])
@@ -357,7 +371,7 @@ def run(args, log):
         log(f"trial {trial_id}: {target} with {reply.get('strategy')}")
         try:
             summary = run_trial(
-                api, trial_id, target, reply.get("strategy"), reply, containers, log
+                api, trial_id, target, reply.get("strategy"), reply, containers, log, args.pace
             )
         except KeyboardInterrupt:
             # Stopped mid-search: the trial is given up rather than left open. Best effort:
@@ -371,6 +385,7 @@ def run(args, log):
         trials.append(summary)
         if not args.json:
             print_trial(len(trials), summary)
+        time.sleep(args.pace)
 
     state = api.get(f"/deployments/{quote(dep)}")
     return dep, trials, state

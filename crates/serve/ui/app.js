@@ -13,16 +13,28 @@
   // Between reconnections of the event stream; reset once the server says hello.
   const BACKOFF_MS = [500, 1000, 2000, 4000, 8000, 15000];
   const DEPLOYMENT_REFETCH_GAP_MS = 500;
+  const SCENES_KEPT = 8;
   // A categorical palette without reds and yellows, which the likelihood scale uses.
   const STRATEGY_COLOURS = [
-    "#1f77b4", "#2ca02c", "#9467bd", "#17becf", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22",
-    "#393b79", "#637939",
+    "#1f77b4",
+    "#2ca02c",
+    "#9467bd",
+    "#17becf",
+    "#8c564b",
+    "#e377c2",
+    "#7f7f7f",
+    "#bcbd22",
+    "#393b79",
+    "#637939",
   ];
   const ROOM_FILLS = ["#eaf1fb", "#efeafa", "#e8f5ec", "#fbf1e2", "#f8e9ef", "#e6f4f5", "#f2f2e6"];
   // YlOrRd, applied to the square root of the likelihood so that the small probabilities of a
   // house with many containers still differ from one another.
   const LIKELIHOOD_STOPS = [
-    [0, [255, 255, 204]], [0.25, [254, 217, 118]], [0.5, [253, 141, 60]], [0.75, [227, 26, 28]],
+    [0, [255, 255, 204]],
+    [0.25, [254, 217, 118]],
+    [0.5, [253, 141, 60]],
+    [0.75, [227, 26, 28]],
     [1, [128, 0, 38]],
   ];
   const NO_LIKELIHOOD = "#c4c8cf";
@@ -137,13 +149,20 @@
   const refetchDeployment = coalesced(fetchDeployment, DEPLOYMENT_REFETCH_GAP_MS);
   const refetchView = coalesced(fetchView, 0);
 
+  // Each scene is read once and kept; only the most recently watched few, as a house's distance
+  // table grows with the square of its containers and a page may stay open for weeks.
   function getScene(name) {
     let p = S.sceneCache.get(name);
-    if (!p) {
+    if (p) {
+      S.sceneCache.delete(name);
+    } else {
       p = api(`/scenes/${seg(name)}`);
-      S.sceneCache.set(name, p);
-      p.catch(() => S.sceneCache.delete(name));
+      p.catch(() => {
+        if (S.sceneCache.get(name) === p) S.sceneCache.delete(name);
+      });
     }
+    S.sceneCache.set(name, p);
+    while (S.sceneCache.size > SCENES_KEPT) S.sceneCache.delete(S.sceneCache.keys().next().value);
     return p;
   }
 
@@ -247,6 +266,7 @@
   function watch(id, picked) {
     if (picked) S.follow = false;
     S.watchedId = id;
+    for (const [t, ev] of S.live) if (t !== id && ev.status !== "searching") S.live.delete(t);
     renderFollow();
     renderOpenTrials();
     renderCurve();
@@ -442,6 +462,8 @@
     ) {
       watch(e.trial, false);
     }
+    // Only the trials still searching and the watched one are kept.
+    if (e.status !== "searching" && e.trial !== S.watchedId) S.live.delete(e.trial);
   }
 
   // ---------------------------------------------------------------- token
@@ -551,14 +573,19 @@
   }
 
   const fmtM = (v) => (v == null || !Number.isFinite(v) ? "–" : v.toFixed(2));
-  const pct = (p) => (p >= 0.995 ? "100 %" : p < 0.001 && p > 0 ? "<0.1 %" : (p * 100).toFixed(p < 0.1 ? 1 : 0) + " %");
+  const pct = (p) =>
+    p >= 0.995
+      ? "100 %"
+      : p < 0.001 && p > 0
+        ? "<0.1 %"
+        : (p * 100).toFixed(p < 0.1 ? 1 : 0) + " %";
 
   // "CounterTop" -> "Counter top", "TVStand" -> "TV stand", "DiningRoom" -> "Dining room".
   function words(type) {
     const parts = String(type).match(/[A-Z]+(?![a-z])|[A-Z]?[a-z]+|\d+/g);
     if (!parts) return String(type);
     return parts
-      .map((p, i) => (i === 0 || p.length > 1 && p === p.toUpperCase() ? p : p.toLowerCase()))
+      .map((p, i) => (i === 0 || (p.length > 1 && p === p.toUpperCase()) ? p : p.toLowerCase()))
       .join(" ");
   }
 
@@ -620,8 +647,8 @@
     const trial = view ? view.trial : null;
     const xs = [];
     const ys = [];
-    for (const r of scene.rooms) for (const [x, y] of r.polygon) xs.push(x), ys.push(y);
-    for (const c of scene.containers) xs.push(c.x), ys.push(c.y);
+    for (const r of scene.rooms) for (const [x, y] of r.polygon) (xs.push(x), ys.push(y));
+    for (const c of scene.containers) (xs.push(c.x), ys.push(c.y));
     xs.push(scene.start[0]);
     ys.push(scene.start[1]);
     const minX = Math.min(...xs);
@@ -629,7 +656,10 @@
     const minY = Math.min(...ys);
     const maxY = Math.max(...ys);
     const margin = 28;
-    const s = Math.min((W - 2 * margin) / Math.max(maxX - minX, 1), (H - 2 * margin) / Math.max(maxY - minY, 1));
+    const s = Math.min(
+      (W - 2 * margin) / Math.max(maxX - minX, 1),
+      (H - 2 * margin) / Math.max(maxY - minY, 1),
+    );
     const ox = (W - s * (maxX - minX)) / 2;
     const oy = (H - s * (maxY - minY)) / 2;
     // Map frame: y grows north, so it is flipped for the screen.
@@ -663,7 +693,12 @@
     for (const c of scene.containers) {
       const cx = X(c.x);
       const cy = Y(c.y);
-      taken.push({ x1: cx - markerR - 2, y1: cy - markerR - 2, x2: cx + markerR + 2, y2: cy + markerR + 2 });
+      taken.push({
+        x1: cx - markerR - 2,
+        y1: cy - markerR - 2,
+        x2: cx + markerR + 2,
+        y2: cy + markerR + 2,
+      });
     }
     const sx = X(scene.start[0]);
     const sy = Y(scene.start[1]);
@@ -684,7 +719,12 @@
           const mx = x0 + fx * (x1 - x0);
           const my = y0 + fy * (y1 - y0);
           if (!insidePolygon(mx, my, r.polygon)) continue;
-          const box = { x1: X(mx) - w / 2, x2: X(mx) + w / 2, y1: Y(my) - h / 2, y2: Y(my) + h / 2 };
+          const box = {
+            x1: X(mx) - w / 2,
+            x2: X(mx) + w / 2,
+            y1: Y(my) - h / 2,
+            y2: Y(my) + h / 2,
+          };
           const hit = taken.reduce((a, b) => a + overlap(box, b), 0);
           if (!best || hit < best.hit) best = { box, hit };
           if (hit === 0) break;
@@ -705,7 +745,16 @@
       if (!c.access) continue;
       const ax = X(c.access[0]);
       const ay = Y(c.access[1]);
-      gLinks.appendChild(svg("line", { x1: X(c.x), y1: Y(c.y), x2: ax, y2: ay, stroke: "#9aa3b2", "stroke-width": 1 }));
+      gLinks.appendChild(
+        svg("line", {
+          x1: X(c.x),
+          y1: Y(c.y),
+          x2: ax,
+          y2: ay,
+          stroke: "#9aa3b2",
+          "stroke-width": 1,
+        }),
+      );
       const d = 3.5;
       const ap = svg("polygon", {
         class: "access",
@@ -795,10 +844,29 @@
         "data-order": order || null,
       });
       if (isNext) {
-        g.appendChild(svg("circle", { class: "next-ring", cx, cy, r: markerR + 7, fill: "none", stroke: "#0f172a", "stroke-width": 2.5 }));
+        g.appendChild(
+          svg("circle", {
+            class: "next-ring",
+            cx,
+            cy,
+            r: markerR + 7,
+            fill: "none",
+            stroke: "#0f172a",
+            "stroke-width": 2.5,
+          }),
+        );
       }
       if (found) {
-        g.appendChild(svg("circle", { cx, cy, r: markerR + 5, fill: "none", stroke: "#16a34a", "stroke-width": 4 }));
+        g.appendChild(
+          svg("circle", {
+            cx,
+            cy,
+            r: markerR + 5,
+            fill: "none",
+            stroke: "#16a34a",
+            "stroke-width": 4,
+          }),
+        );
       }
       g.appendChild(
         svg("circle", {
@@ -813,11 +881,25 @@
       );
       if (order) {
         const dark = p != null && p > 0.35;
-        g.appendChild(svg("text", { class: "order" + (dark ? " on-dark" : ""), x: cx, y: cy + 4, "text-anchor": "middle" }, String(order)));
+        g.appendChild(
+          svg(
+            "text",
+            {
+              class: "order" + (dark ? " on-dark" : ""),
+              x: cx,
+              y: cy + 4,
+              "text-anchor": "middle",
+            },
+            String(order),
+          ),
+        );
       }
       let tip = `${words(c.type)} (${c.id})` + (c.room ? ` in the ${c.room}` : "");
       if (p != null) tip += `\nlikelihood the target is here: ${pct(p)}`;
-      if (order) tip += `\nsearched ${ordinal(order)}` + (o ? `: ${found ? "FOUND the target" : "not there"}` : "");
+      if (order)
+        tip +=
+          `\nsearched ${ordinal(order)}` +
+          (o ? `: ${found ? "FOUND the target" : "not there"}` : "");
       if (o && o.objects.length) tip += `\nseen: ${o.objects.join(", ")}`;
       if (isNext) tip += `\nnext to search, ${fmtM(next.distance_m)} m away`;
       titled(g, tip);
@@ -830,11 +912,14 @@
     placed.sort((a, b) => a.rank - b.rank || a.cy - b.cy || a.cx - b.cx);
     const d = markerR + 4;
     for (const m of placed) {
-      const text = svg("text", { class: "container-label" + (m.isNext ? " next" : "") + (m.found ? " found" : "") });
+      const text = svg("text", {
+        class: "container-label" + (m.isNext ? " next" : "") + (m.found ? " found" : ""),
+      });
       text.appendChild(svg("tspan", {}, words(m.c.type)));
       if (m.found) text.appendChild(svg("tspan", { class: "pct" }, " · found"));
       // Near-zero likelihoods go without a number: the colour says it, and the labels stay short.
-      else if (m.p != null && !m.order && m.p >= 0.005) text.appendChild(svg("tspan", { class: "pct" }, ` ${pct(m.p)}`));
+      else if (m.p != null && !m.order && m.p >= 0.005)
+        text.appendChild(svg("tspan", { class: "pct" }, ` ${pct(m.p)}`));
       gLabels.appendChild(text);
       const w = text.getComputedTextLength();
       const h = 13;
@@ -867,7 +952,15 @@
     // Where the robot is: the end of its route (the start before its first search).
     if (trial) {
       const at = view.route && view.route.length ? view.route[view.route.length - 1] : scene.start;
-      const robot = svg("circle", { id: "robot", cx: X(at[0]), cy: Y(at[1]), r: 6, fill: "#1d4ed8", stroke: "#fff", "stroke-width": 2 });
+      const robot = svg("circle", {
+        id: "robot",
+        cx: X(at[0]),
+        cy: Y(at[1]),
+        r: 6,
+        fill: "#1d4ed8",
+        stroke: "#fff",
+        "stroke-width": 2,
+      });
       titled(robot, "the robot, where it last reported");
       gMarks.appendChild(robot);
     }
@@ -877,8 +970,17 @@
     const bx = 12;
     const by = H - 12;
     const bar = svg("g", { class: "scale-bar" });
-    bar.appendChild(svg("path", { d: `M${bx},${by - 5}v5h${nice * s}v-5`, fill: "none", stroke: "#374151", "stroke-width": 1.5 }));
-    bar.appendChild(svg("text", { x: bx + (nice * s) / 2, y: by - 8, "text-anchor": "middle" }, `${nice} m`));
+    bar.appendChild(
+      svg("path", {
+        d: `M${bx},${by - 5}v5h${nice * s}v-5`,
+        fill: "none",
+        stroke: "#374151",
+        "stroke-width": 1.5,
+      }),
+    );
+    bar.appendChild(
+      svg("text", { x: bx + (nice * s) / 2, y: by - 8, "text-anchor": "middle" }, `${nice} m`),
+    );
     plan.appendChild(bar);
   }
 
@@ -890,7 +992,11 @@
     if (!S.scene) return;
     const view = S.view;
     const hasLikelihoods = !!(view && view.likelihoods);
-    const scale = el("div", { class: "legend-scale", id: "likelihood-legend", "data-likelihoods": hasLikelihoods ? "true" : "false" });
+    const scale = el("div", {
+      class: "legend-scale",
+      id: "likelihood-legend",
+      "data-likelihoods": hasLikelihoods ? "true" : "false",
+    });
     if (hasLikelihoods) {
       scale.appendChild(el("span", { class: "legend-title" }, "Likelihood the target is there"));
       const w = 260;
@@ -898,14 +1004,32 @@
       const bar = svg("svg", { width: w + 2 * pad, height: 30, viewBox: `0 0 ${w + 2 * pad} 30` });
       const grad = svg("linearGradient", { id: "likelihood-gradient", x1: 0, x2: 1, y1: 0, y2: 0 });
       for (let i = 0; i <= 10; i++) {
-        grad.appendChild(svg("stop", { offset: i / 10, "stop-color": likelihoodColour((i / 10) ** 2) }));
+        grad.appendChild(
+          svg("stop", { offset: i / 10, "stop-color": likelihoodColour((i / 10) ** 2) }),
+        );
       }
       bar.appendChild(svg("defs", {}).appendChild(grad).parentNode);
-      bar.appendChild(svg("rect", { x: pad, y: 2, width: w, height: 12, fill: "url(#likelihood-gradient)", stroke: "#6b7280", "stroke-width": 0.5 }));
+      bar.appendChild(
+        svg("rect", {
+          x: pad,
+          y: 2,
+          width: w,
+          height: 12,
+          fill: "url(#likelihood-gradient)",
+          stroke: "#6b7280",
+          "stroke-width": 0.5,
+        }),
+      );
       for (const p of [0, 0.05, 0.25, 0.5, 1]) {
         const x = pad + Math.sqrt(p) * w;
         bar.appendChild(svg("line", { x1: x, x2: x, y1: 14, y2: 18, stroke: "#374151" }));
-        bar.appendChild(svg("text", { x, y: 28, "text-anchor": "middle", class: "tick" }, `${Math.round(p * 100)} %`));
+        bar.appendChild(
+          svg(
+            "text",
+            { x, y: 28, "text-anchor": "middle", class: "tick" },
+            `${Math.round(p * 100)} %`,
+          ),
+        );
       }
       scale.appendChild(bar);
     } else {
@@ -913,7 +1037,13 @@
       sw.appendChild(svg("circle", { cx: 8, cy: 8, r: 6, fill: NO_LIKELIHOOD, stroke: "#4b5563" }));
       scale.appendChild(sw);
       scale.appendChild(
-        el("span", {}, view ? `grey: ${view.trial.strategy} plans without likelihoods` : "grey: no trial, no likelihoods"),
+        el(
+          "span",
+          {},
+          view
+            ? `grey: ${view.trial.strategy} plans without likelihoods`
+            : "grey: no trial, no likelihoods",
+        ),
       );
     }
     box.appendChild(scale);
@@ -927,24 +1057,68 @@
       items.appendChild(span);
     };
     item((s) => {
-      s.appendChild(svg("circle", { cx: 15, cy: 10, r: 7, fill: likelihoodColour(0), stroke: "#111827", "stroke-width": 2.5 }));
+      s.appendChild(
+        svg("circle", {
+          cx: 15,
+          cy: 10,
+          r: 7,
+          fill: likelihoodColour(0),
+          stroke: "#111827",
+          "stroke-width": 2.5,
+        }),
+      );
       s.appendChild(svg("text", { x: 15, y: 14, "text-anchor": "middle", class: "order" }, "1"));
     }, "searched, in order");
     item((s) => {
-      s.appendChild(svg("circle", { cx: 15, cy: 10, r: 8, fill: "none", stroke: "#16a34a", "stroke-width": 3 }));
+      s.appendChild(
+        svg("circle", { cx: 15, cy: 10, r: 8, fill: "none", stroke: "#16a34a", "stroke-width": 3 }),
+      );
       s.appendChild(svg("circle", { cx: 15, cy: 10, r: 5, fill: likelihoodColour(1) }));
     }, "found");
     item((s) => {
-      s.appendChild(svg("circle", { cx: 15, cy: 10, r: 8, fill: "none", stroke: "#0f172a", "stroke-width": 2 }));
+      s.appendChild(
+        svg("circle", { cx: 15, cy: 10, r: 8, fill: "none", stroke: "#0f172a", "stroke-width": 2 }),
+      );
       s.appendChild(svg("circle", { cx: 15, cy: 10, r: 4, fill: "#fed976", stroke: "#4b5563" }));
     }, "next");
-    item((s) => s.appendChild(svg("line", { x1: 2, x2: 28, y1: 10, y2: 10, stroke: "#0f172a", "stroke-width": 2.5, "stroke-dasharray": "5 3" })), "path to next");
+    item(
+      (s) =>
+        s.appendChild(
+          svg("line", {
+            x1: 2,
+            x2: 28,
+            y1: 10,
+            y2: 10,
+            stroke: "#0f172a",
+            "stroke-width": 2.5,
+            "stroke-dasharray": "5 3",
+          }),
+        ),
+      "path to next",
+    );
     item((s) => {
-      s.appendChild(svg("line", { x1: 2, x2: 22, y1: 10, y2: 10, stroke: "#1d4ed8", "stroke-width": 3.5 }));
-      s.appendChild(svg("circle", { cx: 23, cy: 10, r: 5, fill: "#1d4ed8", stroke: "#fff", "stroke-width": 1.5 }));
+      s.appendChild(
+        svg("line", { x1: 2, x2: 22, y1: 10, y2: 10, stroke: "#1d4ed8", "stroke-width": 3.5 }),
+      );
+      s.appendChild(
+        svg("circle", {
+          cx: 23,
+          cy: 10,
+          r: 5,
+          fill: "#1d4ed8",
+          stroke: "#fff",
+          "stroke-width": 1.5,
+        }),
+      );
     }, "route so far, robot");
-    item((s) => s.appendChild(svg("polygon", { points: "24,10 10,4 10,16", fill: "#15803d" })), "start");
-    item((s) => s.appendChild(svg("polygon", { points: "15,6 19,10 15,14 11,10", fill: "#6b7280" })), "access point");
+    item(
+      (s) => s.appendChild(svg("polygon", { points: "24,10 10,4 10,16", fill: "#15803d" })),
+      "start",
+    );
+    item(
+      (s) => s.appendChild(svg("polygon", { points: "15,6 19,10 15,14 11,10", fill: "#6b7280" })),
+      "access point",
+    );
     box.appendChild(items);
   }
 
@@ -961,7 +1135,11 @@
     status.dataset.status = trial ? trial.status : "";
 
     if (!trial) {
-      $("trial-title").textContent = S.scene ? `No trial yet · ${S.scene.name}` : S.loaded ? "No trial yet" : "";
+      $("trial-title").textContent = S.scene
+        ? `No trial yet · ${S.scene.name}`
+        : S.loaded
+          ? "No trial yet"
+          : "";
       $("trial-summary").textContent = S.scene
         ? "The scene's floor plan; a robot's trial shows here as it searches."
         : S.loaded
@@ -994,16 +1172,23 @@
     fact("target", trial.target, "fact-target");
     fact("strategy", trial.strategy, "fact-strategy");
     fact(ended ? "cost" : "cost so far", `${fmtM(trial.cost_m)} m`, "fact-cost");
-    if (trial.travelled_m != null) fact("odometry", `${fmtM(trial.travelled_m)} m`, "fact-travelled");
+    if (trial.travelled_m != null)
+      fact("odometry", `${fmtM(trial.travelled_m)} m`, "fact-travelled");
     const total = S.scene ? S.scene.containers.length : null;
-    fact("searched", `${trial.searched.length}${total != null ? ` of ${total}` : ""}`, "fact-searched");
+    fact(
+      "searched",
+      `${trial.searched.length}${total != null ? ` of ${total}` : ""}`,
+      "fact-searched",
+    );
 
     const nextEl = $("next-container");
     const next = ended ? null : trial.next;
     if (next) {
       nextEl.replaceChildren(
         el("strong", {}, "Next: "),
-        document.createTextNode(`${words(next.type)} (${next.container})${next.room ? ` in the ${next.room}` : ""}, ${fmtM(next.distance_m)} m away`),
+        document.createTextNode(
+          `${words(next.type)} (${next.container})${next.room ? ` in the ${next.room}` : ""}, ${fmtM(next.distance_m)} m away`,
+        ),
       );
       const p = view.likelihoods ? view.likelihoods[next.container] : null;
       if (p != null) nextEl.append(document.createTextNode(` · likelihood ${pct(p)}`));
@@ -1023,14 +1208,18 @@
       const c = types.get(id);
       const li = el("li", { "data-container": id, "data-found": o && o.found ? "true" : "false" });
       li.appendChild(el("span", { class: "what" }, c ? `${words(c.type)} (${id})` : id));
-      if (o && o.found) li.appendChild(el("span", { class: "badge found" }, `found ${trial.target}`));
+      if (o && o.found)
+        li.appendChild(el("span", { class: "badge found" }, `found ${trial.target}`));
       else li.appendChild(el("span", { class: "muted" }, " not there"));
-      if (o && o.objects.length) li.appendChild(el("span", { class: "seen" }, `seen: ${o.objects.join(", ")}`));
+      if (o && o.objects.length)
+        li.appendChild(el("span", { class: "seen" }, `seen: ${o.objects.join(", ")}`));
       list.appendChild(li);
     }
     if (!trial.searched.length) list.appendChild(el("li", { class: "muted empty" }, "nothing yet"));
     if (found && !trial.searched.includes(found.container)) {
-      list.appendChild(el("li", { "data-container": found.container }, `found in ${found.container}`));
+      list.appendChild(
+        el("li", { "data-container": found.container }, `found in ${found.container}`),
+      );
     }
 
     const box = $("replays-box");
@@ -1042,14 +1231,25 @@
         cost,
         own: strategy === trial.strategy,
       }));
-      if (!(trial.strategy in trial.replays_m)) rows.push({ strategy: trial.strategy, cost: trial.cost_m, own: true });
+      if (!(trial.strategy in trial.replays_m))
+        rows.push({ strategy: trial.strategy, cost: trial.cost_m, own: true });
       rows.sort((a, b) => a.cost - b.cost);
       for (const r of rows) {
-        const tr = el("tr", { "data-strategy": r.strategy, "data-cost": r.cost, class: r.own ? "own" : "" });
+        const tr = el("tr", {
+          "data-strategy": r.strategy,
+          "data-cost": r.cost,
+          class: r.own ? "own" : "",
+        });
         tr.append(
           el("td", {}, r.strategy),
           el("td", {}, fmtM(r.cost)),
-          el("td", { class: "muted" }, r.own ? "deployed" : `${r.cost - trial.cost_m >= 0 ? "+" : "−"}${fmtM(Math.abs(r.cost - trial.cost_m))}`),
+          el(
+            "td",
+            { class: "muted" },
+            r.own
+              ? "deployed"
+              : `${r.cost - trial.cost_m >= 0 ? "+" : "−"}${fmtM(Math.abs(r.cost - trial.cost_m))}`,
+          ),
         );
         body.appendChild(tr);
       }
@@ -1091,7 +1291,8 @@
     body.replaceChildren();
     if (!dep) {
       $("deployment-title").textContent = "Deployment";
-      $("deployment-summary").textContent = S.loaded && !S.deployments.length ? "No deployment yet." : "";
+      $("deployment-summary").textContent =
+        S.loaded && !S.deployments.length ? "No deployment yet." : "";
       $("next-strategy").textContent = "";
       $("strategy-table").hidden = true;
       renderCurve();
@@ -1109,13 +1310,23 @@
       ` · ${plural(dep.trials.length, "trial")}, ${ended} ended, ${dep.open_trials.length} open`;
     for (const r of dep.per_strategy) {
       const isNext = dep.next && dep.next.strategy === r.strategy;
-      const tr = el("tr", { "data-strategy": r.strategy, class: isNext ? "next-pick" : "", title: isNext ? dep.next.why : null });
+      const tr = el("tr", {
+        "data-strategy": r.strategy,
+        class: isNext ? "next-pick" : "",
+        title: isNext ? dep.next.why : null,
+      });
       const name = el("td", { class: "strategy" });
       const sw = svg("svg", { width: 12, height: 12, viewBox: "0 0 12 12", class: "swatch" });
       sw.appendChild(svg("circle", { cx: 6, cy: 6, r: 5, fill: strategyColour(r.strategy) }));
       name.append(sw, document.createTextNode(r.strategy));
       if (isNext) name.appendChild(el("span", { class: "badge next" }, "next"));
-      tr.append(name, el("td", {}, String(r.deployed)), el("td", {}, fmtM(r.mean_cost_m)), el("td", {}, fmtM(r.replay_mean_m)), el("td", {}, fmtM(r.score)));
+      tr.append(
+        name,
+        el("td", {}, String(r.deployed)),
+        el("td", {}, fmtM(r.mean_cost_m)),
+        el("td", {}, fmtM(r.replay_mean_m)),
+        el("td", {}, fmtM(r.score)),
+      );
       body.appendChild(tr);
     }
     $("next-strategy").textContent = dep.next ? `Next trial: ${dep.next.why}` : "";
@@ -1150,20 +1361,39 @@
     rows.forEach((name, i) => {
       const y = top + i * rowH + rowH / 2;
       box.appendChild(svg("line", { x1: x0 - 4, x2: x1 + 4, y1: y, y2: y, stroke: "#e5e7eb" }));
-      const t = svg("text", { x: labelW, y: y + 4, "text-anchor": "end", class: "curve-label", fill: strategyColour(name) }, name);
+      const t = svg(
+        "text",
+        {
+          x: labelW,
+          y: y + 4,
+          "text-anchor": "end",
+          class: "curve-label",
+          fill: strategyColour(name),
+        },
+        name,
+      );
       titled(t, name);
       box.appendChild(t);
     });
     // Axis: trial k.
     const axisY = top + rows.length * rowH + 4;
-    box.appendChild(svg("line", { x1: x0 - 4, x2: x1 + 4, y1: axisY, y2: axisY, stroke: "#9ca3af" }));
-    const tickEvery = [1, 2, 5, 10, 20, 50, 100, 200, 500, 1000].find((n) => n * step >= 28) || 1000;
+    box.appendChild(
+      svg("line", { x1: x0 - 4, x2: x1 + 4, y1: axisY, y2: axisY, stroke: "#9ca3af" }),
+    );
+    const tickEvery =
+      [1, 2, 5, 10, 20, 50, 100, 200, 500, 1000].find((n) => n * step >= 28) || 1000;
     for (let k = 1; k <= maxK; k++) {
       if (k !== 1 && k % tickEvery) continue;
-      box.appendChild(svg("line", { x1: X(k), x2: X(k), y1: axisY, y2: axisY + 4, stroke: "#9ca3af" }));
-      box.appendChild(svg("text", { x: X(k), y: axisY + 15, "text-anchor": "middle", class: "tick" }, String(k)));
+      box.appendChild(
+        svg("line", { x1: X(k), x2: X(k), y1: axisY, y2: axisY + 4, stroke: "#9ca3af" }),
+      );
+      box.appendChild(
+        svg("text", { x: X(k), y: axisY + 15, "text-anchor": "middle", class: "tick" }, String(k)),
+      );
     }
-    box.appendChild(svg("text", { x: x0 - 10, y: axisY + 15, "text-anchor": "end", class: "tick" }, "trial k"));
+    box.appendChild(
+      svg("text", { x: x0 - 10, y: axisY + 15, "text-anchor": "end", class: "tick" }, "trial k"),
+    );
 
     const r = Math.max(2.5, Math.min(6, step * 0.35));
     const showCost = step >= 30;
@@ -1182,20 +1412,59 @@
         "data-status": status,
         "data-cost": t.cost_m == null ? null : t.cost_m,
       });
-      if (t.trial === S.watchedId) g.appendChild(svg("circle", { cx: x, cy: y, r: r + 3.5, fill: "none", stroke: "#0f172a", "stroke-width": 1.5 }));
+      if (t.trial === S.watchedId)
+        g.appendChild(
+          svg("circle", {
+            cx: x,
+            cy: y,
+            r: r + 3.5,
+            fill: "none",
+            stroke: "#0f172a",
+            "stroke-width": 1.5,
+          }),
+        );
       if (status === "done") {
         g.appendChild(svg("circle", { cx: x, cy: y, r, fill: colour }));
       } else if (status === "searching") {
-        g.appendChild(svg("circle", { cx: x, cy: y, r: r - 0.75, fill: "#fff", stroke: colour, "stroke-width": 1.5 }));
+        g.appendChild(
+          svg("circle", {
+            cx: x,
+            cy: y,
+            r: r - 0.75,
+            fill: "#fff",
+            stroke: colour,
+            "stroke-width": 1.5,
+          }),
+        );
       } else {
-        g.appendChild(svg("path", { d: `M${x - r},${y - r}L${x + r},${y + r}M${x - r},${y + r}L${x + r},${y - r}`, stroke: colour, "stroke-width": 2 }));
+        g.appendChild(
+          svg("path", {
+            d: `M${x - r},${y - r}L${x + r},${y + r}M${x - r},${y + r}L${x + r},${y - r}`,
+            stroke: colour,
+            "stroke-width": 2,
+          }),
+        );
       }
       if (showCost && t.cost_m != null && status !== "searching") {
         const above = t.trial === S.watchedId ? r + 5 : r + 2;
-        g.appendChild(svg("text", { x, y: y - above, "text-anchor": "middle", class: "cost" }, t.cost_m.toFixed(1)));
+        g.appendChild(
+          svg(
+            "text",
+            { x, y: y - above, "text-anchor": "middle", class: "cost" },
+            t.cost_m.toFixed(1),
+          ),
+        );
       }
       // A generous, invisible target for the click.
-      g.appendChild(svg("rect", { x: x - Math.max(step / 2, 4), y: y - rowH / 2, width: Math.max(step, 8), height: rowH, fill: "transparent" }));
+      g.appendChild(
+        svg("rect", {
+          x: x - Math.max(step / 2, 4),
+          y: y - rowH / 2,
+          width: Math.max(step, 8),
+          height: rowH,
+          fill: "transparent",
+        }),
+      );
       titled(
         g,
         `trial ${t.trial} (k = ${t.k}): ${t.strategy}, looking for ${t.target}, ${status}` +
@@ -1217,16 +1486,31 @@
       const t = rows.get(id) || {};
       const ev = S.live.get(id);
       const watched = id === S.watchedId;
-      const b = el("button", { type: "button", "data-trial": id, "aria-current": watched ? "true" : null, class: watched ? "watched" : "" });
-      const parts = [`trial ${id}`, t.target || (ev && ev.target) || "?", t.strategy || (ev && ev.strategy) || "?"];
-      if (ev) parts.push(`${ev.searched} searched`, `${fmtM(ev.cost_m)} m`, ev.next ? `next ${ev.next}` : "");
+      const b = el("button", {
+        type: "button",
+        "data-trial": id,
+        "aria-current": watched ? "true" : null,
+        class: watched ? "watched" : "",
+      });
+      const parts = [
+        `trial ${id}`,
+        t.target || (ev && ev.target) || "?",
+        t.strategy || (ev && ev.strategy) || "?",
+      ];
+      if (ev)
+        parts.push(
+          `${ev.searched} searched`,
+          `${fmtM(ev.cost_m)} m`,
+          ev.next ? `next ${ev.next}` : "",
+        );
       b.textContent = parts.filter(Boolean).join(" · ") + (watched ? "  (watching)" : "");
       b.addEventListener("click", () => watch(id, true));
       const li = el("li", { "data-trial": id });
       li.appendChild(b);
       list.appendChild(li);
     }
-    if (!dep.open_trials.length) list.appendChild(el("li", { class: "muted empty" }, "none: no robot is searching"));
+    if (!dep.open_trials.length)
+      list.appendChild(el("li", { class: "muted empty" }, "none: no robot is searching"));
   }
 
   // ---------------------------------------------------------------- wiring

@@ -488,7 +488,7 @@ pub struct DeploymentSummary {
 pub const MAX_LISTED_DEPLOYMENTS: usize = 1000;
 
 /// One container searched, as the robot reported it.
-#[derive(Debug, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct ObservationInfo {
     /// The container's id.
     pub container: String,

@@ -18,7 +18,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use serde::{Deserialize, Serialize};
 use tokio::sync::{broadcast, mpsc, watch};
 
-use crate::api::TrialState;
+use crate::api::{ObservationInfo, TrialState};
 use crate::model::TrialStatus;
 
 /// Events kept for watchers that are behind; older ones are dropped for the slowest.
@@ -37,6 +37,8 @@ pub struct Frame {
     pub name: String,
     /// Its data: compact JSON, no newline.
     pub data: String,
+    /// The deployment a `trial` event is of (streams of one deployment skip the others').
+    pub deployment: Option<i64>,
 }
 
 impl Frame {
@@ -49,12 +51,17 @@ impl Frame {
     /// the channel is ignored, not passed on to pages).
     pub(crate) fn decode(text: &str) -> Option<Frame> {
         let (name, data) = text.split_once('\n')?;
-        let known = matches!(name, "trial" | "deployment");
-        (known && !data.contains('\n') && serde_json::from_str::<serde_json::Value>(data).is_ok())
-            .then(|| Frame {
-                name: name.to_string(),
-                data: data.to_string(),
-            })
+        if !matches!(name, "trial" | "deployment") || data.contains('\n') {
+            return None;
+        }
+        let value: serde_json::Value = serde_json::from_str(data).ok()?;
+        Some(Frame {
+            name: name.to_string(),
+            data: data.to_string(),
+            deployment: (name == "trial")
+                .then(|| value["deployment"].as_i64())
+                .flatten(),
+        })
     }
 }
 
@@ -81,10 +88,16 @@ pub struct TrialEvent {
     pub next: Option<String>,
     /// Map distance travelled so far (its cost once ended), metres.
     pub cost_m: f64,
+    /// The way to the next container (cell centres), while searching: with `observed`, a page
+    /// that shows the trial follows it without asking for its picture again.
+    pub next_path: Option<Vec<[f64; 2]>>,
+    /// The observation this event reports, when it reports one.
+    pub observed: Option<ObservationInfo>,
 }
 
-impl From<&TrialState> for TrialEvent {
-    fn from(t: &TrialState) -> Self {
+impl TrialEvent {
+    /// The event of a trial now in `t`, after `observed` when it reports an observation.
+    pub fn new(t: &TrialState, observed: Option<ObservationInfo>) -> Self {
         TrialEvent {
             trial: t.trial,
             deployment: t.deployment,
@@ -96,6 +109,8 @@ impl From<&TrialState> for TrialEvent {
             searched: t.searched.len(),
             next: t.next.as_ref().map(|n| n.container.clone()),
             cost_m: t.cost_m,
+            next_path: t.next.as_ref().map(|n| n.path.clone()),
+            observed,
         }
     }
 }
@@ -200,12 +215,13 @@ impl Events {
         matches!(*route, Route::Shared(_)) || self.ring.receiver_count() > 0
     }
 
-    /// Publishes a trial's state after a write.
-    pub(crate) fn trial(&self, state: &TrialState) {
-        if let Ok(data) = serde_json::to_string(&TrialEvent::from(state)) {
+    /// Publishes a trial's state after a write (that recorded `observed`, if any).
+    pub(crate) fn trial(&self, state: &TrialState, observed: Option<ObservationInfo>) {
+        if let Ok(data) = serde_json::to_string(&TrialEvent::new(state, observed)) {
             self.publish(Frame {
                 name: "trial".into(),
                 data,
+                deployment: Some(state.deployment),
             });
         }
     }
@@ -215,6 +231,7 @@ impl Events {
         self.publish(Frame {
             name: "deployment".into(),
             data: serde_json::json!({ "deployment": id }).to_string(),
+            deployment: None,
         });
     }
 
@@ -224,6 +241,7 @@ impl Events {
         self.deliver(Frame {
             name: "resync".into(),
             data: serde_json::json!({ "missed": null }).to_string(),
+            deployment: None,
         });
     }
 
@@ -237,11 +255,12 @@ impl Events {
         let _ = self.closed.send(true);
     }
 
-    /// A new watcher's stream.
+    /// A new watcher's stream: every event, or with `only` a deployment's id, that
+    /// deployment's trials and the other events (new deployments, resync).
     ///
     /// # Errors
     /// [`TooManyStreams`] when the cap is reached.
-    pub fn watch(&self) -> Result<Watcher, TooManyStreams> {
+    pub fn watch(&self, only: Option<i64>) -> Result<Watcher, TooManyStreams> {
         let max = self.max_streams.load(Ordering::SeqCst);
         let taken = self
             .open
@@ -252,6 +271,7 @@ impl Events {
             return Err(TooManyStreams { max });
         }
         Ok(Watcher {
+            only,
             ring: self.ring.subscribe(),
             closed: self.closed.subscribe(),
             _slot: Slot(self.open.clone()),
@@ -272,6 +292,7 @@ impl Drop for Slot {
 /// One watcher's events.
 #[derive(Debug)]
 pub struct Watcher {
+    only: Option<i64>,
     ring: broadcast::Receiver<Arc<Frame>>,
     closed: watch::Receiver<bool>,
     _slot: Slot,
@@ -281,21 +302,54 @@ impl Watcher {
     /// The next event; `resync` when the watcher fell behind the ring, `None` once the hub is
     /// closed.
     pub async fn next(&mut self) -> Option<Arc<Frame>> {
-        if *self.closed.borrow() {
-            return None;
-        }
-        tokio::select! {
-            got = self.ring.recv() => match got {
-                Ok(frame) => Some(frame),
-                Err(broadcast::error::RecvError::Lagged(missed)) => Some(Arc::new(Frame {
-                    name: "resync".into(),
-                    data: serde_json::json!({ "missed": missed }).to_string(),
-                })),
-                Err(broadcast::error::RecvError::Closed) => None,
-            },
-            _ = self.closed.wait_for(|c| *c) => None,
+        loop {
+            if *self.closed.borrow() {
+                return None;
+            }
+            let frame = tokio::select! {
+                got = self.ring.recv() => match got {
+                    Ok(frame) => frame,
+                    Err(broadcast::error::RecvError::Lagged(missed)) => resync(missed),
+                    Err(broadcast::error::RecvError::Closed) => return None,
+                },
+                _ = self.closed.wait_for(|c| *c) => return None,
+            };
+            if self.wants(&frame) {
+                return Some(frame);
+            }
         }
     }
+
+    /// An event already waiting, without waiting for one (`resync` when the watcher fell
+    /// behind; `None` when none is waiting or the hub is closed).
+    pub fn try_next(&mut self) -> Option<Arc<Frame>> {
+        loop {
+            if *self.closed.borrow() {
+                return None;
+            }
+            let frame = match self.ring.try_recv() {
+                Ok(frame) => frame,
+                Err(broadcast::error::TryRecvError::Lagged(missed)) => resync(missed),
+                Err(_) => return None,
+            };
+            if self.wants(&frame) {
+                return Some(frame);
+            }
+        }
+    }
+
+    fn wants(&self, frame: &Frame) -> bool {
+        self.only.is_none() || frame.deployment.is_none() || frame.deployment == self.only
+    }
+}
+
+/// The event telling a watcher that it lost `missed` events.
+fn resync(missed: u64) -> Arc<Frame> {
+    Arc::new(Frame {
+        name: "resync".into(),
+        data: serde_json::json!({ "missed": missed }).to_string(),
+        deployment: None,
+    })
 }
 
 #[cfg(test)]
@@ -306,14 +360,15 @@ mod tests {
         Frame {
             name: "deployment".into(),
             data: format!("{{\"deployment\":{i}}}"),
+            deployment: None,
         }
     }
 
     #[tokio::test]
     async fn a_watcher_that_stops_reading_is_told_to_resync_and_costs_no_more_than_the_ring() {
         let events = Events::new(4);
-        let mut slow = events.watch().expect("a slot");
-        let mut live = events.watch().expect("a slot");
+        let mut slow = events.watch(None).expect("a slot");
+        let mut live = events.watch(None).expect("a slot");
         for i in 0..10 * RING {
             events.publish(frame(i));
             if i % RING == 0 {
@@ -339,23 +394,24 @@ mod tests {
     #[tokio::test]
     async fn streams_past_the_cap_are_refused_and_a_closed_one_frees_its_slot() {
         let events = Events::new(2);
-        let a = events.watch().expect("first");
-        let _b = events.watch().expect("second");
-        assert_eq!(events.watch().unwrap_err(), TooManyStreams { max: 2 });
+        let a = events.watch(None).expect("first");
+        let _b = events.watch(None).expect("second");
+        assert_eq!(events.watch(None).unwrap_err(), TooManyStreams { max: 2 });
         assert_eq!(events.open_streams(), 2);
         drop(a);
         assert_eq!(events.open_streams(), 1);
-        let mut c = events.watch().expect("a freed slot");
+        let mut c = events.watch(None).expect("a freed slot");
         events.close();
         assert!(c.next().await.is_none(), "a closed hub ends its streams");
-        assert!(events.watch().is_err(), "and opens none");
+        assert!(events.watch(None).is_err(), "and opens none");
     }
 
     #[test]
     fn only_our_own_frames_pass_between_replicas() {
         let f = Frame {
             name: "trial".into(),
-            data: r#"{"trial":1}"#.into(),
+            data: r#"{"trial":1,"deployment":7}"#.into(),
+            deployment: Some(7),
         };
         assert_eq!(Frame::decode(&f.encode()), Some(f));
         for stranger in [
@@ -367,5 +423,38 @@ mod tests {
         ] {
             assert_eq!(Frame::decode(stranger), None, "{stranger:?}");
         }
+    }
+
+    #[tokio::test]
+    async fn a_stream_of_one_deployment_skips_the_trials_of_others_only() {
+        let events = Events::new(4);
+        let mut one = events.watch(Some(2)).expect("a slot");
+        let mut all = events.watch(None).expect("a slot");
+        let trial = |d: i64| Frame {
+            name: "trial".into(),
+            data: format!("{{\"deployment\":{d}}}"),
+            deployment: Some(d),
+        };
+        for f in [trial(1), trial(2), frame(3), trial(3), trial(2)] {
+            events.publish(f);
+        }
+        let mut got = Vec::new();
+        while let Some(f) = one.try_next() {
+            got.push(f.data.clone());
+        }
+        assert_eq!(
+            got,
+            [
+                r#"{"deployment":2}"#,
+                r#"{"deployment":3}"#,
+                r#"{"deployment":2}"#
+            ],
+            "its trials and the new deployment"
+        );
+        let mut n = 0;
+        while all.try_next().is_some() {
+            n += 1;
+        }
+        assert_eq!(n, 5);
     }
 }

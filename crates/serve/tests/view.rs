@@ -187,7 +187,13 @@ async fn a_page_sees_every_step_of_a_trial_within_a_second_and_in_order() {
     .await;
     assert_eq!(status, 201);
     let tid = trial["trial"].as_i64().unwrap();
+    let first = read(&s, token, &format!("/trials/{tid}/view")).await.1;
+    // What a page showing the trial draws from its first picture and the events after it.
+    let mut route: Vec<Value> = first["route"].as_array().unwrap().clone();
+    let mut likelihoods = first["likelihoods"].clone();
     let mut searched = 0;
+    let mut observed = Value::Null;
+    let mut leg = Value::Null;
     loop {
         let (name, e) = events.next(SECOND).await;
         assert_eq!(name, "trial");
@@ -196,8 +202,16 @@ async fn a_page_sees_every_step_of_a_trial_within_a_second_and_in_order() {
         assert_eq!(e["status"], trial["status"]);
         assert_eq!(e["searched"], searched);
         assert_eq!(e["next"], trial["next"]["container"]);
+        assert_eq!(e["next_path"], trial["next"]["path"]);
         assert_eq!(e["strategy"], trial["strategy"]);
         assert_eq!(e["cost_m"], trial["cost_m"]);
+        assert_eq!(e["observed"], observed, "the observation it reports");
+        if let Some(o) = e["observed"].as_object() {
+            let c = o["container"].as_str().unwrap();
+            route.extend(leg.as_array().unwrap().iter().skip(1).cloned());
+            likelihoods[c] = json!(if o["found"] == true { 1.0 } else { 0.0 });
+        }
+        leg = e["next_path"].clone();
         if trial["status"] != "searching" {
             break;
         }
@@ -210,11 +224,12 @@ async fn a_page_sees_every_step_of_a_trial_within_a_second_and_in_order() {
             .unwrap()["contents"]
             .clone();
         let found = held.as_array().unwrap().iter().any(|t| t == "Wallet");
+        observed = json!({"container": c, "found": found, "objects": held});
         let (status, next) = send(
             &s,
             token,
             &format!("/trials/{tid}/observations"),
-            json!({"container": c, "found": found, "objects": held}),
+            observed.clone(),
         )
         .await;
         assert_eq!(status, 200, "{next}");
@@ -222,6 +237,10 @@ async fn a_page_sees_every_step_of_a_trial_within_a_second_and_in_order() {
         searched += 1;
     }
     assert_eq!(trial["status"], "done");
+    // The events were enough: the picture drawn from them is the server's.
+    let last = read(&s, token, &format!("/trials/{tid}/view")).await.1;
+    assert_eq!(Value::Array(route), last["route"]);
+    assert_eq!(likelihoods, last["likelihoods"]);
     // The list of deployments says it too.
     let (status, list) = read(&s, token, "/deployments").await;
     assert_eq!(status, 200);
@@ -462,4 +481,75 @@ async fn event_streams_past_their_cap_are_refused_and_the_api_still_answers() {
         .await
         .unwrap();
     assert_eq!(again.status(), 200);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stream_of_one_deployment_carries_its_trials_and_new_deployments_only() {
+    let s = start(None, None).await;
+    let a = s.post("/deployments", json!({})).await.1["id"]
+        .as_i64()
+        .unwrap();
+    let b = s.post("/deployments", json!({})).await.1["id"]
+        .as_i64()
+        .unwrap();
+    for bad in [
+        "deployment=x",
+        "deployment=0",
+        "deployment=+1",
+        "deployment=",
+        "trial=1",
+    ] {
+        let r = s
+            .client
+            .get(format!("{}/events?{bad}", s.url))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 400, "{bad}");
+    }
+    let (status, stream) = Stream::open(&s, None).await;
+    assert_eq!(status, 200);
+    let mut all = stream.unwrap();
+    let r = s
+        .client
+        .get(format!("{}/events?deployment={b}", s.url))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    let mut only_b = Stream::from_response(r);
+    for stream in [&mut all, &mut only_b] {
+        assert_eq!(stream.next(SECOND).await.0, "hello");
+    }
+    for d in [a, b, a] {
+        let (status, _) = s
+            .post(
+                &format!("/deployments/{d}/trials"),
+                json!({"scene": "flat", "target": "Wallet"}),
+            )
+            .await;
+        assert_eq!(status, 201);
+    }
+    let c = s.post("/deployments", json!({})).await.1["id"]
+        .as_i64()
+        .unwrap();
+    let mut seen = Vec::new();
+    for _ in 0..4 {
+        let (name, e) = all.next(SECOND).await;
+        seen.push((name, e["deployment"].as_i64().unwrap()));
+    }
+    assert_eq!(
+        seen,
+        [
+            ("trial".into(), a),
+            ("trial".into(), b),
+            ("trial".into(), a),
+            ("deployment".into(), c)
+        ]
+    );
+    assert_eq!(only_b.next(SECOND).await.1["deployment"], b);
+    assert_eq!(
+        only_b.next(SECOND).await,
+        ("deployment".into(), json!({ "deployment": c }))
+    );
 }

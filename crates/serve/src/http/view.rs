@@ -7,14 +7,15 @@ use std::convert::Infallible;
 use std::sync::Arc;
 use std::time::Duration;
 
-use axum::extract::State;
+use axum::body::Body;
+use axum::extract::{RawQuery, State};
 use axum::http::{HeaderValue, header};
-use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
+use bytes::Bytes;
 use futures_util::StreamExt;
 
 use crate::error::{ApiError, ErrorKind};
-use crate::events::TooManyStreams;
+use crate::events::{Frame, TooManyStreams};
 use crate::service::Service;
 
 /// The page's files, with their paths and types.
@@ -67,14 +68,23 @@ pub(super) fn page_file(content_type: &'static str, body: &'static str) -> Respo
     response
 }
 
-/// How often an idle stream sends a comment, so that proxies and the page see it alive.
+/// How often a stream sends a comment, so that proxies and the page see it alive.
 const KEEP_ALIVE: Duration = Duration::from_secs(15);
 
-#[utoipa::path(get, path = "/events", responses(
+#[utoipa::path(get, path = "/events",
+    params(("deployment" = Option<i64>, Query, description = "Only this deployment's trials (and every new deployment)", minimum = 1)),
+    responses(
     (status = 200, description = "Server-Sent Events: `hello` first (`{\"shared\": bool}`), then `trial` (a trial started, searched a container or ended: id, deployment, k, scene, target, strategy, status, searched, next, cost_m), `deployment` (`{\"deployment\": id}`, created) and `resync` (`{\"missed\": n}`: this stream fell behind and lost events; read the state again). With replicas on one PostgreSQL, every replica's events.", content_type = "text/event-stream", body = String),
+    (status = 400, description = "The query is not `deployment=<id>`", body = crate::api::ErrorBody),
     (status = 503, description = "As many event streams are open as the server allows (--max-event-streams); retry later", body = crate::api::ErrorBody)))]
-pub(super) async fn events(State(s): State<Arc<Service>>) -> Response {
-    let watcher = match s.events().watch() {
+/// The stream is written here rather than with axum's `Sse`, which sends each event as a write
+/// of its own: events that arrive together go out together.
+pub(super) async fn events(State(s): State<Arc<Service>>, query: RawQuery) -> Response {
+    let only = match only_deployment(query.0.as_deref()) {
+        Ok(only) => only,
+        Err(e) => return e.into_response(),
+    };
+    let watcher = match s.events().watch(only) {
         Ok(w) => w,
         Err(TooManyStreams { max }) => {
             return ApiError::new(
@@ -87,21 +97,76 @@ pub(super) async fn events(State(s): State<Arc<Service>>) -> Response {
             .into_response();
         }
     };
-    let hello = Event::default()
-        .event("hello")
-        .data(serde_json::json!({ "shared": s.is_shared() }).to_string());
-    let rest = futures_util::stream::unfold(watcher, |mut w| async move {
-        let frame = w.next().await?;
-        Some((Event::default().event(&frame.name).data(&frame.data), w))
-    });
-    let stream = futures_util::stream::once(async { hello })
-        .chain(rest)
-        .map(Ok::<_, Infallible>);
-    let mut response = Sse::new(stream)
-        .keep_alive(KeepAlive::new().interval(KEEP_ALIVE))
-        .into_response();
+    let hello = format!(
+        "event: hello\ndata: {}\n\n",
+        serde_json::json!({ "shared": s.is_shared() })
+    );
+    let first = futures_util::stream::once(async move { Bytes::from(hello) });
+    let rest = futures_util::stream::unfold(
+        (
+            watcher,
+            tokio::time::interval_at(tokio::time::Instant::now() + KEEP_ALIVE, KEEP_ALIVE),
+        ),
+        |(mut w, mut tick)| async move {
+            let frame = tokio::select! {
+                f = w.next() => f?,
+                _ = tick.tick() => return Some((Bytes::from_static(b": keep-alive\n\n"), (w, tick))),
+            };
+            // Events that are already waiting go out in the same write: a busy fleet's events
+            // cost the server one write per burst rather than one per event.
+            let mut text = String::with_capacity(256);
+            write_event(&mut text, &frame);
+            for _ in 1..MAX_EVENTS_PER_WRITE {
+                match w.try_next() {
+                    Some(f) => write_event(&mut text, &f),
+                    None => break,
+                }
+            }
+            Some((Bytes::from(text), (w, tick)))
+        },
+    );
+    let body = Body::from_stream(first.chain(rest).map(Ok::<_, Infallible>));
+    let mut response = body.into_response();
+    let h = response.headers_mut();
+    h.insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("text/event-stream"),
+    );
+    h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
     response
-        .headers_mut()
-        .insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
-    response
+}
+
+/// Most events sent in one write.
+const MAX_EVENTS_PER_WRITE: usize = 64;
+
+/// `frame` as Server-Sent Events text (its data is one line of JSON).
+fn write_event(out: &mut String, frame: &Frame) {
+    out.push_str("event: ");
+    out.push_str(&frame.name);
+    out.push_str("\ndata: ");
+    out.push_str(&frame.data);
+    out.push_str("\n\n");
+}
+
+/// The deployment a stream's query names (`deployment=<id>`), if any.
+fn only_deployment(query: Option<&str>) -> Result<Option<i64>, ApiError> {
+    let Some(query) = query.filter(|q| !q.is_empty()) else {
+        return Ok(None);
+    };
+    let bad = || {
+        ApiError::new(
+            ErrorKind::Malformed,
+            "deployment",
+            format!("{query:?}: the stream takes only `deployment=<id>`, a positive integer"),
+        )
+    };
+    let id = query.strip_prefix("deployment=").ok_or_else(bad)?;
+    // Digits only: `+1`, ` 1` and `01x` are not ids.
+    if id.is_empty() || !id.bytes().all(|b| b.is_ascii_digit()) {
+        return Err(bad());
+    }
+    match id.parse::<i64>() {
+        Ok(id) if id >= 1 => Ok(Some(id)),
+        _ => Err(bad()),
+    }
 }

@@ -1,9 +1,10 @@
-//! Browser pages watching the fleet, as the live page behaves (crates/serve/ui/app.js): each
-//! reads `GET /events` on its replica and, like the page, fetches only what it shows, at most
-//! one request of a kind in flight: the watched trial's picture on its events, its deployment
-//! (at most every 500 ms) when one of the deployment's trials ends, the list of deployments
-//! when one is created, everything again on `resync`. A stalled page opens the stream and
-//! never reads it: a client that stopped reading. Pages never poll.
+//! Browser pages watching the fleet, as the live page behaves (crates/serve/ui/app.js). Each
+//! reads `GET /events` on its replica (only the deployment it shows, once it shows one) and
+//! fetches only what it shows: a trial's picture when it starts watching the trial (the events
+//! then carry each step; it reads the picture again only after a gap), its deployment when one
+//! of the deployment's trials ends (at most every 500 ms), the list of deployments when one is
+//! created, everything again on `resync`. A stalled page opens the stream and never reads it:
+//! a client that stopped reading. Pages never poll.
 //!
 //! This is a model of the page's request pattern for the load test, not a second page: the
 //! browser tests drive the real one.
@@ -86,14 +87,21 @@ pub(super) async fn page(
             }
         }
     };
-    let Ok(mut stream) = client.get(format!("{url}/events")).send().await else {
-        counts.stream_errors.fetch_add(1, Ordering::Relaxed);
+    let open = |query: String| {
+        let (client, url, counts) = (client.clone(), url.clone(), counts.clone());
+        async move {
+            match client.get(format!("{url}/events{query}")).send().await {
+                Ok(r) if r.status().is_success() => Some(r),
+                _ => {
+                    counts.stream_errors.fetch_add(1, Ordering::Relaxed);
+                    None
+                }
+            }
+        }
+    };
+    let Some(mut stream) = open(String::new()).await else {
         return;
     };
-    if !stream.status().is_success() {
-        counts.stream_errors.fetch_add(1, Ordering::Relaxed);
-        return;
-    }
     // What the page loads first.
     fetch("/scenes".into()).await;
     fetch("/deployments".into()).await;
@@ -103,6 +111,8 @@ pub(super) async fn page(
     let mut last_deployment_fetch: Option<Instant> = None;
     let mut deployment_due = false;
     let mut scenes_seen = std::collections::BTreeSet::new();
+    // Steps of the watched trial its page has drawn.
+    let mut seen_steps: Option<u64> = None;
     loop {
         let chunk = tokio::select! {
             c = stream.chunk() => c,
@@ -130,19 +140,42 @@ pub(super) async fn page(
                     else {
                         continue;
                     };
-                    if *selected.get_or_insert(d) != d {
+                    if selected.is_none() {
+                        // The page shows this deployment: from now on its stream carries only
+                        // this deployment's trials (the page opens it again with the filter).
+                        selected = Some(d);
+                        let Some(filtered) = open(format!("?deployment={d}")).await else {
+                            return;
+                        };
+                        stream = filtered;
+                        buffer.clear();
+                        watched = (data["status"] == "searching").then_some(t);
+                        view = watched.is_some();
+                        seen_steps = data["searched"].as_u64();
+                        break;
+                    }
+                    if selected != Some(d) {
                         continue;
                     }
                     let searching = data["status"] == "searching";
-                    if searching && data["searched"] == 0 && watched != Some(t) {
+                    let steps = data["searched"].as_u64();
+                    if searching && steps == Some(0) && watched != Some(t) {
                         watched = Some(t);
                         if let Some(scene) = data["scene"].as_str()
                             && scenes_seen.insert(scene.to_string())
                         {
                             fetch(format!("/scenes/{scene}")).await;
                         }
+                        view = true;
+                        seen_steps = Some(0);
+                    } else if watched == Some(t) {
+                        // The events carry each step (the observation, the way to the next
+                        // container): the picture is read again only after a gap.
+                        if steps != seen_steps.map(|n| n + 1) {
+                            view = true;
+                        }
+                        seen_steps = steps;
                     }
-                    view |= watched == Some(t);
                     deployment_due |= !searching;
                 }
                 "deployment" => list = true,

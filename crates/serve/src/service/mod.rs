@@ -255,11 +255,11 @@ impl Service {
         &self.events
     }
 
-    /// What a write that committed made of a trial: kept for reads of it, and told to the
-    /// pages watching.
-    pub(crate) fn told(&self, state: TrialState) {
+    /// What a write that committed made of a trial (after recording `observed`, if it did):
+    /// kept for reads of it, and told to the pages watching.
+    pub(crate) fn told(&self, state: TrialState, observed: Option<crate::api::ObservationInfo>) {
         if self.events.wanted() {
-            self.events.trial(&state);
+            self.events.trial(&state, observed);
         }
         self.recent.keep(Arc::new(state));
     }

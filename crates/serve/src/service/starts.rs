@@ -276,7 +276,7 @@ impl Service {
             claim.replace(&reply)?;
         }
         self.searches.keep(id, 0, live);
-        self.told(state);
+        self.told(state, None);
         Ok(reply)
     }
 }

@@ -305,7 +305,14 @@ impl Service {
         if reply.is_ok()
             && let Some(state) = told
         {
-            self.told(state);
+            self.told(
+                state,
+                Some(ObservationInfo {
+                    container: observation.container.clone(),
+                    found: observation.found,
+                    objects: observation.objects.clone(),
+                }),
+            );
         }
         if reply.is_ok() && status == TrialStatus::Searching {
             self.searches.keep(id, observations.len() + 1, live);
@@ -359,7 +366,7 @@ impl Service {
         if reply.is_ok()
             && let Some(state) = told
         {
-            self.told(state);
+            self.told(state, None);
         }
         reply
     }

@@ -38,13 +38,15 @@ impl Stream {
             "text/event-stream",
             "an event stream"
         );
-        (
-            status,
-            Some(Stream {
-                response,
-                buffer: String::new(),
-            }),
-        )
+        (status, Some(Stream::from_response(response)))
+    }
+
+    /// The stream of a `GET /events` answered 200.
+    pub fn from_response(response: reqwest::Response) -> Stream {
+        Stream {
+            response,
+            buffer: String::new(),
+        }
     }
 
     /// The next event (name, data), skipping keep-alive comments; panics after `within`.

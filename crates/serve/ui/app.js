@@ -1146,6 +1146,8 @@
           ? "Waiting for a robot to start a trial."
           : "";
       $("trial-facts").replaceChildren();
+      $("trial-empty").hidden = !S.loaded;
+      $("trial-body").hidden = true;
       $("next-container").hidden = true;
       delete $("next-container").dataset.container;
       $("searched-list").replaceChildren();
@@ -1155,6 +1157,8 @@
       return;
     }
 
+    $("trial-empty").hidden = true;
+    $("trial-body").hidden = false;
     const found = view.observations.find((o) => o.found);
     $("trial-title").textContent = `Trial ${trial.trial}: looking for ${trial.target}`;
     const ended = trial.status !== "searching";
@@ -1280,6 +1284,7 @@
     }
     if (S.depId != null) sel.value = String(S.depId);
     sel.disabled = !S.deployments.length;
+    sel.closest("label").hidden = !S.deployments.length;
     if (keep) sel.focus();
   }
 
@@ -1292,14 +1297,16 @@
     if (!dep) {
       $("deployment-title").textContent = "Deployment";
       $("deployment-summary").textContent =
-        S.loaded && !S.deployments.length ? "No deployment yet." : "";
+        S.loaded && !S.deployments.length
+          ? "No deployment yet: it shows here when a robot creates one."
+          : "";
       $("next-strategy").textContent = "";
-      $("strategy-table").hidden = true;
+      $("deployment-body").hidden = true;
       renderCurve();
       renderOpenTrials();
       return;
     }
-    $("strategy-table").hidden = false;
+    $("deployment-body").hidden = false;
     const ended = dep.trials.filter((t) => t.status !== "searching").length;
     $("deployment-title").textContent = `Deployment ${dep.id}`;
     $("deployment-summary").textContent =

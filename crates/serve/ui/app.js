@@ -47,7 +47,9 @@
     epoch: 0,
     token: "",
     loaded: false,
-    streamAbort: null,
+    stream: null,
+    opening: null,
+    streams: new Set(),
     retryTimer: null,
     backoff: 0,
     droppedSinceLoad: false,
@@ -62,6 +64,8 @@
     watchedId: null,
     follow: true,
     view: null,
+    viewBusy: false,
+    pending: [],
     scene: null,
     lastError: "",
   };
@@ -210,6 +214,7 @@
     renderDeploymentSelect();
     renderDeployment();
     refetchDeployment();
+    ensureStream();
   }
 
   async function fetchDeployment() {
@@ -266,6 +271,7 @@
   function watch(id, picked) {
     if (picked) S.follow = false;
     S.watchedId = id;
+    S.pending = S.pending.filter((e) => e.trial === id);
     for (const [t, ev] of S.live) if (t !== id && ev.status !== "searching") S.live.delete(t);
     renderFollow();
     renderOpenTrials();
@@ -273,18 +279,32 @@
     refetchView();
   }
 
+  // The watched trial's picture. Its events that arrive meanwhile wait, and are applied to it
+  // once it is in (those it holds already change nothing).
   async function fetchView() {
     const id = S.watchedId;
     if (id == null) return;
-    const view = await api(`/trials/${seg(id)}/view`);
-    const scene = await getScene(view.trial.scene);
-    if (id !== S.watchedId) return;
-    S.view = view;
-    S.scene = scene;
-    renderTrial();
-    renderPlan();
-    renderOpenTrials();
-    renderCurve();
+    S.viewBusy = true;
+    let again = false;
+    try {
+      const view = await api(`/trials/${seg(id)}/view`);
+      const scene = await getScene(view.trial.scene);
+      if (id !== S.watchedId) return;
+      S.view = view;
+      S.scene = scene;
+      const pending = S.pending.filter((e) => e.trial === id);
+      S.pending = [];
+      again = !pending.every(applyStep);
+      const t = view.trial;
+      again = again || (t.status === "done" && !t.replays_m);
+      renderTrial();
+      renderPlan();
+      renderOpenTrials();
+      renderCurve();
+    } finally {
+      S.viewBusy = false;
+    }
+    if (again) refetchView();
   }
 
   // Before any trial: the first scene's plan, so that a wall screen shows the house.
@@ -309,46 +329,111 @@
     el.title = title || "";
   }
 
-  async function openStream() {
+  // The stream follows the selected deployment: once the page shows one, only that deployment's
+  // trials (and every new deployment) come to it (`/events?deployment=ID`), so a busy fleet's
+  // other deployments cost this page nothing.
+  function eventsPath(dep) {
+    return dep == null ? "/events" : `/events?deployment=${seg(dep)}`;
+  }
+
+  function ensureStream() {
+    // A retry is due: it opens the stream wanted then.
+    if (S.retryTimer != null) return;
+    const current = S.opening || S.stream;
+    if (current && current.dep === S.depId) return;
+    if (!current && !S.loaded) return;
+    openStream(S.depId);
+  }
+
+  async function openStream(dep) {
     const epoch = S.epoch;
-    const ctrl = new AbortController();
-    S.streamAbort = ctrl;
+    const me = { ctrl: new AbortController(), dep, draining: false };
+    S.opening = me;
+    S.streams.add(me);
     let res;
     try {
-      res = await fetch("/events", {
+      res = await fetch(eventsPath(dep), {
         headers: { ...headers(), Accept: "text/event-stream" },
         cache: "no-store",
-        signal: ctrl.signal,
+        signal: me.ctrl.signal,
       });
     } catch (e) {
-      if (epoch === S.epoch) streamDown(epoch, 0, "no connection");
+      S.streams.delete(me);
+      if (epoch === S.epoch && S.opening === me) {
+        S.opening = null;
+        dropStream();
+        streamDown(epoch, 0, "no connection");
+      }
       return;
     }
-    if (epoch !== S.epoch) return;
+    if (epoch !== S.epoch || S.opening !== me) {
+      // Another deployment was selected meanwhile: its own stream is on the way.
+      closeStream(me);
+      return;
+    }
+    S.opening = null;
     if (res.status === 401) {
+      closeStream(me);
       refuse();
       return;
     }
     if (!res.ok || !res.body) {
-      ctrl.abort();
+      closeStream(me);
+      // Past the server's cap the stream this one was to replace holds the slot it needs: it
+      // is given up too, and what passes meanwhile is read again once a stream is back.
+      dropStream();
       const retryAfter = Number(res.headers.get("Retry-After")) || 0;
       const why = res.status === 503 ? "the server has too many open views" : `HTTP ${res.status}`;
       streamDown(epoch, retryAfter, why);
       return;
     }
-    setConnection("live", "live", "event stream open");
-    // The subscription exists once the headers are in, so what is fetched from here on misses
-    // no event; after a drop, whatever changed meanwhile is fetched again.
+    // The subscription exists once the headers are in. The stream this one replaces is read a
+    // moment longer, for the events it had on the way; both may carry the same event, which is
+    // then shown once.
+    const old = S.stream;
+    S.stream = me;
+    if (old) {
+      old.draining = true;
+      setTimeout(() => closeStream(old), 1000);
+    }
+    $("connection").dataset.stream = dep == null ? "all" : String(dep);
+    if (!old) setConnection("live", liveText(), liveTitle());
+    // What is fetched from here on misses no event; after a drop, whatever changed meanwhile is
+    // fetched again.
     if (!S.loaded) loadAll();
     else if (S.droppedSinceLoad) resync();
     S.droppedSinceLoad = false;
     try {
-      await readEvents(res.body, epoch);
+      await readEvents(res.body, epoch, me);
     } catch (_) {
       // a dropped connection: reconnect below
     }
-    if (epoch === S.epoch) streamDown(epoch, 0, "the stream ended");
+    S.streams.delete(me);
+    if (epoch === S.epoch && S.stream === me) {
+      S.stream = null;
+      streamDown(epoch, 0, "the stream ended");
+    }
   }
+
+  function closeStream(st) {
+    st.draining = false;
+    st.ctrl.abort();
+    S.streams.delete(st);
+  }
+
+  function dropStream() {
+    if (S.stream) {
+      const old = S.stream;
+      S.stream = null;
+      closeStream(old);
+    }
+  }
+
+  const liveText = () => (S.shared ? "live · every replica" : "live");
+  const liveTitle = () =>
+    S.shared
+      ? "event stream open; trials served by every replica of this database arrive"
+      : "event stream open";
 
   function streamDown(epoch, retryAfterS, why) {
     S.droppedSinceLoad = true;
@@ -360,19 +445,20 @@
     setConnection("reconnecting", `reconnecting (${secs} s)`, `${why}; trying again in ${secs} s`);
     clearTimeout(S.retryTimer);
     S.retryTimer = setTimeout(() => {
-      if (epoch === S.epoch) openStream();
+      S.retryTimer = null;
+      if (epoch === S.epoch) openStream(S.depId);
     }, delay);
   }
 
   // Server-Sent Events read by hand: EventSource cannot send the Authorization header.
-  async function readEvents(body, epoch) {
+  async function readEvents(body, epoch, me) {
     const reader = body.pipeThrough(new TextDecoderStream()).getReader();
     let buf = "";
     let type = "";
     let data = [];
     for (;;) {
       const { value, done } = await reader.read();
-      if (done || epoch !== S.epoch) return;
+      if (done || epoch !== S.epoch || (S.stream !== me && !me.draining)) return;
       buf += value;
       let nl;
       while ((nl = buf.indexOf("\n")) >= 0) {
@@ -404,13 +490,7 @@
     if (type === "hello") {
       S.backoff = 0;
       S.shared = !!d.shared;
-      setConnection(
-        "live",
-        S.shared ? "live · every replica" : "live",
-        S.shared
-          ? "event stream open; trials served by every replica of this database arrive"
-          : "event stream open",
-      );
+      setConnection("live", liveText(), liveTitle());
     } else if (type === "trial") {
       onTrialEvent(d);
     } else if (type === "deployment") {
@@ -453,7 +533,7 @@
       if (e.status !== "searching") refetchDeployment();
     }
     if (e.trial === S.watchedId) {
-      refetchView();
+      followStep(e);
     } else if (
       S.follow &&
       e.deployment === S.depId &&
@@ -464,6 +544,74 @@
     }
     // Only the trials still searching and the watched one are kept.
     if (e.status !== "searching" && e.trial !== S.watchedId) S.live.delete(e.trial);
+  }
+
+  // A step of the watched trial, drawn from its event: the observation it reports, the leg the
+  // robot drove to make it (the way to the next container the event before gave) and the way on.
+  // What the page cannot be sure of (a missed event, a container other than the one proposed)
+  // has the trial's picture read again instead; so has a trial done, for its replays.
+  function followStep(e) {
+    if (S.viewBusy || !S.view || S.view.trial.trial !== e.trial) {
+      S.pending.push(e);
+      if (!S.viewBusy) refetchView();
+      return;
+    }
+    if (!applyStep(e)) {
+      refetchView();
+      return;
+    }
+    renderTrial();
+    renderPlan();
+    renderOpenTrials();
+    const t = S.view.trial;
+    if (t.status === "done" && !t.replays_m) refetchView();
+  }
+
+  // Applies `e` to the picture; false when it cannot follow from what is shown.
+  function applyStep(e) {
+    const v = S.view;
+    const t = v.trial;
+    const n = t.searched.length;
+    if (e.searched < n || (e.searched === n && e.observed)) return true; // shown already
+    if (e.searched === n) {
+      // No search: a start, or a trial given up.
+      if (e.status !== t.status) {
+        t.status = e.status;
+        t.cost_m = e.cost_m;
+        if (e.status !== "searching") t.next = null;
+      }
+      return true;
+    }
+    const o = e.observed;
+    if (e.searched !== n + 1 || !o || t.status !== "searching" || !t.next) return false;
+    if (o.container !== t.next.container) return false;
+    const leg = t.next.path || [];
+    v.route = v.route.length ? v.route.concat(leg.slice(1)) : leg.slice();
+    v.observations.push({ container: o.container, found: o.found, objects: o.objects });
+    t.searched.push(o.container);
+    if (v.likelihoods) v.likelihoods[o.container] = o.found ? 1 : 0;
+    t.status = e.status;
+    t.cost_m = e.cost_m;
+    t.next = e.next && e.status === "searching" ? nextFrom(e.next, e.next_path || []) : null;
+    return true;
+  }
+
+  // The next container as a trial's `next` gives it, from the scene and the event's way there.
+  function nextFrom(id, path) {
+    const c = S.scene ? S.scene.containers.find((x) => x.id === id) : null;
+    let d = 0;
+    for (let i = 1; i < path.length; i++) {
+      d += Math.hypot(path[i][0] - path[i - 1][0], path[i][1] - path[i - 1][1]);
+    }
+    return {
+      container: id,
+      type: c ? c.type : id,
+      room: c ? c.room : null,
+      x: c ? c.x : null,
+      y: c ? c.y : null,
+      distance_m: d,
+      path,
+    };
   }
 
   // ---------------------------------------------------------------- token
@@ -487,9 +635,11 @@
   // Ends everything of the current epoch: requests in flight are dropped when they answer.
   function stop() {
     S.epoch += 1;
-    if (S.streamAbort) S.streamAbort.abort();
-    S.streamAbort = null;
+    for (const st of [...S.streams]) closeStream(st);
+    S.stream = null;
+    S.opening = null;
     clearTimeout(S.retryTimer);
+    S.retryTimer = null;
   }
 
   function clearAll() {
@@ -508,6 +658,8 @@
       watchedId: null,
       follow: true,
       view: null,
+      viewBusy: false,
+      pending: [],
       scene: null,
     });
     clearError();
@@ -524,7 +676,7 @@
     $("auth-error").hidden = true;
     $("view").hidden = false;
     setConnection("connecting", "connecting…", "");
-    openStream();
+    openStream(null);
   }
 
   function readToken() {
@@ -813,6 +965,7 @@
         "stroke-dasharray": "7 5",
         "stroke-linecap": "round",
         "data-container": next.container,
+        "data-points": next.path.length,
       });
       titled(path, `path to the next container, ${next.container}: ${fmtM(next.distance_m)} m`);
       gPaths.appendChild(path);
@@ -1176,8 +1329,6 @@
     fact("target", trial.target, "fact-target");
     fact("strategy", trial.strategy, "fact-strategy");
     fact(ended ? "cost" : "cost so far", `${fmtM(trial.cost_m)} m`, "fact-cost");
-    if (trial.travelled_m != null)
-      fact("odometry", `${fmtM(trial.travelled_m)} m`, "fact-travelled");
     const total = S.scene ? S.scene.containers.length : null;
     fact(
       "searched",

@@ -36,6 +36,11 @@ STATE_SHOWN = """(e) => {
       if (g.dataset.likelihood !== "none") return false;
     } else if (Math.abs(Number(g.dataset.likelihood) - p) > 1e-9) return false;
   }
+  const route = document.querySelector("#route");
+  if ((route ? Number(route.dataset.points) : 0) !== (e.route > 1 ? e.route : 0)) return false;
+  const path = document.querySelector("#next-path");
+  if ((path ? Number(path.dataset.points) : 0) !== e.path) return false;
+  if (document.querySelector("#fact-cost").textContent !== e.cost) return false;
   const listed = [...document.querySelectorAll("#searched-list li[data-container]")];
   if (listed.map((li) => li.dataset.container).join() !== e.searched.join()) return false;
   const open = [...document.querySelectorAll("#open-trials button[data-trial]")];
@@ -89,6 +94,9 @@ def expect_trial(v, api, trial, deployment_open=None, budget_ms=BUDGET_MS):
         "searched": trial["searched"],
         "likelihoods": view["likelihoods"],
         "containers": 9,
+        "route": len(view["route"]),
+        "path": len(trial["next"]["path"]) if trial["next"] else 0,
+        "cost": f"{trial['cost_m']:.2f} m",
         "open": deployment_open
         if deployment_open is not None
         else ([trial["trial"]] if trial["status"] == "searching" else []),
@@ -228,6 +236,8 @@ def test_the_page_asks_only_for_what_changed(serve, view):
     v = view(server).open(TOKEN)
     v.wait_live()
     v.page.wait_for_selector(f'#deployment-card[data-deployment="{dep["id"]}"]', timeout=2000)
+    # Once it shows a deployment, the page's stream carries only that deployment's events.
+    v.page.wait_for_selector(f'#connection[data-stream="{dep["id"]}"]', timeout=2000)
     v.page.wait_for_timeout(300)
     trial = robot.start(dep["id"], "Wallet")
     expect_trial(v, server.api, trial)
@@ -250,11 +260,13 @@ def test_the_page_asks_only_for_what_changed(serve, view):
             "scenes",
             "deployments",
             f"deployments/{dep['id']}",
+            f"events?deployment={dep['id']}",
             "scenes/apartment",
             f"trials/{trial['trial']}/view",
         ]
     ), loaded
-    # Each observation: one refetch of the watched trial's view, nothing else.
+    # Each observation comes with its event, which is enough to draw it: nothing is asked. The
+    # end brings the trial's replays and the deployment's new scores.
     while trial["status"] == "searching":
         t = time.monotonic()
         trial = robot.search_next(trial)
@@ -262,7 +274,7 @@ def test_the_page_asks_only_for_what_changed(serve, view):
         v.page.wait_for_timeout(600)
         asked = gets_since(t)
         if trial["status"] == "searching":
-            assert asked == [f"trials/{trial['trial']}/view"], asked
+            assert asked == [], asked
         else:
             assert sorted(asked) == sorted(
                 [f"trials/{trial['trial']}/view", f"deployments/{dep['id']}"]
@@ -272,6 +284,39 @@ def test_the_page_asks_only_for_what_changed(serve, view):
     v.page.wait_for_timeout(2000)
     assert gets_since(t) == [], "the page polls"
     assert not [r for r in v.requests if r[1] != "GET"], "the page wrote"
+
+
+def test_a_robot_off_the_proposal_and_a_search_given_up_show_too(serve, view):
+    server = serve()
+    robot = Robot(server.api)
+    dep = robot.deploy(strategies=["model/prior"])
+    v = view(server).open(TOKEN)
+    v.page.wait_for_selector(f'#connection[data-stream="{dep["id"]}"]', timeout=5000)
+    trial = robot.start(dep["id"], "Wallet")
+    expect_trial(v, server.api, trial)
+    # The robot searches another container than the one proposed: the event's way does not
+    # lead there, so the page reads the trial again.
+    other = next(c for c in robot.contents if c != trial["next"]["container"])
+    seen = robot.contents[other]
+    trial = server.api.post(
+        f"/trials/{trial['trial']}/observations",
+        {"container": other, "found": "Wallet" in seen, "objects": seen},
+    )
+    expect_trial(v, server.api, trial)
+    if trial["status"] == "searching":
+        trial = robot.search_next(trial)
+        expect_trial(v, server.api, trial)
+    if trial["status"] == "searching":
+        trial = server.api.post(f"/trials/{trial['trial']}/abandon", {})
+        assert trial["status"] == "abandoned"
+        expect_trial(v, server.api, trial)
+        v.within(
+            """(id) => document.querySelector("#trial-status").textContent === "abandoned"
+                && !!document.querySelector(`#selection-curve [data-trial="${id}"]`
+                    + `[data-status="abandoned"]`)""",
+            trial["trial"],
+            what="the trial given up",
+        )
 
 
 def test_a_wrong_token_shows_the_refusal_and_no_data(serve, view):
@@ -451,7 +496,9 @@ def test_past_the_cap_of_event_streams_a_page_still_shows_and_retries(serve, vie
     dep = robot.deploy(strategies=["model/prior", "model/uniform"])
     robot.search_next(robot.start(dep["id"], "Wallet"))
     first = view(server).open(TOKEN)
-    first.wait_live()
+    first.page.wait_for_selector(
+        f'#connection[data-state="live"][data-stream="{dep["id"]}"]', timeout=5000
+    )
     second = view(server).open(TOKEN)
     second.page.wait_for_selector('#connection[data-state="reconnecting"]', timeout=3000)
     second.within(

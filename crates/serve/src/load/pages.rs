@@ -1,7 +1,8 @@
 //! Browser pages watching the fleet, as the live page behaves (crates/serve/ui/app.js). Each
 //! reads `GET /events` on its replica (only the deployment it shows, once it shows one) and
 //! fetches only what it shows: a trial's picture when it starts watching the trial (the events
-//! then carry each step; it reads the picture again only after a gap), its deployment when one
+//! then carry each step; it reads the picture again after a gap, and once the trial is done
+//! for its replays), its deployment when one
 //! of the deployment's trials ends (at most every 500 ms), the list of deployments when one is
 //! created, everything again on `resync`. A stalled page opens the stream and never reads it:
 //! a client that stopped reading. Pages never poll.
@@ -170,8 +171,9 @@ pub(super) async fn page(
                         seen_steps = Some(0);
                     } else if watched == Some(t) {
                         // The events carry each step (the observation, the way to the next
-                        // container): the picture is read again only after a gap.
-                        if steps != seen_steps.map(|n| n + 1) {
+                        // container): the picture is read again only after a gap, and at the
+                        // end for the other strategies' replays, which no event carries.
+                        if steps != seen_steps.map(|n| n + 1) || data["status"] == "done" {
                             view = true;
                         }
                         seen_steps = steps;

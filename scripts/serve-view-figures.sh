@@ -5,7 +5,9 @@
 # alternating, FERRET_FIG_RUNS times each (default 3), so both are measured in one run under the
 # same machine. Then the memory run: 50 robots × 40 trials on houses 0..5 (every grid built
 # early), with and without pages, the first replica's resident memory from a quarter into the
-# run (about 24 000 events). Each line of the output is one run's JSON from
+# run (about 24 000 events). With FERRET_BEFORE_BIN naming an older ferret binary, each round
+# first runs its servers (`--serve-bin`, no pages) under the same robots: what publishing
+# events costs a fleet with no page open. Each line of the output is one run's JSON from
 # `ferret bench serve --json`, prefixed by its label.
 #
 #   FERRET_PROCTHOR_DIR=/abs/path/to/procthor scripts/serve-view-figures.sh > view.jsonl
@@ -39,6 +41,9 @@ run() {
     echo
 }
 for ((i = 1; i <= RUNS; i++)); do
+    if [ -n "${FERRET_BEFORE_BIN:-}" ]; then
+        run "before" --range 0..40 --serve-bin "$FERRET_BEFORE_BIN"
+    fi
     run "no-pages" --range 0..40
     run "5-pages" --range 0..40 --pages 5 --stalled-pages 1
 done

@@ -30,6 +30,23 @@ pub const DEFAULT_MAX_STREAMS: usize = 32;
 /// The PostgreSQL channel events travel on between replicas.
 pub(crate) const CHANNEL: &str = "ferret_events";
 
+/// What a replica with watchers says on the channel (when its first watcher comes, then every
+/// [`HEARTBEAT`]): replicas publish through the database only while someone watches, since a
+/// notification per write costs a fleet that nobody watches (PostgreSQL's work and every
+/// replica's) for nothing.
+pub(crate) const WATCHING: &str = "watching";
+
+/// How often a replica with watchers says so.
+pub(crate) const HEARTBEAT: std::time::Duration = std::time::Duration::from_secs(5);
+
+/// How long a replica publishes after it last heard that someone watches.
+const LEASE: std::time::Duration = std::time::Duration::from_secs(15);
+
+/// Events a replica that publishes nothing keeps, for a watcher that comes: those of the last
+/// [`KEEP_UNHEARD`] go out when it hears of it, so that a page sees every event from the moment
+/// it connected, however long the word took to reach the replica.
+const KEEP_UNHEARD: std::time::Duration = std::time::Duration::from_secs(2);
+
 /// One event as a stream sends it: its name and its JSON data (one line).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Frame {
@@ -127,6 +144,12 @@ enum Route {
 pub struct Events {
     ring: broadcast::Sender<Arc<Frame>>,
     route: std::sync::RwLock<Route>,
+    /// When the hub was made: the clock of `publish_until`.
+    started: std::time::Instant,
+    /// Shared route: publish until this many ms after `started` (someone watches).
+    publish_until: std::sync::atomic::AtomicU64,
+    /// Shared route, publishing nothing: the events of the last [`KEEP_UNHEARD`], with when.
+    unheard: std::sync::Mutex<std::collections::VecDeque<(u64, String)>>,
     open: Arc<AtomicUsize>,
     max_streams: AtomicUsize,
     closed: watch::Sender<bool>,
@@ -161,6 +184,9 @@ impl Events {
         Self {
             ring,
             route: std::sync::RwLock::new(Route::Local),
+            started: std::time::Instant::now(),
+            publish_until: std::sync::atomic::AtomicU64::new(0),
+            unheard: std::sync::Mutex::default(),
             open: Arc::new(AtomicUsize::new(0)),
             max_streams: AtomicUsize::new(max_streams),
             closed,
@@ -187,32 +213,78 @@ impl Events {
         let _ = self.ring.send(Arc::new(frame));
     }
 
-    /// Publishes `frame`: to this replica's watchers, or to every replica's through the
-    /// database. Never waits: when the database falls behind by a whole ring, the event is
-    /// dropped (watchers see it in the next state they read).
-    pub(crate) fn publish(&self, frame: Frame) {
-        let route = self
-            .route
+    fn now_ms(&self) -> u64 {
+        u64::try_from(self.started.elapsed().as_millis()).unwrap_or(u64::MAX)
+    }
+
+    fn route(&self) -> std::sync::RwLockReadGuard<'_, Route> {
+        self.route
             .read()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        match &*route {
-            Route::Local => self.deliver(frame),
-            Route::Shared(outbox) => {
-                if outbox.try_send(frame.encode()).is_err() {
-                    tracing::warn!("event dropped: the database is behind on notifications");
-                }
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// Whether this replica has watchers.
+    pub(crate) fn watched_here(&self) -> bool {
+        self.ring.receiver_count() > 0
+    }
+
+    /// Someone on some replica watches: publish through the database for a while, beginning
+    /// with the events kept meanwhile.
+    pub(crate) fn heard_watching(&self) {
+        let lease = u64::try_from(LEASE.as_millis()).unwrap_or(u64::MAX);
+        self.publish_until
+            .store(self.now_ms().saturating_add(lease), Ordering::SeqCst);
+        let kept: Vec<String> = self
+            .unheard
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .drain(..)
+            .map(|(_, text)| text)
+            .collect();
+        if let Route::Shared(outbox) = &*self.route() {
+            for text in kept {
+                let _ = outbox.try_send(text);
             }
         }
     }
 
-    /// Whether an event would reach anyone: always through the database (other replicas'
-    /// pages), else only while this replica has a watcher.
+    /// Publishes `frame`: to this replica's watchers, or to every replica's through the
+    /// database while someone watches (else it is kept a moment, for a watcher on its way).
+    /// Never waits: when the database falls behind by a whole ring, the event is dropped
+    /// (watchers see it in the next state they read).
+    pub(crate) fn publish(&self, frame: Frame) {
+        match &*self.route() {
+            Route::Local => self.deliver(frame),
+            Route::Shared(outbox) => {
+                let now = self.now_ms();
+                if self.watched_here() || now < self.publish_until.load(Ordering::SeqCst) {
+                    if outbox.try_send(frame.encode()).is_err() {
+                        tracing::warn!("event dropped: the database is behind on notifications");
+                    }
+                    return;
+                }
+                let keep = u64::try_from(KEEP_UNHEARD.as_millis()).unwrap_or(u64::MAX);
+                let mut unheard = self
+                    .unheard
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner);
+                while unheard
+                    .front()
+                    .is_some_and(|(at, _)| now.saturating_sub(*at) > keep)
+                    || unheard.len() >= RING
+                {
+                    unheard.pop_front();
+                }
+                unheard.push_back((now, frame.encode()));
+            }
+        }
+    }
+
+    /// Whether an event is worth making: through the database always (when nobody watches it
+    /// is kept a moment, for a watcher on its way), else only while this replica has a
+    /// watcher.
     pub(crate) fn wanted(&self) -> bool {
-        let route = self
-            .route
-            .read()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        matches!(*route, Route::Shared(_)) || self.ring.receiver_count() > 0
+        matches!(*self.route(), Route::Shared(_)) || self.watched_here()
     }
 
     /// Publishes a trial's state after a write (that recorded `observed`, if any).
@@ -270,12 +342,17 @@ impl Events {
         if taken.is_err() {
             return Err(TooManyStreams { max });
         }
-        Ok(Watcher {
+        let first = !self.watched_here();
+        let watcher = Watcher {
             only,
             ring: self.ring.subscribe(),
             closed: self.closed.subscribe(),
             _slot: Slot(self.open.clone()),
-        })
+        };
+        if first && let Route::Shared(outbox) = &*self.route() {
+            let _ = outbox.try_send(WATCHING.to_string());
+        }
+        Ok(watcher)
     }
 }
 
@@ -456,5 +533,41 @@ mod tests {
             n += 1;
         }
         assert_eq!(n, 5);
+    }
+
+    #[tokio::test]
+    async fn replicas_publish_through_the_database_only_while_someone_watches() {
+        let events = Events::new(4);
+        let (outbox, mut sent) = mpsc::channel(64);
+        events.route_through(outbox);
+        let mut sent_now = || {
+            let mut v = Vec::new();
+            while let Ok(t) = sent.try_recv() {
+                v.push(t);
+            }
+            v
+        };
+        events.publish(frame(1));
+        events.publish(frame(2));
+        assert!(sent_now().is_empty(), "nobody watches: nothing sent");
+        // Another replica's page: the events kept meanwhile go out first, in order.
+        events.heard_watching();
+        events.publish(frame(3));
+        assert_eq!(
+            sent_now(),
+            [frame(1).encode(), frame(2).encode(), frame(3).encode()]
+        );
+        // A page here says so to every replica, once, when it is the first.
+        let events = Events::new(4);
+        let (outbox, mut sent) = mpsc::channel(64);
+        events.route_through(outbox);
+        let _a = events.watch(None).expect("a slot");
+        let _b = events.watch(None).expect("a slot");
+        events.publish(frame(4));
+        let mut got = Vec::new();
+        while let Ok(t) = sent.try_recv() {
+            got.push(t);
+        }
+        assert_eq!(got, [WATCHING.to_string(), frame(4).encode()]);
     }
 }

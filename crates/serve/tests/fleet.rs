@@ -361,3 +361,83 @@ async fn a_page_on_one_replica_sees_a_trial_driven_through_another() {
     ha.abort();
     hb.abort();
 }
+
+/// A fleet that nobody watches sends no notification per write; a page opened on one replica
+/// turns them on everywhere, and sees what the other replica did from the moment it connected.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn replicas_notify_each_other_only_while_a_page_watches() {
+    let Some(url) =
+        support::postgres_or_skip("replicas_notify_each_other_only_while_a_page_watches")
+    else {
+        return;
+    };
+    let (a, ha) = replica(&url).await;
+    let (b, hb) = replica(&url).await;
+    let (listener, mut connection) = tokio_postgres::connect(&url, tokio_postgres::NoTls)
+        .await
+        .unwrap();
+    let heard = Arc::new(std::sync::Mutex::new(Vec::<String>::new()));
+    let sink = heard.clone();
+    let driver = tokio::spawn(async move {
+        while let Some(Ok(m)) =
+            futures_util::future::poll_fn(|cx| connection.poll_message(cx)).await
+        {
+            if let tokio_postgres::AsyncMessage::Notification(n) = m {
+                sink.lock().unwrap().push(n.payload().to_string());
+            }
+        }
+    });
+    listener
+        .batch_execute("LISTEN ferret_events")
+        .await
+        .unwrap();
+    let client = reqwest::Client::new();
+    let post = |url: String, body: Value| {
+        let client = client.clone();
+        async move {
+            let r = client.post(url).json(&body).send().await.unwrap();
+            assert!(r.status().is_success());
+            r.json::<Value>().await.unwrap()
+        }
+    };
+    let d = post(format!("{b}/deployments"), json!({})).await;
+    let id = d["id"].as_i64().unwrap();
+    let before = post(
+        format!("{b}/deployments/{id}/trials"),
+        json!({"scene": "flat", "target": "Wallet"}),
+    )
+    .await;
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    assert!(
+        heard.lock().unwrap().is_empty(),
+        "{:?}",
+        heard.lock().unwrap()
+    );
+
+    let mut page = Stream::open_at(&client, &a, None).await.1.unwrap();
+    assert_eq!(page.next(SECOND).await.0, "hello");
+    let after = post(
+        format!("{b}/deployments/{id}/trials"),
+        json!({"scene": "flat", "target": "Mug"}),
+    )
+    .await;
+    // This start, and those of the moment before the page came (kept for a page on its way).
+    let mut trials = Vec::new();
+    while trials.last() != Some(&after["trial"]) {
+        let (name, e) = page.next(SECOND).await;
+        if name == "trial" {
+            trials.push(e["trial"].clone());
+        }
+    }
+    assert_eq!(trials, [before["trial"].clone(), after["trial"].clone()]);
+    let heard = heard.lock().unwrap().clone();
+    assert_eq!(
+        heard.first().map(String::as_str),
+        Some("watching"),
+        "{heard:?}"
+    );
+    assert!(heard.iter().any(|n| n.starts_with("trial\n")));
+    driver.abort();
+    ha.abort();
+    hb.abort();
+}

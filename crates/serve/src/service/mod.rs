@@ -199,13 +199,25 @@ impl Service {
         let events = Arc::new(Events::new(options.max_event_streams));
         let hub = events.clone();
         let deliver: crate::store::Deliver = Arc::new(move |text: Option<String>| match text {
+            Some(text) if text == crate::events::WATCHING => hub.heard_watching(),
             Some(text) => match Frame::decode(&text) {
                 Some(frame) => hub.deliver(frame),
                 None => tracing::debug!("ignored a notification that is not an event"),
             },
             None => hub.resync_all(),
         });
-        if let Some(outbox) = store.feed(crate::events::CHANNEL, crate::events::RING, deliver)? {
+        let watched = events.clone();
+        let heartbeat = crate::store::Heartbeat {
+            every: crate::events::HEARTBEAT,
+            text: crate::events::WATCHING.into(),
+            when: Arc::new(move || watched.watched_here()),
+        };
+        if let Some(outbox) = store.feed(
+            crate::events::CHANNEL,
+            crate::events::RING,
+            deliver,
+            heartbeat,
+        )? {
             events.route_through(outbox);
         }
         Ok(Service {

@@ -210,7 +210,8 @@ impl Store {
     /// Connects this replica to the events every replica publishes: on PostgreSQL, a session
     /// listens on `channel` (calling `deliver` with each notification's text, or `None` after
     /// a lost session came back) and the returned sender's texts go out as notifications, at
-    /// most `queue` waiting. On SQLite (one server) there is nobody else: `None`.
+    /// most `queue` waiting, with `heartbeat`'s text every `heartbeat.every` while its `when`
+    /// says so. On SQLite (one server) there is nobody else: `None`.
     ///
     /// # Errors
     /// The PostgreSQL client's runtime is gone.
@@ -219,10 +220,11 @@ impl Store {
         channel: &'static str,
         queue: usize,
         deliver: Deliver,
+        heartbeat: Heartbeat,
     ) -> Result<Option<tokio::sync::mpsc::Sender<String>>, StoreError> {
         match &self.backend {
             Backend::Sqlite(_) => Ok(None),
-            Backend::Postgres(p) => p.feed(channel, queue, deliver).map(Some),
+            Backend::Postgres(p) => p.feed(channel, queue, deliver, heartbeat).map(Some),
         }
     }
 
@@ -262,6 +264,16 @@ impl Store {
             }
         }
     }
+}
+
+/// A notification a replica sends again and again while `when` says so ([`Store::feed`]).
+pub struct Heartbeat {
+    /// How often.
+    pub every: std::time::Duration,
+    /// Its text.
+    pub text: String,
+    /// Whether to send it now.
+    pub when: std::sync::Arc<dyn Fn() -> bool + Send + Sync>,
 }
 
 /// What a replica's listener hands on ([`Store::feed`]): a notification's text, or `None` when

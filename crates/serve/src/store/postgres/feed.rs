@@ -11,8 +11,8 @@ use tokio::sync::mpsc;
 use tokio_postgres::{AsyncMessage, NoTls};
 
 use super::Postgres;
-use crate::store::Deliver;
 use crate::store::error::StoreError;
+use crate::store::{Deliver, Heartbeat};
 
 /// Notifications sent in one statement at most.
 const BATCH: usize = 256;
@@ -26,6 +26,7 @@ impl Postgres {
         channel: &'static str,
         queue: usize,
         deliver: Deliver,
+        heartbeat: Heartbeat,
     ) -> Result<mpsc::Sender<String>, StoreError> {
         let Some(rt) = &self.runtime else {
             return Err(StoreError::Unreachable {
@@ -40,7 +41,13 @@ impl Postgres {
             channel,
             deliver,
         ));
-        rt.spawn(notify(self.pool.clone(), self.db.clone(), channel, inbox));
+        rt.spawn(notify(
+            self.pool.clone(),
+            self.db.clone(),
+            channel,
+            inbox,
+            heartbeat,
+        ));
         Ok(outbox)
     }
 }
@@ -92,10 +99,29 @@ async fn listen(config: tokio_postgres::Config, db: String, channel: &str, deliv
     }
 }
 
-/// Sends what is put in `inbox` as notifications on `channel`, as many at once as are waiting.
-async fn notify(pool: Pool, db: String, channel: &str, mut inbox: mpsc::Receiver<String>) {
+/// Sends what is put in `inbox` as notifications on `channel`, as many at once as are waiting,
+/// and `heartbeat`'s text when it is due.
+async fn notify(
+    pool: Pool,
+    db: String,
+    channel: &str,
+    mut inbox: mpsc::Receiver<String>,
+    heartbeat: Heartbeat,
+) {
     let mut batch = Vec::with_capacity(BATCH);
-    while inbox.recv_many(&mut batch, BATCH).await > 0 {
+    let mut beat = tokio::time::interval(heartbeat.every);
+    beat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        tokio::select! {
+            n = inbox.recv_many(&mut batch, BATCH) => if n == 0 { return },
+            _ = beat.tick() => {
+                if (heartbeat.when)() {
+                    batch.push(heartbeat.text.clone());
+                } else {
+                    continue;
+                }
+            }
+        }
         let sent = async {
             let client = pool.get().await.map_err(|e| e.to_string())?;
             client

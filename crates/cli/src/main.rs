@@ -69,8 +69,12 @@ enum Command {
 }
 
 fn main() -> std::process::ExitCode {
-    restore_sigpipe();
     let cli = Cli::parse();
+    // A server writes to sockets whose peers may be gone (a page closed mid-stream); a write
+    // to one must fail that connection, not end the process as SIGPIPE would.
+    if !matches!(cli.command, Command::Serve(_) | Command::Bench(_)) {
+        restore_sigpipe();
+    }
     common::init_tracing(cli.verbose);
     let result = match cli.command {
         Command::Generate(args) => commands::generate::run(args),
@@ -100,8 +104,8 @@ fn main() -> std::process::ExitCode {
 /// on the closed pipe. Restoring the default lets the process end quietly, as Unix tools do.
 #[cfg(unix)]
 fn restore_sigpipe() {
-    // SAFETY: called first thing in main, before any other thread exists; SIG_DFL is a valid
-    // disposition for SIGPIPE.
+    // SAFETY: called in main before any other thread exists (parsing the arguments starts
+    // none); SIG_DFL is a valid disposition for SIGPIPE.
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }

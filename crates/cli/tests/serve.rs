@@ -659,3 +659,26 @@ fn bench_serve_fresh_trials_never_repeats_a_trial() {
         .collect();
     assert!(pairs.len() > 6, "one target per scene: {pairs:?}");
 }
+
+/// A page that goes away while the server writes its events (a tab closed mid-stream) makes a
+/// later write to its socket raise SIGPIPE, which ends a process that does not ignore it (as a
+/// `ferret` command piped into `head` should end): the server ignores it and goes on serving.
+#[test]
+fn sigpipe_from_a_page_gone_mid_stream_leaves_the_server_serving() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut server = Server::start(&dir.path().join("serve.sqlite"));
+    let pid = i32::try_from(server.child.id()).unwrap();
+    // SAFETY: a signal to the child this test started and still holds.
+    assert_eq!(unsafe { libc::kill(pid, libc::SIGPIPE) }, 0);
+    std::thread::sleep(std::time::Duration::from_millis(200));
+    assert!(
+        server.child.try_wait().unwrap().is_none(),
+        "SIGPIPE ended the server: {:?}",
+        server.child.try_wait()
+    );
+    assert_eq!(
+        post(&format!("{}/deployments", server.url), json!({})).0,
+        201
+    );
+    assert_eq!(get(&format!("{}/health", server.url))["status"], "ok");
+}

@@ -31,10 +31,18 @@ pub const DEFAULT_MAX_STREAMS: usize = 32;
 pub(crate) const CHANNEL: &str = "ferret_events";
 
 /// What a replica with watchers says on the channel (when its first watcher comes, then every
-/// [`HEARTBEAT`]): replicas publish through the database only while someone watches, since a
-/// notification per write costs a fleet that nobody watches (PostgreSQL's work and every
-/// replica's) for nothing.
+/// [`HEARTBEAT`]): replicas publish through the database only while another replica has
+/// watchers, since notifications cost a fleet that nobody watches (PostgreSQL's work and every
+/// replica's) for nothing. A replica's own watchers get its events directly.
 pub(crate) const WATCHING: &str = "watching";
+
+/// Longest notification a replica sends: PostgreSQL takes payloads under 8000 bytes. Events
+/// published together go in one notification up to it.
+pub(crate) const MAX_NOTIFICATION: usize = 7_900;
+
+/// Longest trial event: one that would be longer goes without the way to its next container
+/// (a page then reads the trial's picture).
+const MAX_EVENT: usize = 7_000;
 
 /// How often a replica with watchers says so.
 pub(crate) const HEARTBEAT: std::time::Duration = std::time::Duration::from_secs(5);
@@ -71,13 +79,16 @@ impl Frame {
         if !matches!(name, "trial" | "deployment") || data.contains('\n') {
             return None;
         }
-        let value: serde_json::Value = serde_json::from_str(data).ok()?;
+        // Read for its deployment only; the rest is checked to be JSON without being kept.
+        #[derive(Deserialize)]
+        struct Head {
+            deployment: Option<i64>,
+        }
+        let head: Head = serde_json::from_str(data).ok()?;
         Some(Frame {
             name: name.to_string(),
             data: data.to_string(),
-            deployment: (name == "trial")
-                .then(|| value["deployment"].as_i64())
-                .flatten(),
+            deployment: (name == "trial").then_some(head.deployment).flatten(),
         })
     }
 }
@@ -150,6 +161,8 @@ pub struct Events {
     publish_until: std::sync::atomic::AtomicU64,
     /// Shared route, publishing nothing: the events of the last [`KEEP_UNHEARD`], with when.
     unheard: std::sync::Mutex<std::collections::VecDeque<(u64, String)>>,
+    /// This replica's name on the channel: what it hears from itself it has delivered already.
+    replica: String,
     open: Arc<AtomicUsize>,
     max_streams: AtomicUsize,
     closed: watch::Sender<bool>,
@@ -187,6 +200,13 @@ impl Events {
             started: std::time::Instant::now(),
             publish_until: std::sync::atomic::AtomicU64::new(0),
             unheard: std::sync::Mutex::default(),
+            replica: format!(
+                "{}-{:x}",
+                std::process::id(),
+                std::time::SystemTime::now()
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .map_or(0, |d| d.as_nanos())
+            ),
             open: Arc::new(AtomicUsize::new(0)),
             max_streams: AtomicUsize::new(max_streams),
             closed,
@@ -228,8 +248,34 @@ impl Events {
         self.ring.receiver_count() > 0
     }
 
-    /// Someone on some replica watches: publish through the database for a while, beginning
-    /// with the events kept meanwhile.
+    /// This replica's name on the channel: every notification it sends begins with it.
+    pub(crate) fn replica(&self) -> &str {
+        &self.replica
+    }
+
+    /// A notification heard on the channel: `<sender>\n` then frames (or [`WATCHING`])
+    /// separated by blank lines. What this replica sent itself is skipped (its watchers had
+    /// it at once), and what is not ours ignored.
+    pub(crate) fn hear(&self, payload: &str) {
+        let Some((sender, blocks)) = payload.split_once('\n') else {
+            return;
+        };
+        if sender == self.replica {
+            return;
+        }
+        for block in blocks.split("\n\n") {
+            if block == WATCHING {
+                self.heard_watching();
+            } else if let Some(frame) = Frame::decode(block) {
+                self.deliver(frame);
+            } else {
+                tracing::debug!("ignored a notification that is not an event");
+            }
+        }
+    }
+
+    /// Another replica watches: publish through the database for a while, beginning with the
+    /// events kept meanwhile.
     pub(crate) fn heard_watching(&self) {
         let lease = u64::try_from(LEASE.as_millis()).unwrap_or(u64::MAX);
         self.publish_until
@@ -248,17 +294,22 @@ impl Events {
         }
     }
 
-    /// Publishes `frame`: to this replica's watchers, or to every replica's through the
-    /// database while someone watches (else it is kept a moment, for a watcher on its way).
+    /// Publishes `frame`: to this replica's watchers, and on PostgreSQL to the other replicas'
+    /// through the database while one of them has watchers (else it is kept a moment, for a
+    /// watcher on its way).
     /// Never waits: when the database falls behind by a whole ring, the event is dropped
     /// (watchers see it in the next state they read).
     pub(crate) fn publish(&self, frame: Frame) {
         match &*self.route() {
             Route::Local => self.deliver(frame),
             Route::Shared(outbox) => {
+                let text = frame.encode();
+                if self.watched_here() {
+                    self.deliver(frame);
+                }
                 let now = self.now_ms();
-                if self.watched_here() || now < self.publish_until.load(Ordering::SeqCst) {
-                    if outbox.try_send(frame.encode()).is_err() {
+                if now < self.publish_until.load(Ordering::SeqCst) {
+                    if outbox.try_send(text).is_err() {
                         tracing::warn!("event dropped: the database is behind on notifications");
                     }
                     return;
@@ -275,7 +326,7 @@ impl Events {
                 {
                     unheard.pop_front();
                 }
-                unheard.push_back((now, frame.encode()));
+                unheard.push_back((now, text));
             }
         }
     }
@@ -289,7 +340,13 @@ impl Events {
 
     /// Publishes a trial's state after a write (that recorded `observed`, if any).
     pub(crate) fn trial(&self, state: &TrialState, observed: Option<ObservationInfo>) {
-        if let Ok(data) = serde_json::to_string(&TrialEvent::new(state, observed)) {
+        let mut event = TrialEvent::new(state, observed);
+        let mut data = serde_json::to_string(&event);
+        if data.as_ref().is_ok_and(|d| d.len() > MAX_EVENT) {
+            event.next_path = None;
+            data = serde_json::to_string(&event);
+        }
+        if let Ok(data) = data {
             self.publish(Frame {
                 name: "trial".into(),
                 data,
@@ -557,17 +614,32 @@ mod tests {
             sent_now(),
             [frame(1).encode(), frame(2).encode(), frame(3).encode()]
         );
-        // A page here says so to every replica, once, when it is the first.
+        // A page here says so to every replica, once, when it is the first, and gets this
+        // replica's events at once, not through the database.
         let events = Events::new(4);
         let (outbox, mut sent) = mpsc::channel(64);
         events.route_through(outbox);
-        let _a = events.watch(None).expect("a slot");
+        let mut a = events.watch(None).expect("a slot");
         let _b = events.watch(None).expect("a slot");
         events.publish(frame(4));
         let mut got = Vec::new();
         while let Ok(t) = sent.try_recv() {
             got.push(t);
         }
-        assert_eq!(got, [WATCHING.to_string(), frame(4).encode()]);
+        assert_eq!(got, [WATCHING.to_string()]);
+        assert_eq!(a.try_next().as_deref(), Some(&frame(4)));
+        // What it hears: another replica's events and word; its own notifications skipped.
+        let other = |blocks: &[String]| format!("other\n{}", blocks.join("\n\n"));
+        events.hear(&other(&[frame(5).encode(), frame(6).encode()]));
+        assert_eq!(a.try_next().as_deref(), Some(&frame(5)));
+        assert_eq!(a.try_next().as_deref(), Some(&frame(6)));
+        events.hear(&format!("{}\n{}", events.replica(), frame(7).encode()));
+        events.hear("other\nnot an event");
+        assert!(a.try_next().is_none(), "its own and strangers' skipped");
+        events.hear(&other(&[WATCHING.to_string()]));
+        events.publish(frame(8));
+        // Another replica watches: what was kept for it meanwhile, then the new event.
+        assert_eq!(sent.try_recv().ok(), Some(frame(4).encode()));
+        assert_eq!(sent.try_recv().ok(), Some(frame(8).encode()));
     }
 }

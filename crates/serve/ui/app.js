@@ -585,6 +585,8 @@
     const o = e.observed;
     if (e.searched !== n + 1 || !o || t.status !== "searching" || !t.next) return false;
     if (o.container !== t.next.container) return false;
+    // An event too long to travel between replicas comes without the way on: read the picture.
+    if (e.status === "searching" && e.next && !Array.isArray(e.next_path)) return false;
     const leg = t.next.path || [];
     v.route = v.route.length ? v.route.concat(leg.slice(1)) : leg.slice();
     v.observations.push({ container: o.container, found: o.found, objects: o.objects });

@@ -25,7 +25,7 @@ use serde::Serialize;
 
 use crate::api::{SceneSummary, TrialState};
 use crate::error::ApiError;
-use crate::events::{Events, Frame};
+use crate::events::Events;
 use crate::grids::Grids;
 use crate::model::{ApiReply, Outcome, SceneLimits};
 use crate::store::Store;
@@ -199,17 +199,15 @@ impl Service {
         let events = Arc::new(Events::new(options.max_event_streams));
         let hub = events.clone();
         let deliver: crate::store::Deliver = Arc::new(move |text: Option<String>| match text {
-            Some(text) if text == crate::events::WATCHING => hub.heard_watching(),
-            Some(text) => match Frame::decode(&text) {
-                Some(frame) => hub.deliver(frame),
-                None => tracing::debug!("ignored a notification that is not an event"),
-            },
+            Some(text) => hub.hear(&text),
             None => hub.resync_all(),
         });
         let watched = events.clone();
         let heartbeat = crate::store::Heartbeat {
             every: crate::events::HEARTBEAT,
             text: crate::events::WATCHING.into(),
+            sender: events.replica().to_string(),
+            max_bytes: crate::events::MAX_NOTIFICATION,
             when: Arc::new(move || watched.watched_here()),
         };
         if let Some(outbox) = store.feed(

@@ -266,7 +266,8 @@ impl Store {
     }
 }
 
-/// A notification a replica sends again and again while `when` says so ([`Store::feed`]).
+/// How a replica's notifications are sent ([`Store::feed`]): packed, named after their sender,
+/// and with a text sent again and again while `when` says so.
 pub struct Heartbeat {
     /// How often.
     pub every: std::time::Duration,
@@ -274,6 +275,11 @@ pub struct Heartbeat {
     pub text: String,
     /// Whether to send it now.
     pub when: std::sync::Arc<dyn Fn() -> bool + Send + Sync>,
+    /// The first line of every notification sent: who sent it.
+    pub sender: String,
+    /// Longest notification: texts sent together go in one notification up to it, after the
+    /// sender's line, separated by blank lines.
+    pub max_bytes: usize,
 }
 
 /// What a replica's listener hands on ([`Store::feed`]): a notification's text, or `None` when

@@ -122,12 +122,13 @@ async fn notify(
                 }
             }
         }
+        let payloads = pack(&heartbeat.sender, &batch, heartbeat.max_bytes);
         let sent = async {
             let client = pool.get().await.map_err(|e| e.to_string())?;
             client
                 .execute(
                     "SELECT pg_notify($1, t) FROM unnest($2::text[]) AS t",
-                    &[&channel, &batch],
+                    &[&channel, &payloads],
                 )
                 .await
                 .map_err(|e| e.to_string())
@@ -140,5 +141,65 @@ async fn notify(
             );
         }
         batch.clear();
+    }
+}
+
+/// `texts` in as few notifications as fit `max` bytes each: `sender`, a newline, then the texts
+/// separated by blank lines. A text that does not fit alone is left out.
+fn pack(sender: &str, texts: &[String], max: usize) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut current = String::new();
+    for t in texts {
+        if sender.len() + 1 + t.len() > max {
+            tracing::warn!("an event of {} bytes is too long to notify", t.len());
+            continue;
+        }
+        if !current.is_empty() && current.len() + 2 + t.len() > max {
+            out.push(std::mem::take(&mut current));
+        }
+        if current.is_empty() {
+            current.push_str(sender);
+            current.push('\n');
+        } else {
+            current.push_str("\n\n");
+        }
+        current.push_str(t);
+    }
+    if !current.is_empty() {
+        out.push(current);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::pack;
+
+    #[test]
+    fn texts_are_packed_into_notifications_that_fit() {
+        let texts: Vec<String> = (0..10)
+            .map(|i| format!("t{i}-{}", "x".repeat(20)))
+            .collect();
+        let packed = pack("r1", &texts, 80);
+        assert!(packed.len() > 1);
+        assert!(
+            packed
+                .iter()
+                .all(|p| p.len() <= 80 && p.starts_with("r1\n"))
+        );
+        let back: Vec<String> = packed
+            .iter()
+            .flat_map(|p| {
+                p["r1\n".len()..]
+                    .split("\n\n")
+                    .map(str::to_string)
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        assert_eq!(back, texts, "every text once, in order");
+        assert!(
+            pack("r1", &["y".repeat(100)], 80).is_empty(),
+            "too long alone"
+        );
     }
 }

@@ -12,8 +12,9 @@
 //! and is told to read everything again (`resync`), rather than the server keeping a queue per
 //! watcher. Open streams are capped (`max_streams`); past the cap a watcher is refused.
 
-use std::sync::Arc;
+use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 
 use serde::{Deserialize, Serialize};
 use tokio::sync::{broadcast, mpsc, watch};
@@ -30,10 +31,11 @@ pub const DEFAULT_MAX_STREAMS: usize = 32;
 /// The PostgreSQL channel events travel on between replicas.
 pub(crate) const CHANNEL: &str = "ferret_events";
 
-/// What a replica with watchers says on the channel (when its first watcher comes, then every
-/// [`HEARTBEAT`]): replicas publish through the database only while another replica has
-/// watchers, since notifications cost a fleet that nobody watches (PostgreSQL's work and every
-/// replica's) for nothing. A replica's own watchers get its events directly.
+/// What a replica with watchers says on the channel (when its watchers change, then every
+/// [`HEARTBEAT`]), with the deployments they watch (`watching\n3,7`, or `watching\n*` for
+/// all): replicas publish through the database only the events another replica's watchers
+/// want, since notifications cost the database and every replica (a fleet nobody watches pays
+/// nothing). A replica's own watchers get its events directly.
 pub(crate) const WATCHING: &str = "watching";
 
 /// Longest notification a replica sends: PostgreSQL takes payloads under 8000 bytes. Events
@@ -151,16 +153,26 @@ enum Route {
     Shared(mpsc::Sender<String>),
 }
 
+/// Another replica's watchers: until when (ms on the hub's clock) and which deployments they
+/// watch (`None`: all).
+type Lease = (u64, Option<BTreeSet<i64>>);
+
 /// The hub: publishes events and hands out streams of them.
 pub struct Events {
     ring: broadcast::Sender<Arc<Frame>>,
     route: std::sync::RwLock<Route>,
-    /// When the hub was made: the clock of `publish_until`.
+    /// When the hub was made: the clock of `others`.
     started: std::time::Instant,
-    /// Shared route: publish until this many ms after `started` (someone watches).
-    publish_until: std::sync::atomic::AtomicU64,
-    /// Shared route, publishing nothing: the events of the last [`KEEP_UNHEARD`], with when.
-    unheard: std::sync::Mutex<std::collections::VecDeque<(u64, String)>>,
+    /// Shared route: other replicas with watchers, until when (ms after `started`) and which
+    /// deployments they watch (`None`: all).
+    others: Mutex<HashMap<String, Lease>>,
+    /// This replica's watchers: how many watch each deployment (`None`: all).
+    here: Arc<Mutex<BTreeMap<Option<i64>, usize>>>,
+    /// What this replica last said it watches.
+    said: Mutex<Option<String>>,
+    /// Shared route: the events of the last [`KEEP_UNHEARD`] that no other replica wanted,
+    /// with when and their deployment.
+    unheard: Mutex<VecDeque<(u64, Option<i64>, String)>>,
     /// This replica's name on the channel: what it hears from itself it has delivered already.
     replica: String,
     open: Arc<AtomicUsize>,
@@ -198,8 +210,10 @@ impl Events {
             ring,
             route: std::sync::RwLock::new(Route::Local),
             started: std::time::Instant::now(),
-            publish_until: std::sync::atomic::AtomicU64::new(0),
-            unheard: std::sync::Mutex::default(),
+            others: Mutex::default(),
+            here: Arc::default(),
+            said: Mutex::default(),
+            unheard: Mutex::default(),
             replica: format!(
                 "{}-{:x}",
                 std::process::id(),
@@ -264,8 +278,17 @@ impl Events {
             return;
         }
         for block in blocks.split("\n\n") {
-            if block == WATCHING {
-                self.heard_watching();
+            if let Some(which) = block
+                .strip_prefix(WATCHING)
+                .and_then(|r| r.strip_prefix('\n'))
+            {
+                let wanted = (which != "*").then(|| {
+                    which
+                        .split(',')
+                        .filter_map(|d| d.parse::<i64>().ok())
+                        .collect()
+                });
+                self.heard_watching(sender, wanted);
             } else if let Some(frame) = Frame::decode(block) {
                 self.deliver(frame);
             } else {
@@ -274,23 +297,66 @@ impl Events {
         }
     }
 
-    /// Another replica watches: publish through the database for a while, beginning with the
-    /// events kept meanwhile.
-    pub(crate) fn heard_watching(&self) {
+    /// Replica `sender` watches the deployments `wanted` (`None`: all): publish their events
+    /// through the database for a while, beginning with those kept meanwhile.
+    pub(crate) fn heard_watching(&self, sender: &str, wanted: Option<BTreeSet<i64>>) {
         let lease = u64::try_from(LEASE.as_millis()).unwrap_or(u64::MAX);
-        self.publish_until
-            .store(self.now_ms().saturating_add(lease), Ordering::SeqCst);
-        let kept: Vec<String> = self
-            .unheard
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
+        // Held throughout, as `publish` holds it from its choice to its keeping: an event
+        // published meanwhile is either sent by it or found here, never left kept.
+        let mut unheard = lock(&self.unheard);
+        let now = self.now_ms();
+        lock(&self.others).insert(sender.to_string(), (now.saturating_add(lease), wanted));
+        let (send, keep): (Vec<_>, Vec<_>) = unheard
             .drain(..)
-            .map(|(_, text)| text)
-            .collect();
+            .partition(|(_, d, _)| self.others_want(*d, now));
+        unheard.extend(keep);
         if let Route::Shared(outbox) = &*self.route() {
-            for text in kept {
+            for (_, _, text) in send {
                 let _ = outbox.try_send(text);
             }
+        }
+    }
+
+    /// Whether another replica's watchers want an event of `deployment` (`None`: not a
+    /// trial's) now. Called with `unheard` held (the lock order is `unheard`, then `others`).
+    fn others_want(&self, deployment: Option<i64>, now: u64) -> bool {
+        lock(&self.others).values().any(|(until, wanted)| {
+            *until > now
+                && match (wanted, deployment) {
+                    (None, _) | (_, None) => true,
+                    (Some(ids), Some(d)) => ids.contains(&d),
+                }
+        })
+    }
+
+    /// What this replica says on the channel about its watchers now, if it has any.
+    pub(crate) fn watching_word(&self) -> Option<String> {
+        let here = lock(&self.here);
+        if here.is_empty() {
+            return None;
+        }
+        let which = if here.contains_key(&None) {
+            "*".to_string()
+        } else {
+            let ids: Vec<String> = here.keys().flatten().map(i64::to_string).collect();
+            ids.join(",")
+        };
+        Some(format!("{WATCHING}\n{which}"))
+    }
+
+    /// Says on the channel what this replica's watchers watch, when that changed.
+    fn say_watching(&self) {
+        let Some(word) = self.watching_word() else {
+            return;
+        };
+        let mut said = lock(&self.said);
+        if said.as_deref() == Some(word.as_str()) {
+            return;
+        }
+        if let Route::Shared(outbox) = &*self.route()
+            && outbox.try_send(word.clone()).is_ok()
+        {
+            *said = Some(word);
         }
     }
 
@@ -304,29 +370,27 @@ impl Events {
             Route::Local => self.deliver(frame),
             Route::Shared(outbox) => {
                 let text = frame.encode();
+                let deployment = frame.deployment;
                 if self.watched_here() {
                     self.deliver(frame);
                 }
+                let mut unheard = lock(&self.unheard);
                 let now = self.now_ms();
-                if now < self.publish_until.load(Ordering::SeqCst) {
+                if self.others_want(deployment, now) {
                     if outbox.try_send(text).is_err() {
                         tracing::warn!("event dropped: the database is behind on notifications");
                     }
                     return;
                 }
                 let keep = u64::try_from(KEEP_UNHEARD.as_millis()).unwrap_or(u64::MAX);
-                let mut unheard = self
-                    .unheard
-                    .lock()
-                    .unwrap_or_else(std::sync::PoisonError::into_inner);
                 while unheard
                     .front()
-                    .is_some_and(|(at, _)| now.saturating_sub(*at) > keep)
+                    .is_some_and(|(at, _, _)| now.saturating_sub(*at) > keep)
                     || unheard.len() >= RING
                 {
                     unheard.pop_front();
                 }
-                unheard.push_back((now, text));
+                unheard.push_back((now, deployment, text));
             }
         }
     }
@@ -399,28 +463,46 @@ impl Events {
         if taken.is_err() {
             return Err(TooManyStreams { max });
         }
-        let first = !self.watched_here();
+        *lock(&self.here).entry(only).or_default() += 1;
         let watcher = Watcher {
             only,
             ring: self.ring.subscribe(),
             closed: self.closed.subscribe(),
-            _slot: Slot(self.open.clone()),
+            _slot: Slot {
+                open: self.open.clone(),
+                here: self.here.clone(),
+                only,
+            },
         };
-        if first && let Route::Shared(outbox) = &*self.route() {
-            let _ = outbox.try_send(WATCHING.to_string());
-        }
+        self.say_watching();
         Ok(watcher)
     }
 }
 
-/// A stream's place under the cap, given back when the stream ends however it ends.
+/// A stream's place under the cap and among what this replica watches, given back when the
+/// stream ends however it ends.
 #[derive(Debug)]
-struct Slot(Arc<AtomicUsize>);
+struct Slot {
+    open: Arc<AtomicUsize>,
+    here: Arc<Mutex<BTreeMap<Option<i64>, usize>>>,
+    only: Option<i64>,
+}
 
 impl Drop for Slot {
     fn drop(&mut self) {
-        self.0.fetch_sub(1, Ordering::SeqCst);
+        self.open.fetch_sub(1, Ordering::SeqCst);
+        let mut here = lock(&self.here);
+        if let Some(n) = here.get_mut(&self.only) {
+            *n -= 1;
+            if *n == 0 {
+                here.remove(&self.only);
+            }
+        }
     }
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 /// One watcher's events.
@@ -593,7 +675,7 @@ mod tests {
     }
 
     #[tokio::test]
-    async fn replicas_publish_through_the_database_only_while_someone_watches() {
+    async fn replicas_publish_through_the_database_only_what_another_replica_watches() {
         let events = Events::new(4);
         let (outbox, mut sent) = mpsc::channel(64);
         events.route_through(outbox);
@@ -604,42 +686,59 @@ mod tests {
             }
             v
         };
-        events.publish(frame(1));
-        events.publish(frame(2));
-        assert!(sent_now().is_empty(), "nobody watches: nothing sent");
-        // Another replica's page: the events kept meanwhile go out first, in order.
-        events.heard_watching();
+        let trial = |d: i64| Frame {
+            name: "trial".into(),
+            data: format!("{{\"deployment\":{d}}}"),
+            deployment: Some(d),
+        };
+        events.publish(trial(1));
+        events.publish(trial(2));
         events.publish(frame(3));
+        assert!(sent_now().is_empty(), "nobody watches: nothing sent");
+        // Another replica's page on deployment 2: what was kept for it goes out first, then
+        // what it wants as it comes (new deployments always), nothing else.
+        events.heard_watching("other", Some([2].into()));
+        events.publish(trial(1));
+        events.publish(trial(2));
+        events.publish(frame(4));
         assert_eq!(
             sent_now(),
-            [frame(1).encode(), frame(2).encode(), frame(3).encode()]
+            [trial(2), frame(3), trial(2), frame(4)].map(|f| f.encode())
         );
-        // A page here says so to every replica, once, when it is the first, and gets this
-        // replica's events at once, not through the database.
+        // A page of every deployment: the events of deployment 1 kept meanwhile, then the new.
+        events.hear(&format!("third\n{WATCHING}\n*"));
+        events.publish(trial(1));
+        assert_eq!(
+            sent_now(),
+            [trial(1).encode(), trial(1).encode(), trial(1).encode()]
+        );
+
+        // A page here says what it watches, once per change, and gets this replica's events at
+        // once, not through the database.
         let events = Events::new(4);
         let (outbox, mut sent) = mpsc::channel(64);
         events.route_through(outbox);
-        let mut a = events.watch(None).expect("a slot");
-        let _b = events.watch(None).expect("a slot");
-        events.publish(frame(4));
+        let mut a = events.watch(Some(7)).expect("a slot");
+        let b = events.watch(Some(7)).expect("a slot");
+        let c = events.watch(Some(3)).expect("a slot");
+        events.publish(trial(7));
         let mut got = Vec::new();
         while let Ok(t) = sent.try_recv() {
             got.push(t);
         }
-        assert_eq!(got, [WATCHING.to_string()]);
-        assert_eq!(a.try_next().as_deref(), Some(&frame(4)));
-        // What it hears: another replica's events and word; its own notifications skipped.
+        assert_eq!(got, [format!("{WATCHING}\n7"), format!("{WATCHING}\n3,7")]);
+        assert_eq!(a.try_next().as_deref(), Some(&trial(7)));
+        drop((b, c));
+        assert_eq!(events.watching_word(), Some(format!("{WATCHING}\n7")));
+        // What it hears: another replica's events; its own notifications and strangers' skipped.
         let other = |blocks: &[String]| format!("other\n{}", blocks.join("\n\n"));
-        events.hear(&other(&[frame(5).encode(), frame(6).encode()]));
-        assert_eq!(a.try_next().as_deref(), Some(&frame(5)));
+        events.hear(&other(&[trial(7).encode(), frame(6).encode()]));
+        assert_eq!(a.try_next().as_deref(), Some(&trial(7)));
         assert_eq!(a.try_next().as_deref(), Some(&frame(6)));
-        events.hear(&format!("{}\n{}", events.replica(), frame(7).encode()));
+        events.hear(&format!("{}\n{}", events.replica(), trial(7).encode()));
         events.hear("other\nnot an event");
         assert!(a.try_next().is_none(), "its own and strangers' skipped");
-        events.hear(&other(&[WATCHING.to_string()]));
-        events.publish(frame(8));
-        // Another replica watches: what was kept for it meanwhile, then the new event.
-        assert_eq!(sent.try_recv().ok(), Some(frame(4).encode()));
-        assert_eq!(sent.try_recv().ok(), Some(frame(8).encode()));
+        drop(a);
+        assert_eq!(events.watching_word(), None, "no watcher left");
     }
 }

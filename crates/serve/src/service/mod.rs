@@ -205,10 +205,9 @@ impl Service {
         let watched = events.clone();
         let heartbeat = crate::store::Heartbeat {
             every: crate::events::HEARTBEAT,
-            text: crate::events::WATCHING.into(),
             sender: events.replica().to_string(),
             max_bytes: crate::events::MAX_NOTIFICATION,
-            when: Arc::new(move || watched.watched_here()),
+            beat: Arc::new(move || watched.watching_word()),
         };
         if let Some(outbox) = store.feed(
             crate::events::CHANNEL,

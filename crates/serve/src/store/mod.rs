@@ -267,14 +267,12 @@ impl Store {
 }
 
 /// How a replica's notifications are sent ([`Store::feed`]): packed, named after their sender,
-/// and with a text sent again and again while `when` says so.
+/// and with what `beat` gives sent again every `every`.
 pub struct Heartbeat {
     /// How often.
     pub every: std::time::Duration,
-    /// Its text.
-    pub text: String,
-    /// Whether to send it now.
-    pub when: std::sync::Arc<dyn Fn() -> bool + Send + Sync>,
+    /// What to send now, if anything.
+    pub beat: std::sync::Arc<dyn Fn() -> Option<String> + Send + Sync>,
     /// The first line of every notification sent: who sent it.
     pub sender: String,
     /// Longest notification: texts sent together go in one notification up to it, after the

@@ -14,8 +14,11 @@ use super::Postgres;
 use crate::store::error::StoreError;
 use crate::store::{Deliver, Heartbeat};
 
-/// Notifications sent in one statement at most.
+/// Texts sent in one statement at most.
 const BATCH: usize = 256;
+
+/// How long the first text of a batch waits for others: well under what a page would notice.
+const GATHER: Duration = Duration::from_millis(25);
 
 impl Postgres {
     /// Starts listening on `channel` (calling `deliver` for each notification) and returns
@@ -113,12 +116,24 @@ async fn notify(
     beat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
         tokio::select! {
-            n = inbox.recv_many(&mut batch, BATCH) => if n == 0 { return },
+            n = inbox.recv_many(&mut batch, BATCH) => {
+                if n == 0 {
+                    return;
+                }
+                // A notification costs the database and every listening replica far more than
+                // its bytes: what comes within a moment goes in the same ones.
+                tokio::time::sleep(GATHER).await;
+                while batch.len() < BATCH {
+                    match inbox.try_recv() {
+                        Ok(t) => batch.push(t),
+                        Err(_) => break,
+                    }
+                }
+            }
             _ = beat.tick() => {
-                if (heartbeat.when)() {
-                    batch.push(heartbeat.text.clone());
-                } else {
-                    continue;
+                match (heartbeat.beat)() {
+                    Some(text) => batch.push(text),
+                    None => continue,
                 }
             }
         }

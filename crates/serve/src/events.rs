@@ -166,10 +166,8 @@ pub struct Events {
     /// Shared route: other replicas with watchers, until when (ms after `started`) and which
     /// deployments they watch (`None`: all).
     others: Mutex<HashMap<String, Lease>>,
-    /// This replica's watchers: how many watch each deployment (`None`: all).
-    here: Arc<Mutex<BTreeMap<Option<i64>, usize>>>,
-    /// What this replica last said it watches.
-    said: Mutex<Option<String>>,
+    /// What this replica's watchers watch.
+    watching: Arc<Watching>,
     /// Shared route: the events of the last [`KEEP_UNHEARD`] that no other replica wanted,
     /// with when and their deployment.
     unheard: Mutex<VecDeque<(u64, Option<i64>, String)>>,
@@ -211,8 +209,7 @@ impl Events {
             route: std::sync::RwLock::new(Route::Local),
             started: std::time::Instant::now(),
             others: Mutex::default(),
-            here: Arc::default(),
-            said: Mutex::default(),
+            watching: Arc::default(),
             unheard: Mutex::default(),
             replica: format!(
                 "{}-{:x}",
@@ -235,6 +232,7 @@ impl Events {
     /// From now on, events go to the database (`outbox`), and come back to the watchers through
     /// [`Events::deliver`] from the replica's listener.
     pub(crate) fn route_through(&self, outbox: mpsc::Sender<String>) {
+        *lock(&self.watching.outbox) = Some(outbox.clone());
         *self
             .route
             .write()
@@ -331,33 +329,7 @@ impl Events {
 
     /// What this replica says on the channel about its watchers now, if it has any.
     pub(crate) fn watching_word(&self) -> Option<String> {
-        let here = lock(&self.here);
-        if here.is_empty() {
-            return None;
-        }
-        let which = if here.contains_key(&None) {
-            "*".to_string()
-        } else {
-            let ids: Vec<String> = here.keys().flatten().map(i64::to_string).collect();
-            ids.join(",")
-        };
-        Some(format!("{WATCHING}\n{which}"))
-    }
-
-    /// Says on the channel what this replica's watchers watch, when that changed.
-    fn say_watching(&self) {
-        let Some(word) = self.watching_word() else {
-            return;
-        };
-        let mut said = lock(&self.said);
-        if said.as_deref() == Some(word.as_str()) {
-            return;
-        }
-        if let Route::Shared(outbox) = &*self.route()
-            && outbox.try_send(word.clone()).is_ok()
-        {
-            *said = Some(word);
-        }
+        self.watching.word()
     }
 
     /// Publishes `frame`: to this replica's watchers, and on PostgreSQL to the other replicas'
@@ -463,18 +435,18 @@ impl Events {
         if taken.is_err() {
             return Err(TooManyStreams { max });
         }
-        *lock(&self.here).entry(only).or_default() += 1;
+        *lock(&self.watching.here).entry(only).or_default() += 1;
         let watcher = Watcher {
             only,
             ring: self.ring.subscribe(),
             closed: self.closed.subscribe(),
             _slot: Slot {
                 open: self.open.clone(),
-                here: self.here.clone(),
+                watching: self.watching.clone(),
                 only,
             },
         };
-        self.say_watching();
+        self.watching.say();
         Ok(watcher)
     }
 }
@@ -484,19 +456,70 @@ impl Events {
 #[derive(Debug)]
 struct Slot {
     open: Arc<AtomicUsize>,
-    here: Arc<Mutex<BTreeMap<Option<i64>, usize>>>,
+    watching: Arc<Watching>,
     only: Option<i64>,
 }
 
 impl Drop for Slot {
     fn drop(&mut self) {
         self.open.fetch_sub(1, Ordering::SeqCst);
-        let mut here = lock(&self.here);
-        if let Some(n) = here.get_mut(&self.only) {
-            *n -= 1;
-            if *n == 0 {
-                here.remove(&self.only);
+        {
+            let mut here = lock(&self.watching.here);
+            if let Some(n) = here.get_mut(&self.only) {
+                *n -= 1;
+                if *n == 0 {
+                    here.remove(&self.only);
+                }
             }
+        }
+        // A page that moved to one deployment's stream narrows what others send at once.
+        self.watching.say();
+    }
+}
+
+/// What this replica's watchers watch, and what it last said of it on the channel.
+#[derive(Debug, Default)]
+struct Watching {
+    /// How many watch each deployment (`None`: all).
+    here: Mutex<BTreeMap<Option<i64>, usize>>,
+    /// What this replica last said.
+    said: Mutex<Option<String>>,
+    /// Where to say it (replicas on PostgreSQL).
+    outbox: Mutex<Option<mpsc::Sender<String>>>,
+}
+
+impl Watching {
+    /// What to say now: [`WATCHING`] with the deployments watched, if any watcher is open.
+    fn word(&self) -> Option<String> {
+        let here = lock(&self.here);
+        if here.is_empty() {
+            return None;
+        }
+        let which = if here.contains_key(&None) {
+            "*".to_string()
+        } else {
+            let ids: Vec<String> = here.keys().flatten().map(i64::to_string).collect();
+            ids.join(",")
+        };
+        Some(format!("{WATCHING}\n{which}"))
+    }
+
+    /// Says what the watchers watch, when that changed (nothing once none is left: the
+    /// others' leases run out).
+    fn say(&self) {
+        let word = self.word();
+        let mut said = lock(&self.said);
+        if *said == word {
+            return;
+        }
+        match (&word, lock(&self.outbox).as_ref()) {
+            (Some(w), Some(outbox)) => {
+                if outbox.try_send(w.clone()).is_ok() {
+                    *said = word;
+                }
+            }
+            (None, _) => *said = None,
+            (Some(_), None) => {}
         }
     }
 }
@@ -730,6 +753,11 @@ mod tests {
         assert_eq!(a.try_next().as_deref(), Some(&trial(7)));
         drop((b, c));
         assert_eq!(events.watching_word(), Some(format!("{WATCHING}\n7")));
+        assert_eq!(
+            sent.try_recv().ok(),
+            Some(format!("{WATCHING}\n7")),
+            "a closed stream narrows what others send at once"
+        );
         // What it hears: another replica's events; its own notifications and strangers' skipped.
         let other = |blocks: &[String]| format!("other\n{}", blocks.join("\n\n"));
         events.hear(&other(&[trial(7).encode(), frame(6).encode()]));

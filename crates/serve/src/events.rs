@@ -145,14 +145,6 @@ impl TrialEvent {
     }
 }
 
-/// Where the hub's events come from and go.
-enum Route {
-    /// One server: straight to this replica's watchers.
-    Local,
-    /// Replicas on PostgreSQL: to the database, which tells every replica's listener.
-    Shared(mpsc::Sender<String>),
-}
-
 /// Another replica's watchers: until when (ms on the hub's clock) and which deployments they
 /// watch (`None`: all).
 type Lease = (u64, Option<BTreeSet<i64>>);
@@ -160,15 +152,14 @@ type Lease = (u64, Option<BTreeSet<i64>>);
 /// The hub: publishes events and hands out streams of them.
 pub struct Events {
     ring: broadcast::Sender<Arc<Frame>>,
-    route: std::sync::RwLock<Route>,
     /// When the hub was made: the clock of `others`.
     started: std::time::Instant,
-    /// Shared route: other replicas with watchers, until when (ms after `started`) and which
+    /// Other replicas with watchers, until when (ms after `started`) and which
     /// deployments they watch (`None`: all).
     others: Mutex<HashMap<String, Lease>>,
-    /// What this replica's watchers watch.
+    /// What this replica's watchers watch, and the way to the other replicas.
     watching: Arc<Watching>,
-    /// Shared route: the events of the last [`KEEP_UNHEARD`] that no other replica wanted,
+    /// Replicas on PostgreSQL: the events of the last [`KEEP_UNHEARD`] that no other replica wanted,
     /// with when and their deployment.
     unheard: Mutex<VecDeque<(u64, Option<i64>, String)>>,
     /// This replica's name on the channel: what it hears from itself it has delivered already.
@@ -206,7 +197,6 @@ impl Events {
         let (closed, _) = watch::channel(false);
         Self {
             ring,
-            route: std::sync::RwLock::new(Route::Local),
             started: std::time::Instant::now(),
             others: Mutex::default(),
             watching: Arc::default(),
@@ -224,19 +214,16 @@ impl Events {
         }
     }
 
-    /// Sets the most streams open at once (streams open now stay).
-    pub fn set_max_streams(&self, max: usize) {
-        self.max_streams.store(max, Ordering::SeqCst);
+    /// From now on, events for the other replicas go to the database (`outbox`), and theirs
+    /// come through [`Events::hear`] from this replica's listener. Set once, when the service
+    /// is made; a second call changes nothing.
+    pub(crate) fn route_through(&self, outbox: mpsc::Sender<String>) {
+        let _ = self.watching.outbox.set(outbox);
     }
 
-    /// From now on, events go to the database (`outbox`), and come back to the watchers through
-    /// [`Events::deliver`] from the replica's listener.
-    pub(crate) fn route_through(&self, outbox: mpsc::Sender<String>) {
-        *lock(&self.watching.outbox) = Some(outbox.clone());
-        *self
-            .route
-            .write()
-            .unwrap_or_else(std::sync::PoisonError::into_inner) = Route::Shared(outbox);
+    /// Where events for the other replicas go: `None` on one server (SQLite).
+    fn outbox(&self) -> Option<&mpsc::Sender<String>> {
+        self.watching.outbox.get()
     }
 
     /// Tells every watcher `frame` (from the listener, or directly on one server).
@@ -247,12 +234,6 @@ impl Events {
 
     fn now_ms(&self) -> u64 {
         u64::try_from(self.started.elapsed().as_millis()).unwrap_or(u64::MAX)
-    }
-
-    fn route(&self) -> std::sync::RwLockReadGuard<'_, Route> {
-        self.route
-            .read()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
     }
 
     /// Whether this replica has watchers.
@@ -308,7 +289,7 @@ impl Events {
             .drain(..)
             .partition(|(_, d, _)| self.others_want(*d, now));
         unheard.extend(keep);
-        if let Route::Shared(outbox) = &*self.route() {
+        if let Some(outbox) = self.outbox() {
             for (_, _, text) in send {
                 let _ = outbox.try_send(text);
             }
@@ -338,40 +319,39 @@ impl Events {
     /// Never waits: when the database falls behind by a whole ring, the event is dropped
     /// (watchers see it in the next state they read).
     pub(crate) fn publish(&self, frame: Frame) {
-        match &*self.route() {
-            Route::Local => self.deliver(frame),
-            Route::Shared(outbox) => {
-                let text = frame.encode();
-                let deployment = frame.deployment;
-                if self.watched_here() {
-                    self.deliver(frame);
-                }
-                let mut unheard = lock(&self.unheard);
-                let now = self.now_ms();
-                if self.others_want(deployment, now) {
-                    if outbox.try_send(text).is_err() {
-                        tracing::warn!("event dropped: the database is behind on notifications");
-                    }
-                    return;
-                }
-                let keep = u64::try_from(KEEP_UNHEARD.as_millis()).unwrap_or(u64::MAX);
-                while unheard
-                    .front()
-                    .is_some_and(|(at, _, _)| now.saturating_sub(*at) > keep)
-                    || unheard.len() >= RING
-                {
-                    unheard.pop_front();
-                }
-                unheard.push_back((now, deployment, text));
-            }
+        let Some(outbox) = self.outbox() else {
+            self.deliver(frame);
+            return;
+        };
+        let text = frame.encode();
+        let deployment = frame.deployment;
+        if self.watched_here() {
+            self.deliver(frame);
         }
+        let mut unheard = lock(&self.unheard);
+        let now = self.now_ms();
+        if self.others_want(deployment, now) {
+            if outbox.try_send(text).is_err() {
+                tracing::warn!("event dropped: the database is behind on notifications");
+            }
+            return;
+        }
+        let keep = u64::try_from(KEEP_UNHEARD.as_millis()).unwrap_or(u64::MAX);
+        while unheard
+            .front()
+            .is_some_and(|(at, _, _)| now.saturating_sub(*at) > keep)
+            || unheard.len() >= RING
+        {
+            unheard.pop_front();
+        }
+        unheard.push_back((now, deployment, text));
     }
 
     /// Whether an event is worth making: through the database always (when nobody watches it
     /// is kept a moment, for a watcher on its way), else only while this replica has a
     /// watcher.
     pub(crate) fn wanted(&self) -> bool {
-        matches!(*self.route(), Route::Shared(_)) || self.watched_here()
+        self.outbox().is_some() || self.watched_here()
     }
 
     /// Publishes a trial's state after a write (that recorded `observed`, if any).
@@ -484,8 +464,8 @@ struct Watching {
     here: Mutex<BTreeMap<Option<i64>, usize>>,
     /// What this replica last said.
     said: Mutex<Option<String>>,
-    /// Where to say it (replicas on PostgreSQL).
-    outbox: Mutex<Option<mpsc::Sender<String>>>,
+    /// Where to say it, and where events for the other replicas go (replicas on PostgreSQL).
+    outbox: std::sync::OnceLock<mpsc::Sender<String>>,
 }
 
 impl Watching {
@@ -512,7 +492,7 @@ impl Watching {
         if *said == word {
             return;
         }
-        match (&word, lock(&self.outbox).as_ref()) {
+        match (&word, self.outbox.get()) {
             (Some(w), Some(outbox)) => {
                 if outbox.try_send(w.clone()).is_ok() {
                     *said = word;

@@ -43,31 +43,38 @@
 
   // Everything the page knows. `epoch` changes with every start (a new token, a refusal), and
   // answers to requests of an older epoch are dropped, so nothing of a refused session shows.
+  // What the page read from the server: emptied by `clearAll` when the token is refused.
+  function shown() {
+    return {
+      loaded: false,
+      backoff: 0,
+      droppedSinceLoad: false,
+      shared: null,
+      scenes: [],
+      sceneCache: new Map(),
+      deployments: [],
+      depId: null,
+      depPicked: false,
+      dep: null,
+      live: new Map(),
+      watchedId: null,
+      follow: true,
+      view: null,
+      viewBusy: false,
+      pending: [],
+      scene: null,
+    };
+  }
+
   const S = {
     epoch: 0,
     token: "",
-    loaded: false,
     stream: null,
     opening: null,
     streams: new Set(),
     retryTimer: null,
-    backoff: 0,
-    droppedSinceLoad: false,
-    shared: null,
-    scenes: [],
-    sceneCache: new Map(),
-    deployments: [],
-    depId: null,
-    depPicked: false,
-    dep: null,
-    live: new Map(),
-    watchedId: null,
-    follow: true,
-    view: null,
-    viewBusy: false,
-    pending: [],
-    scene: null,
     lastError: "",
+    ...shown(),
   };
 
   class Stale extends Error {}
@@ -645,25 +652,7 @@
   }
 
   function clearAll() {
-    Object.assign(S, {
-      loaded: false,
-      backoff: 0,
-      droppedSinceLoad: false,
-      shared: null,
-      scenes: [],
-      sceneCache: new Map(),
-      deployments: [],
-      depId: null,
-      depPicked: false,
-      dep: null,
-      live: new Map(),
-      watchedId: null,
-      follow: true,
-      view: null,
-      viewBusy: false,
-      pending: [],
-      scene: null,
-    });
+    Object.assign(S, shown());
     clearError();
     renderDeploymentSelect();
     renderDeployment();

@@ -203,18 +203,15 @@ impl Service {
             None => hub.resync_all(),
         });
         let watched = events.clone();
-        let heartbeat = crate::store::Heartbeat {
+        let feed = crate::store::FeedOptions {
             every: crate::events::HEARTBEAT,
             sender: events.replica().to_string(),
             max_bytes: crate::events::MAX_NOTIFICATION,
             beat: Arc::new(move || watched.watching_word()),
         };
-        if let Some(outbox) = store.feed(
-            crate::events::CHANNEL,
-            crate::events::RING,
-            deliver,
-            heartbeat,
-        )? {
+        if let Some(outbox) =
+            store.feed(crate::events::CHANNEL, crate::events::RING, deliver, feed)?
+        {
             events.route_through(outbox);
         }
         Ok(Service {

@@ -53,19 +53,13 @@ impl Service {
 
     /// `GET /trials/{id}`.
     pub fn get_trial(&self, id: i64) -> Result<ApiReply, ApiError> {
-        let (_, state) = self.trial_now(id)?;
-        json(Outcome::Done, &state)
-    }
-
-    /// A stored trial with its state now (the next container planned while it searches).
-    fn trial_now(&self, id: i64) -> Result<(LoadedTrial, TrialState), ApiError> {
         let row = self.trial_row(id)?;
         let t = self.stored_trial(&row)?;
-        let state = Self::state_of(&row, &t)?;
-        Ok((t, state))
+        json(Outcome::Done, &Self::state_of(&row, &t)?)
     }
 
-    /// The state of a stored trial, planned again from its observations.
+    /// The state of a stored trial, planned again from its observations (the next container
+    /// while it searches).
     fn state_of(row: &StoredTrial, t: &LoadedTrial) -> Result<TrialState, ApiError> {
         let mut search = t.search()?;
         let next = match row.status {

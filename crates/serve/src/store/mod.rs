@@ -210,8 +210,8 @@ impl Store {
     /// Connects this replica to the events every replica publishes: on PostgreSQL, a session
     /// listens on `channel` (calling `deliver` with each notification's text, or `None` after
     /// a lost session came back) and the returned sender's texts go out as notifications, at
-    /// most `queue` waiting, with `heartbeat`'s text every `heartbeat.every` while its `when`
-    /// says so. On SQLite (one server) there is nobody else: `None`.
+    /// most `queue` waiting, packed as `options` says, with what `options.beat` gives every
+    /// `options.every`. On SQLite (one server) there is nobody else: `None`.
     ///
     /// # Errors
     /// The PostgreSQL client's runtime is gone.
@@ -220,11 +220,11 @@ impl Store {
         channel: &'static str,
         queue: usize,
         deliver: Deliver,
-        heartbeat: Heartbeat,
+        options: FeedOptions,
     ) -> Result<Option<tokio::sync::mpsc::Sender<String>>, StoreError> {
         match &self.backend {
             Backend::Sqlite(_) => Ok(None),
-            Backend::Postgres(p) => p.feed(channel, queue, deliver, heartbeat).map(Some),
+            Backend::Postgres(p) => p.feed(channel, queue, deliver, options).map(Some),
         }
     }
 
@@ -268,7 +268,7 @@ impl Store {
 
 /// How a replica's notifications are sent ([`Store::feed`]): packed, named after their sender,
 /// and with what `beat` gives sent again every `every`.
-pub struct Heartbeat {
+pub struct FeedOptions {
     /// How often.
     pub every: std::time::Duration,
     /// What to send now, if anything.

@@ -12,7 +12,7 @@ use tokio_postgres::{AsyncMessage, NoTls};
 
 use super::Postgres;
 use crate::store::error::StoreError;
-use crate::store::{Deliver, Heartbeat};
+use crate::store::{Deliver, FeedOptions};
 
 /// Texts sent in one statement at most.
 const BATCH: usize = 256;
@@ -29,7 +29,7 @@ impl Postgres {
         channel: &'static str,
         queue: usize,
         deliver: Deliver,
-        heartbeat: Heartbeat,
+        options: FeedOptions,
     ) -> Result<mpsc::Sender<String>, StoreError> {
         let Some(rt) = &self.runtime else {
             return Err(StoreError::Unreachable {
@@ -49,7 +49,7 @@ impl Postgres {
             self.db.clone(),
             channel,
             inbox,
-            heartbeat,
+            options,
         ));
         Ok(outbox)
     }
@@ -103,16 +103,16 @@ async fn listen(config: tokio_postgres::Config, db: String, channel: &str, deliv
 }
 
 /// Sends what is put in `inbox` as notifications on `channel`, as many at once as are waiting,
-/// and `heartbeat`'s text when it is due.
+/// and what `options.beat` gives when it is due.
 async fn notify(
     pool: Pool,
     db: String,
     channel: &str,
     mut inbox: mpsc::Receiver<String>,
-    heartbeat: Heartbeat,
+    options: FeedOptions,
 ) {
     let mut batch = Vec::with_capacity(BATCH);
-    let mut beat = tokio::time::interval(heartbeat.every);
+    let mut beat = tokio::time::interval(options.every);
     beat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
         tokio::select! {
@@ -131,13 +131,13 @@ async fn notify(
                 }
             }
             _ = beat.tick() => {
-                match (heartbeat.beat)() {
+                match (options.beat)() {
                     Some(text) => batch.push(text),
                     None => continue,
                 }
             }
         }
-        let payloads = pack(&heartbeat.sender, &batch, heartbeat.max_bytes);
+        let payloads = pack(&options.sender, &batch, options.max_bytes);
         let sent = async {
             let client = pool.get().await.map_err(|e| e.to_string())?;
             client

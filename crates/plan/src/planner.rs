@@ -305,6 +305,7 @@ fn fill_rows<const W: usize>(problem: &TourProblem, weight: &[f64], h: &mut Vec<
         let rows = [u, u | 1, u | 2, u | 3];
         let w = rows.map(weight_of);
         let mut best = [[f64::INFINITY; W]; 4];
+        prefetch_far_lookups::<W>(h, u + 4 * PREFETCH_GROUPS_AHEAD, full);
         let mut left = u;
         while left != 0 {
             let x = left.trailing_zeros() as usize;
@@ -326,6 +327,42 @@ fn fill_rows<const W: usize>(problem: &TourProblem, weight: &[f64], h: &mut Vec<
             h.extend_from_slice(row);
         }
     }
+}
+
+/// How many groups ahead [`prefetch_far_lookups`] asks for: far enough for a line from the
+/// shared cache to arrive before the group reads it, near enough that it is still in the core's
+/// cache when it does.
+const PREFETCH_GROUPS_AHEAD: usize = 2;
+
+/// Lookups of container `x` go back 2ˣ rows: from x = 11 on (256 KiB back at 16 lanes) they
+/// leave the core's own caches, so these are the ones worth asking for early.
+const FAR_LOOKUP: usize = 11;
+
+/// Asks the processor for the entries the group of `u` will read for its far next containers,
+/// those from [`FAR_LOOKUP`] on: the hardware prefetchers follow a few streams, not the dozen a
+/// group reads at once. It changes no entry, only when its line arrives. Entries not yet written
+/// (past the end of the table) are skipped.
+#[inline(always)]
+fn prefetch_far_lookups<const W: usize>(h: &[f64], u: usize, full: usize) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        let mut far = u & full & !((1usize << FAR_LOOKUP) - 1);
+        while far != 0 {
+            let x = far.trailing_zeros() as usize;
+            far &= far - 1;
+            let after = (u ^ (1 << x)) * W + x;
+            for k in 0..4 {
+                if let Some(entry) = h.get(after + k * W) {
+                    // SAFETY: SSE is part of x86_64; a prefetch reads nothing the program sees
+                    // and the address is that of a live entry.
+                    unsafe { _mm_prefetch::<_MM_HINT_T0>(std::ptr::from_ref(entry).cast()) };
+                }
+            }
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (h, u, full);
 }
 
 /// `best[l] = min(best[l], w · leg[l] + after)` for every lane: for each next container one

@@ -74,6 +74,10 @@ struct Routes {
     grid: OccupancyGrid,
     /// Flat cell index of every slot.
     cells: Vec<u32>,
+    /// The moves of every cell of `grid` (see [`moves_of`]), shared by the same grid at
+    /// another start: computing them visits every neighbour of every cell, more than a short
+    /// search does.
+    moves: Arc<[u8]>,
     /// The soft cost of this grid, made on first use: an evaluation asks it for every trial of
     /// the house, mostly for legs it has already searched. Shared by clones (same grid, same
     /// cells); `None` inside when the grid makes no soft grid.
@@ -81,10 +85,11 @@ struct Routes {
 }
 
 impl Routes {
-    fn new(grid: OccupancyGrid, cells: Vec<u32>) -> Self {
+    fn new(grid: OccupancyGrid, cells: Vec<u32>, moves: Arc<[u8]>) -> Self {
         Self {
             grid,
             cells,
+            moves,
             soft: Arc::default(),
         }
     }
@@ -195,14 +200,15 @@ impl Distances {
         // room are neighbours, so the last searches mostly stay in the last rooms. (Reordering
         // the places to make those tails tight by straight-line distance measured no better on
         // multiroom-val150.)
-        let mut search = Search::new(grid);
+        let moves = moves_of(grid);
+        let mut search = Search::new(grid, Arc::clone(&moves));
         for s in 0..n.saturating_sub(1) {
             fill_row(&mut search, house, &cells, s, res, &mut metres)?;
         }
         Ok(Distances {
             containers: n - 1,
             metres,
-            routes: Some(Routes::new(grid.clone(), cells)),
+            routes: Some(Routes::new(grid.clone(), cells, moves)),
         })
     }
 
@@ -238,7 +244,13 @@ impl Distances {
         let mut cells = routes.cells.clone();
         cells[0] = grid.start_index();
         let mut metres = self.metres.clone();
-        let mut search = Search::new(grid);
+        // The same floor at another start (what `OccupancyGrid::with_start` makes) moves alike.
+        let moves = if grid.raw_cells() == routes.grid.raw_cells() {
+            Arc::clone(&routes.moves)
+        } else {
+            moves_of(grid)
+        };
+        let mut search = Search::new(grid, Arc::clone(&moves));
         metres[0] = 0.0;
         fill_row(
             &mut search,
@@ -251,7 +263,7 @@ impl Distances {
         Ok(Distances {
             containers: self.containers,
             metres,
-            routes: Some(Routes::new(grid.clone(), cells)),
+            routes: Some(Routes::new(grid.clone(), cells, moves)),
         })
     }
 
@@ -317,7 +329,7 @@ impl Distances {
     pub fn path(&self, a: Place, b: Place) -> Option<Vec<Point>> {
         let r = self.routes.as_ref()?;
         let (&from, &to) = (r.cells.get(a.slot())?, r.cells.get(b.slot())?);
-        let mut search = Search::new(&r.grid);
+        let mut search = Search::new(&r.grid, Arc::clone(&r.moves));
         search.run::<true>(from, &[to]);
         let cells = search.trace(from, to)?;
         let mut points = Vec::with_capacity(cells.len());
@@ -357,7 +369,7 @@ pub fn travel_field(grid: &OccupancyGrid, from: Cell) -> Option<Vec<f64>> {
         return None;
     }
     let source = from.z * grid.width() + from.x;
-    let mut search = Search::new(grid);
+    let mut search = Search::new(grid, moves_of(grid));
     search.run::<false>(source, &[]);
     let res = grid.resolution();
     Some(
@@ -404,11 +416,50 @@ fn cells_of(steps: u64) -> f64 {
     ((steps >> 32) & 0x7fff_ffff) as f64 + (steps & 0xffff_ffff) as f64 * std::f64::consts::SQRT_2
 }
 
+/// For each cell of `grid`, bit `k` set when move `k` of [`neighbours`] leads to a reachable
+/// cell without cutting a corner (0 for cells that are not reachable).
+fn moves_of(grid: &OccupancyGrid) -> Arc<[u8]> {
+    let cells = grid.raw_cells();
+    let w = grid.width() as usize;
+    let reachable = |i: usize| OccupancyGrid::raw_reachable(cells[i]);
+    // Reachable cells are never on the grid's border (it is a margin of Outside cells), so
+    // all eight neighbours of a reachable cell exist.
+    (0..cells.len())
+        .map(|u| {
+            if !reachable(u) {
+                return 0;
+            }
+            neighbours(u, w)
+                .iter()
+                .enumerate()
+                .fold(0u8, |mask, (k, &(v, via))| {
+                    let ok = reachable(v) && via.is_none_or(|(a, b)| reachable(a) && reachable(b));
+                    mask | (u8::from(ok) << k)
+                })
+        })
+        .collect()
+}
+
+/// The per-cell arrays of a [`Search`], kept per thread between searches: a path for a reply
+/// is one short search, and allocating a grid's worth of arrays cost it more than the search.
+#[derive(Default)]
+struct Buffers {
+    steps: Vec<u64>,
+    key: Vec<f64>,
+    targets: Vec<u8>,
+    parent: Vec<u32>,
+    buckets: [Vec<u32>; 3],
+}
+
+thread_local! {
+    /// The buffers of this thread's last finished [`Search`].
+    static SPARE: std::cell::RefCell<Buffers> = std::cell::RefCell::default();
+}
+
 /// A reusable single-source shortest-path search over a grid's reachable cells.
 struct Search {
-    /// For each cell, bit `k` set when move `k` of [`neighbours`] leads to a reachable cell
-    /// without cutting a corner (0 for cells that are not reachable).
-    moves: Vec<u8>,
+    /// The grid's [`moves_of`].
+    moves: Arc<[u8]>,
     /// Flat-index offsets of the eight moves.
     offsets: [isize; 8],
     /// Packed step counts of the best path found so far, [`UNSEEN`] for none, plus [`SETTLED`].
@@ -422,39 +473,63 @@ struct Search {
     buckets: [Vec<u32>; 3],
 }
 
+impl Drop for Search {
+    fn drop(&mut self) {
+        let buffers = Buffers {
+            steps: std::mem::take(&mut self.steps),
+            key: std::mem::take(&mut self.key),
+            targets: std::mem::take(&mut self.targets),
+            parent: std::mem::take(&mut self.parent),
+            buckets: std::mem::take(&mut self.buckets),
+        };
+        // During thread teardown the spare may be gone already; the buffers are then freed.
+        let _ = SPARE.try_with(|spare| {
+            if let Ok(mut spare) = spare.try_borrow_mut()
+                && buffers.steps.capacity() >= spare.steps.capacity()
+            {
+                *spare = buffers;
+            }
+        });
+    }
+}
+
 impl Search {
-    fn new(grid: &OccupancyGrid) -> Self {
-        let cells = grid.raw_cells();
+    /// A search on `grid` whose moves are `moves` (its [`moves_of`]), in this thread's spare
+    /// buffers when it has them.
+    fn new(grid: &OccupancyGrid, moves: Arc<[u8]>) -> Self {
+        let n = grid.raw_cells().len();
         let w = grid.width() as usize;
-        let reachable = |i: usize| OccupancyGrid::raw_reachable(cells[i]);
-        // Reachable cells are never on the grid's border (it is a margin of Outside cells), so
-        // all eight neighbours of a reachable cell exist.
-        let moves = (0..cells.len())
-            .map(|u| {
-                if !reachable(u) {
-                    return 0;
-                }
-                neighbours(u, w)
-                    .iter()
-                    .enumerate()
-                    .fold(0u8, |mask, (k, &(v, via))| {
-                        let ok =
-                            reachable(v) && via.is_none_or(|(a, b)| reachable(a) && reachable(b));
-                        mask | (u8::from(ok) << k)
-                    })
-            })
-            .collect();
         // Offsets from a cell far enough from the border that none underflows.
         let centre = w + 1;
         let offsets = neighbours(centre, w).map(|(v, _)| v as isize - centre as isize);
+        let Buffers {
+            mut steps,
+            mut key,
+            mut targets,
+            parent,
+            buckets,
+        } = SPARE
+            .try_with(|spare| {
+                spare
+                    .try_borrow_mut()
+                    .map(|mut s| std::mem::take(&mut *s))
+                    .unwrap_or_default()
+            })
+            .unwrap_or_default();
+        // `run` writes every entry of `steps` and `key` before it reads one (and of `parent`
+        // when it keeps parents); `targets` must start empty.
+        steps.resize(n, UNSEEN);
+        key.resize(n, f64::INFINITY);
+        targets.clear();
+        targets.resize(n, 0);
         Search {
             moves,
             offsets,
-            steps: vec![UNSEEN; cells.len()],
-            key: vec![f64::INFINITY; cells.len()],
-            targets: vec![0; cells.len()],
-            parent: Vec::new(),
-            buckets: [Vec::new(), Vec::new(), Vec::new()],
+            steps,
+            key,
+            targets,
+            parent,
+            buckets,
         }
     }
 

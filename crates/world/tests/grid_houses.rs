@@ -674,3 +674,88 @@ proptest! {
         }
     }
 }
+
+/// Searches reuse their thread's arrays from one house to the next: distances and paths of
+/// generated houses of different sizes, searched one after another on one thread (larger and
+/// smaller grids in turn, a moved start among them), are those a fresh thread computes.
+#[test]
+fn searches_on_a_used_thread_give_what_a_fresh_thread_gives() {
+    use ferret_world::generate::{GeneratorOptions, generate_houses};
+    use ferret_world::procthor::scene_from_raw;
+    use ferret_world::{HouseLocation, distance};
+
+    let raws = generate_houses(6, 11, &GeneratorOptions::default());
+    let houses: Vec<House> = raws
+        .iter()
+        .enumerate()
+        .map(|(index, raw)| {
+            let at = HouseLocation {
+                file: "<generated>".into(),
+                index,
+            };
+            scene_from_raw(raw, &at, None).unwrap().house
+        })
+        .collect();
+    // Everything one house gives: its matrix, a path between each pair of neighbouring places,
+    // and the matrix and a path with the start moved to a container's access cell.
+    let measure = |house: &House| {
+        let (grid, d) = distance::build(house, &GridParams::default()).unwrap();
+        let n = d.container_count();
+        let paths: Vec<_> = (0..n)
+            .map(|i| {
+                let a = if i == 0 {
+                    Place::Start
+                } else {
+                    Place::Container(i - 1)
+                };
+                d.path(a, Place::Container(i))
+            })
+            .collect();
+        let mut moved_house = house.clone();
+        moved_house.start.position = d.point(Place::Container(n - 1)).unwrap();
+        let moved_grid = grid
+            .with_start(&moved_house.name, moved_house.start.position)
+            .unwrap()
+            .unwrap();
+        let moved = d.with_start(&moved_house, &moved_grid).unwrap();
+        let moved_path = moved.path(Place::Start, Place::Container(0));
+        (
+            d.matrix().to_vec(),
+            paths,
+            moved.matrix().to_vec(),
+            moved_path,
+        )
+    };
+    let fresh: Vec<_> = houses
+        .iter()
+        .map(|h| {
+            let h = h.clone();
+            std::thread::spawn(move || measure(&h)).join().unwrap()
+        })
+        .collect();
+    let sizes: Vec<usize> = houses
+        .iter()
+        .map(|h| {
+            OccupancyGrid::build(h, &GridParams::default())
+                .unwrap()
+                .cell_count()
+        })
+        .collect();
+    assert!(
+        sizes.iter().min() < sizes.iter().max(),
+        "houses of one size: {sizes:?}"
+    );
+    // Forwards, backwards and forwards again on this one thread.
+    let order: Vec<usize> = (0..houses.len())
+        .chain((0..houses.len()).rev())
+        .chain(0..houses.len())
+        .collect();
+    for &i in &order {
+        assert_eq!(
+            measure(&houses[i]),
+            fresh[i],
+            "house {i} (of {} cells)",
+            sizes[i]
+        );
+    }
+}

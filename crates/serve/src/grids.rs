@@ -25,9 +25,13 @@ pub const MAX_YAW_DEG: f64 = 360.0;
 pub(crate) struct Placed {
     pub(crate) house: House,
     pub(crate) distances: Distances,
-    /// Paths between places already traced for replies: tracing one searches the grid, and a
+    /// Paths from the start already traced for replies: tracing one searches the grid, and a
     /// fleet's robots are sent along the same few legs again and again.
-    paths: Mutex<HashMap<(Place, Place), FloorPath>>,
+    paths: Mutex<KeptPaths>,
+    /// Paths between containers already traced, shared with the scene at every start on the
+    /// same grid (they do not depend on where the robot started): robots that start each trial
+    /// where the last left them place the scene anew every trial.
+    between: Arc<Mutex<KeptPaths>>,
     /// Replays of trials that ended here: the same trial ends the same way for every robot of
     /// a fleet, and each end replays every other candidate.
     pub(crate) replays: ReplayMemo,
@@ -42,21 +46,28 @@ pub(crate) struct Placed {
 /// A traced path: `[x, y]` corners on the floor.
 pub(crate) type FloorPath = Arc<[[f64; 2]]>;
 
-/// Paths a placed scene keeps (about 10 corners of 16 bytes each): at most about 1 MiB.
+/// Traced paths by their two ends.
+pub(crate) type KeptPaths = HashMap<(Place, Place), FloorPath>;
+
+/// Paths between containers a scene keeps: at most about 1 MiB.
 const KEPT_PATHS: usize = 4096;
+
+/// Room for one kept path: about 10 corners of 16 bytes, its key and the map's own.
+const PATH_BYTES: usize = 256;
 
 impl Placed {
     pub(crate) fn new(
         house: House,
         distances: Distances,
         kept_replays: usize,
-        plans: Arc<PlanMemo>,
+        (plans, between): (Arc<PlanMemo>, Arc<Mutex<KeptPaths>>),
         targets: Arc<BTreeSet<ObjectType>>,
     ) -> Self {
         Self {
             house,
             distances,
             paths: Mutex::default(),
+            between,
             replays: ReplayMemo::new(kept_replays),
             plans,
             targets,
@@ -71,8 +82,9 @@ impl Placed {
     }
 
     /// Memory it holds, roughly: two bytes per grid cell, the distance matrix, the house, and
-    /// room for the paths and replays it keeps, and for the plans when it is the first to keep
-    /// them (the scene at its own start is placed before any other start shares its plans).
+    /// room for the paths from its start and the replays it keeps, and for the plans and the
+    /// paths between containers when it is the first to keep them (the scene at its own start
+    /// is placed before any other start shares them).
     fn bytes(&self) -> usize {
         let n = self.house.containers.len() + 1;
         let cells = self.distances.grid().map_or(0, OccupancyGrid::cell_count);
@@ -81,20 +93,30 @@ impl Placed {
         } else {
             0
         };
+        let between = if Arc::strong_count(&self.between) == 1 {
+            KEPT_PATHS * PATH_BYTES
+        } else {
+            0
+        };
         cells * 2
             + n * n * 8
             + n * 64
             + 64 * 1024
-            + (1 << 20)
+            + n * PATH_BYTES
             + self.replays.capacity() * 128
             + plans
+            + between
     }
 
     /// The path from `from` to `to` as `[x, y]` corners on the floor (empty without a grid).
     pub(crate) fn path(&self, from: Place, to: Place) -> FloorPath {
+        let kept = if from == Place::Start || to == Place::Start {
+            &self.paths
+        } else {
+            &*self.between
+        };
         let lock = || {
-            self.paths
-                .lock()
+            kept.lock()
                 .unwrap_or_else(std::sync::PoisonError::into_inner)
         };
         if let Some(p) = lock().get(&(from, to)) {
@@ -343,7 +365,7 @@ impl Grids {
             house,
             distances,
             self.kept_replays,
-            Arc::new(PlanMemo::new(self.kept_plans)),
+            (Arc::new(PlanMemo::new(self.kept_plans)), Arc::default()),
             targets,
         )))
     }
@@ -465,12 +487,12 @@ impl Grids {
         };
         check_shift(&grid, &house, pose, "pose")?;
         let distances = base.distances.with_start(&house, &grid).map_err(invalid)?;
-        // The same grid, so the same travel between containers: plans are shared.
+        // The same grid, so the same travel between containers: plans and paths are shared.
         Ok(Arc::new(Placed::new(
             house,
             distances,
             self.kept_replays,
-            Arc::clone(&base.plans),
+            (Arc::clone(&base.plans), Arc::clone(&base.between)),
             base.targets.clone(),
         )))
     }
@@ -499,5 +521,62 @@ impl Grids {
 
     fn lock_cache(&self) -> MutexGuard<'_, GridCache> {
         self.cache.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ferret_world::HouseLocation;
+    use ferret_world::generate::{GeneratorOptions, generate_house};
+    use ferret_world::procthor::scene_from_raw;
+
+    fn traced(placed: &Placed, from: Place, to: Place) -> Vec<[f64; 2]> {
+        let path = placed.distances.path(from, to).unwrap();
+        path.iter().map(|p| [p.x, p.z]).collect()
+    }
+
+    /// Paths between containers are traced once per scene and shared by the scene at every
+    /// start, and each is the path that start traces for itself; paths from the start are
+    /// each start's own.
+    #[test]
+    fn paths_between_containers_are_shared_by_every_start_and_equal_traced_ones() {
+        let raw = generate_house(5, 0, &GeneratorOptions::default());
+        let at = HouseLocation {
+            file: "<generated>".into(),
+            index: 0,
+        };
+        let scene = Arc::new(scene_from_raw(&raw, &at, None).unwrap());
+        let grids = Grids::new(GridParams::default(), 1 << 30, 2, (0, 0));
+        let base = grids.placed("g", None, || Ok(scene.clone())).unwrap();
+        let n = base.house.containers.len();
+        assert!(n >= 2, "{n} containers");
+        let pose = |c: usize| {
+            let p = base.distances.point(Place::Container(c)).unwrap();
+            [p.x, p.z, 0.0]
+        };
+        let not_loaded = || Err(ApiError::internal("the scene is cached"));
+        let a = grids.placed("g", Some(pose(0)), not_loaded).unwrap();
+        let b = grids.placed("g", Some(pose(n - 1)), not_loaded).unwrap();
+        assert!(Arc::ptr_eq(&a.between, &base.between));
+        assert!(Arc::ptr_eq(&b.between, &base.between));
+        for i in 0..n {
+            for j in 0..n {
+                let (from, to) = (Place::Container(i), Place::Container(j));
+                // Kept through `a`, then read back through `b`.
+                assert_eq!(*a.path(from, to), *traced(&a, from, to));
+                assert_eq!(*b.path(from, to), *traced(&b, from, to));
+            }
+        }
+        let kept = |paths: &Mutex<KeptPaths>| paths.lock().map(|p| p.len()).unwrap_or_default();
+        assert_eq!(kept(&base.between), n * n);
+        let last = Place::Container(n - 1);
+        assert_eq!(*a.path(Place::Start, last), *traced(&a, Place::Start, last));
+        assert_eq!(*b.path(Place::Start, last), *traced(&b, Place::Start, last));
+        assert_ne!(a.path(Place::Start, last), b.path(Place::Start, last));
+        assert_eq!(
+            (kept(&a.paths), kept(&b.paths), kept(&base.paths)),
+            (1, 1, 0)
+        );
     }
 }

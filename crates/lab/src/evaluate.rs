@@ -563,31 +563,45 @@ fn evaluate_house(
         Ok(t) => t,
         Err(e) => return (vec![], vec![e.to_string()], 0),
     };
+    // A house's trials run in parallel too: houses differ in cost by far more than their
+    // trials do, so a batch no longer waits for its one slow house on one thread. Collected in
+    // order, the rows are those of one trial after another.
+    let runs: Vec<Vec<std::result::Result<TrialRow, String>>> = trials
+        .par_iter()
+        .map(|trial| {
+            strategies
+                .iter()
+                .map(|s| {
+                    run_trial(
+                        s.as_ref(),
+                        &SearchProblem::new(&scene.house, distances, trial),
+                        &scene.truth,
+                    )
+                    .and_then(|out| {
+                        let cost =
+                            out.reported_cost(&scene.house, distances, draw.protocol.travel_cost)?;
+                        Ok(TrialOutcome { cost, ..out })
+                    })
+                    .map(|out| trial_row(scene, trial, &out))
+                    .map_err(|e| {
+                        // The target is named only when a house has several trials: with one,
+                        // the house says which trial it was.
+                        if trials.len() > 1 {
+                            format!("{}: {}: {}: {e}", scene.house.name, trial.target, s.name())
+                        } else {
+                            format!("{}: {}: {e}", scene.house.name, s.name())
+                        }
+                    })
+                })
+                .collect()
+        })
+        .collect();
     let mut rows = Vec::new();
     let mut errors = Vec::new();
-    for trial in &trials {
-        for s in strategies {
-            let run = run_trial(
-                s.as_ref(),
-                &SearchProblem::new(&scene.house, distances, trial),
-                &scene.truth,
-            )
-            .and_then(|out| {
-                let cost = out.reported_cost(&scene.house, distances, draw.protocol.travel_cost)?;
-                Ok(TrialOutcome { cost, ..out })
-            });
-            match run {
-                Ok(out) => rows.push(trial_row(scene, trial, &out)),
-                // The target is named only when a house has several trials: with one, the house
-                // says which trial it was.
-                Err(e) if trials.len() > 1 => errors.push(format!(
-                    "{}: {}: {}: {e}",
-                    scene.house.name,
-                    trial.target,
-                    s.name()
-                )),
-                Err(e) => errors.push(format!("{}: {}: {e}", scene.house.name, s.name())),
-            }
+    for run in runs.into_iter().flatten() {
+        match run {
+            Ok(row) => rows.push(row),
+            Err(e) => errors.push(e),
         }
     }
     (rows, errors, trials.len())

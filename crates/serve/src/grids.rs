@@ -81,10 +81,11 @@ impl Placed {
             .with_plan_memo(&self.plans)
     }
 
-    /// Memory it holds, roughly: two bytes per grid cell, the distance matrix, the house, and
-    /// room for the paths from its start and the replays it keeps, and for the plans and the
-    /// paths between containers when it is the first to keep them (the scene at its own start
-    /// is placed before any other start shares them).
+    /// Memory it holds, roughly: three bytes per grid cell (the grid and the moves allowed
+    /// from each cell, counted here even when another start shares them), the distance matrix,
+    /// the house, and room for the paths from its start and the replays it keeps, and for the
+    /// plans and the paths between containers when it is the first to keep them (the scene at
+    /// its own start is placed before any other start shares them).
     fn bytes(&self) -> usize {
         let n = self.house.containers.len() + 1;
         let cells = self.distances.grid().map_or(0, OccupancyGrid::cell_count);
@@ -98,7 +99,7 @@ impl Placed {
         } else {
             0
         };
-        cells * 2
+        cells * 3
             + n * n * 8
             + n * 64
             + 64 * 1024

@@ -21,10 +21,11 @@
 //! settled, and because the grid graph is undirected the matrix is filled by symmetry: from the
 //! start to every container, from container `i` to containers `j > i` only. The moves allowed
 //! from each cell are precomputed as a bit mask, once per grid (a grid at another start shares
-//! them), and each thread keeps its searches' per-cell arrays. On multiroom-val150 (87 k cells
-//! and 23 places per house on average) a house takes a median 17 ms on one thread.
+//! them), and a small pool keeps finished searches' per-cell arrays for the next. On
+//! multiroom-val150 (87 k cells and 23 places per house on average) a house takes a median
+//! 17 ms on one thread.
 
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock};
 
 use rayon::prelude::*;
 
@@ -441,8 +442,8 @@ fn moves_of(grid: &OccupancyGrid) -> Arc<[u8]> {
         .collect()
 }
 
-/// The per-cell arrays of a [`Search`], kept per thread between searches: a path for a reply
-/// is one short search, and allocating a grid's worth of arrays cost it more than the search.
+/// The per-cell arrays of a [`Search`], kept between searches: a path for a reply is one short
+/// search, and allocating a grid's worth of arrays cost it more than the search.
 #[derive(Default)]
 struct Buffers {
     steps: Vec<u64>,
@@ -452,9 +453,38 @@ struct Buffers {
     buckets: [Vec<u32>; 3],
 }
 
-thread_local! {
-    /// The buffers of this thread's last finished [`Search`].
-    static SPARE: std::cell::RefCell<Buffers> = std::cell::RefCell::default();
+/// The arrays of finished searches, for the next ones. One pool for the process, not one set
+/// per thread: a server runs each request on a thread of its own, and a set kept on every
+/// thread that ever searched would hold a grid's worth of memory per thread (about 21 bytes a
+/// cell). Bounded by [`SPARE_SETS`] and [`SPARE_CELLS`].
+static SPARE: Mutex<Vec<Buffers>> = Mutex::new(Vec::new());
+
+/// Most sets of arrays the pool keeps: about as many as searches run at once on a small machine.
+const SPARE_SETS: usize = 4;
+
+/// Largest grid, in cells, whose arrays the pool keeps (about 11 MB a set): ProcTHOR houses
+/// have at most about 200 000; a larger grid allocates its own, as every search once did.
+const SPARE_CELLS: usize = 1 << 19;
+
+/// A set of arrays from the pool, or empty ones.
+fn take_spare() -> Buffers {
+    SPARE
+        .lock()
+        .ok()
+        .and_then(|mut pool| pool.pop())
+        .unwrap_or_default()
+}
+
+/// Gives `buffers` back to the pool when it keeps them (not too large, and room left).
+fn give_back(buffers: Buffers) {
+    if buffers.steps.capacity() > SPARE_CELLS {
+        return;
+    }
+    if let Ok(mut pool) = SPARE.lock()
+        && pool.len() < SPARE_SETS
+    {
+        pool.push(buffers);
+    }
 }
 
 /// A reusable single-source shortest-path search over a grid's reachable cells.
@@ -476,28 +506,19 @@ struct Search {
 
 impl Drop for Search {
     fn drop(&mut self) {
-        let buffers = Buffers {
-            steps: std::mem::take(&mut self.steps),
-            key: std::mem::take(&mut self.key),
-            targets: std::mem::take(&mut self.targets),
-            parent: std::mem::take(&mut self.parent),
-            buckets: std::mem::take(&mut self.buckets),
-        };
-        // During thread teardown the spare may be gone already; the buffers are then freed.
-        let _ = SPARE.try_with(|spare| {
-            if let Ok(mut spare) = spare.try_borrow_mut()
-                && buffers.steps.capacity() >= spare.steps.capacity()
-            {
-                *spare = buffers;
-            }
-        });
+        give_back(self.take_buffers());
     }
 }
 
 impl Search {
-    /// A search on `grid` whose moves are `moves` (its [`moves_of`]), in this thread's spare
-    /// buffers when it has them.
+    /// A search on `grid` whose moves are `moves` (its [`moves_of`]), in arrays from the pool
+    /// when it has some.
     fn new(grid: &OccupancyGrid, moves: Arc<[u8]>) -> Self {
+        Self::with_buffers(grid, moves, take_spare())
+    }
+
+    /// A search on `grid` in `buffers`, whatever searches they held before.
+    fn with_buffers(grid: &OccupancyGrid, moves: Arc<[u8]>, buffers: Buffers) -> Self {
         let n = grid.raw_cells().len();
         let w = grid.width() as usize;
         // Offsets from a cell far enough from the border that none underflows.
@@ -509,14 +530,7 @@ impl Search {
             mut targets,
             parent,
             buckets,
-        } = SPARE
-            .try_with(|spare| {
-                spare
-                    .try_borrow_mut()
-                    .map(|mut s| std::mem::take(&mut *s))
-                    .unwrap_or_default()
-            })
-            .unwrap_or_default();
+        } = buffers;
         // `run` writes every entry of `steps` and `key` before it reads one (and of `parent`
         // when it keeps parents); `targets` must start empty.
         steps.resize(n, UNSEEN);
@@ -531,6 +545,17 @@ impl Search {
             targets,
             parent,
             buckets,
+        }
+    }
+
+    /// Its arrays, leaving it empty.
+    fn take_buffers(&mut self) -> Buffers {
+        Buffers {
+            steps: std::mem::take(&mut self.steps),
+            key: std::mem::take(&mut self.key),
+            targets: std::mem::take(&mut self.targets),
+            parent: std::mem::take(&mut self.parent),
+            buckets: std::mem::take(&mut self.buckets),
         }
     }
 
@@ -641,5 +666,112 @@ impl Search {
         }
         path.reverse();
         Some(path)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::HouseLocation;
+    use crate::generate::{GeneratorOptions, generate_houses};
+    use crate::procthor::scene_from_raw;
+
+    /// Generated houses of several sizes with their grids.
+    fn grids() -> Vec<(House, OccupancyGrid)> {
+        generate_houses(6, 11, &GeneratorOptions::default())
+            .iter()
+            .enumerate()
+            .map(|(index, raw)| {
+                let at = HouseLocation {
+                    file: "<generated>".into(),
+                    index,
+                };
+                let house = scene_from_raw(raw, &at, None).unwrap().house;
+                let grid = OccupancyGrid::build(&house, &crate::GridParams::default()).unwrap();
+                (house, grid)
+            })
+            .collect()
+    }
+
+    /// What a search tells from one place: the length (its bits) to every cell, and the path
+    /// to every place.
+    type FromPlace = (Vec<Option<u64>>, Vec<Vec<u32>>);
+
+    /// Everything a search tells from each place of `grid`: the length to every cell (a search
+    /// with no target settles them all) and the path to every other place.
+    fn measure(search: &mut Search, grid: &OccupancyGrid) -> Vec<FromPlace> {
+        let places: Vec<u32> = std::iter::once(grid.start_index())
+            .chain((0..grid.container_count()).filter_map(|i| grid.access_index(i)))
+            .collect();
+        places
+            .iter()
+            .map(|&from| {
+                search.run::<false>(from, &[]);
+                let lengths = (0..search.steps.len() as u32)
+                    .map(|c| search.length(c).map(f64::to_bits))
+                    .collect();
+                search.run::<true>(from, &places);
+                let paths = places
+                    .iter()
+                    .map(|&to| search.trace(from, to).unwrap_or_default())
+                    .collect();
+                (lengths, paths)
+            })
+            .collect()
+    }
+
+    /// A search in arrays another search left (on a larger grid, a smaller one, the same one)
+    /// finds what a search in new arrays finds.
+    #[test]
+    fn a_search_in_used_arrays_finds_what_one_in_new_arrays_finds() {
+        let grids = grids();
+        let sizes: Vec<usize> = grids.iter().map(|(_, g)| g.cell_count()).collect();
+        assert!(sizes.iter().min() < sizes.iter().max(), "{sizes:?}");
+        let fresh: Vec<_> = grids
+            .iter()
+            .map(|(_, g)| {
+                measure(
+                    &mut Search::with_buffers(g, moves_of(g), Buffers::default()),
+                    g,
+                )
+            })
+            .collect();
+        // Forwards, backwards and forwards again, each search in the arrays of the one before.
+        let order = (0..grids.len())
+            .chain((0..grids.len()).rev())
+            .chain(0..grids.len());
+        let mut used = Buffers::default();
+        for i in order {
+            let g = &grids[i].1;
+            let mut search = Search::with_buffers(g, moves_of(g), used);
+            assert!(
+                measure(&mut search, g) == fresh[i],
+                "house {i} ({} cells)",
+                sizes[i]
+            );
+            used = search.take_buffers();
+        }
+    }
+
+    /// The pool never holds more than its sets, nor the arrays of a grid above its size.
+    #[test]
+    fn the_pool_of_arrays_stays_bounded() {
+        let (_, g) = &grids()[0];
+        let searches: Vec<Search> = (0..3 * SPARE_SETS)
+            .map(|_| Search::new(g, moves_of(g)))
+            .collect();
+        drop(searches);
+        let large = Buffers {
+            steps: Vec::with_capacity(SPARE_CELLS + 1),
+            ..Buffers::default()
+        };
+        give_back(large);
+        let pool = SPARE.lock().unwrap();
+        assert!(
+            !pool.is_empty() && pool.len() <= SPARE_SETS,
+            "{} sets",
+            pool.len()
+        );
+        assert!(pool.iter().all(|b| b.steps.capacity() <= SPARE_CELLS));
     }
 }

@@ -566,39 +566,36 @@ fn evaluate_house(
     // A house's trials run in parallel too: houses differ in cost by far more than their
     // trials do, so a batch no longer waits for its one slow house on one thread. Collected in
     // order, the rows are those of one trial after another.
-    let runs: Vec<Vec<std::result::Result<TrialRow, String>>> = trials
+    let runs: Vec<std::result::Result<TrialRow, String>> = trials
         .par_iter()
-        .map(|trial| {
-            strategies
-                .iter()
-                .map(|s| {
-                    run_trial(
-                        s.as_ref(),
-                        &SearchProblem::new(&scene.house, distances, trial),
-                        &scene.truth,
-                    )
-                    .and_then(|out| {
-                        let cost =
-                            out.reported_cost(&scene.house, distances, draw.protocol.travel_cost)?;
-                        Ok(TrialOutcome { cost, ..out })
-                    })
-                    .map(|out| trial_row(scene, trial, &out))
-                    .map_err(|e| {
-                        // The target is named only when a house has several trials: with one,
-                        // the house says which trial it was.
-                        if trials.len() > 1 {
-                            format!("{}: {}: {}: {e}", scene.house.name, trial.target, s.name())
-                        } else {
-                            format!("{}: {}: {e}", scene.house.name, s.name())
-                        }
-                    })
+        .flat_map_iter(|trial| {
+            strategies.iter().map(|s| {
+                run_trial(
+                    s.as_ref(),
+                    &SearchProblem::new(&scene.house, distances, trial),
+                    &scene.truth,
+                )
+                .and_then(|out| {
+                    let cost =
+                        out.reported_cost(&scene.house, distances, draw.protocol.travel_cost)?;
+                    Ok(TrialOutcome { cost, ..out })
                 })
-                .collect()
+                .map(|out| trial_row(scene, trial, &out))
+                .map_err(|e| {
+                    // The target is named only when a house has several trials: with one,
+                    // the house says which trial it was.
+                    if trials.len() > 1 {
+                        format!("{}: {}: {}: {e}", scene.house.name, trial.target, s.name())
+                    } else {
+                        format!("{}: {}: {e}", scene.house.name, s.name())
+                    }
+                })
+            })
         })
         .collect();
     let mut rows = Vec::new();
     let mut errors = Vec::new();
-    for run in runs.into_iter().flatten() {
+    for run in runs {
         match run {
             Ok(row) => rows.push(row),
             Err(e) => errors.push(e),

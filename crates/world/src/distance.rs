@@ -767,11 +767,8 @@ mod tests {
         };
         give_back(large);
         let pool = SPARE.lock().unwrap();
-        assert!(
-            !pool.is_empty() && pool.len() <= SPARE_SETS,
-            "{} sets",
-            pool.len()
-        );
+        // Other tests may take sets meanwhile, so the pool may be empty here, never over.
+        assert!(pool.len() <= SPARE_SETS, "{} sets", pool.len());
         assert!(pool.iter().all(|b| b.steps.capacity() <= SPARE_CELLS));
     }
 }

@@ -456,3 +456,70 @@ async fn replicas_notify_each_other_only_while_a_page_watches() {
     ha.abort();
     hb.abort();
 }
+
+/// Sessions open on database `db` of the server at `admin`, counted from `admin`'s database.
+async fn sessions_on(admin: &str, db: &str) -> i64 {
+    let (client, connection) = tokio_postgres::connect(admin, tokio_postgres::NoTls)
+        .await
+        .unwrap();
+    tokio::spawn(connection);
+    client
+        .query_one(
+            "SELECT count(*) FROM pg_stat_activity WHERE datname = $1",
+            &[&db],
+        )
+        .await
+        .unwrap()
+        .get(0)
+}
+
+/// A replica opens its pool's connections and its claims session as it starts, so that robots
+/// starting at once do not each wait for a connection to be made; a database that admits
+/// fewer connections than the pool still lets it start and serve.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_replica_opens_its_connections_before_the_first_request() {
+    let Some(url) =
+        support::postgres_or_skip("a_replica_opens_its_connections_before_the_first_request")
+    else {
+        return;
+    };
+    let admin = std::env::var("FERRET_TEST_POSTGRES").unwrap();
+    let db = url.rsplit_once('/').unwrap().1.to_string();
+    let options = ferret_serve::PostgresOptions {
+        pool_size: 4,
+        ..Default::default()
+    };
+    let connect = |url: String| {
+        tokio::task::spawn_blocking(move || ferret_serve::Store::connect(&url, options))
+    };
+    let store = connect(url.clone()).await.unwrap().unwrap();
+    // The pool's 4 and the claims session.
+    assert_eq!(sessions_on(&admin, &db).await, 5);
+    tokio::task::spawn_blocking(move || drop(store))
+        .await
+        .unwrap();
+
+    // A role that may hold 2 sessions (the limit binds roles that are not superusers), owning
+    // a database of its own.
+    let role = format!("{db}_limited");
+    support::psql(
+        &admin,
+        &format!("CREATE ROLE {role} LOGIN CONNECTION LIMIT 2"),
+    );
+    let limited = support::fresh_postgres().unwrap();
+    let limited_db = limited.rsplit_once('/').unwrap().1.to_string();
+    support::psql(
+        &admin,
+        &format!("ALTER DATABASE {limited_db} OWNER TO {role}"),
+    );
+    let limited = limited.replacen("postgres@", &format!("{role}@"), 1);
+    let store = connect(limited).await.unwrap().unwrap();
+    assert_eq!(sessions_on(&admin, &limited_db).await, 2);
+    let created = tokio::task::spawn_blocking(move || {
+        let service = Service::new(store, GridParams::default(), strategies()).unwrap();
+        service.create_deployment(serde_json::from_str("{}").unwrap(), b"{}")
+    })
+    .await
+    .unwrap();
+    assert!(created.is_ok(), "{:?}", created.err());
+}

@@ -46,6 +46,10 @@ const MIGRATIONS: [&[&str]; 2] = [
     ],
 ];
 
+/// What a new connection's server process runs first: planning it opens every table of the
+/// schema and their indexes (it returns no row).
+const WARM: &str = "SELECT 1 FROM scenes, deployments, trials, observations, requests LIMIT 0";
+
 /// The advisory lock every replica takes while it migrates, so two starting at once do not
 /// both migrate ("ferret" in ASCII).
 const MIGRATION_LOCK: i64 = 0x6665_7272_6574;
@@ -160,7 +164,46 @@ impl Postgres {
             claims: Mutex::new(None),
         };
         pg.migrate()?;
+        pg.warm(options.pool_size.max(1));
         Ok(pg)
+    }
+
+    /// Opens the pool's connections and the claims session before the first request, each
+    /// connection's server process reading the definitions of every table and index: robots
+    /// that start at once after a replica starts would otherwise each wait for a connection to
+    /// be made and for a new server process to load its catalog, and their first starts were
+    /// a fleet's slowest. A connection that cannot be made now is only logged: the pool makes
+    /// it when a request needs it.
+    fn warm(&self, size: usize) {
+        let started = std::time::Instant::now();
+        let failures: Vec<String> = self.block_on(async {
+            let clients = futures_util::future::join_all((0..size).map(|_| self.pool.get())).await;
+            futures_util::future::join_all(clients.into_iter().map(|c| async move {
+                match c {
+                    Ok(c) => c.batch_execute(WARM).await.err().map(|e| e.to_string()),
+                    Err(e) => Some(e.to_string()),
+                }
+            }))
+            .await
+            .into_iter()
+            .flatten()
+            .collect()
+        });
+        let claims = self.claim_session().err();
+        match (failures.first(), claims) {
+            (None, None) => tracing::info!(
+                "{}: {size} connections and the claims session open in {:.0} ms",
+                self.db,
+                started.elapsed().as_secs_f64() * 1e3
+            ),
+            (first, claims) => tracing::warn!(
+                "{}: {} of {size} connections open now ({}); the claims session: {}; they are made when requests need them",
+                self.db,
+                size - failures.len(),
+                first.map_or("", String::as_str),
+                claims.map_or_else(|| "open".to_string(), |e| e.to_string())
+            ),
+        }
     }
 
     fn block_on<F: std::future::Future>(&self, f: F) -> F::Output {

@@ -512,8 +512,9 @@ async fn a_replica_opens_its_connections_before_the_first_request() {
         &admin,
         &format!("ALTER DATABASE {limited_db} OWNER TO {role}"),
     );
-    let limited = limited.replacen("postgres@", &format!("{role}@"), 1);
-    let store = connect(limited).await.unwrap().unwrap();
+    let mut limited = reqwest::Url::parse(&limited).unwrap();
+    limited.set_username(&role).unwrap();
+    let store = connect(limited.to_string()).await.unwrap().unwrap();
     assert_eq!(sessions_on(&admin, &limited_db).await, 2);
     let created = tokio::task::spawn_blocking(move || {
         let service = Service::new(store, GridParams::default(), strategies()).unwrap();

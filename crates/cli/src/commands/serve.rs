@@ -65,8 +65,8 @@ pub struct Args {
     )]
     db: String,
     /// PostgreSQL only: connections this replica keeps open, all opened as it starts; requests
-    /// that need one beyond them wait (503 after 10 s). Keep replicas × (this + 1) below the
-    /// server's max_connections.
+    /// that need one beyond them wait (503 after 10 s). Each replica holds 2 sessions more (request
+    /// claims, events): keep replicas × (this + 2) below the server's max_connections.
     #[arg(long, value_name = "N", default_value_t = PostgresOptions::default().pool_size)]
     db_pool: usize,
     /// Environment variable holding the bearer token; when it is set, requests need

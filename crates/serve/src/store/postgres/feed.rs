@@ -96,7 +96,10 @@ async fn listen(config: tokio_postgres::Config, db: String, channel: &str, deliv
                 }
                 drop(client);
             }
-            Err(e) => tracing::warn!("{db}: cannot open a session to listen for events: {e}"),
+            Err(e) => tracing::warn!(
+                "{db}: cannot open a session to listen for events: {}",
+                super::with_causes(&e)
+            ),
         }
         tokio::time::sleep(Duration::from_secs(1)).await;
     }

@@ -50,6 +50,23 @@ const MIGRATIONS: [&[&str]; 2] = [
 /// schema and their indexes (it returns no row).
 const WARM: &str = "SELECT 1 FROM scenes, deployments, trials, observations, requests LIMIT 0";
 
+/// `e` and what caused it, as one line: the pool's and the driver's errors say only "db error"
+/// and keep the server's words (such as "too many connections for role") in their sources.
+pub(super) fn with_causes(e: &dyn std::error::Error) -> String {
+    let mut line = e.to_string();
+    let mut cause = e.source();
+    while let Some(c) = cause {
+        // The pool's error repeats its source's words in its own.
+        let words = c.to_string();
+        if !line.ends_with(&words) {
+            line.push_str(": ");
+            line.push_str(&words);
+        }
+        cause = c.source();
+    }
+    line
+}
+
 /// The advisory lock every replica takes while it migrates, so two starting at once do not
 /// both migrate ("ferret" in ASCII).
 const MIGRATION_LOCK: i64 = 0x6665_7272_6574;
@@ -180,8 +197,8 @@ impl Postgres {
             let clients = futures_util::future::join_all((0..size).map(|_| self.pool.get())).await;
             futures_util::future::join_all(clients.into_iter().map(|c| async move {
                 match c {
-                    Ok(c) => c.batch_execute(WARM).await.err().map(|e| e.to_string()),
-                    Err(e) => Some(e.to_string()),
+                    Ok(c) => c.batch_execute(WARM).await.err().map(|e| with_causes(&e)),
+                    Err(e) => Some(with_causes(&e)),
                 }
             }))
             .await
@@ -189,20 +206,24 @@ impl Postgres {
             .flatten()
             .collect()
         });
-        let claims = self.claim_session().err();
-        match (failures.first(), claims) {
-            (None, None) => tracing::info!(
+        if let Some(first) = failures.first() {
+            tracing::warn!(
+                "{}: {} of {size} connections could not be opened now ({first}); the pool opens them when requests need them",
+                self.db,
+                failures.len()
+            );
+        }
+        match self.claim_session() {
+            Err(e) => tracing::warn!(
+                "{}: the claims session could not be opened now ({e}); it is opened when a request needs it",
+                self.db
+            ),
+            Ok(_) if failures.is_empty() => tracing::info!(
                 "{}: {size} connections and the claims session open in {:.0} ms",
                 self.db,
                 started.elapsed().as_secs_f64() * 1e3
             ),
-            (first, claims) => tracing::warn!(
-                "{}: {} of {size} connections open now ({}); the claims session: {}; they are made when requests need them",
-                self.db,
-                size - failures.len(),
-                first.map_or("", String::as_str),
-                claims.map_or_else(|| "open".to_string(), |e| e.to_string())
-            ),
+            Ok(_) => {}
         }
     }
 

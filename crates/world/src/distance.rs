@@ -41,7 +41,10 @@ use crate::soft::{SoftCache, SoftGrid};
 pub const MAX_CONTAINERS: usize = 2000;
 
 /// A place the robot can be: its start, or at (the access cell of) a container.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
 pub enum Place {
     /// The robot's start pose.
     Start,
@@ -331,6 +334,12 @@ impl Distances {
     pub fn path(&self, a: Place, b: Place) -> Option<Vec<Point>> {
         let r = self.routes.as_ref()?;
         let (&from, &to) = (r.cells.get(a.slot())?, r.cells.get(b.slot())?);
+        self.trace_points(from, to)
+    }
+
+    /// The shortest path between two cells of the grid, corners only.
+    fn trace_points(&self, from: u32, to: u32) -> Option<Vec<Point>> {
+        let r = self.routes.as_ref()?;
         let mut search = Search::new(&r.grid, Arc::clone(&r.moves));
         search.run::<true>(from, &[to]);
         let cells = search.trace(from, to)?;
@@ -345,6 +354,89 @@ impl Distances {
             }
         }
         Some(points)
+    }
+}
+
+/// Travel to one spot of the floor from the start and from every container: where a robot
+/// brings what it found when that is no place of the map (a room, a point). Made by
+/// [`Distances::spot`] for the distances it belongs to.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Spot {
+    /// Where the robot stands there: the centre of its cell.
+    point: Point,
+    /// Its flat cell index.
+    cell: u32,
+    /// Metres to it from every place, by matrix slot (0 = start).
+    metres: Vec<f64>,
+}
+
+impl Spot {
+    /// Where the robot stands there (the centre of its grid cell).
+    pub fn point(&self) -> Point {
+        self.point
+    }
+
+    /// Travel from `place` to the spot, metres (infinite for a place beyond the house).
+    pub fn from(&self, place: Place) -> f64 {
+        self.metres
+            .get(place.slot())
+            .copied()
+            .unwrap_or(f64::INFINITY)
+    }
+}
+
+impl Distances {
+    /// The spot of `cell` (a cell of these distances' grid, e.g. from
+    /// [`OccupancyGrid::nearest_reachable`]): one search from it to the start and every
+    /// container.
+    ///
+    /// # Errors
+    /// [`WorldError::Grid`] when these distances came from no grid or `cell` is not reachable
+    /// from the start (`house` names the house in it).
+    pub fn spot(&self, house: &House, cell: Cell) -> Result<Spot> {
+        let err = |message: String| WorldError::Grid {
+            house: house.name.clone(),
+            message,
+        };
+        let r = self
+            .routes
+            .as_ref()
+            .ok_or_else(|| err("a spot of the floor needs distances measured on a grid".into()))?;
+        let point = r.grid.center(cell);
+        if !r.grid.is_reachable(cell) {
+            return Err(err(format!(
+                "({:.2}, {:.2}) cannot be reached from the start",
+                point.x, point.z
+            )));
+        }
+        let source = cell.z * r.grid.width() + cell.x;
+        let mut search = Search::new(&r.grid, Arc::clone(&r.moves));
+        search.run::<false>(source, &r.cells);
+        let res = r.grid.resolution();
+        let metres = r
+            .cells
+            .iter()
+            .map(|&c| search.length(c).map(|l| l * res))
+            .collect::<Option<Vec<f64>>>()
+            .ok_or_else(|| {
+                err(format!(
+                    "({:.2}, {:.2}) has no path to every container",
+                    point.x, point.z
+                ))
+            })?;
+        Ok(Spot {
+            point,
+            cell: source,
+            metres,
+        })
+    }
+
+    /// The shortest path from `from` to `spot` as points on the floor (as [`path`](Self::path)
+    /// gives between places), when these distances came from a grid.
+    pub fn path_to_spot(&self, from: Place, spot: &Spot) -> Option<Vec<Point>> {
+        let r = self.routes.as_ref()?;
+        let &start = r.cells.get(from.slot())?;
+        self.trace_points(start, spot.cell)
     }
 }
 

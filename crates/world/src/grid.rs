@@ -394,6 +394,30 @@ impl OccupancyGrid {
             .map(usize::from)
     }
 
+    /// The reachable cell nearest to `p` by centre distance (`p`'s own cell when it is
+    /// reachable; ties to the lowest index), with that distance in metres; with `room`, only
+    /// cells of that room count. Where a robot stands when sent to a point of the floor. `None`
+    /// when no cell qualifies or `p` is not finite.
+    pub fn nearest_reachable(&self, p: Point, room: Option<usize>) -> Option<(Cell, f64)> {
+        if !p.is_finite() {
+            return None;
+        }
+        let g = &self.inner;
+        let w = g.width as usize;
+        g.cells
+            .iter()
+            .enumerate()
+            .filter(|&(i, &c)| {
+                c & REACHABLE != 0 && room.is_none_or(|r| usize::from(g.rooms[i]) == r)
+            })
+            .map(|(i, _)| {
+                let centre = g.center((i % w) as u32, (i / w) as u32);
+                (centre.distance(p), i)
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))
+            .map(|(d, i)| (g.cell(i as u32), d))
+    }
+
     /// Number of free cells.
     pub fn free_count(&self) -> usize {
         self.inner.free

@@ -22,7 +22,7 @@ pub mod scene;
 pub mod soft;
 pub mod target_name;
 
-pub use distance::{Distances, Place};
+pub use distance::{Distances, Place, Spot};
 pub use error::{HouseLocation, Result, WorldError, error_chain};
 pub use geometry::{Footprint, Point, Polygon, Rect};
 pub use grid::{GridParams, OccupancyGrid};

@@ -342,3 +342,54 @@ impl ProtocolArgs {
         Ok(p)
     }
 }
+
+/// Household tasks instead of one target per trial.
+#[derive(clap::Args, Clone, Debug, Default)]
+pub struct TaskArgs {
+    /// Household tasks instead of one target per trial: `all:N` asks for N distinct object
+    /// types of each house (drawn from --seed, every one wanted) and `any:N` for any one of N,
+    /// N from 1 to 4. Opening a container reveals all of it: a target seen while looking for
+    /// another is found. Add `sequential/<spec>` (e.g. sequential/model/prior) to --strategies
+    /// for one search after another.
+    #[arg(long, value_name = "all:N|any:N", conflicts_with = "tasks")]
+    pub task: Option<ferret_plan::TaskShape>,
+    /// Where every task of --task brings what it found, its cost counting the way there:
+    /// `start` ("bring it to me"), `room:<RoomType>` (the centre of the house's first room of
+    /// that type, e.g. room:Kitchen) or `container:<ObjectType>` (the first of that type, e.g.
+    /// container:Sofa).
+    #[arg(long, value_name = "start|room:TYPE|container:TYPE", requires = "task")]
+    pub deliver: Option<ferret_lab::Deliver>,
+    /// Tasks given one per trial in a CSV file with the columns house (index in the house
+    /// file), targets (1 to 4 types separated by spaces or +), goal (all or any) and
+    /// destination (start, container:<id>, room:<id>, a point <x>,<z> in metres, or empty).
+    /// Every line is checked before anything runs.
+    #[arg(long, value_name = "FILE", value_parser = parse_task_file)]
+    pub tasks: Option<TaskFile>,
+}
+
+/// The lines of a tasks file.
+#[derive(Clone, Debug)]
+pub struct TaskFile(Vec<ferret_lab::TaskLine>);
+
+/// Reads a tasks file while the arguments are parsed, so that a bad line is a usage error.
+fn parse_task_file(path: &str) -> Result<TaskFile, String> {
+    ferret_lab::read_task_file(std::path::Path::new(path))
+        .map(TaskFile)
+        .map_err(|e| ferret_world::error_chain(&e))
+}
+
+impl TaskArgs {
+    /// The tasks these options ask for, if any.
+    pub fn tasks(&self) -> Option<ferret_lab::Tasks> {
+        match (&self.task, &self.tasks) {
+            (Some(shape), _) => Some(ferret_lab::Tasks::Drawn {
+                shape: *shape,
+                deliver: self.deliver.clone(),
+            }),
+            (None, Some(file)) => Some(ferret_lab::Tasks::Listed {
+                lines: file.0.clone(),
+            }),
+            (None, None) => None,
+        }
+    }
+}

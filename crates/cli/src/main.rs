@@ -95,9 +95,26 @@ fn main() -> std::process::ExitCode {
         Ok(code) => code,
         Err(e) => {
             eprintln!("error: {}", ferret_world::error_chain(e.as_ref()));
-            std::process::ExitCode::FAILURE
+            if is_bad_task(&e) {
+                // A task that cannot be asked is bad input, as a bad option is.
+                std::process::ExitCode::from(2)
+            } else {
+                std::process::ExitCode::FAILURE
+            }
         }
     }
+}
+
+/// Whether `e` says a household task was asked that cannot be (a target twice, a destination
+/// the house does not have, ...): a usage error, as clap's are.
+fn is_bad_task(e: &anyhow::Error) -> bool {
+    e.chain().any(|cause| {
+        cause.is::<ferret_plan::TaskError>()
+            || matches!(
+                cause.downcast_ref::<ferret_lab::LabError>(),
+                Some(ferret_lab::LabError::Task { .. })
+            )
+    })
 }
 
 /// Rust ignores SIGPIPE, so `ferret houses check | head` would make every later `println!` panic

@@ -108,6 +108,7 @@ fn main() {
         per_house: TrialsPerHouse::One,
         protocol: &Protocol::FERRET,
         holdout: None,
+        tasks: None,
     };
     let targets = draw.targets(&scenes, &maps);
     let pairs: Vec<(&House, &ObjectType)> = targets.iter().map(|(h, t)| (*h, t)).collect();

@@ -222,7 +222,7 @@ pub fn targets_for(scene: &Scene, count: TargetCount, seed: u64) -> Vec<ObjectTy
         TargetCount::N(n) => {
             let first = draw_trial(&scene.house, &scene.truth, seed, 0.0)
                 .ok()
-                .map(|t| t.target);
+                .map(|t| t.task.first().clone());
             let mut rest: Vec<ObjectType> = all
                 .into_iter()
                 .filter(|t| Some(t) != first.as_ref())

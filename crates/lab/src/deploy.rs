@@ -2,15 +2,16 @@
 //! step of the deployment loop ([`DeploymentLoop`], owned by the select crate and shared with
 //! the HTTP service) in each.
 
-use ferret_plan::{DrawMode, Protocol, SearchProblem, TrialSpec, TrialsPerHouse};
+use ferret_plan::{DrawMode, Protocol, SearchProblem, Task, TrialSpec, TrialsPerHouse};
 use ferret_select::{DeploymentLoop, DeploymentStep, HouseOrder};
-use ferret_world::{GridParams, ObjectType, Scene};
+use ferret_world::{GridParams, Scene};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use crate::error::{LabError, Result};
 use crate::evaluate::TrialDraw;
 use crate::feedback::Feedback;
+use crate::tasks::{TaskText, Tasks};
 
 /// The houses a batch deployment visits: `trials` visits of `count` houses, cycling through
 /// them in file order when the targets are given (a robot in one home), else shuffled distinct
@@ -46,8 +47,11 @@ pub fn house_order(
 pub struct DeploySettings<'a> {
     /// Trials in all.
     pub trials: usize,
-    /// Object types to find, one per trial, in order; empty draws targets.
-    pub find: &'a [ObjectType],
+    /// What to find, one task per trial (a target, or several with a goal and a destination),
+    /// in order; empty draws them.
+    pub find: &'a [TaskText],
+    /// Household tasks drawn per house instead of one target (when `find` is empty).
+    pub tasks: Option<&'a Tasks>,
     /// Targets drawn per house; each trial runs one of them, picked at random.
     pub per_house: TrialsPerHouse,
     /// Seed of the house order and targets (the selector's tie breaks have their own).
@@ -65,8 +69,8 @@ pub struct DeployedTrial {
     pub k: usize,
     /// Position of the house among the loaded houses.
     pub house: usize,
-    /// The target.
-    pub target: ObjectType,
+    /// What was asked.
+    pub task: Task,
     /// The step: choice, cost, container, replays.
     pub step: DeploymentStep,
 }
@@ -102,6 +106,7 @@ pub fn deploy(
         per_house: settings.per_house,
         protocol: settings.protocol,
         holdout: None,
+        tasks: settings.tasks,
     };
     let mut done = Vec::new();
     let houses = order.houses().to_vec();
@@ -115,18 +120,13 @@ pub fn deploy(
             }
         };
         let trial = if given {
-            let target = settings.find[k].clone();
-            if scene.truth.goal_containers(&target).is_empty() {
-                return Err(LabError::invalid(format!(
-                    "{}: no container holds {target}, so trial {} cannot end",
-                    scene.house.name,
-                    k + 1
-                )));
-            }
-            TrialSpec {
-                target,
-                revealed: Vec::new(),
-            }
+            let task = settings.find[k]
+                .task(scene)
+                .map_err(|error| LabError::Task {
+                    place: format!("trial {}", k + 1),
+                    error,
+                })?;
+            TrialSpec::of(task)
         } else {
             let mut drawn = draw.trials(scene)?;
             // One trial is the paper's draw; the stream is touched only when there is a choice,
@@ -137,12 +137,24 @@ pub fn deploy(
             };
             drawn.swap_remove(pick)
         };
-        let problem = SearchProblem::new(&scene.house, &distances, &trial);
+        let legs = trial
+            .task
+            .destination()
+            .map(|d| d.legs(&scene.house, &distances))
+            .transpose()
+            .map_err(|e| LabError::Task {
+                place: format!("trial {}", k + 1),
+                error: e,
+            })?;
+        let mut problem = SearchProblem::new(&scene.house, &distances, &trial);
+        if let Some(l) = legs.as_ref() {
+            problem = problem.with_destination(l);
+        }
         let step = deployment.step(&problem, &scene.truth)?;
         let t = DeployedTrial {
             k: k + 1,
             house: h,
-            target: trial.target.clone(),
+            task: trial.task.clone(),
             step,
         };
         on_trial(&t);

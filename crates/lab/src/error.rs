@@ -13,6 +13,16 @@ pub enum LabError {
     /// A setting that cannot be used, named as the user gave it.
     #[error("{0}")]
     Invalid(String),
+    /// A household task that cannot be asked: where it was given (a file and line, a task of a
+    /// house) and which field is wrong.
+    #[error("{place}: {error}")]
+    Task {
+        /// Where the task was given.
+        place: String,
+        /// Its field and what is wrong with it.
+        #[source]
+        error: ferret_plan::TaskError,
+    },
     /// A house failed to load, map or validate.
     #[error(transparent)]
     World(#[from] WorldError),

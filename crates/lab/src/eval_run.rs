@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use ferret_plan::{Protocol, TrialsPerHouse};
+use ferret_plan::{Destination, Protocol, TrialSpec, TrialsPerHouse};
 use ferret_world::{ContainerSet, Distances, GridParams, Scene};
 
 use crate::error::{LabError, Result};
@@ -14,11 +14,12 @@ use crate::evaluate::{
 };
 use crate::feedback::Feedback;
 use crate::files::DirLock;
-use crate::houses::HouseSource;
+use crate::houses::{HouseEvent, HouseSource};
 use crate::rows::TrialRow;
 use crate::runs::{ReportView, RunInfo, RunWriter, WrittenRun};
 use crate::shard::{SHARD_RULE, Shard, ShardRecord};
 use crate::strategies::{LlmSettings, PlanningSettings, Strategies, check_distinct};
+use crate::tasks::Tasks;
 
 /// An evaluation run: which houses, strategies and trials, and where its files go.
 #[derive(Clone, Copy, Debug)]
@@ -39,6 +40,8 @@ pub struct EvalJob<'a> {
     pub reveal_fraction: f64,
     /// Trials per house.
     pub trials_per_house: TrialsPerHouse,
+    /// Household tasks instead of one target per trial.
+    pub tasks: Option<&'a Tasks>,
     /// The protocol the trials follow.
     pub protocol: &'a Protocol,
     /// Costs in grid cells too.
@@ -129,17 +132,19 @@ impl EvalJob<'_> {
             per_house: self.trials_per_house,
             protocol,
             holdout: self.planning.holdout,
+            tasks: self.tasks,
         };
         check_holdout_has_trials(&open, &draw)?;
+        let grid = GridParams {
+            access: protocol.access,
+            ..self.grid
+        };
+        check_listed_tasks(self.source, &draw, &grid)?;
         // Claimed before the evaluation, so that a second run into the same directory stops at
         // once rather than after its work, its files then replacing this one's.
         let mut out_lock = DirLock::acquire(self.out)?;
         let mut writer = RunWriter::create(self.out, self.cells)?;
         let mut shown: Option<ShownHouse> = None;
-        let grid = GridParams {
-            access: protocol.access,
-            ..self.grid
-        };
         let context = EvalContext::new(&setup, self.specs, &draw, &grid, self.llm, feedback);
         let totals = context.run(HouseInput::Source(&open), &mut |h| {
             if self.shard.is_none()
@@ -235,6 +240,7 @@ impl EvalJob<'_> {
             reveal_fraction: self.reveal_fraction,
             trials_per_house: self.trials_per_house,
             protocol: *self.protocol,
+            tasks: self.tasks.cloned(),
             strategies: self.specs.to_vec(),
             trials_sha256: None,
             shard: self.shard.map(|sh| ShardRecord {
@@ -252,6 +258,65 @@ impl EvalJob<'_> {
             merged_from: Vec::new(),
         }
     }
+}
+
+/// Refuses, before anything runs, a list of tasks that does not fit its houses: a house the
+/// source does not hold, a target of `all` no container of its house holds, a container or
+/// room its house does not have, a point off the floor the robot reaches. Reads every house
+/// of the source once, and maps those with a destination in a room or at a point.
+pub fn check_listed_tasks(
+    source: &HouseSource,
+    draw: &TrialDraw<'_>,
+    grid: &GridParams,
+) -> Result<()> {
+    let Some(tasks @ Tasks::Listed { lines }) = draw.tasks else {
+        return Ok(());
+    };
+    let wanted = tasks.listed_houses();
+    let mut seen = std::collections::BTreeSet::new();
+    for event in source.open(draw.protocol.containers, None)?.houses()? {
+        let HouseEvent::Scene(scene) = event? else {
+            continue;
+        };
+        let index = scene.house.index;
+        if !wanted.contains(&index) {
+            continue;
+        }
+        seen.insert(index);
+        let trials = draw.trials(&scene)?;
+        let spot = |t: &&TrialSpec| {
+            matches!(
+                t.task.destination(),
+                Some(Destination::Room { .. } | Destination::Point { .. })
+            )
+        };
+        if trials.iter().any(|t| spot(&t)) {
+            let (_, distances) = ferret_world::distance::build(&scene.house, grid)?;
+            for (k, t) in trials.iter().filter(spot).enumerate() {
+                if let Some(d) = t.task.destination() {
+                    d.legs(&scene.house, &distances)
+                        .map_err(|error| LabError::Task {
+                            place: format!("house {index}, task {}", k + 1),
+                            error,
+                        })?;
+                }
+            }
+        }
+    }
+    if let Some((k, line)) = lines
+        .iter()
+        .enumerate()
+        .find(|(_, l)| !seen.contains(&l.house))
+    {
+        return Err(LabError::Task {
+            place: format!("task {}", k + 1),
+            error: ferret_plan::TaskError::new(
+                "house",
+                format!("no house {} in {}", line.house, source.describe()),
+            ),
+        });
+    }
+    Ok(())
 }
 
 /// Whether `source` holds a valid house of index `i` (inside its range), reading that house

@@ -16,6 +16,7 @@ use crate::feedback::Feedback;
 use crate::houses::{HouseEvent, HouseStream, Mapped, OpenSource, build_maps};
 use crate::rows::TrialRow;
 use crate::strategies::{LlmSettings, Strategies, add_summary, prefetch_outcome, prefetch_quiet};
+use crate::tasks::Tasks;
 use ferret_llm::{PrefetchSummary, Prefetched};
 
 /// How trials are drawn on each house: the same for every strategy.
@@ -30,23 +31,37 @@ pub struct TrialDraw<'a> {
     /// The protocol the trials follow.
     pub protocol: &'a Protocol,
     /// With one held-out fold, only the trials whose target is of that fold's types are run
-    /// (drawn as without hold-out, then kept or not, so they are a subset of the run without).
+    /// (drawn as without hold-out, then kept or not, so they are a subset of the run without);
+    /// a task is run when one of its targets is.
     pub holdout: Option<HoldOut>,
+    /// Household tasks instead of one target per trial.
+    pub tasks: Option<&'a Tasks>,
 }
 
 impl TrialDraw<'_> {
     /// The trials of one house.
-    pub fn trials(&self, scene: &Scene) -> Result<Vec<TrialSpec>, ferret_plan::PlanError> {
-        let mut trials = draw_trials_with(
-            &scene.house,
-            &scene.truth,
-            self.seed,
-            self.reveal_fraction,
-            self.per_house,
-            self.protocol,
-        )?;
+    ///
+    /// Errors: what drawing refuses (a house without targets, too few for a task, a
+    /// destination it does not have), and listed tasks that do not fit the house.
+    pub fn trials(&self, scene: &Scene) -> Result<Vec<TrialSpec>> {
+        let mut trials = match self.tasks {
+            None => draw_trials_with(
+                &scene.house,
+                &scene.truth,
+                self.seed,
+                self.reveal_fraction,
+                self.per_house,
+                self.protocol,
+            )?,
+            Some(tasks) => tasks.trials(
+                scene,
+                (self.seed, self.reveal_fraction),
+                self.per_house,
+                self.protocol,
+            )?,
+        };
         if let Some(h) = self.holdout {
-            trials.retain(|t| h.includes_target(&t.target));
+            trials.retain(|t| t.task.targets().iter().any(|x| h.includes_target(x)));
         }
         Ok(trials)
     }
@@ -76,7 +91,8 @@ impl TrialDraw<'_> {
                 self.trials(s)
                     .unwrap_or_default()
                     .into_iter()
-                    .map(|t| (&s.house, t.target))
+                    .flat_map(|t| t.task.targets().to_vec())
+                    .map(|t| (&s.house, t))
             })
             .collect()
     }
@@ -566,30 +582,44 @@ fn evaluate_house(
     // A house's trials run in parallel too: houses differ in cost by far more than their
     // trials do, so a batch no longer waits for its one slow house on one thread. Collected in
     // order, the rows are those of one trial after another.
+    let tasks = draw.tasks.is_some();
+    let several = trials.len() > 1;
     let runs: Vec<std::result::Result<TrialRow, String>> = trials
         .par_iter()
         .flat_map_iter(|trial| {
-            strategies.iter().map(|s| {
-                run_trial(
-                    s.as_ref(),
-                    &SearchProblem::new(&scene.house, distances, trial),
-                    &scene.truth,
-                )
-                .and_then(|out| {
-                    let cost =
-                        out.reported_cost(&scene.house, distances, draw.protocol.travel_cost)?;
-                    Ok(TrialOutcome { cost, ..out })
-                })
-                .map(|out| trial_row(scene, trial, &out))
-                .map_err(|e| {
-                    // The target is named only when a house has several trials: with one,
-                    // the house says which trial it was.
-                    if trials.len() > 1 {
-                        format!("{}: {}: {}: {e}", scene.house.name, trial.target, s.name())
-                    } else {
-                        format!("{}: {}: {e}", scene.house.name, s.name())
-                    }
-                })
+            // The target is named only when a house has several trials: with one, the house
+            // says which trial it was.
+            let failed = move |s: &str, e: &dyn std::fmt::Display| {
+                if several {
+                    format!(
+                        "{}: {}: {s}: {e}",
+                        scene.house.name,
+                        trial.task.targets_label()
+                    )
+                } else {
+                    format!("{}: {s}: {e}", scene.house.name)
+                }
+            };
+            // A destination resolved once for every strategy of the trial.
+            let legs = trial
+                .task
+                .destination()
+                .map(|d| d.legs(&scene.house, distances))
+                .transpose();
+            strategies.iter().map(move |s| {
+                let legs = legs.as_ref().map_err(|e| failed(s.name(), e))?;
+                let mut problem = SearchProblem::new(&scene.house, distances, trial);
+                if let Some(l) = legs {
+                    problem = problem.with_destination(l);
+                }
+                run_trial(s.as_ref(), &problem, &scene.truth)
+                    .and_then(|out| {
+                        let cost =
+                            out.reported_cost(&scene.house, distances, draw.protocol.travel_cost)?;
+                        Ok(TrialOutcome { cost, ..out })
+                    })
+                    .map(|out| trial_row(scene, trial, &out, tasks))
+                    .map_err(|e| failed(s.name(), &e))
             })
         })
         .collect();
@@ -604,8 +634,9 @@ fn evaluate_house(
     (rows, errors, trials.len())
 }
 
-/// The `trials.csv` row of a finished trial.
-pub fn trial_row(scene: &Scene, trial: &TrialSpec, out: &TrialOutcome) -> TrialRow {
+/// The `trials.csv` row of a finished trial; with `tasks`, the task's columns too (every row of
+/// a run of tasks has them, none of a run of single targets).
+pub fn trial_row(scene: &Scene, trial: &TrialSpec, out: &TrialOutcome, tasks: bool) -> TrialRow {
     let house = &scene.house;
     let id = |c: usize| {
         house
@@ -613,10 +644,12 @@ pub fn trial_row(scene: &Scene, trial: &TrialSpec, out: &TrialOutcome) -> TrialR
             .get(c)
             .map_or_else(|| c.to_string(), |x| x.id.clone())
     };
+    let task = &trial.task;
+    let holding = |c: usize| task.targets().iter().any(|t| scene.truth.holds(c, t));
     TrialRow {
         house: house.name.clone(),
         house_index: house.index,
-        target: trial.target.to_string(),
+        target: task.targets_label(),
         strategy: out.strategy.clone(),
         cost_m: out.cost,
         searches: out.searched.len(),
@@ -628,7 +661,21 @@ pub fn trial_row(scene: &Scene, trial: &TrialSpec, out: &TrialOutcome) -> TrialR
             .map(|&c| id(c))
             .collect::<Vec<_>>()
             .join(" "),
-        goal_containers: scene.truth.goal_containers(&trial.target).len(),
+        goal_containers: (0..house.containers.len()).filter(|&c| holding(c)).count(),
         cost_cells: None,
+        goal: tasks.then(|| task.goal().to_string()),
+        destination: tasks.then(|| {
+            task.destination()
+                .map(|d| d.label(house))
+                .unwrap_or_default()
+        }),
+        found_each: tasks.then(|| {
+            out.found_each
+                .iter()
+                .map(|f| f.map_or_else(|| "-".to_string(), id))
+                .collect::<Vec<_>>()
+                .join(" ")
+        }),
+        delivery_m: tasks.then_some(out.delivery),
     }
 }

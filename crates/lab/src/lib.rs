@@ -39,6 +39,7 @@
 //!     per_house: TrialsPerHouse::One,
 //!     protocol: &Protocol::FERRET,
 //!     holdout: None,
+//!     tasks: None,
 //! };
 //! let grid = GridParams::default();
 //! let run = EvalContext::new(&setup, &specs, &draw, &grid, &llm, &Silent)
@@ -77,6 +78,7 @@ pub mod selection;
 pub mod shard;
 pub mod strategies;
 pub mod summary;
+pub mod tasks;
 
 pub use deploy::{DeploySettings, DeployedTrial, deploy, house_order};
 pub use error::{LabError, Result};
@@ -98,3 +100,4 @@ pub use strategies::{
     DEFAULT_STRATEGIES, LlmSettings, PlanningSettings, Strategies, StrategiesBuilder,
 };
 pub use summary::{CostTable, PairedRow, SummaryRow, paired_comparisons, summarize};
+pub use tasks::{Deliver, TaskLine, TaskText, Tasks, read_task_file, task_of_row};

@@ -9,7 +9,7 @@ use std::path::Path;
 use std::sync::{Arc, Mutex};
 
 use ferret_llm::LlmService;
-use ferret_plan::{Protocol, ReplayMode, SearchProblem, Strategy, replay_outcome_with};
+use ferret_plan::{PlanError, Protocol, ReplayMode, SearchProblem, Strategy, replay_outcome_with};
 use ferret_select::{CostTable, ORACLE};
 use ferret_world::{Distances, Scene};
 use rayon::prelude::*;
@@ -253,6 +253,7 @@ fn run_draw(info: &RunInfo) -> TrialDraw<'_> {
         per_house: info.trials_per_house,
         protocol: &info.protocol,
         holdout: info.planning.holdout,
+        tasks: info.tasks.as_ref(),
     }
 }
 
@@ -613,7 +614,10 @@ pub fn replay_house(
     let drawn = run_draw(info).trials(scene)?;
     let mut out = Vec::new();
     for (target, rows) in trials {
-        let Some(trial) = drawn.iter().find(|t| t.target.as_str() == target.as_str()) else {
+        let Some(trial) = drawn
+            .iter()
+            .find(|t| t.task.targets_label() == target.as_str())
+        else {
             return Err(LabError::invalid(format!(
                 "{}: trials.csv has target {target}, the run's seed does not draw it; was run.json edited?",
                 house.name
@@ -643,37 +647,37 @@ fn replay_trial(
     out: &mut Vec<ReplayRow>,
 ) -> Result<()> {
     let house = &scene.house;
+    let legs = trial
+        .task
+        .destination()
+        .map(|d| d.legs(house, distances))
+        .transpose()
+        .map_err(PlanError::Task)?;
     for deployed in strategies {
         let row = rows.get(deployed.name()).ok_or_else(|| {
             LabError::invalid(format!("{}: no trial of {}", house.name, deployed.name()))
         })?;
-        if row.target != trial.target.as_str() {
+        let label = trial.task.targets_label();
+        if row.target != label {
             return Err(LabError::invalid(format!(
-                "{}: trials.csv says target {}, the run's seed draws {}; was run.json edited?",
-                house.name, row.target, trial.target
+                "{}: trials.csv says target {}, the run's seed draws {label}; was run.json edited?",
+                house.name, row.target
             )));
         }
-        let found = house.container_index(&row.found_container).ok_or_else(|| {
-            LabError::invalid(format!(
-                "{}: found container `{}` is not in the house",
-                house.name, row.found_container
-            ))
-        })?;
+        let found_each = found_each(house, row)?;
+        let mut problem = SearchProblem::new(house, distances, trial);
+        if let Some(l) = legs.as_ref() {
+            problem = problem.with_destination(l);
+        }
         for s in strategies {
             if s.name() == deployed.name() {
                 continue;
             }
-            let c = replay_outcome_with(
-                mode,
-                s.as_ref(),
-                &SearchProblem::new(house, distances, trial),
-                &scene.truth,
-                found,
-            )?
-            .reported_cost(house, distances, travel)?;
+            let c = replay_outcome_with(mode, s.as_ref(), &problem, &scene.truth, &found_each)?
+                .reported_cost(house, distances, travel)?;
             out.push(ReplayRow {
                 house_index: house.index,
-                target: trial.target.to_string(),
+                target: label.clone(),
                 deployed: deployed.name().to_string(),
                 strategy: s.name().to_string(),
                 replay_cost_m: c,
@@ -681,6 +685,32 @@ fn replay_trial(
         }
     }
     Ok(())
+}
+
+/// Where each target of a row's trial was found (task order): the row's `found_each` in a run
+/// of tasks, its found container otherwise.
+fn found_each(house: &ferret_world::House, row: &TrialRow) -> Result<Vec<Option<usize>>> {
+    let index = |id: &str| {
+        house.container_index(id).ok_or_else(|| {
+            LabError::invalid(format!(
+                "{}: found container `{id}` is not in the house",
+                house.name
+            ))
+        })
+    };
+    match &row.found_each {
+        Some(each) => each
+            .split_whitespace()
+            .map(|id| {
+                if id == "-" {
+                    Ok(None)
+                } else {
+                    index(id).map(Some)
+                }
+            })
+            .collect(),
+        None => Ok(vec![Some(index(&row.found_container)?)]),
+    }
 }
 
 #[cfg(test)]
@@ -703,6 +733,10 @@ mod tests {
             searched: "1|0".into(),
             goal_containers: 1,
             cost_cells: None,
+            goal: None,
+            destination: None,
+            found_each: None,
+            delivery_m: None,
         }
     }
 

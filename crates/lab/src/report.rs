@@ -75,6 +75,9 @@ pub struct RunFigures<'a> {
     pub trials_per_house: TrialsPerHouse,
     /// Trials drawn on those houses.
     pub trials_run: usize,
+    /// The household tasks of the run, described ([`Tasks::describe`](crate::Tasks::describe)),
+    /// when its trials are tasks.
+    pub tasks: Option<&'a str>,
     /// Costs in grid cells too.
     pub cells: bool,
     /// The reference code's weighted means, when its draws apply.
@@ -92,7 +95,7 @@ pub fn run_markdown(f: &RunFigures<'_>) -> String {
         f.summary,
         f.source,
         f.houses_run,
-        f.trials_per_house,
+        (f.trials_per_house, f.tasks),
         f.trials_run,
     );
     if f.cells {
@@ -112,20 +115,25 @@ pub fn run_markdown(f: &RunFigures<'_>) -> String {
     md
 }
 
-/// The paper's table I as Markdown; `trials` trials were drawn on `houses` houses.
+/// The paper's table I as Markdown; `trials` trials were drawn on `houses` houses, as `drawn`
+/// says (trials per house, and the household tasks described, when they are tasks).
 pub fn summary_markdown(
     summary: &[SummaryRow],
     source: &str,
     houses: usize,
-    per_house: TrialsPerHouse,
+    drawn: (TrialsPerHouse, Option<&str>),
     trials: usize,
 ) -> String {
-    let drawn = match per_house {
-        TrialsPerHouse::One => "one trial per house".to_string(),
-        TrialsPerHouse::Count(n) => {
+    let (per_house, tasks) = drawn;
+    let drawn = match (per_house, tasks) {
+        (_, Some(tasks)) => format!("{trials} household tasks ({tasks})"),
+        (TrialsPerHouse::One, None) => "one trial per house".to_string(),
+        (TrialsPerHouse::Count(n), None) => {
             format!("{trials} trials, up to {n} distinct targets per house")
         }
-        TrialsPerHouse::All => format!("{trials} trials, every target type of each house"),
+        (TrialsPerHouse::All, None) => {
+            format!("{trials} trials, every target type of each house")
+        }
     };
     let mut md = format!(
         "# Navigation cost per strategy\n\n{houses} houses from {source}; {drawn}, the same for every strategy.\n\n"

@@ -31,6 +31,23 @@ pub struct TrialRow {
     /// so that the default file has the columns above only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cost_cells: Option<f64>,
+    /// The task's goal, `all` or `any`, in a run of household tasks (these last four columns
+    /// are absent otherwise; `target` is then the targets joined by `+` for all and `|` for
+    /// any, `found` whether the goal held, `found_container` where it came to hold and
+    /// `goal_containers` the containers holding any target).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub goal: Option<String>,
+    /// Where the robot brought what it found (`start`, `container:<id>`, `room:<id>`,
+    /// `<x>,<z>`), empty for nowhere.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub destination: Option<String>,
+    /// Where each target (in the task's order) was first seen, space separated, `-` for not
+    /// found.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub found_each: Option<String>,
+    /// The last leg, to the destination, metres (part of `cost_m`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub delivery_m: Option<f64>,
 }
 
 /// The paper's unit of cost: a grid cell of 0.05 m (its table I is in these cells).

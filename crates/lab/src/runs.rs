@@ -45,6 +45,9 @@ pub struct RunInfo {
     /// The protocol; left out when it is ferret's, for the same reason.
     #[serde(default, skip_serializing_if = "is_ferret_protocol")]
     pub protocol: Protocol,
+    /// Household tasks instead of one target per trial; absent for single targets.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tasks: Option<crate::tasks::Tasks>,
     /// Strategies in order.
     pub strategies: Vec<String>,
     /// SHA-256 of the trials.csv written with this file, so that a trials.csv of another run
@@ -256,12 +259,14 @@ pub fn run_report(info: &RunInfo, costs: &CostTable, view: &ReportView<'_>) -> R
     let reference_means = (info.protocol.rng == ferret_plan::TrialRng::Python
         && info.trials_per_house == TrialsPerHouse::One)
         .then(|| reference_means_of(costs, &info.strategies, view.houses));
+    let tasks = info.tasks.as_ref().map(crate::tasks::Tasks::describe);
     let markdown = run_markdown(&RunFigures {
         summary: &summary,
         source: view.source,
         houses_run: view.houses_run,
         trials_per_house: info.trials_per_house,
         trials_run: view.trials_run,
+        tasks: tasks.as_deref(),
         cells: view.cells,
         reference_means: reference_means.as_deref(),
         shard: info.shard.as_ref().map(|sh| (sh.index, sh.count)),

@@ -402,6 +402,10 @@ mod tests {
             searched: "1|0".into(),
             goal_containers: 1,
             cost_cells: None,
+            goal: None,
+            destination: None,
+            found_each: None,
+            delivery_m: None,
         }
     }
 
@@ -436,7 +440,7 @@ mod tests {
         ];
         let summary = summarize(&rows, &order);
         assert!((summary[1].improvement_pct.unwrap_or_default() - 60.0).abs() < 1e-9);
-        let md = summary_markdown(&summary, "test", 1, TrialsPerHouse::One, 1);
+        let md = summary_markdown(&summary, "test", 1, (TrialsPerHouse::One, None), 1);
         assert!(
             md.contains("| model/x | 1 | 4.00 | ±0.00 | 4.00 | -60.0 % |"),
             "{md}"
@@ -472,7 +476,7 @@ mod tests {
         assert!((summary[1].improvement_pct.unwrap() - 10.0).abs() < 1e-9);
         assert!(summary[0].improvement_pct.unwrap().abs() < 1e-9);
         assert_eq!(summary[1].paired_trials, 3);
-        let md = summary_markdown(&summary, "test houses", 4, TrialsPerHouse::One, 4);
+        let md = summary_markdown(&summary, "test houses", 4, (TrialsPerHouse::One, None), 4);
         // In cells: 18 m is 360 cells of 0.05 m.
         let cells = cells_markdown(&summary);
         assert!(cells.contains("| model/x | 3 | 360.0 | ±"), "{cells}");
@@ -485,7 +489,7 @@ mod tests {
         // Complete runs carry no note.
         let complete = summarize(&rows[..4], &order[..1]);
         assert!(
-            !summary_markdown(&complete, "test houses", 4, TrialsPerHouse::One, 4)
+            !summary_markdown(&complete, "test houses", 4, (TrialsPerHouse::One, None), 4)
                 .contains("Failed trials")
         );
     }

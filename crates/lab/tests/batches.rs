@@ -44,6 +44,7 @@ fn draw() -> TrialDraw<'static> {
         per_house: TrialsPerHouse::Count(2),
         protocol: &Protocol::FERRET,
         holdout: None,
+        tasks: None,
     }
 }
 
@@ -61,6 +62,7 @@ fn info(shard: Option<ShardRecord>) -> RunInfo {
         reveal_fraction: 0.0,
         trials_per_house: TrialsPerHouse::Count(2),
         protocol: Protocol::FERRET,
+        tasks: None,
         strategies: specs(),
         trials_sha256: None,
         shard,

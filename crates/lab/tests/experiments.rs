@@ -139,6 +139,7 @@ fn eval_run(dir: &std::path::Path, count: usize) -> EvalRun {
         per_house: TrialsPerHouse::One,
         protocol: &Protocol::FERRET,
         holdout: None,
+        tasks: None,
     };
     let ev = evaluate(&loaded.scenes, &maps, &strategies, &draw, &Silent);
     assert!(ev.errors.is_empty(), "{:?}", ev.errors);
@@ -154,6 +155,7 @@ fn eval_run(dir: &std::path::Path, count: usize) -> EvalRun {
         reveal_fraction: 0.0,
         trials_per_house: TrialsPerHouse::One,
         protocol: Protocol::FERRET,
+        tasks: None,
         strategies: names,
         trials_sha256: None,
         shard: None,

@@ -59,6 +59,7 @@ fn evaluate_runs_every_strategy_on_the_same_trials_and_ticks_once_per_house() {
         per_house: TrialsPerHouse::One,
         protocol: &Protocol::FERRET,
         holdout: None,
+        tasks: None,
     };
     let count = Count::default();
     let ev = evaluate(&scenes, &maps, &s, &draw, &count);
@@ -99,6 +100,7 @@ fn a_deployment_step_learns_what_run_trial_and_replay_costs_say() {
         per_house: TrialsPerHouse::One,
         protocol: &protocol,
         holdout: None,
+        tasks: None,
     };
     for scene in &scenes {
         let (_, distances) =
@@ -115,7 +117,7 @@ fn a_deployment_step_learns_what_run_trial_and_replay_costs_say() {
             &candidates,
             &problem,
             &scene.truth,
-            step.found,
+            &step.found_each,
             (step.chosen, step.cost),
         )
         .unwrap();
@@ -138,12 +140,13 @@ fn a_batch_deployment_names_a_type_no_container_holds() {
         (ReplayMode::Pessimistic, TravelCost::Plain),
     )
     .unwrap();
-    let find = vec![ferret_world::ObjectType::new("NoSuchThing")];
+    let find = vec!["NoSuchThing".parse::<ferret_lab::TaskText>().unwrap()];
     let protocol = Protocol::FERRET;
     let grid = GridParams::default();
     let settings = DeploySettings {
         trials: 1,
         find: &find,
+        tasks: None,
         per_house: TrialsPerHouse::One,
         seed: 0,
         protocol: &protocol,

@@ -37,6 +37,7 @@ fn info(strategies: &[String], count: usize) -> RunInfo {
         reveal_fraction: 0.0,
         trials_per_house: TrialsPerHouse::Count(2),
         protocol: Protocol::FERRET,
+        tasks: None,
         strategies: strategies.to_vec(),
         trials_sha256: None,
         shard: None,
@@ -100,6 +101,7 @@ fn a_streamed_evaluation_writes_the_in_memory_run_byte_for_byte() {
         per_house: TrialsPerHouse::Count(2),
         protocol: &Protocol::FERRET,
         holdout: None,
+        tasks: None,
     };
     let grid = GridParams::default();
     let houses: Vec<usize> = loaded.scenes.iter().map(|s| s.house.index).collect();
@@ -214,6 +216,10 @@ fn row(strategy: &str, house_index: usize, target: &str, cost_m: f64, searched: 
         searched: searched.into(),
         goal_containers: 1,
         cost_cells: None,
+        goal: None,
+        destination: None,
+        found_each: None,
+        delivery_m: None,
     }
 }
 

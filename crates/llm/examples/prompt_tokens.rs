@@ -41,7 +41,7 @@ fn measure(label: &str, scenes: &[Scene]) {
             };
             houses += 1;
             let ctx = HouseContext::new(&s.house);
-            let plan = QueryPlan::new(&s.house, &trial.target);
+            let plan = QueryPlan::new(&s.house, trial.task.first());
             for q in &plan.queries {
                 let Ok(m) = lib.probability_messages(prompt, &ctx, q) else {
                     continue;
@@ -83,7 +83,7 @@ fn measure(label: &str, scenes: &[Scene]) {
         };
         houses += 1;
         let ctx = HouseContext::new(&s.house);
-        let mut belief = Belief::new(&s.house, &d, &trial.target);
+        let mut belief = Belief::new(&s.house, &d, &trial.task);
         for (step, &c) in out.searched.iter().enumerate() {
             let unsearched: Vec<usize> = belief.unsearched().collect();
             if unsearched.len() > 1 {
@@ -91,7 +91,7 @@ fn measure(label: &str, scenes: &[Scene]) {
                     &s.house,
                     &ctx,
                     &d,
-                    &trial.target,
+                    trial.task.first(),
                     belief.position(),
                     &unsearched,
                 )

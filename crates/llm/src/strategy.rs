@@ -170,7 +170,7 @@ impl LlmDirectPolicy<'_> {
             belief.house,
             &self.house,
             belief.distances,
-            belief.target,
+            belief.sought(),
             belief.position(),
             &unsearched,
         )?;
@@ -221,7 +221,7 @@ impl LlmDirectPolicy<'_> {
                 "house {} (#{}): where to look for {} next",
                 belief.house.name,
                 belief.house.index,
-                belief.target.words()
+                belief.sought().words()
             ),
         };
         let mut answer = s.service.block_on(s.llm.ask(&question, &s.name))?;

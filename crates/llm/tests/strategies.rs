@@ -195,10 +195,7 @@ fn llm_model_strategy_plans_over_llm_probabilities() {
         .build("llm+model/p-context-a/mock/exact")
         .unwrap();
     assert_eq!(strategy.name(), "llm+model/p-context-a/mock/exact");
-    let trial = TrialSpec {
-        target: ObjectType::new("RemoteControl"),
-        revealed: vec![],
-    };
+    let trial = TrialSpec::single(ObjectType::new("RemoteControl"));
     let out = run_trial(
         strategy.as_ref(),
         &SearchProblem::new(&house, &d, &trial),
@@ -238,10 +235,7 @@ fn llm_direct_follows_the_answer_and_falls_back_to_the_nearest() {
         .build("llm-direct/p-direct/mock")
         .unwrap();
     // The remote is in the dresser: the LLM names it first (matched ignoring case and the full stop).
-    let remote = TrialSpec {
-        target: ObjectType::new("RemoteControl"),
-        revealed: vec![],
-    };
+    let remote = TrialSpec::single(ObjectType::new("RemoteControl"));
     let out = run_trial(
         strategy.as_ref(),
         &SearchProblem::new(&house, &d, &remote),
@@ -252,10 +246,7 @@ fn llm_direct_follows_the_answer_and_falls_back_to_the_nearest() {
     // The apple is in the fridge: first the dresser, then nothing matches ("the garage"), so the
     // nearest container to the dresser is taken each time: bed 2 (x=10), ..., the fridge last
     // but one.
-    let apple = TrialSpec {
-        target: ObjectType::new("Apple"),
-        revealed: vec![],
-    };
+    let apple = TrialSpec::single(ObjectType::new("Apple"));
     let out = run_trial(
         strategy.as_ref(),
         &SearchProblem::new(&house, &d, &apple),
@@ -321,10 +312,7 @@ fn offline_replay_gives_identical_trials_and_sends_nothing() {
         for spec in specs {
             let s = r.build(spec).unwrap();
             for ((house, truth), target) in scenes.iter().zip(&targets) {
-                let trial = TrialSpec {
-                    target: target.clone(),
-                    revealed: vec![],
-                };
+                let trial = TrialSpec::single(target.clone());
                 outs.push(
                     run_trial(
                         s.as_ref(),
@@ -351,10 +339,7 @@ fn offline_replay_gives_identical_trials_and_sends_nothing() {
         "a warm run still reports the tokens its answers took"
     );
     // A trial needing an answer never asked fails clearly.
-    let unknown = TrialSpec {
-        target: ObjectType::new("Book"),
-        revealed: vec![],
-    };
+    let unknown = TrialSpec::single(ObjectType::new("Book"));
     let s = registry(&replay_service).build(specs[0]).unwrap();
     let (house, truth) = &scenes[0];
     let e = run_trial(
@@ -417,10 +402,7 @@ fn prefetch_asks_every_question_once_then_trials_send_nothing() {
     for spec in &specs[..3] {
         let s = r.build(spec).unwrap();
         for (house, truth) in &scenes {
-            let trial = TrialSpec {
-                target: target.clone(),
-                revealed: vec![],
-            };
+            let trial = TrialSpec::single(target.clone());
             run_trial(
                 s.as_ref(),
                 &SearchProblem::new(house, &straight_distances(house), &trial),

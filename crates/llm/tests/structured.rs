@@ -98,10 +98,7 @@ fn json_object_dialect_and_location_enums_for_p_direct() {
     register_strategies(&mut registry, service.clone(), PlannerConfig::default(), 12);
     let strategy = registry.build("llm-direct/p-direct/mock").unwrap();
     let (house, truth) = small_scene("h#0");
-    let trial = TrialSpec {
-        target: ObjectType::new("Apple"),
-        revealed: vec![],
-    };
+    let trial = TrialSpec::single(ObjectType::new("Apple"));
     let out = run_trial(
         strategy.as_ref(),
         &SearchProblem::new(&house, &straight_distances(&house), &trial),

@@ -1,10 +1,12 @@
-//! Decision latency of the exact planner (targets: ≤ 50 µs at n = 8, ≤ 100 ms at n = 16), and
-//! the cost of a whole trial of `model/…/exact`, where a trial needs a new table only when its
+//! Decision latency of the exact planner (targets: ≤ 50 µs at n = 8, ≤ 100 ms at n = 16), of
+//! the task table (targets: ≤ 2 ms for 3 targets over 8 candidates, ≤ 200 ms over 12), and the
+//! cost of a whole trial of `model/…/exact`, where a trial needs a new table only when its
 //! candidate set changes.
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use ferret_plan::{
-    Belief, CandidateLimit, Planner, PlannerConfig, Policy, Probability, TourProblem, solve_exact,
+    Belief, CandidateLimit, Planner, PlannerConfig, Policy, Probability, Task, TaskProblem,
+    TourProblem, solve_exact, solve_task,
 };
 use ferret_world::{
     Container, Distances, Footprint, House, ObjectType, Point, Polygon, Pose, Room, RoomType,
@@ -20,6 +22,20 @@ fn bench(c: &mut Criterion) {
         group.bench_with_input(BenchmarkId::from_parameter(n), &p, |b, p| {
             b.iter(|| solve_exact(p))
         });
+    }
+    group.finish();
+}
+
+fn bench_task(c: &mut Criterion) {
+    let mut group = c.benchmark_group("task_table_decision");
+    group.sample_size(10);
+    for (n, m) in [(8usize, 2usize), (8, 3), (8, 4), (12, 3), (14, 3)] {
+        let p = TaskProblem::random(n, m, true, (n * 10 + m) as u64);
+        group.bench_with_input(
+            BenchmarkId::from_parameter(format!("{n}x{m}")),
+            &p,
+            |b, p| b.iter(|| solve_task(p)),
+        );
     }
     group.finish();
 }
@@ -92,12 +108,12 @@ fn trial(
     goal: usize,
     fresh: bool,
 ) -> usize {
-    let target = ObjectType::new("RemoteControl");
+    let task = Task::single(ObjectType::new("RemoteControl"));
     let config = PlannerConfig {
         limit: CandidateLimit::Exact { max: 16 },
         ..PlannerConfig::default()
     };
-    let mut belief = Belief::new(house, distances, &target);
+    let mut belief = Belief::new(house, distances, &task);
     let mut planner = Planner::new(p.to_vec(), config);
     let mut searches = 0;
     while belief.unsearched_count() > 0 {
@@ -135,5 +151,5 @@ fn bench_trial(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench, bench_trial);
+criterion_group!(benches, bench, bench_task, bench_trial);
 criterion_main!(benches);

@@ -2,37 +2,65 @@
 
 use ferret_world::{Distances, House, ObjectType, Place};
 
-/// What the robot knows during a trial: the map (house and distances), where it is, which
-/// containers it has searched and what they held. It holds no ground truth.
+use crate::task::Task;
+
+/// What the robot knows during a trial: the map (house and distances), what it is asked, where
+/// it is, which containers it has searched, what they held and so which targets it has found.
+/// It holds no ground truth.
 #[derive(Clone, Debug)]
 pub struct Belief<'a> {
     /// The known map.
     pub house: &'a House,
     /// Travel distances between places of the map.
     pub distances: &'a Distances,
-    /// The object type searched for.
-    pub target: &'a ObjectType,
+    /// What the robot is asked.
+    pub task: &'a Task,
     position: Place,
     searched: Vec<bool>,
     order: Vec<usize>,
     observed: Vec<Vec<ObjectType>>,
+    /// The container each target (task order) was first seen in.
+    found: Vec<Option<usize>>,
     travelled: f64,
 }
 
 impl<'a> Belief<'a> {
     /// The belief at the start of a trial: at the start pose, nothing searched.
-    pub fn new(house: &'a House, distances: &'a Distances, target: &'a ObjectType) -> Self {
+    pub fn new(house: &'a House, distances: &'a Distances, task: &'a Task) -> Self {
         let n = house.containers.len();
         Self {
             house,
             distances,
-            target,
+            task,
             position: Place::Start,
             searched: vec![false; n],
             order: Vec::new(),
             observed: vec![Vec::new(); n],
+            found: vec![None; task.targets().len()],
             travelled: 0.0,
         }
+    }
+
+    /// The container where target `t` (an index into the task's targets) was first seen.
+    pub fn found(&self, t: usize) -> Option<usize> {
+        self.found.get(t).copied().flatten()
+    }
+
+    /// Where each target (task order) was first seen.
+    pub fn found_each(&self) -> &[Option<usize>] {
+        &self.found
+    }
+
+    /// True once the task's goal holds: every target found (`all`) or one (`any`).
+    pub fn goal_holds(&self) -> bool {
+        self.task.holds(self.found.iter().map(Option::is_some))
+    }
+
+    /// The first target of the task not yet found (the first one when all are): what a policy
+    /// that looks for one thing at a time looks for.
+    pub fn sought(&self) -> &'a ObjectType {
+        let t = self.found.iter().position(Option::is_none).unwrap_or(0);
+        &self.task.targets()[t]
     }
 
     /// Where the robot is.
@@ -85,6 +113,7 @@ impl<'a> Belief<'a> {
         if let Some(s) = self.searched.get_mut(c) {
             *s = true;
         }
+        self.note_found(c, &contents);
         if let Some(o) = self.observed.get_mut(c) {
             *o = contents;
         }
@@ -92,11 +121,27 @@ impl<'a> Belief<'a> {
         leg
     }
 
-    /// Marks `c` as searched and empty without moving (containers revealed before the trial).
+    /// Marks as found in `c` every target of the task among `contents` not found before.
+    fn note_found(&mut self, c: usize, contents: &[ObjectType]) {
+        for (t, found) in self.task.targets().iter().zip(&mut self.found) {
+            if found.is_none() && contents.contains(t) {
+                *found = Some(c);
+            }
+        }
+    }
+
+    /// Adds the last leg to the destination (metres) to the distance travelled.
+    pub(crate) fn arrive(&mut self, leg: f64) {
+        self.travelled += leg;
+    }
+
+    /// Marks `c` as searched, holding `contents`, without moving (containers revealed before
+    /// the trial).
     pub fn reveal(&mut self, c: usize, contents: Vec<ObjectType>) {
         if let Some(s) = self.searched.get_mut(c) {
             *s = true;
         }
+        self.note_found(c, &contents);
         if let Some(o) = self.observed.get_mut(c) {
             *o = contents;
         }

@@ -58,6 +58,20 @@ pub enum PlanError {
         /// The house label.
         house: String,
     },
+    /// A house has fewer target types than a task asks for.
+    #[error(
+        "{house}: {have} target type(s), a task of {want} targets cannot be drawn {tasks} time(s)"
+    )]
+    TooFewTargets {
+        /// The house label.
+        house: String,
+        /// Target types in the house.
+        have: usize,
+        /// Targets per task.
+        want: usize,
+        /// Tasks asked for.
+        tasks: usize,
+    },
     /// A fusion file could not be read.
     #[error("fusion file {path}: {message}")]
     Fusion {
@@ -88,6 +102,9 @@ pub enum PlanError {
         /// Why.
         message: String,
     },
+    /// A task that cannot be asked, or a destination the map cannot serve.
+    #[error(transparent)]
+    Task(#[from] crate::task::TaskError),
     /// A trial to replay is inconsistent with its house.
     #[error("replay on {house}: {message}")]
     Replay {

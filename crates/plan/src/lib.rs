@@ -31,7 +31,7 @@
 //! while let Some(c) = search.next_container()? {
 //!     // A real robot drives to container `c` here; the ground truth stands in for its camera.
 //!     let seen: Vec<_> = scene.truth.contents(c).iter().map(|o| o.object_type.clone()).collect();
-//!     found = seen.contains(&trial.target);
+//!     found = seen.contains(trial.task.first());
 //!     search.record(c, seen)?;
 //!     if found {
 //!         break;
@@ -55,6 +55,7 @@
 //!     p: vec![Probability::new(0.9).ok_or("p")?, Probability::new(0.1).ok_or("p")?],
 //!     search_cost: 0.0,
 //!     leg_extra: vec![],
+//!     final_leg: vec![],
 //! };
 //! let (plan, _) = solve_exact(&problem).ok_or("too large")?;
 //! // The far, likely one first: 10 + 0.1·10 = 11 m expected, against 4 + 0.9·10 = 13 m.
@@ -83,6 +84,8 @@ pub mod pyrandom;
 pub mod replay;
 pub mod replay_memo;
 pub mod strategy;
+pub mod task;
+pub mod task_table;
 pub mod trial;
 
 pub use belief::Belief;
@@ -97,7 +100,10 @@ pub use learned::{Embedder, Learned, LearnedKind, LearnedSettings, LearnedSource
 pub use likelihood::{Evidence, LikelihoodSource, Noise, OracleLikelihood, Uniform};
 pub use plan_memo::PlanMemo;
 pub use planner::{Plan, TourProblem, solve_brute_force, solve_exact};
-pub use policy::{CandidateLimit, CostModel, Greedy, Oracle, Planner, PlannerConfig, Policy};
+pub use policy::{
+    CandidateLimit, CostModel, Greedy, Oracle, Planner, PlannerConfig, Policy, Sequential,
+    oracle_route,
+};
 pub use prior::{CALIBRATION_FOLDS, Prior, PriorCalibration, RawPrior};
 pub use probability::Probability;
 pub use problem::{SearchProblem, TrialSpec};
@@ -109,8 +115,13 @@ pub use replay::{
     hindsight_truth, replay_cost, replay_cost_with, replay_costs, replay_outcome_with,
 };
 pub use replay_memo::ReplayMemo;
-pub use strategy::{ModelStrategy, Strategy, StrategyRegistry, StrategySpec, TrialContext};
+pub use strategy::{
+    ModelStrategy, SEQUENTIAL, SequentialStrategy, Strategy, StrategyRegistry, StrategySpec,
+    TrialContext, task_likelihoods,
+};
+pub use task::{Destination, DestinationLegs, Goal, MAX_TARGETS, Task, TaskError};
+pub use task_table::{TaskProblem, TaskSolution, solve_task};
 pub use trial::{
-    Search, TrialOutcome, TrialsPerHouse, draw_trial, draw_trials, draw_trials_with, python_seed,
-    run_trial,
+    Search, TaskShape, TrialOutcome, TrialsPerHouse, draw_tasks, draw_trial, draw_trials,
+    draw_trials_with, python_seed, run_trial,
 };

@@ -30,8 +30,13 @@ pub struct TourProblem {
     pub search_cost: f64,
     /// A cost added to every leg that ends at candidate `i`, weighted like the leg; empty for
     /// eq. 3. [`CostModel::Authors`](crate::CostModel::Authors) puts `p_i · D(robot, i)` here.
-    /// Because it depends only on the leg's end, the Held–Karp recursion stays exact.
+    /// Because it depends only on the leg's end, the Held–Karp recursion stays exact. A
+    /// destination puts `p_i · D(i, destination)` here: the drive there once found at `i`.
     pub leg_extra: Vec<f64>,
+    /// The cost of ending the search at candidate `i` without the target, weighted by the
+    /// chance that no candidate held it: the drive from `i` to a destination; empty for none
+    /// (eq. 3: leftover probability costs nothing).
+    pub final_leg: Vec<f64>,
 }
 
 impl TourProblem {
@@ -53,6 +58,10 @@ impl TourProblem {
         self.leg_extra.get(x).copied().unwrap_or(0.0)
     }
 
+    fn final_at(&self, x: usize) -> f64 {
+        self.final_leg.get(x).copied().unwrap_or(0.0)
+    }
+
     /// The expected cost of searching in `order` (local indices) from the robot's position, paper
     /// eq. 3. Leftover probability after the last container costs nothing.
     pub fn expected_cost(&self, order: &[usize]) -> f64 {
@@ -67,6 +76,9 @@ impl TourProblem {
             total += weight * (leg + self.search_cost + self.extra(x));
             weight *= 1.0 - self.p[x].get();
             at = Some(x);
+        }
+        if let Some(l) = at.filter(|_| !self.final_leg.is_empty()) {
+            total += weight * self.final_at(l);
         }
         total
     }
@@ -92,6 +104,7 @@ impl TourProblem {
                 .collect(),
             search_cost: 0.0,
             leg_extra: Vec::new(),
+            final_leg: Vec::new(),
         }
     }
 }
@@ -282,8 +295,14 @@ fn fill_rows<const W: usize>(problem: &TourProblem, weight: &[f64], h: &mut Vec<
         }
     }
     let weight_of = |u: usize| weight[full ^ u];
-    // Nothing left: nothing more to pay.
-    h.extend_from_slice(&[0.0; W]);
+    // Nothing left: nothing more to pay but the drive to a destination, if there is one.
+    let mut last = [0.0; W];
+    if !problem.final_leg.is_empty() {
+        for (l, e) in last.iter_mut().enumerate().take(n) {
+            *e = weight[full] * problem.final_at(l);
+        }
+    }
+    h.extend_from_slice(&last);
     // Remaining sets 1, 2, 3 (only containers 0 and 1) one by one.
     for u in 1..=full.min(3) {
         let w = weight_of(u);
@@ -502,6 +521,7 @@ mod tests {
                 .collect(),
             search_cost: r,
             leg_extra: Vec::new(),
+            final_leg: Vec::new(),
         }
     }
 
@@ -543,6 +563,7 @@ mod tests {
             p: vec![Probability::ONE; n],
             search_cost: 0.0,
             leg_extra: Vec::new(),
+            final_leg: Vec::new(),
         };
         assert!(solve_exact(&pr).is_none());
     }
@@ -559,7 +580,11 @@ mod tests {
         }
         let mut h = vec![f64::INFINITY; (1 << n) * n];
         for l in 0..n {
-            h[full * n + l] = 0.0;
+            h[full * n + l] = if problem.final_leg.is_empty() {
+                0.0
+            } else {
+                weight[full] * problem.final_at(l)
+            };
         }
         for s in (1..full).rev() {
             for l in (0..n).filter(|l| s & (1 << l) != 0) {
@@ -655,6 +680,7 @@ mod tests {
                 p: ps[..n].iter().map(|&x| Probability::clamped(x, 0.0, 1.0)).collect(),
                 search_cost: r,
                 leg_extra: Vec::new(),
+                final_leg: Vec::new(),
             };
             if authors {
                 pr.leg_extra = (0..n).map(|i| pr.p[i].get() * pr.from_robot[i]).collect();
@@ -713,6 +739,7 @@ mod tests {
                     p: left.iter().map(|&x| pr.p[x]).collect(),
                     search_cost: r,
                     leg_extra: Vec::new(),
+                    final_leg: Vec::new(),
                 };
                 let fresh = left[solve_exact(&sub).unwrap().0.order[0]];
                 prop_assert_eq!(reused, fresh, "step {}", step);
@@ -733,6 +760,7 @@ mod tests {
                 p: ps[..n].iter().map(|&x| Probability::clamped(x, 0.0, 1.0)).collect(),
                 search_cost: 0.5,
                 leg_extra: Vec::new(),
+                final_leg: Vec::new(),
             };
             let (dp, _) = solve_exact(&pr).unwrap();
             let bf = solve_brute_force(&pr);

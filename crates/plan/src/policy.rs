@@ -9,6 +9,8 @@ use crate::error::PlanError;
 use crate::plan_memo::PlanMemo;
 use crate::planner::{self, Solution, TourProblem};
 use crate::probability::Probability;
+use crate::task::{DestinationLegs, Goal};
+use crate::task_table::{self, TaskProblem, TaskSolution};
 
 /// Maps a belief to the next container to search. A policy lives for one trial and may keep state
 /// between decisions (a cached plan, a conversation). Policies are `Send` so that a search in
@@ -104,10 +106,22 @@ impl Default for PlannerConfig {
 }
 
 /// The model-based planner: chooses the first container of the ordering with least expected cost
-/// (paper eq. 3) over the candidates, given each container's probability.
+/// (paper eq. 3) over the candidates, given each container's probability; for a task, the first
+/// step of the policy with least expected cost until its goal holds and the robot stands at its
+/// destination ([`task_table`](crate::task_table)).
+///
+/// While one target is wanted (or any of several: one target of likelihood 1 − ∏(1 − p_t)) it
+/// solves the Held–Karp problem of eq. 3, with a destination's legs added to it; while several
+/// are wanted at once, the task table over (searched set, found set, position).
 #[derive(Debug)]
 pub struct Planner {
-    p: Vec<Probability>,
+    /// One row of probabilities per target it plans for, index-aligned with the containers.
+    p: Vec<Vec<Probability>>,
+    /// The index, among the belief's task targets, of each row's target.
+    rows: Vec<usize>,
+    goal: Goal,
+    /// Travel from each place to the destination, when there is one.
+    destination: Option<DestinationLegs>,
     config: PlannerConfig,
     /// A full solution over a candidate set, reused while the robot follows it.
     cached: Option<Cached>,
@@ -118,16 +132,49 @@ pub struct Planner {
 #[derive(Debug)]
 struct Cached {
     candidates: Vec<usize>,
-    problem: TourProblem,
-    /// `None` while the decision came from the memo: solved when the robot follows it further.
-    solution: Option<Solution>,
+    /// The rows wanted when it was solved.
+    wanted: Vec<usize>,
+    table: Table,
+}
+
+#[derive(Debug)]
+enum Table {
+    /// One target wanted (or `any`): the Held–Karp problem. Its solution is `None` while the
+    /// decision came from the memo: solved when the robot follows it further.
+    Tour(TourProblem, Option<Solution>),
+    /// Several targets wanted at once.
+    Task(TaskProblem, TaskSolution),
+}
+
+/// What a decision plans for: the probabilities of one target (or of any of several), or of
+/// several wanted at once.
+enum Wanted {
+    One(Vec<Probability>),
+    Several(Vec<usize>),
 }
 
 impl Planner {
-    /// A planner over fixed per-container probabilities (index-aligned with the house's containers).
+    /// A planner for one target over fixed per-container probabilities (index-aligned with the
+    /// house's containers): the first target of the belief's task, no destination.
     pub fn new(p: Vec<Probability>, config: PlannerConfig) -> Self {
+        Self::for_targets(vec![p], vec![0], Goal::All, None, config)
+    }
+
+    /// A planner for a task: one row of probabilities per target, `rows[i]` the index of row
+    /// `i`'s target among the belief's task targets; done once `goal` holds over those rows;
+    /// then on to `destination`.
+    pub fn for_targets(
+        p: Vec<Vec<Probability>>,
+        rows: Vec<usize>,
+        goal: Goal,
+        destination: Option<DestinationLegs>,
+        config: PlannerConfig,
+    ) -> Self {
         Self {
             p,
+            rows,
+            goal,
+            destination,
             config,
             cached: None,
             memo: None,
@@ -141,17 +188,77 @@ impl Planner {
         Self { memo, ..self }
     }
 
+    /// The rows whose target the belief has not found.
+    fn wanted_rows(&self, belief: &Belief<'_>) -> Vec<usize> {
+        (0..self.p.len())
+            .filter(|&i| belief.found(self.rows[i]).is_none())
+            .collect()
+    }
+
+    /// What this decision plans for.
+    fn wanted(&self, rows: &[usize]) -> Wanted {
+        match (rows, self.goal) {
+            ([one], _) => Wanted::One(self.p[*one].clone()),
+            (_, Goal::Any) => {
+                let n = self.p.first().map_or(0, Vec::len);
+                Wanted::One(
+                    (0..n)
+                        .map(|c| {
+                            let none = self.p.iter().map(|row| 1.0 - row[c].get()).product::<f64>();
+                            Probability::clamped(1.0 - none, 0.0, 1.0)
+                        })
+                        .collect(),
+                )
+            }
+            (rows, Goal::All) => Wanted::Several(rows.to_vec()),
+        }
+    }
+
     /// The candidates for this decision under the configured limit.
     pub fn candidates(&self, belief: &Belief<'_>) -> Vec<usize> {
-        let positive: Vec<usize> = belief.unsearched().filter(|&c| self.p(c) > 0.0).collect();
+        let rows = self.wanted_rows(belief);
+        let wanted = self.wanted(&rows);
+        self.candidates_for(belief, &wanted)
+    }
+
+    /// The candidates while `wanted` is what the robot wants, ranked by the chance that a
+    /// container holds something wanted (for several targets at once: any of them).
+    fn candidates_for(&self, belief: &Belief<'_>, wanted: &Wanted) -> Vec<usize> {
+        match wanted {
+            Wanted::One(p) => {
+                let score: Vec<f64> = p.iter().map(|p| p.get()).collect();
+                self.candidates_by(belief, &score, planner::MAX_EXACT)
+            }
+            Wanted::Several(rows) => {
+                let n = belief.house.containers.len();
+                let score: Vec<f64> = (0..n)
+                    .map(|c| {
+                        let none: f64 = rows
+                            .iter()
+                            .map(|&r| 1.0 - self.p[r].get(c).map_or(0.0, |p| p.get()))
+                            .product();
+                        1.0 - none
+                    })
+                    .collect();
+                self.candidates_by(belief, &score, task_table::max_candidates(rows.len()))
+            }
+        }
+    }
+
+    /// The candidates by `score` (the chance each container holds something wanted): every
+    /// unsearched container with a chance, while they number at most the limit (and
+    /// `largest`); beyond it the 2 nearest, then the likeliest.
+    fn candidates_by(&self, belief: &Belief<'_>, score: &[f64], largest: usize) -> Vec<usize> {
+        let at = |c: usize| score.get(c).copied().unwrap_or(0.0);
+        let positive: Vec<usize> = belief.unsearched().filter(|&c| at(c) > 0.0).collect();
         if positive.is_empty() {
             // Every remaining container has p = 0: nothing to plan, fall back to the nearest.
             return nearest(belief, belief.unsearched()).into_iter().collect();
         }
         let k = match self.config.limit {
-            CandidateLimit::Paper { k } => k.max(1),
+            CandidateLimit::Paper { k } => k.clamp(1, largest),
             CandidateLimit::Exact { max } => {
-                let max = max.clamp(1, planner::MAX_EXACT);
+                let max = max.clamp(1, planner::MAX_EXACT.min(largest));
                 if positive.len() <= max {
                     return positive;
                 }
@@ -169,14 +276,14 @@ impl Planner {
                 .then(a.cmp(&b))
         });
         let mut chosen: Vec<usize> = by_distance.iter().copied().take(2.min(k)).collect();
-        let mut by_p = positive;
-        by_p.sort_by(|&a, &b| {
-            self.p(b)
-                .total_cmp(&self.p(a))
+        let mut by_score = positive;
+        by_score.sort_by(|&a, &b| {
+            at(b)
+                .total_cmp(&at(a))
                 .then(belief.distance_to(a).total_cmp(&belief.distance_to(b)))
                 .then(a.cmp(&b))
         });
-        for c in by_p {
+        for c in by_score {
             if chosen.len() >= k {
                 break;
             }
@@ -188,46 +295,86 @@ impl Planner {
         chosen
     }
 
-    fn p(&self, c: usize) -> f64 {
-        self.p.get(c).map_or(0.0, |p| p.get())
+    fn leg(&self, place: Place) -> f64 {
+        self.destination.as_ref().map_or(0.0, |d| d.from(place))
     }
 
-    fn problem(&self, belief: &Belief<'_>, candidates: &[usize]) -> TourProblem {
+    fn problem(&self, belief: &Belief<'_>, candidates: &[usize], p: &[Probability]) -> TourProblem {
         let n = candidates.len();
         let d = belief.distances;
+        let pc = |c: usize| p.get(c).copied().unwrap_or(Probability::ZERO);
         let from_robot: Vec<f64> = candidates.iter().map(|&c| belief.distance_to(c)).collect();
-        let leg_extra = match self.config.cost {
+        let mut leg_extra = match self.config.cost {
             CostModel::Paper => Vec::new(),
             CostModel::Authors => candidates
                 .iter()
                 .zip(&from_robot)
-                .map(|(&c, d)| self.p(c) * d)
+                .map(|(&c, d)| pc(c).get() * d)
                 .collect(),
         };
+        let mut final_leg = Vec::new();
+        if self.destination.is_some() {
+            leg_extra.resize(n, 0.0);
+            for (e, &c) in leg_extra.iter_mut().zip(candidates) {
+                *e += pc(c).get() * self.leg(Place::Container(c));
+            }
+            final_leg = candidates
+                .iter()
+                .map(|&c| self.leg(Place::Container(c)))
+                .collect();
+        }
         TourProblem {
             from_robot,
-            between: (0..n * n)
-                .map(|k| {
-                    d.between(
-                        Place::Container(candidates[k / n]),
-                        Place::Container(candidates[k % n]),
-                    )
-                })
-                .collect(),
-            p: candidates
-                .iter()
-                .map(|&c| self.p.get(c).copied().unwrap_or(Probability::ZERO))
-                .collect(),
+            between: between(d, candidates),
+            p: candidates.iter().map(|&c| pc(c)).collect(),
             search_cost: self.config.search_cost,
             leg_extra,
+            final_leg,
         }
     }
 
-    /// Reuses the cached solution when the candidate set is unchanged except for containers
-    /// searched since, and the robot stands at one of them (Bellman's principle: the best
-    /// continuation of an optimal plan is a table lookup).
-    fn cached_next(&mut self, belief: &Belief<'_>, candidates: &[usize]) -> Option<usize> {
+    fn task_problem(
+        &self,
+        belief: &Belief<'_>,
+        candidates: &[usize],
+        rows: &[usize],
+    ) -> TaskProblem {
+        TaskProblem {
+            from_robot: candidates.iter().map(|&c| belief.distance_to(c)).collect(),
+            between: between(belief.distances, candidates),
+            p: rows
+                .iter()
+                .map(|&r| {
+                    candidates
+                        .iter()
+                        .map(|&c| self.p[r].get(c).copied().unwrap_or(Probability::ZERO))
+                        .collect()
+                })
+                .collect(),
+            search_cost: self.config.search_cost,
+            to_destination: match self.destination {
+                Some(_) => candidates
+                    .iter()
+                    .map(|&c| self.leg(Place::Container(c)))
+                    .collect(),
+                None => Vec::new(),
+            },
+        }
+    }
+
+    /// Reuses the cached solution when the same targets are wanted, the candidate set is
+    /// unchanged except for containers searched since, and the robot stands at one of them
+    /// (Bellman's principle: the best continuation of an optimal plan is a table lookup).
+    fn cached_next(
+        &mut self,
+        belief: &Belief<'_>,
+        candidates: &[usize],
+        wanted: &[usize],
+    ) -> Option<usize> {
         let cached = self.cached.as_mut()?;
+        if cached.wanted != wanted {
+            return None;
+        }
         let mut searched = 0usize;
         for (i, &c) in cached.candidates.iter().enumerate() {
             if belief.is_searched(c) {
@@ -247,43 +394,36 @@ impl Planner {
         if at.is_some_and(|a| searched & (1 << a) == 0) {
             return None;
         }
-        // A first step taken from the memo: the table it came from, solved again (bit for bit
-        // the same) now that the robot follows it.
-        if cached.solution.is_none() {
-            cached.solution = planner::solve_exact(&cached.problem).map(|(_, solution)| solution);
-        }
-        cached
-            .solution
-            .as_ref()?
-            .next(&cached.problem, searched, at)
-            .map(|i| cached.candidates[i])
+        let next = match &mut cached.table {
+            Table::Tour(problem, solution) => {
+                // A first step taken from the memo: the table it came from, solved again (bit
+                // for bit the same) now that the robot follows it.
+                if solution.is_none() {
+                    *solution = planner::solve_exact(problem).map(|(_, solution)| solution);
+                }
+                solution.as_ref()?.next(problem, searched, at)
+            }
+            // The same targets wanted: none was found since it was solved.
+            Table::Task(problem, solution) => solution.next(problem, searched, 0, at),
+        };
+        next.map(|i| cached.candidates[i])
     }
-}
 
-impl Policy for Planner {
-    fn choose(&mut self, belief: &Belief<'_>) -> Result<usize, PlanError> {
-        let candidates = self.candidates(belief);
-        if candidates.len() <= 1 {
-            return candidates
-                .first()
-                .copied()
-                .ok_or_else(|| no_container("model"));
-        }
-        // The authors' extra term is measured from where the robot stands now, so a plan made
-        // elsewhere is not their continuation: replan at every decision.
-        if self.config.cost == CostModel::Paper
-            && let Some(c) = self.cached_next(belief, &candidates)
-        {
-            return Ok(c);
-        }
-        // The old table is no longer of use; dropped first, its memory serves the new solve.
-        self.cached = None;
-        let problem = self.problem(belief, &candidates);
-        // The authors' extra term makes the table depend on where the robot stands.
+    /// The first step over `candidates` while one target (or any of several) is wanted.
+    fn choose_tour(
+        &mut self,
+        belief: &Belief<'_>,
+        candidates: Vec<usize>,
+        wanted: Vec<usize>,
+        p: &[Probability],
+    ) -> Result<usize, PlanError> {
+        let problem = self.problem(belief, &candidates, p);
+        // The authors' extra term and a destination's make the table depend on more than the
+        // candidates' probabilities and the travel between them.
         let memo = self
             .memo
             .as_ref()
-            .filter(|_| self.config.cost == CostModel::Paper);
+            .filter(|_| self.config.cost == CostModel::Paper && problem.final_leg.is_empty());
         if let Some(memo) = memo
             && let Some(steps) = memo.first_steps(&candidates, &problem)
             && let Some(first) = planner::first_from_steps(&problem, &steps)
@@ -291,20 +431,13 @@ impl Policy for Planner {
             let chosen = candidates[first];
             self.cached = Some(Cached {
                 candidates,
-                problem,
-                solution: None,
+                wanted,
+                table: Table::Tour(problem, None),
             });
             return Ok(chosen);
         }
-        let (plan, solution) = planner::solve_exact(&problem).ok_or_else(|| PlanError::Policy {
-            policy: "model".into(),
-            error: format!(
-                "{} candidates exceed the exact planner's limit of {}",
-                candidates.len(),
-                planner::MAX_EXACT
-            )
-            .into(),
-        })?;
+        let (plan, solution) = planner::solve_exact(&problem)
+            .ok_or_else(|| too_many(candidates.len(), planner::MAX_EXACT))?;
         let first = plan
             .order
             .first()
@@ -315,29 +448,116 @@ impl Policy for Planner {
         }
         self.cached = Some(Cached {
             candidates,
-            problem,
-            solution: Some(solution),
+            wanted,
+            table: Table::Tour(problem, Some(solution)),
+        });
+        Ok(first)
+    }
+
+    /// The first step over `candidates` while the targets of `wanted` are all wanted.
+    fn choose_task(
+        &mut self,
+        belief: &Belief<'_>,
+        candidates: Vec<usize>,
+        wanted: Vec<usize>,
+    ) -> Result<usize, PlanError> {
+        let problem = self.task_problem(belief, &candidates, &wanted);
+        let solution = task_table::solve_task(&problem)
+            .ok_or_else(|| too_many(candidates.len(), task_table::max_candidates(wanted.len())))?;
+        let first = solution
+            .next(&problem, 0, 0, None)
+            .map(|i| candidates[i])
+            .ok_or_else(|| no_container("model"))?;
+        self.cached = Some(Cached {
+            candidates,
+            wanted,
+            table: Table::Task(problem, solution),
         });
         Ok(first)
     }
 }
 
-/// The oracle: knows which containers hold the target and goes to the nearest of them. A lower
+fn too_many(candidates: usize, limit: usize) -> PlanError {
+    PlanError::Policy {
+        policy: "model".into(),
+        error: format!("{candidates} candidates exceed the exact planner's limit of {limit}")
+            .into(),
+    }
+}
+
+/// Travel between `candidates`, row-major.
+fn between(d: &ferret_world::Distances, candidates: &[usize]) -> Vec<f64> {
+    let n = candidates.len();
+    (0..n * n)
+        .map(|k| {
+            d.between(
+                Place::Container(candidates[k / n]),
+                Place::Container(candidates[k % n]),
+            )
+        })
+        .collect()
+}
+
+impl Policy for Planner {
+    fn choose(&mut self, belief: &Belief<'_>) -> Result<usize, PlanError> {
+        let rows = self.wanted_rows(belief);
+        let wanted = self.wanted(&rows);
+        let candidates = self.candidates_for(belief, &wanted);
+        if candidates.len() <= 1 {
+            return candidates
+                .first()
+                .copied()
+                .ok_or_else(|| no_container("model"));
+        }
+        // The authors' extra term is measured from where the robot stands now, so a plan made
+        // elsewhere is not their continuation: replan at every decision.
+        if self.config.cost == CostModel::Paper
+            && let Some(c) = self.cached_next(belief, &candidates, &rows)
+        {
+            return Ok(c);
+        }
+        // The old table is no longer of use; dropped first, its memory serves the new solve.
+        self.cached = None;
+        match wanted {
+            Wanted::One(p) => self.choose_tour(belief, candidates, rows, &p),
+            Wanted::Several(several) => self.choose_task(belief, candidates, several),
+        }
+    }
+}
+
+/// The oracle: knows which containers hold the targets. For one target and no destination it
+/// goes to the nearest container holding it; for a task it follows the cheapest route through
+/// containers that make the goal hold, then to the destination ([`oracle_route`]). A lower
 /// bound on cost, never a selectable strategy.
 #[derive(Clone, Debug)]
 pub struct Oracle {
     goals: Vec<usize>,
+    /// The route to follow, for a task.
+    route: Option<Vec<usize>>,
 }
 
 impl Oracle {
     /// An oracle for a trial whose goal containers are `goals`.
     pub fn new(goals: Vec<usize>) -> Self {
-        Self { goals }
+        Self { goals, route: None }
+    }
+
+    /// An oracle that follows `route` (see [`oracle_route`]).
+    pub fn along(route: Vec<usize>) -> Self {
+        Self {
+            goals: Vec::new(),
+            route: Some(route),
+        }
     }
 }
 
 impl Policy for Oracle {
     fn choose(&mut self, belief: &Belief<'_>) -> Result<usize, PlanError> {
+        if let Some(route) = &self.route
+            && let Some(&c) = route.iter().find(|&&c| !belief.is_searched(c))
+        {
+            return Ok(c);
+        }
         let open = self
             .goals
             .iter()
@@ -346,5 +566,126 @@ impl Policy for Oracle {
         nearest(belief, open)
             .or_else(|| nearest(belief, belief.unsearched()))
             .ok_or_else(|| no_container("oracle"))
+    }
+}
+
+/// The cheapest route from the robot's position through containers until the goal holds, then
+/// to the destination: `holds[c]` is the bit set of the targets container `c` holds (task
+/// order, at most [`MAX_TARGETS`](crate::MAX_TARGETS)), `goal` says which sets of found
+/// targets end it. Exact: a shortest path over (targets found, last container), visiting only
+/// containers that hold something new. Empty when no route makes the goal hold.
+pub fn oracle_route(
+    belief: &Belief<'_>,
+    holds: &[u8],
+    goal: Goal,
+    destination: Option<&DestinationLegs>,
+) -> Vec<usize> {
+    let m = belief.task.targets().len();
+    let done = |mask: u8| match goal {
+        Goal::All => usize::from(mask) == (1 << m) - 1,
+        Goal::Any => mask != 0,
+    };
+    let useful: Vec<usize> = belief
+        .unsearched()
+        .filter(|&c| holds.get(c).is_some_and(|&h| h != 0))
+        .collect();
+    let k = useful.len();
+    let states = (1usize << m) * k;
+    // cost[mask·k + i]: least travel to stand at useful[i] having found `mask`.
+    let mut cost = vec![f64::INFINITY; states];
+    let mut parent = vec![usize::MAX; states];
+    let at = |mask: u8, i: usize| usize::from(mask) * k + i;
+    for (i, &c) in useful.iter().enumerate() {
+        let s = at(holds[c], i);
+        let d = belief.distance_to(c);
+        if d < cost[s] {
+            cost[s] = d;
+        }
+    }
+    // Masks only grow along a route, so increasing masks are settled in order.
+    for mask in 1..(1u8 << m) {
+        if done(mask) {
+            continue;
+        }
+        for (i, &c) in useful.iter().enumerate() {
+            let here = cost[at(mask, i)];
+            if !here.is_finite() {
+                continue;
+            }
+            for (j, &d) in useful.iter().enumerate() {
+                let next = mask | holds[d];
+                if next == mask {
+                    continue;
+                }
+                let v = here
+                    + belief
+                        .distances
+                        .between(Place::Container(c), Place::Container(d));
+                if v < cost[at(next, j)] {
+                    cost[at(next, j)] = v;
+                    parent[at(next, j)] = at(mask, i);
+                }
+            }
+        }
+    }
+    let end = |s: usize| {
+        let c = useful[s % k];
+        cost[s] + destination.map_or(0.0, |g| g.from(Place::Container(c)))
+    };
+    let best = (0..states)
+        .filter(|&s| done((s / k) as u8) && cost[s].is_finite())
+        .min_by(|&a, &b| end(a).total_cmp(&end(b)).then(a.cmp(&b)));
+    let mut route = Vec::new();
+    let mut s = best.unwrap_or(usize::MAX);
+    while s != usize::MAX {
+        route.push(useful[s % k]);
+        s = parent[s];
+    }
+    route.reverse();
+    route
+}
+
+/// One search after another: the single-target planner looks for the task's first target not
+/// yet found, without a thought for the others or the destination, remembering what was
+/// searched and seen (a target seen meanwhile is found). The baseline a task planner must beat.
+#[derive(Debug)]
+pub struct Sequential {
+    /// One single-target planner per target of the task, in task order.
+    planners: Vec<Planner>,
+}
+
+impl Sequential {
+    /// Looks for target `t` of the task with probabilities `p[t]`, one after another.
+    pub fn new(p: Vec<Vec<Probability>>, config: PlannerConfig) -> Self {
+        Self {
+            planners: p
+                .into_iter()
+                .enumerate()
+                .map(|(t, row)| Planner::for_targets(vec![row], vec![t], Goal::All, None, config))
+                .collect(),
+        }
+    }
+
+    /// The same, the planners sharing `memo`.
+    pub fn with_memo(self, memo: Option<Arc<PlanMemo>>) -> Self {
+        Self {
+            planners: self
+                .planners
+                .into_iter()
+                .map(|p| p.with_memo(memo.clone()))
+                .collect(),
+        }
+    }
+}
+
+impl Policy for Sequential {
+    fn choose(&mut self, belief: &Belief<'_>) -> Result<usize, PlanError> {
+        let t = (0..self.planners.len())
+            .find(|&t| belief.found(t).is_none())
+            .unwrap_or(0);
+        self.planners
+            .get_mut(t)
+            .ok_or_else(|| no_container("sequential"))?
+            .choose(belief)
     }
 }

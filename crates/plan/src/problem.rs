@@ -1,9 +1,11 @@
 //! The object-search problem a strategy solves: what the robot knows (the house and its travel
-//! distances) and what it is asked (the target, the containers searched before). Every
+//! distances) and what it is asked (the task, the containers searched before). Every
 //! consumer — the simulator, a robot's step-by-step search, offline replay, the services —
 //! plans on this one type.
 
 use ferret_world::{Distances, House, ObjectType};
+
+use crate::task::{DestinationLegs, Task, TaskError};
 use serde::{Deserialize, Serialize};
 
 use std::sync::Arc;
@@ -11,13 +13,32 @@ use std::sync::Arc;
 use crate::plan_memo::PlanMemo;
 use crate::replay_memo::ReplayMemo;
 
-/// One house, one target, one start pose (the house's), and containers revealed beforehand.
+/// One house, one task (a target, or several with a goal and a destination), one start pose
+/// (the house's), and containers revealed beforehand.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TrialSpec {
-    /// The object type to find.
-    pub target: ObjectType,
+    /// What the robot is asked.
+    pub task: Task,
     /// Containers known to be searched before the trial starts (usually none).
     pub revealed: Vec<usize>,
+}
+
+impl TrialSpec {
+    /// A trial of one target, nothing revealed.
+    pub fn single(target: ObjectType) -> Self {
+        Self {
+            task: Task::single(target),
+            revealed: Vec::new(),
+        }
+    }
+
+    /// A trial of `task`, nothing revealed.
+    pub fn of(task: Task) -> Self {
+        Self {
+            task,
+            revealed: Vec::new(),
+        }
+    }
 }
 
 /// One object-search problem: the map the robot knows, travel distances on it, and the trial
@@ -35,6 +56,8 @@ pub struct SearchProblem<'a> {
     memo: Option<&'a ReplayMemo>,
     /// First steps of plans solved in this house, when the caller keeps them.
     plans: Option<&'a Arc<PlanMemo>>,
+    /// The task's destination on this map, when the caller resolved it.
+    destination: Option<&'a DestinationLegs>,
 }
 
 impl<'a> SearchProblem<'a> {
@@ -46,7 +69,40 @@ impl<'a> SearchProblem<'a> {
             trial,
             memo: None,
             plans: None,
+            destination: None,
         }
+    }
+
+    /// The same problem with its task's destination already resolved on this map (see
+    /// [`Destination::legs`](crate::Destination::legs)): searches of it then need not resolve it
+    /// themselves, which costs a search over the grid for a room or a point.
+    pub fn with_destination(self, legs: &'a DestinationLegs) -> Self {
+        Self {
+            destination: Some(legs),
+            ..self
+        }
+    }
+
+    /// The task's destination on this map: the legs given with
+    /// [`with_destination`](Self::with_destination), else resolved now; `None` for a task
+    /// without one.
+    ///
+    /// # Errors
+    /// What [`Destination::legs`](crate::Destination::legs) refuses.
+    pub fn destination_legs(
+        &self,
+    ) -> Result<Option<std::borrow::Cow<'a, DestinationLegs>>, TaskError> {
+        if let Some(l) = self.destination {
+            return Ok(Some(std::borrow::Cow::Borrowed(l)));
+        }
+        self.trial
+            .task
+            .destination()
+            .map(|d| {
+                d.legs(self.house, self.distances)
+                    .map(std::borrow::Cow::Owned)
+            })
+            .transpose()
     }
 
     /// The same problem, its replays looked up in and added to `memo`. The memo must belong to
@@ -78,8 +134,8 @@ impl<'a> SearchProblem<'a> {
         self.memo
     }
 
-    /// The object type searched for.
-    pub fn target(&self) -> &'a ObjectType {
-        &self.trial.target
+    /// What the robot is asked.
+    pub fn task(&self) -> &'a Task {
+        &self.trial.task
     }
 }

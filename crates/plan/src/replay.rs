@@ -1,50 +1,65 @@
 //! Offline replay (paper section V-C): what would another strategy have cost on a finished trial?
 //!
 //! The pessimistic hindsight belief: the target is only in the container where it was actually
-//! found; containers searched in the trial are known (and held nothing else of use); every other
+//! found (for a task, each target found only where it was found, the others nowhere);
+//! containers searched in the trial are known (and held nothing else of use); every other
 //! container is assumed empty. The replay reuses [`run_trial`] and the strategies' own policies,
-//! so a replay cannot drift from a real run.
+//! so a replay cannot drift from a real run: it ends when the task's goal holds in that world,
+//! at the task's destination.
 
-use ferret_world::{GroundTruth, House, ObjectType, SmallObject, TravelCost};
+use ferret_world::{GroundTruth, House, SmallObject, TravelCost};
 
 use crate::error::PlanError;
 use crate::problem::SearchProblem;
 use crate::protocol::ReplayMode;
 use crate::replay_memo::ReplayKey;
 use crate::strategy::Strategy;
+use crate::task::Task;
 use crate::trial::{TrialOutcome, run_trial};
 
-/// The hindsight world of a finished trial: the target in `found` only.
+/// The hindsight world of a finished trial: each target of `task` only in the container
+/// `found_each` says it was found in (task order; `None`: found nowhere).
 pub fn hindsight_truth(
     house: &House,
-    target: &ObjectType,
-    found: usize,
+    task: &Task,
+    found_each: &[Option<usize>],
 ) -> Result<GroundTruth, PlanError> {
-    if found >= house.containers.len() {
-        return Err(PlanError::Replay {
+    let mut contents = vec![Vec::new(); house.containers.len()];
+    for (i, (target, found)) in task.targets().iter().zip(found_each).enumerate() {
+        let Some(c) = *found else { continue };
+        let slot = contents.get_mut(c).ok_or_else(|| PlanError::Replay {
             house: house.name.clone(),
-            message: format!("container {found} does not exist"),
+            message: format!("container {c} does not exist"),
+        })?;
+        slot.push(SmallObject {
+            id: if i == 0 {
+                "hindsight-target".into()
+            } else {
+                format!("hindsight-target-{i}")
+            },
+            object_type: target.clone(),
         });
     }
-    let mut contents = vec![Vec::new(); house.containers.len()];
-    contents[found].push(SmallObject {
-        id: "hindsight-target".into(),
-        object_type: target.clone(),
-    });
+    if !task.holds(found_each.iter().map(Option::is_some)) {
+        return Err(PlanError::Replay {
+            house: house.name.clone(),
+            message: format!("the trial's goal did not hold ({task})"),
+        });
+    }
     Ok(GroundTruth::new(contents))
 }
 
 /// The replay cost under `mode`: [`replay_cost`] when pessimistic; when counterfactual (the
-/// paper's reference code), the strategy is run on the true world `truth` and stops at the first
-/// container that truly holds the target, whichever was found in the trial.
+/// paper's reference code), the strategy is run on the true world `truth` and stops where the
+/// goal truly holds, whichever containers it was met at in the trial.
 pub fn replay_cost_with(
     mode: ReplayMode,
     strategy: &dyn Strategy,
     problem: &SearchProblem<'_>,
     truth: &GroundTruth,
-    found: usize,
+    found_each: &[Option<usize>],
 ) -> Result<f64, PlanError> {
-    replay_outcome_with(mode, strategy, problem, truth, found).map(|o| o.cost)
+    replay_outcome_with(mode, strategy, problem, truth, found_each).map(|o| o.cost)
 }
 
 /// The replayed trial itself under `mode` (see [`replay_cost_with`]): its searches give its
@@ -54,20 +69,26 @@ pub fn replay_outcome_with(
     strategy: &dyn Strategy,
     problem: &SearchProblem<'_>,
     truth: &GroundTruth,
-    found: usize,
+    found_each: &[Option<usize>],
 ) -> Result<TrialOutcome, PlanError> {
     let house = problem.house;
+    let task = problem.task();
     let (outcome, never) = match mode {
         ReplayMode::Pessimistic => {
-            let hindsight = hindsight_truth(house, problem.target(), found)?;
-            (
-                run_trial(strategy, problem, &hindsight)?,
-                format!("never searched container {found}"),
-            )
+            let hindsight = hindsight_truth(house, task, found_each)?;
+            let never = match found_each {
+                [Some(found)] => format!("never searched container {found}"),
+                _ => format!("never reached the goal of {task}"),
+            };
+            (run_trial(strategy, problem, &hindsight)?, never)
         }
         ReplayMode::Counterfactual => (
             run_trial(strategy, problem, truth)?,
-            format!("never found {}", problem.target()),
+            if task.targets().len() == 1 {
+                format!("never found {}", task.first())
+            } else {
+                format!("never reached the goal of {task}")
+            },
         ),
     };
     match outcome.found {
@@ -79,19 +100,26 @@ pub fn replay_outcome_with(
     }
 }
 
-/// The replay cost of `strategy` on a trial whose target was found in container `found`: the
-/// distance it travels until it searches `found`.
+/// The replay cost of `strategy` on a trial whose targets were found in `found_each` (task
+/// order): the distance it travels until its goal holds in the hindsight world (for one
+/// target: until it searches the container where it was found), and on to the destination.
 pub fn replay_cost(
     strategy: &dyn Strategy,
     problem: &SearchProblem<'_>,
-    found: usize,
+    found_each: &[Option<usize>],
 ) -> Result<f64, PlanError> {
-    let truth = hindsight_truth(problem.house, problem.target(), found)?;
-    replay_cost_with(ReplayMode::Pessimistic, strategy, problem, &truth, found)
+    let truth = hindsight_truth(problem.house, problem.task(), found_each)?;
+    replay_cost_with(
+        ReplayMode::Pessimistic,
+        strategy,
+        problem,
+        &truth,
+        found_each,
+    )
 }
 
-/// The replay costs of every candidate on a finished trial, as selection needs them after each
-/// deployment. `deployed` is the deployed candidate's index and its own cost (already in
+/// The replay costs of every candidate on a finished trial whose targets were found in
+/// `found_each`, as selection needs them after each deployment. `deployed` is the deployed candidate's index and its own cost (already in
 /// `travel`'s terms), which its entry keeps; the others are replayed under `mode` and reported
 /// under `travel`, so that every entry is in the same unit.
 pub fn replay_costs(
@@ -99,11 +127,11 @@ pub fn replay_costs(
     candidates: &[std::sync::Arc<dyn Strategy>],
     problem: &SearchProblem<'_>,
     truth: &GroundTruth,
-    found: usize,
+    found_each: &[Option<usize>],
     deployed: (usize, f64),
 ) -> Result<Vec<f64>, PlanError> {
     let replay = |s: &dyn Strategy| {
-        replay_outcome_with(mode, s, problem, truth, found)?.reported_cost(
+        replay_outcome_with(mode, s, problem, truth, found_each)?.reported_cost(
             problem.house,
             problem.distances,
             travel,
@@ -128,9 +156,9 @@ pub fn replay_costs(
     };
     let key = |s: &dyn Strategy| ReplayKey {
         strategy: s.name().to_string(),
-        target: problem.trial.target.clone(),
+        task: problem.trial.task.to_string(),
         revealed: problem.trial.revealed.clone(),
-        found,
+        found: found_each.to_vec(),
         travel,
     };
     let mut missed = false;

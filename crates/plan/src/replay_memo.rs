@@ -6,7 +6,7 @@ use std::collections::HashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 
-use ferret_world::{ObjectType, TravelCost};
+use ferret_world::TravelCost;
 
 use crate::error::PlanError;
 
@@ -16,8 +16,8 @@ use crate::error::PlanError;
 /// trial ends the same way again and again; each end replays every other candidate, which is a
 /// whole simulated search (an exact planner's one solves a Held–Karp problem per decision).
 /// Under the pessimistic hindsight belief a replay depends only on the house, the start (both
-/// fixed by whoever owns the memo), the trial (target, containers revealed), the container the
-/// target was found in, the strategy and the travel cost; the last four are the key, the
+/// fixed by whoever owns the memo), the trial (task, containers revealed), the containers its
+/// targets were found in, the strategy and the travel cost; the last five are the key, the
 /// strategy by name. So a memo must not outlive what its strategies' names mean (the registry
 /// that built them) nor be shared between houses or starts. Counterfactual replays, which also
 /// depend on the true world, are never kept.
@@ -39,9 +39,11 @@ type Slot = Arc<Mutex<Option<f64>>>;
 #[derive(Debug, Hash, PartialEq, Eq)]
 pub(crate) struct ReplayKey {
     pub(crate) strategy: String,
-    pub(crate) target: ObjectType,
+    /// The task as written (targets, goal, destination).
+    pub(crate) task: String,
     pub(crate) revealed: Vec<usize>,
-    pub(crate) found: usize,
+    /// Where each target was found.
+    pub(crate) found: Vec<Option<usize>>,
     pub(crate) travel: TravelCost,
 }
 

@@ -7,11 +7,16 @@ use std::sync::Arc;
 
 use ferret_world::GroundTruth;
 
+use crate::belief::Belief;
 use crate::error::PlanError;
 use crate::learned::{LearnedKind, LearnedSource};
 use crate::likelihood::{LikelihoodSource, Noise, Uniform};
-use crate::policy::{CandidateLimit, CostModel, Greedy, Oracle, Planner, PlannerConfig, Policy};
+use crate::policy::{
+    CandidateLimit, CostModel, Greedy, Oracle, Planner, PlannerConfig, Policy, Sequential,
+    oracle_route,
+};
 use crate::prior::{Prior, RawPrior};
+use crate::probability::Probability;
 use crate::problem::SearchProblem;
 
 /// What a strategy needs to start a trial.
@@ -41,6 +46,12 @@ pub trait Strategy: Send + Sync {
     /// The likelihood source the strategy plans over, if it plans over one (what `ferret
     /// calibrate` scores).
     fn likelihood_source(&self) -> Option<&Arc<dyn LikelihoodSource>> {
+        None
+    }
+
+    /// The planner settings, for a strategy that plans with the expected-cost planner (what
+    /// `sequential/<spec>` runs target after target).
+    fn planner_config(&self) -> Option<PlannerConfig> {
         None
     }
 }
@@ -119,14 +130,30 @@ impl StrategyRegistry {
             .insert(kind.to_string(), (usage.to_string(), Box::new(build)));
     }
 
-    /// Usage lines of every registered kind.
+    /// Usage lines of every registered kind, and of `sequential/<spec>`.
     pub fn usage(&self) -> Vec<String> {
-        self.kinds.values().map(|(u, _)| u.clone()).collect()
+        self.kinds
+            .values()
+            .map(|(u, _)| u.clone())
+            .chain([format!("{SEQUENTIAL}/<model spec>")])
+            .collect()
     }
 
-    /// Builds the strategy a spec names.
+    /// Builds the strategy a spec names. `sequential/<spec>` is the planner of `<spec>` run
+    /// target after target (see [`Sequential`]), for any `<spec>` that plans over a likelihood
+    /// source.
     pub fn build(&self, spec: &str) -> Result<Arc<dyn Strategy>, PlanError> {
         let parsed = StrategySpec::parse(spec)?;
+        if parsed.kind == SEQUENTIAL {
+            let inner = self.build(&parsed.args.join("/")).map_err(|e| match e {
+                PlanError::UnknownStrategy { reason, .. } => PlanError::UnknownStrategy {
+                    spec: parsed.raw.clone(),
+                    reason,
+                },
+                other => other,
+            })?;
+            return SequentialStrategy::new(&parsed.raw, inner).map(|s| Arc::new(s) as _);
+        }
         match self.kinds.get(&parsed.kind) {
             Some((_, build)) => build(&parsed),
             None => Err(PlanError::UnknownStrategy {
@@ -276,10 +303,119 @@ impl Strategy for OracleStrategy {
             policy: "oracle".into(),
             error: "the oracle was not given the ground truth".into(),
         })?;
-        Ok(Box::new(Oracle::new(
-            truth.goal_containers(ctx.problem.target()),
-        )))
+        let task = ctx.problem.task();
+        if task.is_single() {
+            return Ok(Box::new(Oracle::new(truth.goal_containers(task.first()))));
+        }
+        let holds: Vec<u8> = (0..ctx.problem.house.containers.len())
+            .map(|c| {
+                task.targets()
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, t)| truth.holds(c, t))
+                    .fold(0u8, |m, (i, _)| m | (1 << i))
+            })
+            .collect();
+        let legs = ctx.problem.destination_legs().map_err(task_error)?;
+        let belief = Belief::new(ctx.problem.house, ctx.problem.distances, task);
+        // The route from the start; containers searched beforehand hold no target.
+        let route = oracle_route(&belief, &holds, task.goal(), legs.as_deref());
+        Ok(Box::new(Oracle::along(route)))
     }
+}
+
+/// A task the map cannot serve, as a policy's failure.
+pub(crate) fn task_error(e: crate::task::TaskError) -> PlanError {
+    PlanError::Task(e)
+}
+
+/// The spec kind of [`SequentialStrategy`].
+pub const SEQUENTIAL: &str = "sequential";
+
+/// `sequential/<spec>`: the single-target planner of `<spec>` looking for a task's targets one
+/// after another, then driving to the destination. On one target it is `<spec>` itself.
+pub struct SequentialStrategy {
+    name: String,
+    inner: Arc<dyn Strategy>,
+}
+
+impl SequentialStrategy {
+    /// `inner` run target after target, named `name`.
+    ///
+    /// # Errors
+    /// [`PlanError::UnknownStrategy`] when `inner` does not plan over a likelihood source.
+    pub fn new(name: &str, inner: Arc<dyn Strategy>) -> Result<Self, PlanError> {
+        if inner.likelihood_source().is_none() || inner.planner_config().is_none() {
+            return Err(PlanError::UnknownStrategy {
+                spec: name.to_string(),
+                reason: format!(
+                    "`{}` does not plan over a likelihood source; sequential/ takes a model strategy such as sequential/model/prior",
+                    inner.name()
+                ),
+            });
+        }
+        Ok(Self {
+            name: name.to_string(),
+            inner,
+        })
+    }
+}
+
+impl Strategy for SequentialStrategy {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn likelihood_source(&self) -> Option<&Arc<dyn LikelihoodSource>> {
+        self.inner.likelihood_source()
+    }
+
+    fn planner_config(&self) -> Option<PlannerConfig> {
+        self.inner.planner_config()
+    }
+
+    fn policy<'a>(&'a self, ctx: &TrialContext<'a>) -> Result<Box<dyn Policy + 'a>, PlanError> {
+        // One target, no destination: nothing to do one after another.
+        if ctx.problem.task().is_single() {
+            return self.inner.policy(ctx);
+        }
+        let (Some(source), Some(config)) = (self.likelihood_source(), self.planner_config()) else {
+            return Err(PlanError::Policy {
+                policy: self.name.clone(),
+                error: "no likelihood source".into(),
+            });
+        };
+        let p = task_likelihoods(source.as_ref(), &ctx.problem)?;
+        Ok(Box::new(
+            Sequential::new(p, config).with_memo(ctx.problem.plan_memo().cloned()),
+        ))
+    }
+}
+
+/// One row of likelihoods per target of the problem's task, each checked to have one entry per
+/// container.
+pub fn task_likelihoods(
+    source: &dyn LikelihoodSource,
+    problem: &SearchProblem<'_>,
+) -> Result<Vec<Vec<Probability>>, PlanError> {
+    let house = problem.house;
+    problem
+        .task()
+        .targets()
+        .iter()
+        .map(|t| {
+            let p = source.likelihoods(house, t)?;
+            if p.len() == house.containers.len() {
+                Ok(p)
+            } else {
+                Err(PlanError::LikelihoodCount {
+                    source_name: source.name().to_string(),
+                    expected: house.containers.len(),
+                    got: p.len(),
+                })
+            }
+        })
+        .collect()
 }
 
 /// The model-based planner over a likelihood source: `model/prior`, `llm+model/<prompt>/<llm>`.
@@ -314,19 +450,26 @@ impl Strategy for ModelStrategy {
         Some(&self.source)
     }
 
+    fn planner_config(&self) -> Option<PlannerConfig> {
+        Some(self.config)
+    }
+
     fn policy<'a>(&'a self, ctx: &TrialContext<'a>) -> Result<Box<dyn Policy + 'a>, PlanError> {
-        let p = self
-            .source
-            .likelihoods(ctx.problem.house, ctx.problem.target())?;
-        if p.len() != ctx.problem.house.containers.len() {
-            return Err(PlanError::LikelihoodCount {
-                source_name: self.source.name().to_string(),
-                expected: ctx.problem.house.containers.len(),
-                got: p.len(),
-            });
+        let task = ctx.problem.task();
+        let p = task_likelihoods(self.source.as_ref(), &ctx.problem)?;
+        let memo = ctx.problem.plan_memo().cloned();
+        if task.is_single() {
+            let p = p.into_iter().next().unwrap_or_default();
+            return Ok(Box::new(Planner::new(p, self.config).with_memo(memo)));
         }
+        let legs = ctx
+            .problem
+            .destination_legs()
+            .map_err(task_error)?
+            .map(std::borrow::Cow::into_owned);
+        let rows = (0..p.len()).collect();
         Ok(Box::new(
-            Planner::new(p, self.config).with_memo(ctx.problem.plan_memo().cloned()),
+            Planner::for_targets(p, rows, task.goal(), legs, self.config).with_memo(memo),
         ))
     }
 }

@@ -1,5 +1,5 @@
-//! Trials: drawing a target for a house, and the simulator that runs a strategy until the target
-//! is found (on a [`SearchProblem`]).
+//! Trials: drawing a target (or a task of several) for a house, and the simulator that runs a
+//! strategy until the task's goal holds (on a [`SearchProblem`]).
 
 use ferret_world::{Distances, GroundTruth, House, ObjectType, Place, Point, TravelCost};
 use rand::{Rng, SeedableRng};
@@ -13,6 +13,7 @@ use crate::problem::{SearchProblem, TrialSpec};
 use crate::protocol::{InitialBelief, Protocol, TargetSet, TrialRng};
 use crate::pyrandom::PyRandom;
 use crate::strategy::{Strategy, TrialContext};
+use crate::task::{DestinationLegs, Goal, Task};
 
 /// A deterministic RNG for house `index` under `seed`, independent of thread scheduling.
 fn house_rng(seed: u64, index: usize, stream: u64) -> ChaCha8Rng {
@@ -39,22 +40,32 @@ pub fn draw_trial(
     }
     let mut rng = house_rng(seed, house.index, 1);
     let target = types[rng.random_range(0..types.len())].clone();
-    let revealed = reveal(house, truth, &target, reveal_fraction, &mut rng);
-    Ok(TrialSpec { target, revealed })
+    let revealed = reveal(
+        house,
+        truth,
+        std::slice::from_ref(&target),
+        reveal_fraction,
+        &mut rng,
+    );
+    Ok(TrialSpec {
+        task: Task::single(target),
+        revealed,
+    })
 }
 
-/// The containers that start out searched: `reveal_fraction` of those not holding `target`.
+/// The containers that start out searched: `reveal_fraction` of those holding none of
+/// `targets`.
 fn reveal(
     house: &House,
     truth: &GroundTruth,
-    target: &ObjectType,
+    targets: &[ObjectType],
     reveal_fraction: f64,
     rng: &mut ChaCha8Rng,
 ) -> Vec<usize> {
     let mut revealed = Vec::new();
     if reveal_fraction > 0.0 {
         let empty: Vec<usize> = (0..house.containers.len())
-            .filter(|&c| !truth.holds(c, target))
+            .filter(|&c| !targets.iter().any(|t| truth.holds(c, t)))
             .collect();
         let k = ((empty.len() as f64) * reveal_fraction.clamp(0.0, 1.0)).round() as usize;
         let mut pool = empty;
@@ -169,23 +180,50 @@ pub fn draw_trials_with(
         let revealed = reveal(
             house,
             truth,
-            &target,
+            std::slice::from_ref(&target),
             reveal_fraction,
             &mut house_rng(seed, house.index, 1),
         );
-        vec![TrialSpec { target, revealed }]
+        vec![TrialSpec {
+            task: Task::single(target),
+            revealed,
+        }]
     } else {
-        let types = truth
-            .target_types()
-            .into_iter()
-            .filter(|t| allowed(t))
-            .collect();
+        let types = allowed_types(house, truth, protocol);
         draw_targets(house, types, truth, seed, reveal_fraction, per_house)?
     };
+    paper_initial_belief(house, truth, seed, protocol, &mut trials);
+    Ok(trials)
+}
+
+/// The target types a trial of `house` may ask for under `protocol`, in name order.
+fn allowed_types(house: &House, truth: &GroundTruth, protocol: &Protocol) -> Vec<ObjectType> {
+    let furniture: std::collections::BTreeSet<&ObjectType> = house
+        .containers
+        .iter()
+        .map(|c| &c.object_type)
+        .chain(house.obstacles.iter().map(|o| &o.object_type))
+        .collect();
+    truth
+        .target_types()
+        .into_iter()
+        .filter(|t| protocol.targets == TargetSet::Pickupable || !furniture.contains(t))
+        .collect()
+}
+
+/// Under the paper's initial belief, reveals the containers each trial starts with searched
+/// (see [`draw_trials_with`]); nothing under ferret's.
+fn paper_initial_belief(
+    house: &House,
+    truth: &GroundTruth,
+    seed: u64,
+    protocol: &Protocol,
+    trials: &mut [TrialSpec],
+) {
     if protocol.initial_belief == InitialBelief::Paper {
         let n = house.containers.len();
         let mut rng = house_rng(seed, house.index, 4);
-        for t in &mut trials {
+        for t in trials.iter_mut() {
             let unsearched = match protocol.rng {
                 TrialRng::Python => {
                     let mut py = PyRandom::new(python_seed(house.index, seed));
@@ -203,10 +241,12 @@ pub fn draw_trials_with(
                 }
             };
             let mut keep = vec![false; n];
-            for c in unsearched
-                .into_iter()
-                .chain(truth.goal_containers(&t.target))
-            {
+            let goals = t
+                .task
+                .targets()
+                .iter()
+                .flat_map(|target| truth.goal_containers(target));
+            for c in unsearched.into_iter().chain(goals) {
                 if let Some(k) = keep.get_mut(c) {
                     *k = true;
                 }
@@ -216,7 +256,122 @@ pub fn draw_trials_with(
             t.revealed.dedup();
         }
     }
+}
+
+/// The shape of the tasks a run draws: how many targets each asks for, and whether all of them
+/// or any one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TaskShape {
+    /// All of the targets, or any one.
+    pub goal: Goal,
+    /// Targets per task, 1 to [`MAX_TARGETS`](crate::MAX_TARGETS).
+    pub targets: usize,
+}
+
+impl std::str::FromStr for TaskShape {
+    type Err = crate::task::TaskError;
+
+    /// `all:<N>` or `any:<N>`.
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let err = |m: String| crate::task::TaskError::new("targets", m);
+        let (goal, n) = s
+            .split_once(':')
+            .ok_or_else(|| err(format!("`{s}`: expected `all:<N>` or `any:<N>`")))?;
+        let goal = goal.parse()?;
+        let targets: usize = n
+            .trim()
+            .parse()
+            .map_err(|_| err(format!("`{n}` is not a number of targets")))?;
+        if !(1..=crate::task::MAX_TARGETS).contains(&targets) {
+            return Err(err(format!(
+                "{targets} targets: a task asks for 1 to {}",
+                crate::task::MAX_TARGETS
+            )));
+        }
+        Ok(Self { goal, targets })
+    }
+}
+
+impl std::fmt::Display for TaskShape {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}:{}", self.goal, self.targets)
+    }
+}
+
+/// Draws the tasks of a house: each asks for `shape.targets` distinct types present in the
+/// house (those `protocol` allows), drawn uniformly and kept in the order drawn, with no
+/// destination; a house draws `per_house` tasks, each of another set of targets. Revealed
+/// containers hold none of a task's targets. A stream of its own, so the single-target draws
+/// are untouched.
+///
+/// # Errors
+/// [`PlanError::TooFewTargets`] for a house with fewer types than a task asks for (or fewer
+/// sets of them than `per_house` tasks), [`PlanError::NoTarget`] for one with none; `per_house`
+/// `all` is refused (every set of targets would be too many trials).
+pub fn draw_tasks(
+    (house, truth): (&House, &GroundTruth),
+    seed: u64,
+    reveal_fraction: f64,
+    per_house: TrialsPerHouse,
+    protocol: &Protocol,
+    shape: TaskShape,
+) -> Result<Vec<TrialSpec>, PlanError> {
+    let types = allowed_types(house, truth, protocol);
+    if types.is_empty() {
+        return Err(PlanError::NoTarget {
+            house: house.name.clone(),
+        });
+    }
+    let count = match per_house {
+        TrialsPerHouse::One => 1,
+        TrialsPerHouse::Count(n) => n,
+        TrialsPerHouse::All => {
+            return Err(PlanError::Task(crate::task::TaskError::new(
+                "trials per house",
+                "`all` draws every target type once; with tasks give a number of tasks per house",
+            )));
+        }
+    };
+    let possible = binomial(types.len(), shape.targets);
+    if types.len() < shape.targets || possible < count as u128 {
+        return Err(PlanError::TooFewTargets {
+            house: house.name.clone(),
+            have: types.len(),
+            want: shape.targets,
+            tasks: count,
+        });
+    }
+    let mut rng = house_rng(seed, house.index, 5);
+    let mut trials: Vec<TrialSpec> = Vec::with_capacity(count);
+    let mut sets: Vec<Vec<ObjectType>> = Vec::new();
+    while trials.len() < count {
+        let picked: Vec<ObjectType> =
+            rand::seq::index::sample(&mut rng, types.len(), shape.targets)
+                .into_iter()
+                .map(|i| types[i].clone())
+                .collect();
+        let mut set = picked.clone();
+        set.sort();
+        if sets.contains(&set) {
+            continue;
+        }
+        sets.push(set);
+        let revealed = reveal(house, truth, &picked, reveal_fraction, &mut rng);
+        let task = Task::new(picked, shape.goal, None)?;
+        trials.push(TrialSpec { task, revealed });
+    }
+    paper_initial_belief(house, truth, seed, protocol, &mut trials);
     Ok(trials)
+}
+
+/// n choose k, saturating.
+fn binomial(n: usize, k: usize) -> u128 {
+    if k > n {
+        return 0;
+    }
+    (0..k).fold(1u128, |acc, i| {
+        acc.saturating_mul((n - i) as u128) / (i as u128 + 1)
+    })
 }
 
 /// The seed of CPython's `random` for house `index` under trial seed `seed`: the house's index
@@ -265,8 +420,17 @@ fn draw_targets(
             // The same stream and draws as `draw_trial`.
             let mut rng = house_rng(seed, house.index, 1);
             let target = types[rng.random_range(0..types.len())].clone();
-            let revealed = reveal(house, truth, &target, reveal_fraction, &mut rng);
-            return Ok(vec![TrialSpec { target, revealed }]);
+            let revealed = reveal(
+                house,
+                truth,
+                std::slice::from_ref(&target),
+                reveal_fraction,
+                &mut rng,
+            );
+            return Ok(vec![TrialSpec {
+                task: Task::single(target),
+                revealed,
+            }]);
         }
         TrialsPerHouse::Count(n) => n,
         TrialsPerHouse::All => types.len(),
@@ -279,8 +443,17 @@ fn draw_targets(
     Ok(types
         .into_iter()
         .map(|target| {
-            let revealed = reveal(house, truth, &target, reveal_fraction, &mut rng);
-            TrialSpec { target, revealed }
+            let revealed = reveal(
+                house,
+                truth,
+                std::slice::from_ref(&target),
+                reveal_fraction,
+                &mut rng,
+            );
+            TrialSpec {
+                task: Task::single(target),
+                revealed,
+            }
         })
         .collect())
 }
@@ -290,21 +463,30 @@ fn draw_targets(
 pub struct TrialOutcome {
     /// The strategy's name.
     pub strategy: String,
-    /// The target.
-    pub target: ObjectType,
-    /// Distance travelled until the target was found (or everything was searched), metres.
+    /// What was asked.
+    pub task: Task,
+    /// Distance travelled until the goal held (or everything was searched) and, with a
+    /// destination, the robot stood there; metres.
     pub cost: f64,
     /// Containers searched, in order.
     pub searched: Vec<usize>,
-    /// The container where the target was found; `None` when it is in no container.
+    /// The container where the goal came to hold (for one target: where it was found); `None`
+    /// when it never held.
     pub found: Option<usize>,
+    /// Where each target (task order) was first seen.
+    pub found_each: Vec<Option<usize>>,
+    /// The last leg, to the destination, metres (0 without one); part of `cost`.
+    pub delivery: f64,
+    /// The destination, when it is a place of the map (the start, a container).
+    pub delivered_to: Option<Place>,
 }
 
 impl TrialOutcome {
-    /// The places visited, from the start.
+    /// The places visited, from the start (and the destination, when it is a place).
     pub fn places(&self) -> Vec<Place> {
         std::iter::once(Place::Start)
             .chain(self.searched.iter().map(|&c| Place::Container(c)))
+            .chain(self.delivered_to)
             .collect()
     }
 
@@ -313,8 +495,9 @@ impl TrialOutcome {
     /// reference code's reported metric; the strategy still decided on plain distances).
     ///
     /// # Errors
-    /// [`PlanError::TravelCost`] for the soft cost on distances that came from no grid, or a
-    /// trajectory with a leg the soft cost cannot travel.
+    /// [`PlanError::TravelCost`] for the soft cost on distances that came from no grid, a
+    /// destination that is no place of the map, or a trajectory with a leg the soft cost cannot
+    /// travel.
     pub fn reported_cost(
         &self,
         house: &House,
@@ -328,6 +511,11 @@ impl TrialOutcome {
             house: house.name.clone(),
             message: message.to_owned(),
         };
+        if self.task.destination().is_some() && self.delivered_to.is_none() {
+            return Err(err(
+                "the soft travel cost measures legs between places of the map; a destination in a room or at a point is not one",
+            ));
+        }
         let cost = distances
             .travel_cost(&self.places(), travel)
             .ok_or_else(|| err("the soft travel cost needs distances measured on a grid"))?;
@@ -340,25 +528,40 @@ impl TrialOutcome {
         }
     }
 
-    /// The trajectory on the floor (the cells walked), when the distances came from a grid.
-    pub fn trajectory(&self, distances: &Distances) -> Option<Vec<Point>> {
-        let places = self.places();
+    /// The trajectory on the floor (the cells walked), when the distances came from a grid;
+    /// with the task's destination `legs`, the way there too.
+    pub fn trajectory(
+        &self,
+        distances: &Distances,
+        legs: Option<&DestinationLegs>,
+    ) -> Option<Vec<Point>> {
         let mut points = Vec::new();
-        for leg in places.windows(2) {
-            let path = distances.path(leg[0], leg[1])?;
-            points.extend(path);
+        let visits: Vec<Place> = std::iter::once(Place::Start)
+            .chain(self.searched.iter().map(|&c| Place::Container(c)))
+            .collect();
+        for leg in visits.windows(2) {
+            points.extend(distances.path(leg[0], leg[1])?);
+        }
+        if let Some(legs) = legs.filter(|_| self.task.destination().is_some()) {
+            let last = visits.last().copied().unwrap_or(Place::Start);
+            points.extend(legs.path(distances, last)?);
         }
         Some(points)
     }
 }
 
 /// One trial in progress, one search at a time: what a robot loop drives (ask for the next
-/// container, go there, report what was seen). The simulator [`run_trial`] is this loop with the
-/// ground truth answering, so a robot and a simulation cannot plan differently.
+/// container, go there, report what was seen, and at the end go to the destination). The
+/// simulator [`run_trial`] is this loop with the ground truth answering, so a robot and a
+/// simulation cannot plan differently.
 pub struct Search<'a> {
     strategy: &'a dyn Strategy,
     policy: Box<dyn Policy + 'a>,
     belief: Belief<'a>,
+    /// The task's destination on this map.
+    destination: Option<std::borrow::Cow<'a, DestinationLegs>>,
+    /// The last leg, once the robot went to the destination.
+    delivered: Option<f64>,
 }
 
 impl<'a> Search<'a> {
@@ -366,6 +569,9 @@ impl<'a> Search<'a> {
     /// that declare [`needs_ground_truth`](Strategy::needs_ground_truth) (the oracle), which fail
     /// without it, and for what the containers searched beforehand (`problem.trial.revealed`)
     /// held; a robot, which has no ground truth, starts with none searched.
+    ///
+    /// # Errors
+    /// The strategy's own failures, and a destination the map cannot serve.
     pub fn start(
         strategy: &'a dyn Strategy,
         problem: &SearchProblem<'a>,
@@ -386,8 +592,9 @@ impl<'a> Search<'a> {
                 None
             },
         };
+        let destination = problem.destination_legs()?;
         let policy = strategy.policy(&ctx)?;
-        let mut belief = Belief::new(problem.house, problem.distances, problem.target());
+        let mut belief = Belief::new(problem.house, problem.distances, problem.task());
         if !problem.trial.revealed.is_empty() {
             let truth = truth.ok_or_else(|| {
                 unusable("unusable: containers searched beforehand need the ground truth")
@@ -400,16 +607,22 @@ impl<'a> Search<'a> {
             strategy,
             policy,
             belief,
+            destination,
+            delivered: None,
         })
     }
 
-    /// The container to search next, or `None` when every container has been searched.
+    /// The container to search next, or `None` when the task's goal holds, every container
+    /// has been searched, or the robot went to the destination.
     ///
     /// # Errors
     /// The policy's own failures, and a choice of a container that does not exist or was
     /// already searched.
     pub fn next_container(&mut self) -> Result<Option<usize>, PlanError> {
-        if self.belief.unsearched_count() == 0 {
+        if self.belief.unsearched_count() == 0
+            || self.belief.goal_holds()
+            || self.delivered.is_some()
+        {
             return Ok(None);
         }
         let c = self.policy.choose(&self.belief)?;
@@ -427,9 +640,52 @@ impl<'a> Search<'a> {
         Ok(self.belief.search(c, seen))
     }
 
+    /// True once the task's goal holds (for one target: it was found).
+    pub fn goal_holds(&self) -> bool {
+        self.belief.goal_holds()
+    }
+
+    /// Ends the search: the robot goes from where it stands to the task's destination (the leg
+    /// is added to the distance travelled) and searches no more. Returns that leg, metres: 0
+    /// without a destination, and the same leg again when called twice.
+    pub fn finish(&mut self) -> f64 {
+        if let Some(leg) = self.delivered {
+            return leg;
+        }
+        let leg = self
+            .destination
+            .as_ref()
+            .map_or(0.0, |d| d.from(self.belief.position()));
+        if self.destination.is_some() {
+            self.belief.arrive(leg);
+        }
+        self.delivered = Some(leg);
+        leg
+    }
+
+    /// The task's destination on this map, if it has one.
+    pub fn destination(&self) -> Option<&DestinationLegs> {
+        self.destination.as_deref()
+    }
+
     /// What is known so far.
     pub fn belief(&self) -> &Belief<'a> {
         &self.belief
+    }
+
+    /// The container where the goal came to hold: where the target that completed it (`all`)
+    /// or the first target (`any`) was found. `None` while it does not hold.
+    pub fn goal_container(&self) -> Option<usize> {
+        let b = &self.belief;
+        if !b.goal_holds() {
+            return None;
+        }
+        let found: Vec<usize> = b.found_each().iter().flatten().copied().collect();
+        let rank = |c: &usize| b.searched_in_order().iter().position(|x| x == c);
+        match b.task.goal() {
+            Goal::All => found.iter().copied().max_by_key(rank),
+            Goal::Any => found.iter().copied().min_by_key(rank),
+        }
     }
 
     fn check(&self, c: usize) -> Result<(), PlanError> {
@@ -448,29 +704,31 @@ impl<'a> Search<'a> {
     }
 }
 
-/// Runs `strategy` on one trial: replans after every search until a container holding the target
-/// is searched or none is left.
+/// Runs `strategy` on one trial: replans after every search until the task's goal holds (for
+/// one target: a container holding it is searched) or none is left, then goes to the
+/// destination.
 pub fn run_trial(
     strategy: &dyn Strategy,
     problem: &SearchProblem<'_>,
     truth: &GroundTruth,
 ) -> Result<TrialOutcome, PlanError> {
-    let trial = problem.trial;
     let mut search = Search::start(strategy, problem, Some(truth))?;
-    let mut found = None;
     while let Some(c) = search.next_container()? {
         search.record(c, contents_of(truth, c))?;
-        if truth.holds(c, &trial.target) {
-            found = Some(c);
-            break;
-        }
     }
+    let delivery = search.finish();
+    let found = search.goal_container();
+    let delivered_to = search.destination().and_then(DestinationLegs::place);
+    let belief = search.belief();
     Ok(TrialOutcome {
         strategy: strategy.name().to_string(),
-        target: trial.target.clone(),
-        cost: search.belief().travelled(),
-        searched: search.belief().searched_in_order().to_vec(),
+        task: problem.trial.task.clone(),
+        cost: belief.travelled(),
+        searched: belief.searched_in_order().to_vec(),
         found,
+        found_each: belief.found_each().to_vec(),
+        delivery,
+        delivered_to,
     })
 }
 

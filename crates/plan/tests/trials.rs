@@ -10,7 +10,9 @@ use ferret_world::{
     Container, Distances, Footprint, GroundTruth, House, ObjectType, Point, Polygon, Pose, Room,
     RoomType, Scene, SmallObject,
 };
-use proptest::prelude::{ProptestConfig, prop, prop_assert, prop_assert_eq, prop_assume, proptest};
+use proptest::prelude::{
+    Just, ProptestConfig, any, prop, prop_assert, prop_assert_eq, prop_assume, prop_oneof, proptest,
+};
 use proptest::strategy::Strategy as _;
 
 /// A one-room house with containers at `points`, Euclidean travel, and the given contents.
@@ -133,7 +135,7 @@ proptest! {
         let scene = Scene { house: house.clone(), truth: truth.clone() };
         let reg = registry(std::slice::from_ref(&scene));
         for target in truth.target_types() {
-            let trial = TrialSpec { target: target.clone(), revealed: vec![] };
+            let trial = TrialSpec::single(target.clone());
             let oracle = run_trial(reg.build("oracle").unwrap().as_ref(), &SearchProblem::new(&house, &distances, &trial), &truth).unwrap();
             for spec in SPECS {
                 let s = reg.build(spec).unwrap();
@@ -159,18 +161,18 @@ proptest! {
         let scene = Scene { house: house.clone(), truth: truth.clone() };
         let reg = registry(std::slice::from_ref(&scene));
         for target in truth.target_types() {
-            let trial = TrialSpec { target: target.clone(), revealed: vec![] };
+            let trial = TrialSpec::single(target.clone());
             let single_goal = truth.goal_containers(&target).len() == 1;
             for deployed in SPECS.iter().filter(|s| **s != "oracle") {
                 let d = reg.build(deployed).unwrap();
                 let real = run_trial(d.as_ref(), &SearchProblem::new(&house, &distances, &trial), &truth).unwrap();
                 let found = real.found.unwrap();
-                let own = replay_cost(d.as_ref(), &SearchProblem::new(&house, &distances, &trial), found).unwrap();
+                let own = replay_cost(d.as_ref(), &SearchProblem::new(&house, &distances, &trial), &[Some(found)]).unwrap();
                 prop_assert!((own - real.cost).abs() < 1e-9, "{}: replay {} != real {}", deployed, own, real.cost);
                 for other in SPECS.iter().filter(|s| **s != "oracle") {
                     let o = reg.build(other).unwrap();
                     let true_cost = run_trial(o.as_ref(), &SearchProblem::new(&house, &distances, &trial), &truth).unwrap().cost;
-                    let replay = replay_cost(o.as_ref(), &SearchProblem::new(&house, &distances, &trial), found).unwrap();
+                    let replay = replay_cost(o.as_ref(), &SearchProblem::new(&house, &distances, &trial), &[Some(found)]).unwrap();
                     prop_assert!(replay + 1e-9 >= true_cost, "{} replay {} < true {}", other, replay, true_cost);
                     if single_goal {
                         prop_assert!((replay - true_cost).abs() < 1e-9);
@@ -192,10 +194,7 @@ fn model_strategy_prefers_the_likely_container() {
         })
         .collect();
     let reg = registry(&training);
-    let trial = TrialSpec {
-        target: ObjectType::new("Egg"),
-        revealed: vec![],
-    };
+    let trial = TrialSpec::single(ObjectType::new("Egg"));
     let model = run_trial(
         reg.build("model/prior").unwrap().as_ref(),
         &SearchProblem::new(&house, &distances, &trial),
@@ -245,10 +244,10 @@ fn trials_per_house_draws_distinct_targets_and_one_is_draw_trial() {
         assert_eq!(one, vec![draw_trial(&house, &truth, seed, 0.0).unwrap()]);
         let two = draw_trials(&house, &truth, seed, 0.5, TrialsPerHouse::Count(2)).unwrap();
         assert_eq!(two.len(), 2);
-        assert_ne!(two[0].target, two[1].target);
+        assert_ne!(two[0].task.first(), two[1].task.first());
         for t in &two {
             // Half of the containers without the target start out searched, never a goal.
-            let goals = truth.goal_containers(&t.target);
+            let goals = truth.goal_containers(t.task.first());
             assert_eq!(
                 t.revealed.len(),
                 ((4 - goals.len()) as f64 * 0.5).round() as usize
@@ -259,7 +258,7 @@ fn trials_per_house_draws_distinct_targets_and_one_is_draw_trial() {
         let many = draw_trials(&house, &truth, seed, 0.0, TrialsPerHouse::Count(9)).unwrap();
         assert_eq!(many.len(), 3);
         let all = draw_trials(&house, &truth, seed, 0.0, TrialsPerHouse::All).unwrap();
-        let names: Vec<&str> = all.iter().map(|t| t.target.as_str()).collect();
+        let names: Vec<&str> = all.iter().map(|t| t.task.first().as_str()).collect();
         assert_eq!(names, ["Book", "Egg", "RemoteControl"]);
     }
     assert_eq!("all".parse(), Ok(TrialsPerHouse::All));
@@ -298,10 +297,7 @@ fn authors_cost_specs_parse_and_plan_with_the_extra_term() {
     // Eq. 3 from the start: 4 + (1−p)·9 vs 5 + (1−p)·9 → the nearer first either way; the
     // authors' term adds p·4 vs p·5, the same order. Both find the target at 5 m after 4 + 9 m.
     let (house, truth, distances) = house(&[(4.0, 0.0), (-5.0, 0.0)], &[0, 1], &[vec![], vec![0]]);
-    let trial = TrialSpec {
-        target: ObjectType::new("Egg"),
-        revealed: vec![],
-    };
+    let trial = TrialSpec::single(ObjectType::new("Egg"));
     for s in ["model/uniform", "model/uniform/authors"] {
         let strategy = reg.build(s).unwrap();
         let out = run_trial(
@@ -335,14 +331,14 @@ proptest! {
             let protocol = Protocol { initial_belief: belief, ..Protocol::FERRET };
             let trials = draw_trials_with(&house, &truth, seed, 0.0, TrialsPerHouse::All, &protocol).unwrap();
             for trial in &trials {
-                let single_goal = truth.goal_containers(&trial.target).len() == 1;
+                let single_goal = truth.goal_containers(trial.task.first()).len() == 1;
                 for deployed in SPECS.iter().filter(|s| **s != "oracle") {
                     let d = reg.build(deployed).unwrap();
                     let found = run_trial(d.as_ref(), &SearchProblem::new(&house, &distances, trial), &truth).unwrap().found.unwrap();
                     for other in SPECS.iter().filter(|s| **s != "oracle") {
                         let o = reg.build(other).unwrap();
-                        let pess = replay_cost_with(ReplayMode::Pessimistic, o.as_ref(), &SearchProblem::new(&house, &distances, trial), &truth, found).unwrap();
-                        let cf = replay_cost_with(ReplayMode::Counterfactual, o.as_ref(), &SearchProblem::new(&house, &distances, trial), &truth, found).unwrap();
+                        let pess = replay_cost_with(ReplayMode::Pessimistic, o.as_ref(), &SearchProblem::new(&house, &distances, trial), &truth, &[Some(found)]).unwrap();
+                        let cf = replay_cost_with(ReplayMode::Counterfactual, o.as_ref(), &SearchProblem::new(&house, &distances, trial), &truth, &[Some(found)]).unwrap();
                         let real = run_trial(o.as_ref(), &SearchProblem::new(&house, &distances, trial), &truth).unwrap().cost;
                         prop_assert!(cf <= pess + 1e-9, "{}: counterfactual {} > pessimistic {}", other, cf, pess);
                         prop_assert!((cf - real).abs() < 1e-9);
@@ -373,9 +369,9 @@ proptest! {
             let with = draw_trials_with(&house, &truth, seed, 0.0, per_house, &paper).unwrap();
             prop_assert_eq!(with.len(), plain.len());
             for (a, b) in plain.iter().zip(&with) {
-                prop_assert_eq!(&a.target, &b.target);
+                prop_assert_eq!(&a.task.first(), &b.task.first());
                 prop_assert!(a.revealed.is_empty());
-                let goals = truth.goal_containers(&b.target);
+                let goals = truth.goal_containers(b.task.first());
                 prop_assert!(b.revealed.iter().all(|c| !goals.contains(c)));
                 let n = house.containers.len();
                 let kept = n - b.revealed.len();
@@ -409,7 +405,7 @@ fn paper_targets_leave_out_types_that_are_also_furniture() {
         draw_trials_with(&house, &truth, 0, 0.0, TrialsPerHouse::All, &p)
             .unwrap()
             .into_iter()
-            .map(|t| t.target.to_string())
+            .map(|t| t.task.first().to_string())
             .collect::<Vec<_>>()
     };
     assert_eq!(all(TargetSet::Pickupable), ["Bed", "Book", "Egg"]);
@@ -442,7 +438,7 @@ fn python_draws_give_the_reference_trials() {
         ..Protocol::FERRET
     };
     let trials = draw_trials_with(&house, &truth, 0, 0.0, TrialsPerHouse::One, &p).unwrap();
-    assert_eq!(trials[0].target.as_str(), "A6");
+    assert_eq!(trials[0].task.first().as_str(), "A6");
     // Drawn unsearched: 1 6 5 0 3 9 7 8; containers 2 and 4 pre-searched, but 2 holds the
     // target and stays unsearched.
     assert_eq!(trials[0].revealed, vec![4]);
@@ -460,7 +456,7 @@ fn python_draws_give_the_reference_trials() {
         ..p
     };
     let t = draw_trials_with(&house, &truth, 0, 0.0, TrialsPerHouse::One, &empty).unwrap();
-    assert_eq!((t[0].target.as_str(), t[0].revealed.len()), ("A6", 0));
+    assert_eq!((t[0].task.first().as_str(), t[0].revealed.len()), ("A6", 0));
 }
 
 proptest! {
@@ -492,7 +488,7 @@ proptest! {
                 if goals.iter().all(|g| revealed.contains(g)) {
                     continue;
                 }
-                trials.push(TrialSpec { target: target.clone(), revealed });
+                trials.push(TrialSpec { task: ferret_plan::Task::single(target.clone()), revealed });
             }
         }
         prop_assume!(!trials.is_empty());
@@ -506,17 +502,17 @@ proptest! {
             let deployed = (k % candidates.len(), 1.0);
             let plain = SearchProblem::new(&house, &distances, trial);
             let found = truth
-                .goal_containers(&trial.target)
+                .goal_containers(trial.task.first())
                 .into_iter()
                 .find(|g| !trial.revealed.contains(g))
                 .unwrap();
-            let fresh = replay_costs(settings, &candidates, &plain, &truth, found, deployed).unwrap();
-            let kept = replay_costs(settings, &candidates, &plain.with_replay_memo(&memo), &truth, found, deployed).unwrap();
+            let fresh = replay_costs(settings, &candidates, &plain, &truth, &[Some(found)], deployed).unwrap();
+            let kept = replay_costs(settings, &candidates, &plain.with_replay_memo(&memo), &truth, &[Some(found)], deployed).unwrap();
             prop_assert_eq!(
                 fresh.iter().map(|c| c.to_bits()).collect::<Vec<_>>(),
                 kept.iter().map(|c| c.to_bits()).collect::<Vec<_>>()
             );
-            let key = (trial.target.clone(), trial.revealed.clone(), found);
+            let key = (trial.task.first().clone(), trial.revealed.clone(), found);
             if !asked.insert(key) {
                 repeats += candidates.len() - 1;
             }
@@ -527,9 +523,9 @@ proptest! {
         prop_assert_eq!(memo.len(), asked.len() * candidates.len());
         let before = memo.len();
         let trial = &trials[0];
-        let found = truth.goal_containers(&trial.target)[0];
+        let found = truth.goal_containers(trial.task.first())[0];
         let problem = SearchProblem::new(&house, &distances, trial).with_replay_memo(&memo);
-        replay_costs((ReplayMode::Counterfactual, TravelCost::Plain), &candidates, &problem, &truth, found, (0, 1.0)).unwrap();
+        replay_costs((ReplayMode::Counterfactual, TravelCost::Plain), &candidates, &problem, &truth, &[Some(found)], (0, 1.0)).unwrap();
         prop_assert_eq!(memo.len(), before);
     }
 }
@@ -552,18 +548,23 @@ fn a_full_replay_memo_keeps_no_more_and_still_answers() {
     let memo = ReplayMemo::new(1);
     let settings = (ReplayMode::Pessimistic, TravelCost::Plain);
     for (target, found) in [("Egg", 0), ("Book", 1), ("Book", 1)] {
-        let trial = TrialSpec {
-            target: ObjectType::new(target),
-            revealed: vec![],
-        };
+        let trial = TrialSpec::single(ObjectType::new(target));
         let plain = SearchProblem::new(&house, &distances, &trial);
-        let fresh = replay_costs(settings, &candidates, &plain, &truth, found, (0, 1.0)).unwrap();
+        let fresh = replay_costs(
+            settings,
+            &candidates,
+            &plain,
+            &truth,
+            &[Some(found)],
+            (0, 1.0),
+        )
+        .unwrap();
         let kept = replay_costs(
             settings,
             &candidates,
             &plain.with_replay_memo(&memo),
             &truth,
-            found,
+            &[Some(found)],
             (0, 1.0),
         )
         .unwrap();
@@ -609,17 +610,22 @@ fn ends_of_one_trial_at_once_replay_it_once() {
         slow.clone(),
     ];
     let memo = ReplayMemo::new(100);
-    let trial = TrialSpec {
-        target: ObjectType::new("Egg"),
-        revealed: vec![],
-    };
+    let trial = TrialSpec::single(ObjectType::new("Egg"));
     let problem = SearchProblem::new(&house, &distances, &trial).with_replay_memo(&memo);
     let settings = (ReplayMode::Pessimistic, TravelCost::Plain);
     let costs: Vec<Vec<f64>> = std::thread::scope(|scope| {
         let ends: Vec<_> = (0..8)
             .map(|_| {
                 scope.spawn(|| {
-                    replay_costs(settings, &candidates, &problem, &truth, 2, (0, 1.0)).unwrap()
+                    replay_costs(
+                        settings,
+                        &candidates,
+                        &problem,
+                        &truth,
+                        &[Some(2)],
+                        (0, 1.0),
+                    )
+                    .unwrap()
                 })
             })
             .collect();
@@ -632,7 +638,7 @@ fn ends_of_one_trial_at_once_replay_it_once() {
         &candidates,
         &SearchProblem::new(&house, &distances, &trial),
         &truth,
-        2,
+        &[Some(2)],
         (0, 1.0),
     )
     .unwrap();
@@ -673,10 +679,7 @@ fn a_deployed_candidate_that_cannot_be_replayed_fails_no_end() {
         Arc::new(ferret_plan::strategy::GreedyStrategy),
     ];
     let memo = ReplayMemo::new(100);
-    let trial = TrialSpec {
-        target: ObjectType::new("Egg"),
-        revealed: vec![],
-    };
+    let trial = TrialSpec::single(ObjectType::new("Egg"));
     let problem = SearchProblem::new(&house, &distances, &trial);
     let settings = (ReplayMode::Pessimistic, TravelCost::Plain);
     let kept = replay_costs(
@@ -684,11 +687,19 @@ fn a_deployed_candidate_that_cannot_be_replayed_fails_no_end() {
         &candidates,
         &problem.with_replay_memo(&memo),
         &truth,
-        2,
+        &[Some(2)],
         (0, 7.0),
     )
     .unwrap();
-    let alone = replay_costs(settings, &candidates, &problem, &truth, 2, (0, 7.0)).unwrap();
+    let alone = replay_costs(
+        settings,
+        &candidates,
+        &problem,
+        &truth,
+        &[Some(2)],
+        (0, 7.0),
+    )
+    .unwrap();
     assert_eq!(kept, alone);
     assert_eq!(memo.len(), 1);
     // Deployed elsewhere, the candidate that cannot be replayed fails the end, as without a memo.
@@ -698,7 +709,7 @@ fn a_deployed_candidate_that_cannot_be_replayed_fails_no_end() {
             &candidates,
             &problem.with_replay_memo(&memo),
             &truth,
-            2,
+            &[Some(2)],
             (1, 7.0)
         )
         .is_err()
@@ -722,10 +733,7 @@ fn trials_with_and_without_a_memo(
         };
         let strategy = registry(std::slice::from_ref(&scene)).build(spec).unwrap();
         for target in truth.target_types() {
-            let trial = TrialSpec {
-                target,
-                revealed: vec![],
-            };
+            let trial = TrialSpec::single(target);
             let problem = SearchProblem::new(&house, &distances, &trial);
             let alone = run_trial(strategy.as_ref(), &problem, &truth);
             let shared = run_trial(strategy.as_ref(), &problem.with_plan_memo(&memo), &truth);
@@ -779,4 +787,173 @@ fn a_plan_memo_is_used_by_trials_of_one_house() {
         trials_with_and_without_a_memo("model/uniform/exact5", &(pts, kinds, contents), &starts)
             .unwrap();
     assert!(hits > 0, "no decision came from the memo");
+}
+
+/// Household tasks drawn from a house's target types: pairs and triples under either goal,
+/// with no destination, the start, or a container.
+fn tasks_of(truth: &GroundTruth, n: usize, pick: usize) -> Vec<ferret_plan::Task> {
+    use ferret_plan::{Destination, Goal, Task};
+    let types: Vec<ObjectType> = truth.target_types().into_iter().collect();
+    let mut tasks = Vec::new();
+    for m in 2..=types.len().min(3) {
+        for goal in [Goal::All, Goal::Any] {
+            let destination = match (pick + m) % 3 {
+                0 => None,
+                1 => Some(Destination::Start),
+                _ => Some(Destination::Container { index: pick % n }),
+            };
+            let targets = types.iter().cycle().skip(pick).take(m).cloned().collect();
+            tasks.push(Task::new(targets, goal, destination).unwrap());
+        }
+    }
+    tasks
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// Every strategy does every task: its goal holds, each target is found where it is, no
+    /// container is searched twice, the cost is the legs walked plus the last one to the
+    /// destination, and no strategy beats the oracle's cheapest route.
+    #[test]
+    fn every_strategy_does_every_task_and_none_beats_the_oracle(
+        (pts, kinds, contents) in arb_house(),
+        pick in 0usize..5,
+    ) {
+        use ferret_world::Place;
+        let (house, truth, distances) = house(&pts, &kinds, &contents);
+        let scene = Scene { house: house.clone(), truth: truth.clone() };
+        let reg = registry(std::slice::from_ref(&scene));
+        for task in tasks_of(&truth, house.containers.len(), pick) {
+            let trial = TrialSpec::of(task.clone());
+            let problem = SearchProblem::new(&house, &distances, &trial);
+            let legs = problem.destination_legs().unwrap();
+            let oracle = run_trial(reg.build("oracle").unwrap().as_ref(), &problem, &truth).unwrap();
+            for spec in SPECS.iter().copied().chain(["sequential/model/prior", "sequential/model/uniform/exact"]) {
+                let out = run_trial(reg.build(spec).unwrap().as_ref(), &problem, &truth).unwrap();
+                prop_assert!(out.found.is_some(), "{} did not do {}", spec, task);
+                prop_assert!(task.holds(out.found_each.iter().map(Option::is_some)));
+                for (t, f) in task.targets().iter().zip(&out.found_each) {
+                    if let Some(c) = f {
+                        prop_assert!(truth.holds(*c, t) && out.searched.contains(c));
+                        // Found where it was first seen.
+                        let first = out.searched.iter().find(|&&x| truth.holds(x, t));
+                        prop_assert_eq!(first, Some(c));
+                    }
+                }
+                let mut seen = out.searched.clone();
+                seen.sort_unstable();
+                seen.dedup();
+                prop_assert_eq!(seen.len(), out.searched.len(), "{} searched a container twice", spec);
+                let last = out.searched.last().map_or(Place::Start, |&c| Place::Container(c));
+                let delivery = legs.as_ref().map_or(0.0, |l| l.from(last));
+                prop_assert_eq!(out.delivery, delivery);
+                let walked: f64 = out.places().windows(2).map(|w| distances.between(w[0], w[1])).sum();
+                let walked = if out.delivered_to.is_some() { walked } else { walked + delivery };
+                prop_assert!((out.cost - walked).abs() < 1e-9, "{}: cost {} walked {}", spec, out.cost, walked);
+                prop_assert!(out.cost + 1e-9 >= oracle.cost, "{} ({}) beat the oracle ({}) on {}", spec, out.cost, oracle.cost, task);
+            }
+        }
+    }
+
+    /// In the world its likelihoods describe (each target in each container independently),
+    /// the exact task planner's expected cost is the least: below one search after another and
+    /// below the nearest container first, summed over every world. Every likelihood is
+    /// positive, so that every unsearched container stays a candidate: a container no wanted
+    /// target can be in is left out of the plan, as eq. 3 leaves what lies beyond the
+    /// candidates uncounted.
+    #[test]
+    fn the_task_planner_is_best_in_its_own_world(
+        (pts, kinds, _) in arb_small_house(),
+        ps in prop::collection::vec(prop_oneof![6 => 0.01f64..=1.0, 1 => Just(1.0)], 8),
+        any_goal in any::<bool>(),
+        destination in 0usize..3,
+    ) {
+        use ferret_plan::{Destination, Goal, ModelStrategy, SequentialStrategy, Task, Strategy};
+        let n = pts.len();
+        let (house, _, distances) = house(&pts, &kinds, &vec![vec![]; n]);
+        let targets = [ObjectType::new("Egg"), ObjectType::new("Book")];
+        let source: Arc<dyn ferret_plan::LikelihoodSource> = Arc::new(Table {
+            targets: targets.to_vec(),
+            p: ps.clone(),
+            n,
+        });
+        let config = PlannerConfig { limit: CandidateLimit::Exact { max: 8 }, ..PlannerConfig::default() };
+        let planner: Arc<dyn Strategy> = Arc::new(ModelStrategy::new("model/table/exact", source.clone(), config));
+        let sequential = SequentialStrategy::new("sequential/model/table/exact", planner.clone()).unwrap();
+        let greedy = StrategyRegistry::builtin(None, config, 8).build("optimistic+greedy").unwrap();
+        let goal = if any_goal { Goal::Any } else { Goal::All };
+        let destination = match destination {
+            0 => None,
+            1 => Some(Destination::Start),
+            _ => Some(Destination::Container { index: n - 1 }),
+        };
+        let task = Task::new(targets.to_vec(), goal, destination).unwrap();
+        let trial = TrialSpec::of(task);
+        let problem = SearchProblem::new(&house, &distances, &trial);
+        let expected = |s: &dyn Strategy| -> f64 {
+            let mut total = 0.0;
+            for world in 0..(1usize << (2 * n)) {
+                let holds = |t: usize, c: usize| world & (1 << (t * n + c)) != 0;
+                let weight: f64 = (0..2)
+                    .flat_map(|t| (0..n).map(move |c| (t, c)))
+                    .map(|(t, c)| if holds(t, c) { ps[t * n + c] } else { 1.0 - ps[t * n + c] })
+                    .product();
+                if weight == 0.0 {
+                    continue;
+                }
+                let truth = GroundTruth::new(
+                    (0..n)
+                        .map(|c| {
+                            (0..2)
+                                .filter(|&t| holds(t, c))
+                                .map(|t| SmallObject { id: format!("{t}|{c}"), object_type: targets[t].clone() })
+                                .collect()
+                        })
+                        .collect(),
+                );
+                total += weight * run_trial(s, &problem, &truth).unwrap().cost;
+            }
+            total
+        };
+        let best = expected(planner.as_ref());
+        for (name, other) in [("sequential", expected(&sequential)), ("greedy", expected(greedy.as_ref()))] {
+            prop_assert!(best <= other + 1e-9 * other.max(1.0), "planner {} > {} {}", best, name, other);
+        }
+    }
+}
+
+/// Houses of 2 to 4 containers: every world of 2 targets can be enumerated.
+fn arb_small_house() -> impl proptest::strategy::Strategy<Value = HouseParts> {
+    (2usize..=4).prop_flat_map(|n| {
+        (
+            prop::collection::vec((-15.0f64..15.0, -15.0f64..15.0), n),
+            prop::collection::vec(0usize..4, n),
+            Just(vec![vec![]; n]),
+        )
+    })
+}
+
+/// Likelihoods from a table: `p[t·n + c]` for target `t` of `targets` in container `c`.
+struct Table {
+    targets: Vec<ObjectType>,
+    p: Vec<f64>,
+    n: usize,
+}
+
+impl ferret_plan::LikelihoodSource for Table {
+    fn name(&self) -> &str {
+        "table"
+    }
+
+    fn likelihoods(
+        &self,
+        _house: &House,
+        target: &ObjectType,
+    ) -> Result<Vec<ferret_plan::Probability>, ferret_plan::PlanError> {
+        let t = self.targets.iter().position(|x| x == target).unwrap_or(0);
+        Ok((0..self.n)
+            .map(|c| ferret_plan::Probability::clamped(self.p[t * self.n + c], 0.0, 1.0))
+            .collect())
+    }
 }

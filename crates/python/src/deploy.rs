@@ -156,15 +156,13 @@ impl PyDeployment {
         let deployment = &self.deployment;
         let replays = py.allow_threads(|| {
             errors::guarded("Deployment.finish", || {
-                let trial = TrialSpec {
-                    target: target.clone(),
-                    revealed: Vec::new(),
-                };
+                let trial = TrialSpec::single(target.clone());
                 let problem = SearchProblem::new(&scene.house, &map.1, &trial);
-                let truth = hindsight_truth(&scene.house, &target, found).map_err(errors::plan)?;
+                let truth = hindsight_truth(&scene.house, &trial.task, &[Some(found)])
+                    .map_err(errors::plan)?;
                 let mut deployment = deployment.lock().unwrap_or_else(|p| p.into_inner());
                 let replays = deployment
-                    .replays(&problem, &truth, found, (chosen, cost))
+                    .replays(&problem, &truth, &[Some(found)], (chosen, cost))
                     .map_err(errors::plan)?;
                 deployment.learn(cost, &replays).map_err(select_error)?;
                 Ok(replays)

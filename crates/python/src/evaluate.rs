@@ -298,6 +298,7 @@ pub fn evaluate(
         per_house,
         protocol: &protocol,
         holdout: None,
+        tasks: None,
     };
     let run_info = run_info(&houses, &planning, &grid, &draw, &specs);
     let source = houses
@@ -410,6 +411,7 @@ fn run_info(
         reveal_fraction: draw.reveal_fraction,
         trials_per_house: draw.per_house,
         protocol: *draw.protocol,
+        tasks: None,
         strategies: strategies.to_vec(),
         trials_sha256: None,
         shard: None,

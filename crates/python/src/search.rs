@@ -156,10 +156,7 @@ impl PySearch {
         let owner = Owner {
             scene: h.scene.clone(),
             map: map.clone(),
-            trial: TrialSpec {
-                target: target.clone(),
-                revealed: Vec::new(),
-            },
+            trial: TrialSpec::single(target.clone()),
             strategy: built,
         };
         let live = py.allow_threads(|| {
@@ -278,7 +275,7 @@ impl PySearch {
         let Some(source) = owner.strategy.likelihood_source().cloned() else {
             return Ok(None);
         };
-        let (scene, target) = (owner.scene.clone(), owner.trial.target.clone());
+        let (scene, target) = (owner.scene.clone(), owner.trial.task.first().clone());
         py.allow_threads(|| {
             errors::guarded("Search.likelihoods", || {
                 source

@@ -91,6 +91,8 @@ fn house_figures(house: &House, dir: &Path, stem: &str, ext: &str) -> BoxResult<
             path: walk(&d, &g_order),
             searched: g_order,
             goals: vec![goal],
+            goal_labels: Vec::new(),
+            destination: None,
             color: None,
         },
         TrajectoryPanel {
@@ -99,6 +101,8 @@ fn house_figures(house: &House, dir: &Path, stem: &str, ext: &str) -> BoxResult<
             path: walk(&d, &two),
             searched: two,
             goals: vec![goal],
+            goal_labels: Vec::new(),
+            destination: None,
             color: None,
         },
         TrajectoryPanel {
@@ -107,6 +111,8 @@ fn house_figures(house: &House, dir: &Path, stem: &str, ext: &str) -> BoxResult<
             path: walk(&d, &direct),
             searched: direct,
             goals: vec![goal],
+            goal_labels: Vec::new(),
+            destination: None,
             color: None,
         },
     ];

@@ -74,6 +74,8 @@ pub mod plan_colors {
     pub const GOAL_EDGE: Rgb = Rgb::hex(0x8a6500);
     /// The robot's start marker.
     pub const START: Rgb = Rgb::hex(0x111111);
+    /// Where a task brings what it found.
+    pub const DESTINATION: Rgb = Rgb::hex(0x1b7f3b);
     /// Text.
     pub const TEXT: Rgb = Rgb::hex(0x222222);
     /// Room names.

@@ -182,6 +182,11 @@ pub struct TrajectoryPanel {
     pub searched: Vec<usize>,
     /// Indices of the goal containers (those holding the target).
     pub goals: Vec<usize>,
+    /// What each goal container holds of a task's targets, index-aligned with `goals`, shown
+    /// in its label (`goal: Mug, Apple`); the container's type when empty.
+    pub goal_labels: Vec<String>,
+    /// Where a task brought what it found, drawn as a diamond; `None` without a destination.
+    pub destination: Option<Point>,
     /// Path colour; [`Rgb::palette`] of the panel's index when `None`.
     pub color: Option<Rgb>,
 }
@@ -277,6 +282,7 @@ pub fn draw_trajectories(
     for p in panels {
         let what = format!("trajectory panel `{}`", p.title);
         check_points(&what, &p.path)?;
+        check_points(&what, p.destination.as_slice())?;
         if !p.cost_m.is_finite() {
             return Err(ReportError::invalid(
                 what,
@@ -353,7 +359,7 @@ pub fn draw_trajectories(
     let cell_w = panel_w + PANEL_GAP;
     let cell_h = panel_title_h + plot_h + panel_list_h;
     let width = (2.0 * MARGIN + cols as f64 * cell_w - PANEL_GAP).max(400.0);
-    let legend = trajectory_legend();
+    let legend = trajectory_legend(panels.iter().any(|p| p.destination.is_some()));
     let legend_h = legend_height(&legend, width - 2.0 * MARGIN);
     let height = TITLE_H + rows as f64 * cell_h + legend_h + MARGIN;
     let layout = PlanLayout {
@@ -534,6 +540,7 @@ enum Swatch {
     Rect { fill: Rgb, edge: Rgb },
     Door,
     Start,
+    Destination,
     Badge(Rgb),
     Shade,
 }
@@ -587,8 +594,8 @@ fn plan_legend(occupancy: bool) -> Vec<LegendItem> {
     items
 }
 
-fn trajectory_legend() -> Vec<LegendItem> {
-    vec![
+fn trajectory_legend(destination: bool) -> Vec<LegendItem> {
+    let mut items = vec![
         LegendItem {
             swatch: Swatch::Badge(Rgb::palette(0)),
             label: "containers searched, in order".into(),
@@ -622,7 +629,14 @@ fn trajectory_legend() -> Vec<LegendItem> {
             swatch: Swatch::Start,
             label: "start".into(),
         },
-    ]
+    ];
+    if destination {
+        items.push(LegendItem {
+            swatch: Swatch::Destination,
+            label: "destination".into(),
+        });
+    }
+    items
 }
 
 const LEGEND_ROW: f64 = 22.0;
@@ -696,6 +710,7 @@ fn draw_legend<DB: DrawingBackend>(
                 )?;
             }
             Swatch::Start => draw_start_marker(root, (x + 8.0, y), (1.0, 0.0))?,
+            Swatch::Destination => draw_destination(root, (x + 10.0, y))?,
             Swatch::Badge(c) => draw_badge(root, (x + SWATCH_W / 2.0, y), "1", c)?,
             Swatch::Shade => {
                 let r = [px((x + 4.0, y - 6.0)), px((x + SWATCH_W - 4.0, y + 6.0))];
@@ -861,6 +876,21 @@ fn draw_start_marker<DB: DrawingBackend>(
     arrow_head(root, tip, dir, 10.0, rgba(pc::START, 1.0))?;
     root.draw(&Circle::new(px(at), 8, WHITE.filled()))?;
     root.draw(&Circle::new(px(at), 6, pc::START.rgb().filled()))?;
+    Ok(())
+}
+
+/// Where a task brings what it found: a green diamond with a white rim, the end of the last
+/// leg.
+fn draw_destination<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, at: (f64, f64)) -> Drawn {
+    let diamond = |r: f64| {
+        [(0.0, -r), (r, 0.0), (0.0, r), (-r, 0.0)].map(|(dx, dz)| px((at.0 + dx, at.1 + dz)))
+    };
+    root.draw(&Polygon::new(diamond(11.0).to_vec(), WHITE.filled()))?;
+    root.draw(&Polygon::new(
+        diamond(8.5).to_vec(),
+        pc::DESTINATION.rgb().filled(),
+    ))?;
+    root.draw(&Circle::new(px(at), 2, WHITE.filled()))?;
     Ok(())
 }
 
@@ -1407,6 +1437,10 @@ impl Picture for Trajectories<'_> {
             draw_path(root, &l, &panel.path, color)?;
             let start = l.to_pixel(house.start.position);
             draw_start_marker(root, start, heading_px(&house.start))?;
+            let destination = panel.destination.map(|d| l.to_pixel(d));
+            if let Some(at) = destination {
+                draw_destination(root, at)?;
+            }
 
             let mut soft = furniture_boxes(house, &l);
             soft.extend(path_boxes(&l, &panel.path, 5.0));
@@ -1414,6 +1448,9 @@ impl Picture for Trajectories<'_> {
             let mut placer = Placer::new(b.grown(-2.0), soft);
             for b in start_boxes(house, &l) {
                 placer.reserve(b);
+            }
+            if let Some(at) = destination {
+                placer.reserve(BoxPx::centred(at, (24.0, 24.0)));
             }
             // Badges first: they sit on their containers and labels must not hide them.
             let mut badges = Vec::new();
@@ -1433,12 +1470,13 @@ impl Picture for Trajectories<'_> {
             let goal_labels: Vec<(usize, String, Rgb)> = panel
                 .goals
                 .iter()
-                .map(|&g| {
-                    (
-                        g,
-                        format!("goal: {}", house.containers[g].object_type.words()),
-                        pc::GOAL_EDGE,
-                    )
+                .enumerate()
+                .map(|(i, &g)| {
+                    let holds = match panel.goal_labels.get(i) {
+                        Some(l) if !l.is_empty() => l.clone(),
+                        _ => house.containers[g].object_type.words(),
+                    };
+                    (g, format!("goal: {holds}"), pc::GOAL_EDGE)
                 })
                 .collect();
             draw_container_labels(root, house, &l, &mut placer, &goal_labels, 11.5)?;

@@ -239,6 +239,8 @@ fn panels() -> Vec<TrajectoryPanel> {
             ],
             searched: vec![3, 2, 0],
             goals: vec![0],
+            goal_labels: Vec::new(),
+            destination: None,
             color: None,
         },
         TrajectoryPanel {
@@ -251,6 +253,8 @@ fn panels() -> Vec<TrajectoryPanel> {
             ],
             searched: vec![0],
             goals: vec![0],
+            goal_labels: Vec::new(),
+            destination: None,
             color: None,
         },
         TrajectoryPanel {
@@ -263,6 +267,8 @@ fn panels() -> Vec<TrajectoryPanel> {
             ],
             searched: vec![0],
             goals: vec![0],
+            goal_labels: Vec::new(),
+            destination: None,
             color: Some(Rgb::new(10, 20, 30)),
         },
     ]

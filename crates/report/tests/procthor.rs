@@ -126,6 +126,8 @@ fn real_houses_are_drawn() {
             path,
             searched: vec![goal],
             goals: vec![goal],
+            goal_labels: Vec::new(),
+            destination: None,
             color: None,
         }];
         draw_trajectories(

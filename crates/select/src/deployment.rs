@@ -8,7 +8,7 @@
 use std::sync::Arc;
 
 use ferret_plan::{PlanError, ReplayMode, SearchProblem, Strategy, replay_costs, run_trial};
-use ferret_world::{GroundTruth, ObjectType, TravelCost};
+use ferret_world::{GroundTruth, TravelCost};
 
 use crate::{LiveDeployment, Method, SelectError, TrialEnd};
 
@@ -21,13 +21,14 @@ pub enum DeploymentError {
     /// A trial or a replay could not be planned.
     #[error(transparent)]
     Plan(#[from] PlanError),
-    /// The simulated trial ended without finding the target, so it cannot be learned from.
-    #[error("{house}: the target {target} was not found")]
+    /// The simulated trial ended without its goal holding (the target not found), so it
+    /// cannot be learned from.
+    #[error("{house}: {task} was not done (a target was not found)")]
     NotFound {
         /// The house's name.
         house: String,
-        /// The target.
-        target: ObjectType,
+        /// The task, as written.
+        task: String,
     },
 }
 
@@ -80,8 +81,10 @@ pub struct DeploymentStep {
     pub chosen: usize,
     /// Its cost, metres, as the protocol reports it.
     pub cost: f64,
-    /// The container where the target was found.
+    /// The container where the goal came to hold (for one target: where it was found).
     pub found: usize,
+    /// Where each target (task order) was first seen.
+    pub found_each: Vec<Option<usize>>,
     /// Every candidate's replay cost on this trial (entry `chosen` is `cost`).
     pub replays: Vec<f64>,
 }
@@ -148,7 +151,7 @@ impl DeploymentLoop {
     }
 
     /// Every candidate's replay cost on a trial where `chosen` was deployed, cost `cost` and
-    /// found the target in `found`; nothing is learned yet.
+    /// found the task's targets in `found_each` (task order); nothing is learned yet.
     ///
     /// # Errors
     /// A candidate that cannot be replayed (an LLM endpoint down, a policy failing).
@@ -156,7 +159,7 @@ impl DeploymentLoop {
         &self,
         problem: &SearchProblem<'_>,
         truth: &GroundTruth,
-        found: usize,
+        found_each: &[Option<usize>],
         (chosen, cost): (usize, f64),
     ) -> Result<Vec<f64>, PlanError> {
         replay_costs(
@@ -164,7 +167,7 @@ impl DeploymentLoop {
             &self.candidates,
             problem,
             truth,
-            found,
+            found_each,
             (chosen, cost),
         )
     }
@@ -188,10 +191,10 @@ impl DeploymentLoop {
 
     /// One whole step: choose, run the trial in simulation, replay the others, learn. The cost is
     /// the one the replay settings' travel cost reports (planners decide on plain distances
-    /// either way).
+    /// either way). A trial of a household task is replayed on the same task.
     ///
     /// # Errors
-    /// A trial or replay that cannot be planned, or a trial that never finds its target.
+    /// A trial or replay that cannot be planned, or a trial whose goal never holds.
     pub fn step(
         &mut self,
         problem: &SearchProblem<'_>,
@@ -203,15 +206,16 @@ impl DeploymentLoop {
         let Some(found) = outcome.found else {
             return Err(DeploymentError::NotFound {
                 house: problem.house.name.clone(),
-                target: problem.trial.target.clone(),
+                task: problem.trial.task.to_string(),
             });
         };
-        let replays = self.replays(problem, truth, found, (chosen, cost))?;
+        let replays = self.replays(problem, truth, &outcome.found_each, (chosen, cost))?;
         self.learn(cost, &replays)?;
         Ok(DeploymentStep {
             chosen,
             cost,
             found,
+            found_each: outcome.found_each,
             replays,
         })
     }

@@ -97,10 +97,7 @@ async fn a_deployment_through_the_api_costs_what_the_simulator_says() {
     let candidates = strategies();
     let mut live = LiveDeployment::new(Method::ReplaySelection, candidates.len(), 5.0, 3).unwrap();
     for (k, t) in TARGETS.iter().enumerate() {
-        let trial = TrialSpec {
-            target: ObjectType::new(*t),
-            revealed: vec![],
-        };
+        let trial = TrialSpec::single(ObjectType::new(*t));
         let i = live.choose();
         let problem = SearchProblem::new(&sim.house, &distances, &trial);
         let outcome = run_trial(candidates[i].as_ref(), &problem, &sim.truth).unwrap();
@@ -110,7 +107,7 @@ async fn a_deployment_through_the_api_costs_what_the_simulator_says() {
             &candidates,
             &problem,
             &sim.truth,
-            found,
+            &[Some(found)],
             (i, outcome.cost),
         )
         .unwrap();

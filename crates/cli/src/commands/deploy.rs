@@ -47,12 +47,16 @@ pub struct Args {
     /// them, picked at random, in a house of its own. 1 is the paper's draw.
     #[arg(long, value_name = "N|all", default_value = "1")]
     trials_per_house: TrialsPerHouse,
-    /// Object types to find, in order, comma separated (e.g. `Blanket,CellPhone`): trial k looks
-    /// for the k-th in house k (cycling through the houses in file order), as a robot in one home
+    /// What to find, in order, comma separated (e.g. `Blanket,CellPhone`): trial k looks for
+    /// the k-th in house k (cycling through the houses in file order), as a robot in one home
     /// would. `--trials` defaults to their number. Without it, houses are shuffled and targets
-    /// drawn.
-    #[arg(long, value_delimiter = ',', value_name = "TYPES")]
-    find: Vec<String>,
+    /// drawn. Each may be a household task: `Mug+Apple` (both), `Mug|Cup` (either), with
+    /// `@start`, `@room:<id>` or `@container:<id>` to bring them there (e.g.
+    /// `Mug+Apple@start`).
+    #[arg(long, value_delimiter = ',', value_name = "TASKS")]
+    find: Vec<ferret_lab::TaskText>,
+    #[command(flatten)]
+    tasks: crate::args::TaskArgs,
     /// Seed of the house order and targets, and of the selector's tie breaks (its own stream,
     /// as in `ferret serve`).
     #[arg(long, default_value_t = 0)]
@@ -140,18 +144,31 @@ pub fn run(args: Args) -> Result<ExitCode> {
         .iter()
         .flat_map(|s| s.truth.target_types())
         .collect();
-    let find: Vec<ObjectType> = args
+    let find: Vec<ferret_lab::TaskText> = args
         .find
         .iter()
-        .map(|t| {
-            ferret_world::check_target(t.trim(), &held)
-                .map_err(|e| anyhow::anyhow!("--find: {e} (in {})", loaded.source))
+        .map(|task| {
+            let targets = task
+                .targets
+                .iter()
+                .map(|t| {
+                    ferret_world::check_target(t.trim(), &held)
+                        .map(|t| t.to_string())
+                        .map_err(|e| anyhow::anyhow!("--find: {e} (in {})", loaded.source))
+                })
+                .collect::<Result<_>>()?;
+            Ok(ferret_lab::TaskText {
+                targets,
+                ..task.clone()
+            })
         })
         .collect::<Result<_>>()?;
+    let tasks = args.tasks.tasks();
     let grid = args.grid.params_for(protocol.access);
     let settings = DeploySettings {
         trials,
         find: &find,
+        tasks: tasks.as_ref(),
         per_house: args.trials_per_house,
         seed: args.seed,
         protocol: &protocol,
@@ -175,7 +192,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
             let row = DeployRow {
                 k: t.k,
                 house: scene.house.name.clone(),
-                target: t.target.to_string(),
+                target: t.task.targets_label(),
                 chosen: names[t.step.chosen].clone(),
                 cost_m: t.step.cost,
                 found_container: scene.house.containers[t.step.found].id.clone(),

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 use ferret_lab::{CostTable, EvalJob, ShownHouse, TrialRow};
-use ferret_plan::{Protocol, TrialOutcome, TrialSpec, TrialsPerHouse};
+use ferret_plan::{Destination, Goal, Protocol, Task, TrialOutcome, TrialsPerHouse};
 use ferret_report::{
     TrajectoryOptions, TrajectoryPanel, ViolinOptions, draw_trajectories, draw_violins,
 };
@@ -34,6 +34,8 @@ pub struct Args {
     pub llm: super::llm_setup::LlmArgs,
     #[command(flatten)]
     pub protocol: ProtocolArgs,
+    #[command(flatten)]
+    pub tasks: crate::args::TaskArgs,
     /// Strategies, comma separated: optimistic+greedy, model/uniform, model/prior (calibrated),
     /// model/prior-raw (the uncalibrated estimate of earlier versions), model/noise (a control
     /// that knows nothing), each with /exact, /exact<N> or /k<N>, oracle (a model spec ending in
@@ -97,6 +99,7 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
     args.grid.validate()?;
     args.planning.validate()?;
     let protocol = args.protocol.resolve(Protocol::FERRET)?;
+    let tasks = args.tasks.tasks();
     let (source, planning, llm) = (
         args.houses.source(),
         args.planning.settings(),
@@ -111,6 +114,7 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
         seed: args.seed,
         reveal_fraction: args.reveal_fraction,
         trials_per_house: args.trials_per_house,
+        tasks: tasks.as_ref(),
         protocol: &protocol,
         cells: args.cells,
         paired_against: &args.paired_against,
@@ -225,7 +229,8 @@ pub fn draw_pictures(
 }
 
 /// Draws every strategy's trajectory on one house side by side, from the trials already run
-/// (`rows`): nothing is run again, so no LLM is asked twice.
+/// (`rows`): nothing is run again, so no LLM is asked twice. A task's panels mark the
+/// containers holding each target and the destination, and its route ends there.
 pub fn draw_house_trajectories(
     scene: &Scene,
     distances: &Distances,
@@ -234,19 +239,41 @@ pub fn draw_house_trajectories(
     out: &Path,
 ) -> Result<()> {
     let house = &scene.house;
-    let mut panels = Vec::new();
-    let mut target = None;
     // With several trials per house, the panels show the house's first trial.
-    let shown = rows
+    let Some(shown) = rows
         .iter()
         .find(|r| r.house_index == house.index && r.house == house.name)
-        .map(|r| r.target.as_str());
+    else {
+        anyhow::bail!("no trial on {} to draw", house.name);
+    };
+    let task = ferret_lab::task_of_row(shown, house)?;
+    let legs = task
+        .destination()
+        .map(|d| d.legs(house, distances))
+        .transpose()?;
+    // Every container holding a target, and which of them.
+    let holds = |c: usize| -> Vec<String> {
+        task.targets()
+            .iter()
+            .filter(|t| scene.truth.holds(c, t))
+            .map(|t| t.words())
+            .collect()
+    };
+    let goals: Vec<usize> = (0..house.containers.len())
+        .filter(|&c| !holds(c).is_empty())
+        .collect();
+    let goal_labels: Vec<String> = if task.targets().len() > 1 {
+        goals.iter().map(|&c| holds(c).join(", ")).collect()
+    } else {
+        Vec::new()
+    };
+    let mut panels = Vec::new();
     for s in strategies {
         let Some(row) = rows.iter().find(|r| {
             r.house_index == house.index
                 && r.house == house.name
                 && &r.strategy == s
-                && Some(r.target.as_str()) == shown
+                && r.target == shown.target
         }) else {
             continue;
         };
@@ -255,39 +282,80 @@ pub fn draw_house_trajectories(
             .split_whitespace()
             .filter_map(|id| house.container_index(id))
             .collect();
-        let target_type = ferret_world::ObjectType::new(row.target.clone());
         let o = TrialOutcome {
             strategy: row.strategy.clone(),
-            target: target_type.clone(),
+            task: task.clone(),
             cost: row.cost_m,
             searched: searched.clone(),
             found: house.container_index(&row.found_container),
+            found_each: Vec::new(),
+            delivery: row.delivery_m.unwrap_or(0.0),
+            delivered_to: legs.as_ref().and_then(|l| l.place()),
         };
         panels.push(TrajectoryPanel {
             title: s.clone(),
             cost_m: o.cost,
-            path: o.trajectory(distances).unwrap_or_default(),
+            path: o.trajectory(distances, legs.as_ref()).unwrap_or_default(),
             searched,
-            goals: scene.truth.goal_containers(&target_type),
+            goals: goals.clone(),
+            goal_labels: goal_labels.clone(),
+            destination: legs.as_ref().and_then(|l| l.point(distances)),
             color: None,
         });
-        target = Some(target_type);
     }
-    let Some(target) = target else {
-        anyhow::bail!("no trial on {} to draw", house.name);
-    };
-    let trial = TrialSpec {
-        target,
-        revealed: Vec::new(),
-    };
+    let what = task_words(&task);
     let opts = TrajectoryOptions {
-        title: Some(format!(
-            "Finding a {} in {}",
-            trial.target.words(),
-            scene.house.name
-        )),
+        title: Some(match task.destination() {
+            Some(d) => format!(
+                "Bringing {what} to {} in {}",
+                destination_words(d, house),
+                scene.house.name
+            ),
+            None => format!("Finding {what} in {}", scene.house.name),
+        }),
         ..TrajectoryOptions::default()
     };
     draw_trajectories(&scene.house, &panels, &opts, out)?;
     Ok(())
+}
+
+/// "a mug", "a mug and an apple", "a mug or a cup".
+fn task_words(task: &Task) -> String {
+    let words: Vec<String> = task
+        .targets()
+        .iter()
+        .map(|t| {
+            let w = t.words();
+            let article = if w.starts_with(['a', 'e', 'i', 'o', 'u']) {
+                "an"
+            } else {
+                "a"
+            };
+            format!("{article} {w}")
+        })
+        .collect();
+    let join = match task.goal() {
+        Goal::All => " and ",
+        Goal::Any => " or ",
+    };
+    match words.split_last() {
+        Some((last, rest)) if !rest.is_empty() => format!("{}{join}{last}", rest.join(", ")),
+        _ => words.join(""),
+    }
+}
+
+/// "the start", "the kitchen", "the sofa", "(1.5, 2.0)".
+fn destination_words(d: &Destination, house: &ferret_world::House) -> String {
+    match d {
+        Destination::Start => "the start".into(),
+        Destination::Container { index } => house.containers.get(*index).map_or_else(
+            || "a container".into(),
+            |c| format!("the {}", c.object_type.words()),
+        ),
+        Destination::Room { index } => house.rooms.get(*index).map_or_else(
+            || "a room".into(),
+            |r| format!("the {}", r.room_type.words()),
+        ),
+        Destination::Point { x, z } => format!("({x:.1}, {z:.1})"),
+    }
 }

@@ -78,7 +78,9 @@ pub fn robot_trials(
                         .wrapping_add(attempt.wrapping_mul(0xbf58_476d_1ce4_e5b9));
                     let target = ferret_plan::draw_trial(&scene.house, &scene.truth, seed, 0.0)
                         .map_err(|e| house_error(scene, &e))?
-                        .target;
+                        .task
+                        .first()
+                        .clone();
                     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
                     let at = cells[rng.random_range(0..cells.len())];
                     let yaw = rng.random_range(-180.0..180.0_f64).round();
@@ -91,7 +93,9 @@ pub fn robot_trials(
             } else {
                 let target = ferret_plan::draw_trial(&scene.house, &scene.truth, seed, 0.0)
                     .map_err(|e| house_error(scene, &e))?
-                    .target;
+                    .task
+                    .first()
+                    .clone();
                 (target, None)
             };
             let contents = scene

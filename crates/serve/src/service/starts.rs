@@ -243,10 +243,7 @@ impl Service {
         let placed = self.placed(&row.scene, row.pose)?;
         let owner = Owner {
             placed: placed.clone(),
-            trial: TrialSpec {
-                target: ObjectType::new(row.target.clone()),
-                revealed: Vec::new(),
-            },
+            trial: TrialSpec::single(ObjectType::new(row.target.clone())),
             strategy,
         };
         let mut live = LiveSearch::try_new(owner, |o| {

@@ -41,10 +41,7 @@ impl Service {
         Ok(LoadedTrial {
             observations,
             placed: self.placed(&row.scene, row.pose)?,
-            trial: TrialSpec {
-                target: ObjectType::new(row.target.clone()),
-                revealed: Vec::new(),
-            },
+            trial: TrialSpec::single(ObjectType::new(row.target.clone())),
             strategy,
             candidates,
             spec,
@@ -110,7 +107,7 @@ impl Service {
         let likelihoods = match t.strategy.likelihood_source() {
             Some(source) => {
                 let mut ps: Vec<f64> = source
-                    .likelihoods(house, &t.trial.target)
+                    .likelihoods(house, t.trial.task.first())
                     .map_err(plan_error)?
                     .iter()
                     .map(|p| p.get())
@@ -202,7 +199,7 @@ impl Service {
                 ),
             )
         })?;
-        let target = &t.trial.target;
+        let target = t.trial.task.first();
         // The search this replica kept after the trial's last reply, else one rebuilt.
         let mut live = match self.searches.take(id, observations.len()) {
             Some(live) => live,
@@ -247,13 +244,13 @@ impl Service {
             leg,
         };
         let (status, next, replays) = if req.found {
-            let truth = hindsight_truth(house, target, c).map_err(plan_error)?;
+            let truth = hindsight_truth(house, &t.trial.task, &[Some(c)]).map_err(plan_error)?;
             let replays = replay_costs(
                 ROBOT_REPLAY,
                 candidates,
                 &placed.problem(&t.trial),
                 &truth,
-                c,
+                &[Some(c)],
                 (row.chosen, cost),
             )
             .map_err(plan_error)?;
@@ -446,8 +443,8 @@ fn rebuild<'a>(
             .iter()
             .map(|t| ObjectType::new(t.clone()))
             .collect();
-        if o.found && !seen.contains(&trial.target) {
-            seen.push(trial.target.clone());
+        if o.found && !seen.contains(trial.task.first()) {
+            seen.push(trial.task.first().clone());
         }
         search.record(c, seen).map_err(plan_error)?;
     }

@@ -852,6 +852,17 @@ proptest! {
                 let walked = if out.delivered_to.is_some() { walked } else { walked + delivery };
                 prop_assert!((out.cost - walked).abs() < 1e-9, "{}: cost {} walked {}", spec, out.cost, walked);
                 prop_assert!(out.cost + 1e-9 >= oracle.cost, "{} ({}) beat the oracle ({}) on {}", spec, out.cost, oracle.cost, task);
+                // Replayed where it was deployed, a strategy costs what it cost; others replayed
+                // in the hindsight world cost at least what they cost in the true one.
+                if spec != "oracle" {
+                    let s = reg.build(spec).unwrap();
+                    let own = replay_cost(s.as_ref(), &problem, &out.found_each).unwrap();
+                    prop_assert!((own - out.cost).abs() < 1e-9, "{}: replay {} real {}", spec, own, out.cost);
+                    let greedy = reg.build("optimistic+greedy").unwrap();
+                    let replay = replay_cost(greedy.as_ref(), &problem, &out.found_each).unwrap();
+                    let real = run_trial(greedy.as_ref(), &problem, &truth).unwrap().cost;
+                    prop_assert!(replay + 1e-9 >= real, "greedy replay {} < real {}", replay, real);
+                }
             }
         }
     }

@@ -846,6 +846,55 @@ mod tests {
     }
 
     /// The pool never holds more than its sets, nor the arrays of a grid above its size.
+    /// A spot at a container's access cell is that container: the same distance from every
+    /// place, and a way there of that length. A point inside furniture stands on the nearest
+    /// reachable cell; a room's cells are its own.
+    #[test]
+    fn a_spot_is_measured_as_the_places_are() {
+        for (house, grid) in grids() {
+            let d = Distances::compute(&house, &grid).unwrap();
+            let n = house.containers.len();
+            for c in [0, n / 2, n - 1] {
+                let cell = grid.access_cell(c).unwrap();
+                let spot = d.spot(&house, cell).unwrap();
+                for from in std::iter::once(Place::Start).chain((0..n).map(Place::Container)) {
+                    let want = d.between(from, Place::Container(c));
+                    assert!(
+                        (spot.from(from) - want).abs() < 1e-9,
+                        "{}: {from:?}",
+                        house.name
+                    );
+                }
+                let path = d.path_to_spot(Place::Start, &spot).unwrap();
+                let length: f64 = path.windows(2).map(|w| w[0].distance(w[1])).sum();
+                assert!((length - spot.from(Place::Start)).abs() < 1e-6);
+                assert_eq!(path.last().copied(), Some(spot.point()));
+            }
+            let inside = house.containers[0].footprint.center;
+            let (cell, off) = grid.nearest_reachable(inside, None).unwrap();
+            assert!(grid.is_reachable(cell) && off > 0.0, "{}", house.name);
+            for r in 0..house.rooms.len() {
+                if let Some((cell, _)) =
+                    grid.nearest_reachable(house.rooms[r].floor.centroid(), Some(r))
+                {
+                    assert_eq!(grid.room(cell), Some(r));
+                    assert!(d.spot(&house, cell).is_ok());
+                }
+            }
+            // A cell nobody reaches is refused, naming the point.
+            let outside = grid
+                .cells()
+                .find(|&(c, _)| !grid.is_reachable(c))
+                .unwrap()
+                .0;
+            let err = d.spot(&house, outside).unwrap_err().to_string();
+            assert!(err.contains("cannot be reached"), "{err}");
+        }
+        let synthetic = Distances::from_matrix(1, vec![0.0, 1.0, 1.0, 0.0]).unwrap();
+        let house = &grids()[0].0;
+        assert!(synthetic.spot(house, crate::grid::Cell::new(0, 0)).is_err());
+    }
+
     #[test]
     fn the_pool_of_arrays_stays_bounded() {
         let (_, g) = &grids()[0];

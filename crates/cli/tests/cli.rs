@@ -282,6 +282,38 @@ fn prior_train_feeds_eval_and_bench_prints_json() {
     let lines: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(lines[1]["containers"], 8);
     assert!(lines[1]["median_us"].as_f64().unwrap() > 0.0);
+
+    // The task table of 3 targets: 2^8 searched sets × 2^3 found sets × 8 positions.
+    let o = ferret(&[
+        "bench",
+        "planner",
+        "--targets",
+        "3",
+        "--sizes",
+        "8",
+        "--instances",
+        "3",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let lines: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(
+        (
+            lines[0]["targets"].as_u64(),
+            lines[0]["containers"].as_u64()
+        ),
+        (Some(3), Some(8))
+    );
+    assert_eq!(
+        lines[0]["table_mib"].as_f64(),
+        Some((256 * 8 * 8 * 8) as f64 / 1048576.0)
+    );
+    let o = ferret(&["bench", "planner", "--targets", "3", "--sizes", "16"]);
+    assert!(
+        !o.status.success() && text(&o).contains("limit of 15"),
+        "{}",
+        text(&o)
+    );
 }
 
 #[test]

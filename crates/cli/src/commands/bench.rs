@@ -121,10 +121,16 @@ pub struct PlannerArgs {
     /// Seed of the instances.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Targets wanted at once, 1 to 4: with 2 or more, the task planner's table over (searched
+    /// set, found set, position) with a destination, as a household task of `all` that many
+    /// targets plans it; with 1, the single-target Held–Karp table.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=4))]
+    targets: u8,
 }
 
 #[derive(Serialize)]
 struct Line {
+    targets: usize,
     containers: usize,
     instances: usize,
     median_us: f64,
@@ -477,54 +483,70 @@ fn print_serve_line(line: &ServeLine) {
 }
 
 fn planner(args: PlannerArgs) -> Result<ExitCode> {
+    let m = usize::from(args.targets);
+    let largest = if m == 1 {
+        ferret_plan::planner::MAX_EXACT
+    } else {
+        ferret_plan::task_table::max_candidates(m)
+    };
     let mut lines = Vec::new();
     for &n in &args.sizes {
-        if n > ferret_plan::planner::MAX_EXACT {
+        if n > largest {
             anyhow::bail!(
-                "{n} containers exceed the exact planner's limit of {}",
-                ferret_plan::planner::MAX_EXACT
+                "{n} containers exceed the exact planner's limit of {largest} for {m} target(s)"
             );
         }
-        // Keep each size to a few seconds: 2^n·n² work per solve.
-        let work = (1u64 << n) * (n * n) as u64;
+        // Keep each size to a few seconds: 2^n·n² work per solve (times 3^m for tasks).
+        let work = (1u64 << n) * (n * n) as u64 * if m == 1 { 1 } else { 3u64.pow(m as u32) };
         let instances = args
             .instances
             .max(1)
             .min((2_000_000_000 / work.max(1)).max(5) as usize);
         let mut us: Vec<f64> = (0..instances)
             .map(|i| {
-                let p = TourProblem::random(
-                    n,
-                    args.seed
-                        .wrapping_mul(1_000_003)
-                        .wrapping_add((n * 10_000 + i) as u64),
-                );
-                let t = Instant::now();
-                let solved = solve_exact(&p);
-                let e = t.elapsed().as_secs_f64() * 1e6;
-                std::hint::black_box(solved);
-                e
+                let seed = args
+                    .seed
+                    .wrapping_mul(1_000_003)
+                    .wrapping_add((n * 10_000 + i) as u64);
+                let t;
+                if m == 1 {
+                    let p = TourProblem::random(n, seed);
+                    t = Instant::now();
+                    std::hint::black_box(solve_exact(&p));
+                } else {
+                    let p = ferret_plan::TaskProblem::random(n, m, true, seed);
+                    t = Instant::now();
+                    std::hint::black_box(ferret_plan::solve_task(&p));
+                }
+                t.elapsed().as_secs_f64() * 1e6
             })
             .collect();
         us.sort_by(f64::total_cmp);
+        let entries = if m == 1 {
+            (1u64 << n) * n as u64
+        } else {
+            ferret_plan::task_table::table_entries(n, m) as u64
+        };
         lines.push(Line {
+            targets: m,
             containers: n,
             instances,
             median_us: us[us.len() / 2],
             p90_us: us[(us.len() * 9) / 10],
-            table_mib: ((1u64 << n) * n as u64 * 8) as f64 / (1024.0 * 1024.0),
+            table_mib: (entries * 8) as f64 / (1024.0 * 1024.0),
         });
     }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&lines)?);
     } else {
         println!(
-            "{:>10} {:>9} {:>14} {:>14} {:>10}",
-            "containers", "instances", "median", "p90", "table"
+            "{:>7} {:>10} {:>9} {:>14} {:>14} {:>10}",
+            "targets", "containers", "instances", "median", "p90", "table"
         );
         for l in &lines {
             println!(
-                "{:>10} {:>9} {:>14} {:>14} {:>7.1} MiB",
+                "{:>7} {:>10} {:>9} {:>14} {:>14} {:>7.1} MiB",
+                l.targets,
                 l.containers,
                 l.instances,
                 human(l.median_us),

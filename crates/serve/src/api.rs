@@ -237,7 +237,8 @@ fn integer_valued<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<u64>,
     }
 }
 
-/// `POST /deployments/{id}/trials`.
+/// `POST /deployments/{id}/trials`: one target (`target`), or a household task (`targets`, a
+/// `goal` and a `destination`).
 #[derive(Clone, Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct StartTrial {
@@ -248,13 +249,101 @@ pub struct StartTrial {
     /// The scene's name.
     #[schema(min_length = 1)]
     pub scene: String,
-    /// The object type to find, CamelCase (`CellPhone`).
+    /// The object type to find, CamelCase (`CellPhone`); give this or `targets`.
+    #[serde(default)]
     #[schema(pattern = r"^[A-Za-z0-9]{1,100}$")]
-    pub target: String,
+    pub target: Option<String>,
+    /// The object types of a household task, 1 to 4 distinct, CamelCase; give this or
+    /// `target`. A target seen while looking for another is found.
+    #[serde(default)]
+    #[schema(min_items = 1, max_items = 4)]
+    pub targets: Option<Vec<String>>,
+    /// `all` (default): every target; `any`: any one of them.
+    #[serde(default)]
+    pub goal: Option<GoalName>,
+    /// Where the robot brings what it found; the trial's cost includes the way there.
+    #[serde(default)]
+    pub destination: Option<DestinationBody>,
     /// The robot's pose `[x, y, yaw°]` in the map frame; default: the scene's start.
     #[serde(default)]
     #[schema(value_type = Option<Vec<f64>>, min_items = 3, max_items = 3)]
     pub pose: Option<[f64; 3]>,
+}
+
+/// Whether a task wants every target or any one.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum GoalName {
+    /// Every target.
+    #[default]
+    All,
+    /// Any one of them.
+    Any,
+}
+
+impl From<GoalName> for ferret_plan::Goal {
+    fn from(g: GoalName) -> Self {
+        match g {
+            GoalName::All => ferret_plan::Goal::All,
+            GoalName::Any => ferret_plan::Goal::Any,
+        }
+    }
+}
+
+/// Where a task brings what it found, in the scene's names and map frame.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+pub enum DestinationBody {
+    /// Back where the trial started ("bring it to me").
+    Start,
+    /// At a container, where the robot stands to search it.
+    Container {
+        /// The container's id.
+        #[schema(min_length = 1)]
+        id: String,
+    },
+    /// In a room, at the reachable point nearest its centre.
+    Room {
+        /// The room's name.
+        #[schema(min_length = 1)]
+        name: String,
+    },
+    /// At a point of the floor (the reachable point nearest it, within 0.5 m).
+    Point {
+        /// x, metres.
+        #[schema(minimum = -100000.0, maximum = 100000.0)]
+        x: f64,
+        /// y, metres.
+        #[schema(minimum = -100000.0, maximum = 100000.0)]
+        y: f64,
+    },
+}
+
+/// A trial's household task as stored: its targets, goal and destination.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TaskBody {
+    /// The targets, in order.
+    pub targets: Vec<String>,
+    /// All or any.
+    pub goal: GoalName,
+    /// Where to bring them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub destination: Option<DestinationBody>,
+}
+
+/// The destination of a trial's task, where it is.
+#[derive(Clone, Debug, Serialize, Deserialize, ToSchema)]
+pub struct DestinationState {
+    /// As the task named it.
+    #[serde(flatten)]
+    pub named: DestinationBody,
+    /// Where the robot stands there, map frame, metres.
+    pub at: [f64; 2],
+    /// Once the trial has ended: the way from the last container searched to the destination
+    /// (cell centres, map frame), which the robot drives with what it found.
+    pub path: Option<Vec<[f64; 2]>>,
+    /// The length of `path`, metres (part of `cost_m`).
+    pub distance_m: Option<f64>,
 }
 
 /// `POST /trials/{id}/observations`.
@@ -268,8 +357,13 @@ pub struct Observe {
     /// The id of the container searched.
     #[schema(min_length = 1)]
     pub container: String,
-    /// Whether the target was in it.
+    /// Whether the target was in it. For a household task, whether one of its targets was,
+    /// named in `found_targets` or `objects`.
     pub found: bool,
+    /// The task's targets seen in it (CamelCase); a target listed in `objects` counts too.
+    #[serde(default)]
+    #[schema(max_items = 4)]
+    pub found_targets: Vec<String>,
     /// Other object types seen in it (CamelCase).
     #[serde(default)]
     #[schema(max_items = 1000)]
@@ -381,15 +475,24 @@ pub struct TrialState {
     pub k: i64,
     /// The scene's name.
     pub scene: String,
-    /// The target.
+    /// The target; for a household task, its targets joined by `+` (all) or `|` (any).
     pub target: String,
+    /// The targets, in order (one for a single target).
+    pub targets: Vec<String>,
+    /// `all` or `any`.
+    pub goal: GoalName,
+    /// Where the robot brings what it found, if anywhere.
+    pub destination: Option<DestinationState>,
+    /// Each target found so far, with the container it was found in.
+    pub found_in: BTreeMap<String, String>,
     /// The strategy selection chose for it.
     pub strategy: String,
     /// Where it stands.
     pub status: TrialStatus,
     /// Containers searched so far, in order.
     pub searched: Vec<String>,
-    /// Map distance travelled so far, metres (the cost selection learns from).
+    /// Map distance travelled so far, metres (the cost selection learns from); once a trial
+    /// with a destination has ended, with the way there.
     pub cost_m: f64,
     /// Sum of the robot's reported odometry, when it reported any.
     pub travelled_m: Option<f64>,
@@ -421,7 +524,7 @@ pub struct TrialSummary {
     pub trial: i64,
     /// 1-based position.
     pub k: i64,
-    /// The target.
+    /// The target; for a household task, its targets joined by `+` (all) or `|` (any).
     pub target: String,
     /// The strategy.
     pub strategy: String,
@@ -512,8 +615,13 @@ pub struct TrialView {
     pub observations: Vec<ObservationInfo>,
     /// The probability that the target is in each container now, by container id: the
     /// strategy's likelihood for containers not yet searched, 0 for searched ones without the
-    /// target, 1 where it was found. Null for a strategy that plans without a likelihood.
+    /// target, 1 where it was found. For a household task, the chance that a container holds a
+    /// target still wanted (0 once the goal holds). Null for a strategy that plans without a
+    /// likelihood.
     pub likelihoods: Option<BTreeMap<String, f64>>,
+    /// For a household task of several targets, each target's likelihoods as `likelihoods`
+    /// has them for one; null otherwise.
+    pub target_likelihoods: Option<BTreeMap<String, BTreeMap<String, f64>>>,
 }
 
 /// Error body.

@@ -98,7 +98,7 @@ pub struct StoredTrial {
     pub k: i64,
     /// The scene's name.
     pub scene: String,
-    /// The target type.
+    /// The target type; for a household task, its targets joined by `+` (all) or `|` (any).
     pub target: String,
     /// The robot's pose at the start, when given (else the scene's start).
     pub pose: Option<[f64; 3]>,
@@ -115,6 +115,8 @@ pub struct StoredTrial {
     pub started_after: i64,
     /// Its place (1-based) among the deployment's trials in the order they ended, once ended.
     pub end_seq: Option<i64>,
+    /// Its household task (targets, goal, destination); `None` for one target.
+    pub task: Option<crate::api::TaskBody>,
 }
 
 /// One search reported by the robot.

@@ -326,6 +326,7 @@ mod tests {
                         replays: None,
                         started_after: ended,
                         end_seq: None,
+                        task: None,
                     });
                 }
             }

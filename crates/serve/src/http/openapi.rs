@@ -81,6 +81,22 @@ pub fn document(options: &HttpOptions, strategies: &[String], limits: &SceneLimi
     if let Some(items) = doc.pointer_mut("/components/schemas/Observe/properties/objects/items") {
         *items = json!({"type": "string", "pattern": crate::api::TYPE_NAME_PATTERN});
     }
+    if let Some(start) = doc.pointer_mut("/components/schemas/StartTrial") {
+        // One target or a task's targets, never both (a null one counts as absent).
+        start["oneOf"] = json!([
+            {"required": ["target"], "properties": {"target": {"type": "string"}}},
+            {"required": ["targets"], "properties": {"targets": {"type": "array"}}}
+        ]);
+    }
+    for at in [
+        "/components/schemas/StartTrial/properties/targets",
+        "/components/schemas/Observe/properties/found_targets",
+    ] {
+        if let Some(targets) = doc.pointer_mut(at) {
+            targets["uniqueItems"] = json!(true);
+            targets["items"] = json!({"type": "string", "pattern": crate::api::TYPE_NAME_PATTERN});
+        }
+    }
     if let Some(pose) = doc.pointer_mut("/components/schemas/StartTrial/properties/pose") {
         *pose = json!({
             "type": ["array", "null"],

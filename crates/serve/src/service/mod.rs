@@ -14,6 +14,7 @@ mod deployments;
 mod replies;
 mod scenes;
 mod starts;
+mod tasks;
 mod trials;
 
 use std::collections::BTreeMap;

@@ -3,14 +3,14 @@
 //! container planned once it is stored. Starts of one deployment that wait for its lock on one
 //! replica are stored together.
 
-use ferret_plan::{Search, TrialSpec};
-use ferret_world::ObjectType;
+use ferret_plan::Search;
 use ferret_world::distance::Place;
 
 use super::replies::{Begun, ReplyTo, RequestClaim};
-use super::trials::next_container;
+use super::tasks::{destination_state, requested_task, trial_spec};
+use super::trials::{next_container, trial_state};
 use super::{Service, json};
-use crate::api::{StartTrial, TrialState, is_type_name};
+use crate::api::{StartTrial, TaskBody};
 use crate::error::{ApiError, ErrorKind, plan_error};
 use crate::model::{ApiReply, DeploymentSpec, Outcome, StoredTrial, TrialStatus};
 use crate::searches::{LiveSearch, Owner};
@@ -38,16 +38,6 @@ impl Service {
             Begun::Fresh(claim) => claim,
         };
         let spec = self.spec(deployment)?;
-        if !is_type_name(&req.target) {
-            return Err(ApiError::new(
-                ErrorKind::Invalid,
-                "target",
-                format!(
-                    "{:?} is not a CamelCase object type of ASCII letters and digits such as CellPhone",
-                    req.target
-                ),
-            ));
-        }
         // The route's resource is the deployment (404 when missing); a scene named in the body
         // that does not exist makes the body unusable: 422.
         let placed = self.placed(&req.scene, req.pose).map_err(|e| {
@@ -57,15 +47,14 @@ impl Service {
                 e
             }
         })?;
-        // A target the scene does not list could only end "not found" after every container.
-        ferret_world::check_target(&req.target, &placed.targets)
-            .map_err(|e| ApiError::new(ErrorKind::Invalid, "target", e.to_string()))?;
+        let asked = Asked::from(requested_task(&req, &placed)?);
         self.stored_candidates(deployment, &spec)?;
         // Made alone: the trial as stored is kept, so that planning it needs no read.
         let alone = || {
             let started = std::cell::RefCell::new(None);
             let stored = claim.complete_with(&route, body, |w| {
-                let (mut trials, finals) = self.store_starts(w, deployment, &spec, &[&req])?;
+                let (mut trials, finals) =
+                    self.store_starts(w, deployment, &spec, &[(&req, &asked)])?;
                 let trial = trials
                     .pop()
                     .ok_or_else(|| ApiError::internal("a start stored no trial"))?;
@@ -83,6 +72,7 @@ impl Service {
         } else {
             let job = StartJob {
                 req: req.clone(),
+                asked: asked.clone(),
                 reply_to: claim.reply_to(&route, body),
             };
             self.starts.run(
@@ -91,7 +81,7 @@ impl Service {
                 |jobs| match jobs.len() {
                     // This request's own, the only one waiting.
                     1 => vec![match alone() {
-                        Ok((stored, trial)) => Gathered::Started(stored, trial),
+                        Ok((stored, trial)) => Gathered::Started(stored, trial.map(Box::new)),
                         Err(e) => Gathered::Failed(e),
                     }],
                     _ => self.start_together(deployment, &spec, &jobs),
@@ -100,7 +90,7 @@ impl Service {
             )
         };
         let (stored, known) = match gathered {
-            Gathered::Started(stored, trial) => (stored, trial),
+            Gathered::Started(stored, trial) => (stored, trial.map(|t| *t)),
             Gathered::Failed(e) => return Err(e),
             Gathered::Alone => alone()?,
         };
@@ -117,7 +107,7 @@ impl Service {
         spec: &DeploymentSpec,
         jobs: &[StartJob],
     ) -> Vec<Gathered> {
-        let reqs: Vec<&StartTrial> = jobs.iter().map(|j| &j.req).collect();
+        let reqs: Vec<(&StartTrial, &Asked)> = jobs.iter().map(|j| (&j.req, &j.asked)).collect();
         let done = self.store.write_finishing(|w| {
             let (trials, mut finals) = self.store_starts(w, deployment, spec, &reqs)?;
             let mut started = Vec::with_capacity(trials.len());
@@ -126,7 +116,7 @@ impl Service {
                 if let Some(to) = &job.reply_to {
                     finals.push(to.store(&reply));
                 }
-                started.push(Gathered::Started(reply, Some(trial)));
+                started.push(Gathered::Started(reply, Some(Box::new(trial))));
             }
             Ok::<_, ApiError>((started, finals))
         });
@@ -160,7 +150,7 @@ impl Service {
         w: &Writer<'_>,
         deployment: i64,
         spec: &DeploymentSpec,
-        reqs: &[&StartTrial],
+        reqs: &[(&StartTrial, &Asked)],
     ) -> Result<(Vec<StoredTrial>, Vec<Final>), ApiError> {
         let mark = self.selectors.mark(deployment);
         let now = w
@@ -186,15 +176,17 @@ impl Service {
         }
         let mut trials = Vec::with_capacity(reqs.len());
         let mut finals = Vec::with_capacity(reqs.len());
-        for ((req, (chosen, counts)), id) in reqs.iter().zip(choices).zip(now.next_trials) {
+        for (((req, asked), (chosen, counts)), id) in reqs.iter().zip(choices).zip(now.next_trials)
+        {
             let new = NewTrial {
                 deployment,
                 k: counts.started as i64 + 1,
                 scene: &req.scene,
-                target: &req.target,
+                target: &asked.label,
                 pose: req.pose,
                 chosen,
                 started_after: counts.ended as i64,
+                task: asked.task.as_ref(),
             };
             finals.push(w.insert_trial_last(id, &new));
             trials.push(StoredTrial {
@@ -202,7 +194,7 @@ impl Service {
                 deployment,
                 k: new.k,
                 scene: req.scene.clone(),
-                target: req.target.clone(),
+                target: asked.label.clone(),
                 pose: req.pose,
                 chosen,
                 status: TrialStatus::Searching,
@@ -210,6 +202,7 @@ impl Service {
                 replays: None,
                 started_after: new.started_after,
                 end_seq: None,
+                task: asked.task.clone(),
             });
         }
         Ok((trials, finals))
@@ -243,31 +236,23 @@ impl Service {
         let placed = self.placed(&row.scene, row.pose)?;
         let owner = Owner {
             placed: placed.clone(),
-            trial: TrialSpec::single(ObjectType::new(row.target.clone())),
+            trial: trial_spec(&row, &placed)?,
             strategy,
         };
         let mut live = LiveSearch::try_new(owner, |o| {
             let problem = o.placed.problem(&o.trial);
             Search::start(o.strategy.as_ref(), &problem, None).map_err(plan_error)
         })?;
-        let next = live
-            .with_dependent_mut(|_, search| search.next_container())
-            .map_err(plan_error)?
-            .map(|c| next_container(&placed, Place::Start, c));
-        let state = TrialState {
-            trial: id,
-            deployment: row.deployment,
-            k: row.k,
-            scene: row.scene.clone(),
-            target: row.target.clone(),
-            strategy: spec.strategies[row.chosen].clone(),
-            status: TrialStatus::Searching,
-            searched: Vec::new(),
-            cost_m: 0.0,
-            travelled_m: None,
-            next,
-            replays_m: None,
-        };
+        let (next, destination) = live.with_dependent_mut(|owner, search| {
+            let next = search
+                .next_container()
+                .map_err(plan_error)?
+                .map(|c| next_container(&placed, Place::Start, c));
+            let destination =
+                destination_state(row.task.as_ref(), &owner.placed, search.destination(), None);
+            Ok::<_, ApiError>((next, destination))
+        })?;
+        let state = trial_state(&row, &spec, &[], 0.0, (next, destination));
         let reply = json(Outcome::Created, &state)?;
         if let Some(claim) = claim {
             claim.replace(&reply)?;
@@ -289,14 +274,28 @@ fn unplanned(trial: i64) -> ApiReply {
 /// A trial's start waiting to be stored with others of its deployment.
 pub(crate) struct StartJob {
     req: StartTrial,
+    asked: Asked,
     reply_to: Option<ReplyTo>,
+}
+
+/// What a start asks for, checked: the name its row keeps as the target, and its task.
+#[derive(Clone, Debug)]
+pub(crate) struct Asked {
+    label: String,
+    task: Option<TaskBody>,
+}
+
+impl From<(String, Option<TaskBody>)> for Asked {
+    fn from((label, task): (String, Option<TaskBody>)) -> Self {
+        Self { label, task }
+    }
 }
 
 /// What became of a gathered start.
 pub(crate) enum Gathered {
     /// Stored: the reply stored for it (naming the trial) and the trial, when this write
     /// stored it (not when a reply stored before was found).
-    Started(ApiReply, Option<StoredTrial>),
+    Started(ApiReply, Option<Box<StoredTrial>>),
     /// Not stored: to be made alone.
     Alone,
     /// Refused, or the database failed.
@@ -346,8 +345,15 @@ mod tests {
             req: StartTrial {
                 request_id: request_id.map(str::to_string),
                 scene: "flat".into(),
-                target: "Wallet".into(),
+                target: Some("Wallet".into()),
+                targets: None,
+                goal: None,
+                destination: None,
                 pose: None,
+            },
+            asked: Asked {
+                label: "Wallet".into(),
+                task: None,
             },
             reply_to: request_id.map(|id| ReplyTo::new(id, route, BODY)),
         }

@@ -4,16 +4,20 @@
 
 use std::sync::Arc;
 
-use ferret_plan::{Search, Strategy, TrialSpec, hindsight_truth, replay_costs};
+use std::collections::BTreeMap;
+
+use ferret_plan::{MAX_TARGETS, Search, Strategy, TrialSpec, hindsight_truth, replay_costs};
 use ferret_world::ObjectType;
 use ferret_world::distance::Place;
+
+use super::tasks::{destination_state, found_in, goal_of, seen, targets_of, trial_spec};
 
 use super::deployments::ROBOT_REPLAY;
 use super::replies::Begun;
 use super::{Service, json};
 use crate::api::{
-    AbandonTrial, MAX_OBJECTS, MAX_TRAVELLED_M, NextContainer, ObservationInfo, Observe,
-    TrialState, TrialView, is_type_name,
+    AbandonTrial, DestinationState, MAX_OBJECTS, MAX_TRAVELLED_M, NextContainer, ObservationInfo,
+    Observe, TrialState, TrialView, is_type_name,
 };
 use crate::error::{ApiError, ErrorKind, plan_error};
 use crate::grids::Placed;
@@ -38,10 +42,11 @@ impl Service {
         let strategy = candidates.get(row.chosen).cloned().ok_or_else(|| {
             ApiError::internal(format!("trial {}: no strategy {}", row.id, row.chosen))
         })?;
+        let placed = self.placed(&row.scene, row.pose)?;
         Ok(LoadedTrial {
             observations,
-            placed: self.placed(&row.scene, row.pose)?,
-            trial: TrialSpec::single(ObjectType::new(row.target.clone())),
+            trial: trial_spec(row, &placed)?,
+            placed,
             strategy,
             candidates,
             spec,
@@ -59,18 +64,27 @@ impl Service {
     /// while it searches).
     fn state_of(row: &StoredTrial, t: &LoadedTrial) -> Result<TrialState, ApiError> {
         let mut search = t.search()?;
+        let from = search.belief().position();
         let next = match row.status {
-            TrialStatus::Searching => {
-                let from = search.belief().position();
-                search
-                    .next_container()
-                    .map_err(plan_error)?
-                    .map(|c| next_container(&t.placed, from, c))
-            }
+            TrialStatus::Searching => search
+                .next_container()
+                .map_err(plan_error)?
+                .map(|c| next_container(&t.placed, from, c)),
             _ => None,
         };
+        // A search that ended (not given up) went on to its destination from there.
+        let ended_at =
+            matches!(row.status, TrialStatus::Done | TrialStatus::Exhausted).then_some(from);
+        let destination =
+            destination_state(row.task.as_ref(), &t.placed, search.destination(), ended_at);
         let travelled = search.belief().travelled();
-        Ok(trial_state(row, &t.spec, &t.observations, travelled, next))
+        Ok(trial_state(
+            row,
+            &t.spec,
+            &t.observations,
+            travelled,
+            (next, destination),
+        ))
     }
 
     /// `GET /trials/{id}/view`: the trial with its way so far, what it saw and its likelihoods
@@ -104,30 +118,11 @@ impl Service {
             route.extend(t.placed.path(from, to).iter().skip(1).copied());
             from = to;
         }
-        let likelihoods = match t.strategy.likelihood_source() {
-            Some(source) => {
-                let mut ps: Vec<f64> = source
-                    .likelihoods(house, t.trial.task.first())
-                    .map_err(plan_error)?
-                    .iter()
-                    .map(|p| p.get())
-                    .collect();
-                for &(c, found) in &searched {
-                    if let Some(p) = ps.get_mut(c) {
-                        *p = if found { 1.0 } else { 0.0 };
-                    }
-                }
-                Some(
-                    house
-                        .containers
-                        .iter()
-                        .zip(ps)
-                        .map(|(c, p)| (c.id.clone(), p))
-                        .collect(),
-                )
-            }
-            None => None,
-        };
+        if let Some(way) = state.destination.as_ref().and_then(|d| d.path.as_ref()) {
+            route.extend(way.iter().skip(1).copied());
+        }
+        let (likelihoods, target_likelihoods) =
+            view_likelihoods(t.strategy.as_ref(), house, &state, &searched)?;
         let view = TrialView {
             trial: state,
             start,
@@ -142,6 +137,7 @@ impl Service {
                 })
                 .collect(),
             likelihoods,
+            target_likelihoods,
         };
         json(Outcome::Done, &view)
     }
@@ -199,21 +195,23 @@ impl Service {
                 ),
             )
         })?;
-        let target = t.trial.task.first();
+        let targets = targets_of(&row);
+        let (objects, found) = observed(&req, &targets)?;
         // The search this replica kept after the trial's last reply, else one rebuilt.
         let mut live = match self.searches.take(id, observations.len()) {
             Some(live) => live,
             None => t.live_search()?,
         };
-        let mut seen: Vec<ObjectType> = req
-            .objects
-            .iter()
-            .map(|o| ObjectType::new(o.clone()))
-            .collect();
-        if req.found && !seen.contains(target) {
-            seen.push(target.clone());
-        }
-        let (leg, cost, upcoming) = live.with_dependent_mut(|_, search| {
+        let observation = StoredObservation {
+            container: req.container.clone(),
+            found,
+            objects,
+            travelled: req.travelled_m,
+            leg: 0.0,
+        };
+        let seen = seen(&observation, &targets);
+        let task = row.task.as_ref();
+        let (leg, cost, step) = live.with_dependent_mut(|owner, search| {
             if search.belief().is_searched(c) {
                 return Err(ApiError::new(
                     ErrorKind::Conflict,
@@ -222,48 +220,48 @@ impl Service {
                 ));
             }
             let leg = search.record(c, seen).map_err(plan_error)?;
-            let cost = search.belief().travelled();
-            let upcoming = if req.found {
-                None
+            let from = search.belief().position();
+            let step = if search.goal_holds() {
+                search.finish();
+                Step::Done(search.belief().found_each().to_vec())
             } else {
-                let from = search.belief().position();
-                Some(
-                    search
-                        .next_container()
-                        .map_err(plan_error)?
-                        .map(|n| (from, n)),
-                )
+                match search.next_container().map_err(plan_error)? {
+                    Some(n) => Step::Next(from, n),
+                    None => {
+                        // Everything searched: the robot goes to the destination empty-handed.
+                        search.finish();
+                        Step::Exhausted
+                    }
+                }
             };
-            Ok((leg, cost, upcoming))
+            let ended_at = (!matches!(step, Step::Next(..))).then_some(from);
+            let destination =
+                destination_state(task, &owner.placed, search.destination(), ended_at);
+            Ok((leg, search.belief().travelled(), (step, destination)))
         })?;
-        let observation = StoredObservation {
-            container: req.container.clone(),
-            found: req.found,
-            objects: req.objects.clone(),
-            travelled: req.travelled_m,
-            leg,
-        };
-        let (status, next, replays) = if req.found {
-            let truth = hindsight_truth(house, &t.trial.task, &[Some(c)]).map_err(plan_error)?;
-            let replays = replay_costs(
-                ROBOT_REPLAY,
-                candidates,
-                &placed.problem(&t.trial),
-                &truth,
-                &[Some(c)],
-                (row.chosen, cost),
-            )
-            .map_err(plan_error)?;
-            (TrialStatus::Done, None, Some(replays))
-        } else {
-            match upcoming.flatten() {
-                Some((from, n)) => (
-                    TrialStatus::Searching,
-                    Some(next_container(placed, from, n)),
-                    None,
-                ),
-                None => (TrialStatus::Exhausted, None, None),
+        let (step, destination) = step;
+        let observation = StoredObservation { leg, ..observation };
+        let (status, next, replays) = match step {
+            Step::Done(found_each) => {
+                let truth =
+                    hindsight_truth(house, &t.trial.task, &found_each).map_err(plan_error)?;
+                let replays = replay_costs(
+                    ROBOT_REPLAY,
+                    candidates,
+                    &placed.problem(&t.trial),
+                    &truth,
+                    &found_each,
+                    (row.chosen, cost),
+                )
+                .map_err(plan_error)?;
+                (TrialStatus::Done, None, Some(replays))
             }
+            Step::Next(from, n) => (
+                TrialStatus::Searching,
+                Some(next_container(placed, from, n)),
+                None,
+            ),
+            Step::Exhausted => (TrialStatus::Exhausted, None, None),
         };
         let mut told = None;
         let reply = claim.complete_with(&route, body, |w| {
@@ -288,7 +286,13 @@ impl Service {
             updated.status = status;
             updated.cost = (status != TrialStatus::Searching).then_some(cost);
             updated.replays = replays.clone();
-            let state = trial_state(&updated, spec, &all, cost, next.clone());
+            let state = trial_state(
+                &updated,
+                spec,
+                &all,
+                cost,
+                (next.clone(), destination.clone()),
+            );
             let reply = json(Outcome::Done, &state)?;
             told = Some(state);
             Ok((reply, last))
@@ -332,6 +336,20 @@ impl Service {
         let observations = self.store.read(|r| r.observations(id))?;
         let spec = self.spec(row.deployment)?;
         let cost: f64 = observations.iter().map(|o| o.leg).sum();
+        // Where the task would have brought what it found: no way there, the search was given
+        // up where the robot is.
+        let destination = match &row.task {
+            Some(task) if task.destination.is_some() => {
+                let placed = self.placed(&row.scene, row.pose)?;
+                let trial = trial_spec(&row, &placed)?;
+                let legs = trial
+                    .task
+                    .destination()
+                    .and_then(|d| d.legs(&placed.house, &placed.distances).ok());
+                destination_state(Some(task), &placed, legs.as_ref(), None)
+            }
+            _ => None,
+        };
         let mut told = None;
         let reply = claim.complete_with(&route, body, |w| {
             // As any trial's end: the trial's row, then the deployment's.
@@ -348,7 +366,13 @@ impl Service {
             let mut ended = row.clone();
             ended.status = TrialStatus::Abandoned;
             ended.cost = Some(cost);
-            let state = trial_state(&ended, &spec, &observations, cost, None);
+            let state = trial_state(
+                &ended,
+                &spec,
+                &observations,
+                cost,
+                (None, destination.clone()),
+            );
             let reply = json(Outcome::Done, &state)?;
             told = Some(state);
             Ok((reply, last))
@@ -361,6 +385,91 @@ impl Service {
         }
         reply
     }
+}
+
+/// A trial's likelihoods now, for its picture: each target's from the strategy's source, 0 in
+/// the containers searched without it and 1 where it was found; for several targets, also the
+/// chance that a container holds one still wanted (1 where one was found, 0 once the goal
+/// holds). `(None, None)` for a strategy without a likelihood source.
+type ViewLikelihoods = (
+    Option<BTreeMap<String, f64>>,
+    Option<BTreeMap<String, BTreeMap<String, f64>>>,
+);
+
+fn view_likelihoods(
+    strategy: &dyn Strategy,
+    house: &ferret_world::House,
+    state: &TrialState,
+    searched: &[(usize, bool)],
+) -> Result<ViewLikelihoods, ApiError> {
+    let Some(source) = strategy.likelihood_source() else {
+        return Ok((None, None));
+    };
+    let ids = |ps: Vec<f64>| -> BTreeMap<String, f64> {
+        house
+            .containers
+            .iter()
+            .zip(ps)
+            .map(|(c, p)| (c.id.clone(), p))
+            .collect()
+    };
+    let mut rows = Vec::with_capacity(state.targets.len());
+    for t in &state.targets {
+        let mut ps: Vec<f64> = source
+            .likelihoods(house, &ObjectType::new(t.as_str()))
+            .map_err(plan_error)?
+            .iter()
+            .map(|p| p.get())
+            .collect();
+        let found_at = state.found_in.get(t);
+        for &(c, _) in searched {
+            if let Some(p) = ps.get_mut(c) {
+                *p = if found_at == Some(&house.containers[c].id) {
+                    1.0
+                } else {
+                    0.0
+                };
+            }
+        }
+        rows.push(ps);
+    }
+    if let [one] = rows.as_slice() {
+        return Ok((Some(ids(one.clone())), None));
+    }
+    let done = state.status == TrialStatus::Done;
+    let found_anything: Vec<bool> = (0..house.containers.len())
+        .map(|c| {
+            state
+                .found_in
+                .values()
+                .any(|id| *id == house.containers[c].id)
+        })
+        .collect();
+    let wanted: Vec<&Vec<f64>> = state
+        .targets
+        .iter()
+        .zip(&rows)
+        .filter(|(t, _)| !state.found_in.contains_key(*t))
+        .map(|(_, r)| r)
+        .collect();
+    let combined: Vec<f64> = (0..house.containers.len())
+        .map(|c| {
+            if found_anything[c] {
+                1.0
+            } else if done {
+                0.0
+            } else {
+                1.0 - wanted.iter().map(|r| 1.0 - r[c]).product::<f64>()
+            }
+        })
+        .collect();
+    let each = state
+        .targets
+        .iter()
+        .zip(rows)
+        .map(|(t, r)| (t.clone(), ids(r)))
+        .collect();
+    Ok((Some(ids(combined)), Some(each)))
 }
 
 /// Locks trial `id` and checks it is still searching with the `seen` observations it was read
@@ -438,33 +547,36 @@ fn rebuild<'a>(
                 o.container
             ))
         })?;
-        let mut seen: Vec<ObjectType> = o
-            .objects
+        let targets: Vec<String> = trial
+            .task
+            .targets()
             .iter()
-            .map(|t| ObjectType::new(t.clone()))
+            .map(ToString::to_string)
             .collect();
-        if o.found && !seen.contains(trial.task.first()) {
-            seen.push(trial.task.first().clone());
-        }
-        search.record(c, seen).map_err(plan_error)?;
+        search.record(c, seen(o, &targets)).map_err(plan_error)?;
     }
     Ok(search)
 }
 
-fn trial_state(
+pub(super) fn trial_state(
     row: &StoredTrial,
     spec: &DeploymentSpec,
     observations: &[StoredObservation],
     cost: f64,
-    next: Option<NextContainer>,
+    (next, destination): (Option<NextContainer>, Option<DestinationState>),
 ) -> TrialState {
     let reported: Vec<f64> = observations.iter().filter_map(|o| o.travelled).collect();
+    let targets = targets_of(row);
     TrialState {
         trial: row.id,
         deployment: row.deployment,
         k: row.k,
         scene: row.scene.clone(),
         target: row.target.clone(),
+        found_in: found_in(observations, &targets),
+        targets,
+        goal: goal_of(row),
+        destination,
         strategy: spec.strategies.get(row.chosen).cloned().unwrap_or_default(),
         status: row.status,
         searched: observations.iter().map(|o| o.container.clone()).collect(),
@@ -479,6 +591,65 @@ fn trial_state(
                 .collect()
         }),
     }
+}
+
+/// How a search went on after an observation.
+enum Step {
+    /// The goal holds: where each target was found.
+    Done(Vec<Option<usize>>),
+    /// Still searching: from where, which container next.
+    Next(Place, usize),
+    /// Every container searched without the goal holding.
+    Exhausted,
+}
+
+/// What an observation says was in a container, checked: the object types to keep (those seen,
+/// the targets named found among them) and whether a target was found. For a one-target trial
+/// `found` says so as before; for a task, the targets found are those named in
+/// `found_targets` or `objects`, and `found` without naming one is refused.
+fn observed(req: &Observe, targets: &[String]) -> Result<(Vec<String>, bool), ApiError> {
+    if req.found_targets.len() > MAX_TARGETS {
+        return Err(ApiError::new(
+            ErrorKind::Invalid,
+            "found_targets",
+            format!(
+                "{} targets; a task has at most {MAX_TARGETS}",
+                req.found_targets.len()
+            ),
+        ));
+    }
+    let mut objects = req.objects.clone();
+    for (i, t) in req.found_targets.iter().enumerate() {
+        if !targets.contains(t) {
+            return Err(ApiError::new(
+                ErrorKind::Invalid,
+                format!("found_targets[{i}]"),
+                format!(
+                    "{t:?} is not a target of this trial ({})",
+                    targets.join(", ")
+                ),
+            ));
+        }
+        if !objects.contains(t) {
+            objects.push(t.clone());
+        }
+    }
+    let named = targets.iter().any(|t| objects.contains(t));
+    let found = match targets {
+        [_] => req.found || named,
+        _ if req.found && !named => {
+            return Err(ApiError::new(
+                ErrorKind::Invalid,
+                "found",
+                format!(
+                    "found, but no target of this trial ({}) is named: list the targets seen in found_targets",
+                    targets.join(", ")
+                ),
+            ));
+        }
+        _ => named,
+    };
+    Ok((objects, found))
 }
 
 pub(super) fn next_container(placed: &Placed, from: Place, c: usize) -> NextContainer {

@@ -17,7 +17,7 @@ use super::value::{Row, Value};
 
 /// Schema migrations, version `i + 1` at index `i`. Version 1 is the schema of the first
 /// servers, written with `IF NOT EXISTS` so that it also describes their files.
-const MIGRATIONS: [&[&str]; 2] = [
+const MIGRATIONS: [&[&str]; 3] = [
     &["CREATE TABLE IF NOT EXISTS scenes (
         name TEXT PRIMARY KEY, body TEXT NOT NULL);
     CREATE TABLE IF NOT EXISTS deployments (
@@ -40,6 +40,8 @@ const MIGRATIONS: [&[&str]; 2] = [
         ALTER TABLE trials ADD COLUMN end_seq INTEGER;",
         super::END_ORDER,
     ],
+    // Household tasks: a trial's targets, goal and destination (JSON; NULL for one target).
+    &["ALTER TABLE trials ADD COLUMN task TEXT;"],
 ];
 
 pub(super) struct Sqlite {

@@ -19,8 +19,7 @@ const INSERT_OBSERVATION: &str =
 /// A deployment's trials started after its first `$2` or ended after its first `$3`.
 pub(super) const SINCE: &str = "deployment = $1 AND (k > $2 OR end_seq > $3)";
 
-pub(super) const TRIAL_COLUMNS: &str =
-    "id, deployment, k, scene, target, pose, chosen, status, cost, replays, started_after, end_seq";
+pub(super) const TRIAL_COLUMNS: &str = "id, deployment, k, scene, target, pose, chosen, status, cost, replays, started_after, end_seq, task";
 
 impl Conn<'_> {
     /// A trial's status and observation count from a row of [`PROGRESS`].
@@ -70,6 +69,10 @@ impl Conn<'_> {
                         Some(Value::Null) => None,
                         _ => Some(c.int(r, 11, "trial end_seq")?),
                     },
+                    task: json(12, "task")?
+                        .map(serde_json::from_value)
+                        .transpose()
+                        .map_err(|_| bad("task"))?,
                 })
             })
             .collect()
@@ -83,9 +86,12 @@ impl Writer<'_> {
     /// [`lock_deployment_since`]: Self::lock_deployment_since
     pub fn insert_trial_last(&self, id: i64, t: &NewTrial<'_>) -> Final {
         let pose = t.pose.map(|p| serde_json::json!(p).to_string());
+        let task = t
+            .task
+            .map(|task| serde_json::to_value(task).unwrap_or_default().to_string());
         Final {
-            sql: "INSERT INTO trials (id, deployment, k, scene, target, pose, chosen, status, started_after)
-                 VALUES ($1, $2, $3, $4, $5, $6, $7, 'searching', $8)",
+            sql: "INSERT INTO trials (id, deployment, k, scene, target, pose, chosen, status, started_after, task)
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, 'searching', $8, $9)",
             params: vec![
                 id.into(),
                 t.deployment.into(),
@@ -95,6 +101,7 @@ impl Writer<'_> {
                 pose.into(),
                 (t.chosen as i64).into(),
                 t.started_after.into(),
+                task.into(),
             ],
         }
     }
@@ -205,7 +212,7 @@ pub struct NewTrial<'a> {
     pub k: i64,
     /// The scene's name.
     pub scene: &'a str,
-    /// The target type.
+    /// The target type (for a task, its targets' label).
     pub target: &'a str,
     /// The robot's pose at the start, when given.
     pub pose: Option<[f64; 3]>,
@@ -213,6 +220,8 @@ pub struct NewTrial<'a> {
     pub chosen: usize,
     /// How many of the deployment's trials had ended when it started.
     pub started_after: i64,
+    /// The household task, for a trial of one.
+    pub task: Option<&'a crate::api::TaskBody>,
 }
 
 impl Reader<'_> {

@@ -23,7 +23,7 @@ pub(super) use conn::Conn;
 use conn::{On, Tx, TxState};
 
 /// Schema migrations, version `i + 1` at index `i` (the same versions as SQLite's).
-const MIGRATIONS: [&[&str]; 2] = [
+const MIGRATIONS: [&[&str]; 3] = [
     &["CREATE TABLE scenes (name TEXT PRIMARY KEY, body TEXT NOT NULL);
     CREATE TABLE deployments (id BIGSERIAL PRIMARY KEY, spec TEXT NOT NULL);
     CREATE TABLE trials (
@@ -44,6 +44,8 @@ const MIGRATIONS: [&[&str]; 2] = [
         ALTER TABLE trials ADD COLUMN end_seq BIGINT;",
         super::END_ORDER,
     ],
+    // Household tasks: a trial's targets, goal and destination (JSON; NULL for one target).
+    &["ALTER TABLE trials ADD COLUMN task TEXT;"],
 ];
 
 /// What a new connection's server process runs first: planning it opens every table of the

@@ -38,6 +38,8 @@
     [1, [128, 0, 38]],
   ];
   const NO_LIKELIHOOD = "#c4c8cf";
+  // Where a task brings what it found: purple, unlike the start (green) and every route.
+  const DESTINATION = "#7e22ce";
 
   const $ = (id) => document.getElementById(id);
 
@@ -594,6 +596,8 @@
     if (o.container !== t.next.container) return false;
     // An event too long to travel between replicas comes without the way on: read the picture.
     if (e.status === "searching" && e.next && !Array.isArray(e.next_path)) return false;
+    // A target of several found changes what every other container may hold: read the picture.
+    if (o.found && t.targets && t.targets.length > 1 && e.status === "searching") return false;
     const leg = t.next.path || [];
     v.route = v.route.length ? v.route.concat(leg.slice(1)) : leg.slice();
     v.observations.push({ container: o.container, found: o.found, objects: o.objects });
@@ -724,6 +728,24 @@
         : (p * 100).toFixed(p < 0.1 ? 1 : 0) + " %";
 
   // "CounterTop" -> "Counter top", "TVStand" -> "TV stand", "DiningRoom" -> "Dining room".
+  // "looking for a Mug", "looking for all of Mug, Apple, then to the start".
+  function taskWords(trial) {
+    const targets = trial.targets || [trial.target];
+    const what =
+      targets.length > 1
+        ? `looking for ${trial.goal === "any" ? "any" : "all"} of ${targets.join(", ")}`
+        : `looking for ${targets[0]}`;
+    return trial.destination ? `${what}, then to ${destinationWords(trial.destination)}` : what;
+  }
+
+  // A task's destination as the page names it.
+  function destinationWords(d) {
+    if (d.kind === "start") return "the start";
+    if (d.kind === "container") return `container ${d.id}`;
+    if (d.kind === "room") return `the ${d.name}`;
+    return `(${fmtM(d.x)}, ${fmtM(d.y)})`;
+  }
+
   function words(type) {
     const parts = String(type).match(/[A-Z]+(?![a-z])|[A-Z]?[a-z]+|\d+/g);
     if (!parts) return String(type);
@@ -1093,6 +1115,28 @@
       taken.push(best.box);
     }
 
+    // Where a task brings what it found: a green diamond.
+    const dest = trial && trial.destination;
+    if (dest && Array.isArray(dest.at)) {
+      const dx = X(dest.at[0]);
+      const dy = Y(dest.at[1]);
+      const r = 9;
+      const mark = svg("polygon", {
+        id: "destination",
+        points: `${dx},${dy - r} ${dx + r},${dy} ${dx},${dy + r} ${dx - r},${dy}`,
+        fill: DESTINATION,
+        stroke: "#fff",
+        "stroke-width": 2,
+        "data-kind": dest.kind,
+      });
+      titled(
+        mark,
+        `destination: ${destinationWords(dest)}` +
+          (dest.distance_m != null ? `, ${fmtM(dest.distance_m)} m from the last container` : ""),
+      );
+      gMarks.appendChild(mark);
+    }
+
     // Where the robot is: the end of its route (the start before its first search).
     if (trial) {
       const at = view.route && view.route.length ? view.route[view.route.length - 1] : scene.start;
@@ -1142,7 +1186,14 @@
       "data-likelihoods": hasLikelihoods ? "true" : "false",
     });
     if (hasLikelihoods) {
-      scale.appendChild(el("span", { class: "legend-title" }, "Likelihood the target is there"));
+      const several = view.trial.targets && view.trial.targets.length > 1;
+      scale.appendChild(
+        el(
+          "span",
+          { class: "legend-title" },
+          several ? "Likelihood a wanted target is there" : "Likelihood the target is there",
+        ),
+      );
       const w = 260;
       const pad = 16;
       const bar = svg("svg", { width: w + 2 * pad, height: 30, viewBox: `0 0 ${w + 2 * pad} 30` });
@@ -1263,6 +1314,20 @@
       (s) => s.appendChild(svg("polygon", { points: "15,6 19,10 15,14 11,10", fill: "#6b7280" })),
       "access point",
     );
+    if (view && view.trial.destination) {
+      item(
+        (s) =>
+          s.appendChild(
+            svg("polygon", {
+              points: "15,2 23,10 15,18 7,10",
+              fill: DESTINATION,
+              stroke: "#fff",
+              "stroke-width": 1.5,
+            }),
+          ),
+        "destination",
+      );
+    }
     box.appendChild(items);
   }
 
@@ -1304,7 +1369,7 @@
     $("trial-empty").hidden = true;
     $("trial-body").hidden = false;
     const found = view.observations.find((o) => o.found);
-    $("trial-title").textContent = `Trial ${trial.trial}: looking for ${trial.target}`;
+    $("trial-title").textContent = `Trial ${trial.trial}: ${taskWords(trial)}`;
     const ended = trial.status !== "searching";
     $("trial-summary").textContent =
       `${trial.strategy} · deployment ${trial.deployment}, trial k = ${trial.k} · scene ${trial.scene} · ` +
@@ -1315,9 +1380,35 @@
     const facts = $("trial-facts");
     facts.replaceChildren();
     const fact = (k, v, id) => {
-      facts.append(el("dt", {}, k), el("dd", { id }, v));
+      const dd = el("dd", { id });
+      if (v instanceof Node) dd.append(v);
+      else dd.textContent = v;
+      facts.append(el("dt", {}, k), dd);
     };
-    fact("target", trial.target, "fact-target");
+    const targets = trial.targets || [trial.target];
+    if (targets.length > 1 || trial.destination) {
+      const dd = el("span", {});
+      targets.forEach((t, i) => {
+        const at = (trial.found_in || {})[t];
+        if (i) dd.append(document.createTextNode(trial.goal === "any" ? " or " : ", "));
+        dd.append(
+          el(
+            "span",
+            {
+              class: at ? "badge found" : "muted",
+              "data-target": t,
+              "data-found-in": at || "",
+            },
+            at ? `${t} ✓ ${at}` : t,
+          ),
+        );
+      });
+      fact(trial.goal === "any" ? "any of" : "all of", dd, "fact-target");
+      if (trial.destination)
+        fact("bring to", destinationWords(trial.destination), "fact-destination");
+    } else {
+      fact("target", trial.target, "fact-target");
+    }
     fact("strategy", trial.strategy, "fact-strategy");
     fact(ended ? "cost" : "cost so far", `${fmtM(trial.cost_m)} m`, "fact-cost");
     const total = S.scene ? S.scene.containers.length : null;
@@ -1354,8 +1445,17 @@
       const c = types.get(id);
       const li = el("li", { "data-container": id, "data-found": o && o.found ? "true" : "false" });
       li.appendChild(el("span", { class: "what" }, c ? `${words(c.type)} (${id})` : id));
+      const here = Object.entries(trial.found_in || {})
+        .filter(([, c]) => c === id)
+        .map(([t]) => t);
       if (o && o.found)
-        li.appendChild(el("span", { class: "badge found" }, `found ${trial.target}`));
+        li.appendChild(
+          el(
+            "span",
+            { class: "badge found" },
+            `found ${here.length ? here.join(", ") : trial.target}`,
+          ),
+        );
       else li.appendChild(el("span", { class: "muted" }, " not there"));
       if (o && o.objects.length)
         li.appendChild(el("span", { class: "seen" }, `seen: ${o.objects.join(", ")}`));

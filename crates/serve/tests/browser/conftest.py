@@ -192,11 +192,20 @@ class Robot:
             f"/deployments/{seg(deployment)}/trials", {"scene": self.scene, "target": target}
         )
 
+    def start_task(self, deployment, targets, goal="all", destination=None):
+        """Starts a household task: several targets, all or any, brought to `destination`."""
+        body = {"scene": self.scene, "targets": targets, "goal": goal}
+        if destination is not None:
+            body["destination"] = destination
+        return self.api.post(f"/deployments/{seg(deployment)}/trials", body)
+
     def search_next(self, trial):
-        """Searches the container the server proposed; returns the server's reply."""
+        """Searches the container the server proposed, naming the trial's targets it sees;
+        returns the server's reply."""
         cid = trial["next"]["container"]
         seen = self.contents[cid]
-        body = {"container": cid, "found": trial["target"] in seen, "objects": seen}
+        found = [t for t in trial["targets"] if t in seen]
+        body = {"container": cid, "found": bool(found), "found_targets": found, "objects": seen}
         return self.api.post(f"/trials/{seg(trial['trial'])}/observations", body)
 
     def finish(self, trial):

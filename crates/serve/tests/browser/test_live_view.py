@@ -229,6 +229,58 @@ def test_a_robots_search_shows_live(serve, view):
     assert {"trial"} <= shots
 
 
+# The page names every target of a task, found or not, and marks the destination on the plan;
+# once the goal holds, the route ends there.
+TASK_SHOWN = """(e) => {
+  const card = document.querySelector("#plan-card");
+  if (card.dataset.trial !== String(e.trial) || card.dataset.status !== e.status) return false;
+  if (!document.querySelector("#trial-title").textContent.includes(e.title)) return false;
+  const named = [...document.querySelectorAll("#fact-target [data-target]")];
+  if (named.map((n) => n.dataset.target).join() !== e.targets.join()) return false;
+  for (const n of named) {
+    if (n.dataset.foundIn !== (e.found_in[n.dataset.target] || "")) return false;
+  }
+  const dest = document.querySelector("#destination");
+  if (!dest || dest.dataset.kind !== e.kind) return false;
+  if (!document.querySelector("#fact-destination")) return false;
+  const route = document.querySelector("#route");
+  return (route ? Number(route.dataset.points) : 0) === (e.route > 1 ? e.route : 0);
+}"""
+
+
+def test_a_task_shows_every_target_and_the_destination(serve, view):
+    server = serve()
+    v = view(server).open(token=TOKEN)
+    v.wait_live()
+    robot = Robot(server.api)
+    dep = robot.deploy(strategies=["model/prior", "optimistic+greedy"])
+    trial = robot.start_task(
+        dep["id"], ["Wallet", "Tomato", "Vase"], destination={"kind": "room", "name": "bedroom"}
+    )
+    while True:
+        shown = server.api.get(f"/trials/{seg(trial['trial'])}/view")
+        expected = {
+            "trial": trial["trial"],
+            "status": trial["status"],
+            "title": "all of Wallet, Tomato, Vase, then to the bedroom",
+            "targets": trial["targets"],
+            "found_in": trial["found_in"],
+            "kind": "room",
+            "route": len(shown["route"]),
+        }
+        v.within(TASK_SHOWN, expected, what=f"task trial after {trial['searched']}")
+        if len(trial["found_in"]) == 1:
+            v.shot("serve-view-task.png")
+        if trial["status"] != "searching":
+            break
+        trial = robot.search_next(trial)
+    assert trial["status"] == "done" and len(trial["found_in"]) == 3
+    # The route ends where the destination is, and the trial's cost counts the way there.
+    assert shown["route"][-1] == trial["destination"]["path"][-1]
+    assert trial["destination"]["distance_m"] > 0
+    v.check_clean()
+
+
 def test_the_page_asks_only_for_what_changed(serve, view):
     server = serve()
     robot = Robot(server.api)

@@ -31,7 +31,8 @@ pub struct Args {
     llm: LlmArgs,
     #[command(flatten)]
     protocol: ProtocolArgs,
-    /// Candidate strategies, comma separated (the oracle is never a candidate).
+    /// Candidate strategies, comma separated (the oracle is never a candidate); for tasks,
+    /// sequential/<spec> looks for one target after another with the planner of <spec>.
     #[arg(long, value_delimiter = ',', default_value = DEFAULT_STRATEGIES)]
     strategies: Vec<String>,
     /// Number of trials [default: 20, or the number of types to --find].

@@ -43,7 +43,8 @@ pub struct Args {
     /// --fusion: the control of every fused row), and with an LLM configuration
     /// llm+model/<prompt>/<llm>[/exact], fused/<prompt>/<llm>[/exact] (with --fusion) and
     /// llm-direct/p-direct/<llm> (prompts: p-yesno, p-choice, p-batch, p-context-a,
-    /// p-context-b, p-minimal, p-direct, or a template path).
+    /// p-context-b, p-minimal, p-direct, or a template path); with --task, also
+    /// sequential/<spec> (the planner of <spec> looking for one target after another).
     #[arg(long, value_delimiter = ',', default_value = DEFAULT_STRATEGIES)]
     pub strategies: Vec<String>,
     /// Seed of the trials (targets drawn per house).

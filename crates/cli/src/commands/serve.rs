@@ -47,7 +47,9 @@ pub struct Args {
     #[command(flatten)]
     llm: LlmArgs,
     /// Strategies deployments may choose from, comma separated (the oracle never: a robot has no
-    /// ground truth).
+    /// ground truth). For trials of household tasks (several targets, a destination), add
+    /// sequential/model/prior to let selection weigh one search after another against the
+    /// task planner.
     #[arg(long, value_delimiter = ',', default_value = DEFAULT_STRATEGIES)]
     strategies: Vec<String>,
     /// Address to listen on. Anything but loopback exposes the robot's planner to the network:

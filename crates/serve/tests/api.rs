@@ -5,7 +5,7 @@
 mod support;
 
 use support::server::{Server, start, start_with};
-use support::{SCENE, TARGETS, strategies};
+use support::{SCENE, TARGETS, contents, strategies};
 
 use std::path::Path;
 use std::sync::Arc;
@@ -15,24 +15,6 @@ use ferret_select::{LiveDeployment, Method};
 use ferret_serve::{ServeOptions, ServiceOptions};
 use ferret_world::{GridParams, ObjectType, SceneFile, TravelCost};
 use serde_json::{Value, json};
-
-/// A simulated robot: searches what it is told, reports the scene file's contents.
-fn contents(scene: &Value, container: &str) -> Vec<String> {
-    scene["containers"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|c| c["id"] == container)
-        .map(|c| {
-            c["contents"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|v| v.as_str().unwrap().to_string())
-                .collect()
-        })
-        .unwrap()
-}
 
 /// Runs one trial to the end through the API; returns (strategy, cost, searched).
 async fn run_api_trial(

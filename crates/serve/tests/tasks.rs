@@ -8,30 +8,13 @@ mod support;
 use std::path::Path;
 
 use support::server::{Server, start};
-use support::{SCENE, strategies};
+use support::{SCENE, contents, strategies};
 
 use ferret_plan::{
     Destination, Goal, ReplayMode, SearchProblem, Task, TrialSpec, replay_costs, run_trial,
 };
 use ferret_world::{GridParams, ObjectType, SceneFile, TravelCost};
 use serde_json::{Value, json};
-
-fn contents(scene: &Value, container: &str) -> Vec<String> {
-    scene["containers"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|c| c["id"] == container)
-        .map(|c| {
-            c["contents"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|v| v.as_str().unwrap().to_string())
-                .collect()
-        })
-        .unwrap()
-}
 
 /// Runs a task to the end as a simulated robot that names the targets it sees; returns the
 /// last state.

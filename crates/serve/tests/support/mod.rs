@@ -127,6 +127,23 @@ pub const TARGETS: [&str; 5] = [
     "CellPhone",
 ];
 
+/// What a simulated robot sees in `container` of `scene` (as `GET /scenes/{name}` lists it):
+/// the scene file's contents.
+pub fn contents(scene: &serde_json::Value, container: &str) -> Vec<String> {
+    scene["containers"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .find(|c| c["id"] == container)
+        .and_then(|c| c["contents"].as_array())
+        .map(|c| {
+            c.iter()
+                .filter_map(|v| v.as_str().map(str::to_string))
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
 pub fn strategies() -> Vec<Arc<dyn Strategy>> {
     let registry = StrategyRegistry::builtin(None, PlannerConfig::default(), 10);
     ["optimistic+greedy", "model/uniform", "model/uniform/k2"]

@@ -263,9 +263,32 @@ impl EvalJob<'_> {
 /// Refuses, before anything runs, a list of tasks that does not fit its houses: a house the
 /// source does not hold, a target of `all` no container of its house holds, a container or
 /// room its house does not have, a point off the floor the robot reaches. Reads every house
-/// of the source once, and maps those with a destination in a room or at a point.
+/// of the source once (see [`check_listed_tasks_in`]).
 pub fn check_listed_tasks(
     source: &HouseSource,
+    draw: &TrialDraw<'_>,
+    grid: &GridParams,
+) -> Result<()> {
+    let Some(Tasks::Listed { .. }) = draw.tasks else {
+        return Ok(());
+    };
+    let open = source.open(draw.protocol.containers, None)?;
+    // Skipped (invalid) houses hold no task: a line naming one is a house the source does not
+    // hold, as before.
+    let scenes = open.houses()?.filter_map(|event| match event {
+        Ok(HouseEvent::Scene(scene)) => Some(Ok(scene)),
+        Ok(HouseEvent::Skipped(_)) => None,
+        Err(e) => Some(Err(e)),
+    });
+    check_listed_tasks_in(scenes, &source.describe(), draw, grid)
+}
+
+/// [`check_listed_tasks`] over houses already read (`scenes`, in any order; `source` names
+/// them in the error for a house that is not among them): for a face that holds its houses in
+/// memory. Maps only the houses with a destination in a room or at a point.
+pub fn check_listed_tasks_in<S: std::borrow::Borrow<Scene>>(
+    scenes: impl IntoIterator<Item = Result<S>>,
+    source: &str,
     draw: &TrialDraw<'_>,
     grid: &GridParams,
 ) -> Result<()> {
@@ -274,16 +297,15 @@ pub fn check_listed_tasks(
     };
     let wanted = tasks.listed_houses();
     let mut seen = std::collections::BTreeSet::new();
-    for event in source.open(draw.protocol.containers, None)?.houses()? {
-        let HouseEvent::Scene(scene) = event? else {
-            continue;
-        };
+    for scene in scenes {
+        let scene = scene?;
+        let scene: &Scene = std::borrow::Borrow::borrow(&scene);
         let index = scene.house.index;
         if !wanted.contains(&index) {
             continue;
         }
         seen.insert(index);
-        let trials = draw.trials(&scene)?;
+        let trials = draw.trials(scene)?;
         let spot = |t: &&TrialSpec| {
             matches!(
                 t.task.destination(),
@@ -312,7 +334,7 @@ pub fn check_listed_tasks(
             place: format!("task {}", k + 1),
             error: ferret_plan::TaskError::new(
                 "house",
-                format!("no house {} in {}", line.house, source.describe()),
+                format!("no house {} in {source}", line.house),
             ),
         });
     }

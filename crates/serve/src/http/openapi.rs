@@ -88,6 +88,15 @@ pub fn document(options: &HttpOptions, strategies: &[String], limits: &SceneLimi
             {"required": ["targets"], "properties": {"targets": {"type": "array"}}}
         ]);
     }
+    // Each kind of destination takes its own fields only (serde refuses others).
+    if let Some(kinds) = doc
+        .pointer_mut("/components/schemas/DestinationBody/oneOf")
+        .and_then(Value::as_array_mut)
+    {
+        for kind in kinds {
+            kind["additionalProperties"] = json!(false);
+        }
+    }
     for at in [
         "/components/schemas/StartTrial/properties/targets",
         "/components/schemas/Observe/properties/found_targets",

@@ -5,9 +5,8 @@
 use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard};
 
-use ferret_plan::{SearchProblem, TrialSpec, hindsight_truth};
+use ferret_plan::{SearchProblem, hindsight_truth};
 use ferret_select::{DeploymentLoop, Method};
-use ferret_world::ObjectType;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -17,9 +16,9 @@ use crate::search::PySearch;
 use crate::settings;
 
 /// A deployment: `choose()` names the strategy of the next trial, the robot runs a
-/// `ferret.Search` with it, and `finish(search)` replays every candidate on that trial (the
-/// target only where it was found) and lets the selector learn; `abandon()` ends a trial that
-/// found nothing, which teaches nothing. The same strategies, method, `c` and `seed` on the same
+/// `ferret.Search` with it (one target or a household task), and `finish(search)` replays every
+/// candidate on that trial (each target only where it was found) and lets the selector learn;
+/// `abandon()` ends a trial that found nothing, which teaches nothing. The same strategies, method, `c` and `seed` on the same
 /// trials make `ferret deploy`'s choices and costs.
 #[pyclass(name = "Deployment", module = "ferret")]
 pub struct PyDeployment {
@@ -124,8 +123,11 @@ impl PyDeployment {
     }
 
     /// Ends the trial in progress with the robot's `search` (a `ferret.Search` of the chosen
-    /// strategy that found the target): replays every candidate on it and learns. Returns each
-    /// candidate's cost on this trial, metres (the chosen one's is the search's own cost).
+    /// strategy that found its target, or whose task's goal holds): replays every candidate on
+    /// it — the same task, each target only where it was found, to the same destination — and
+    /// learns. A search with a destination that was not finished is finished here (its
+    /// `finish()`: the way there is part of every cost). Returns each candidate's cost on this
+    /// trial, metres (the chosen one's is the search's own cost).
     fn finish<'py>(
         &mut self,
         py: Python<'py>,
@@ -144,27 +146,24 @@ impl PyDeployment {
                 self.names[chosen]
             )));
         }
-        let Some(found) = s.found_index() else {
-            return Err(errors::search(
-                "the search has not found its target: finish() needs a found target, abandon() ends a trial without one",
-            ));
-        };
-        let cost = s.travelled();
-        let (scene, map) = s.scene_and_map();
-        let target = ObjectType::new(s.target_type());
+        let done = s.conclude()?;
         drop(s);
         let deployment = &self.deployment;
         let replays = py.allow_threads(|| {
             errors::guarded("Deployment.finish", || {
-                let trial = TrialSpec::single(target.clone());
-                let problem = SearchProblem::new(&scene.house, &map.1, &trial);
-                let truth = hindsight_truth(&scene.house, &trial.task, &[Some(found)])
+                let mut problem = SearchProblem::new(&done.scene.house, &done.map.1, &done.trial);
+                if let Some(l) = &done.legs {
+                    problem = problem.with_destination(l);
+                }
+                let truth = hindsight_truth(&done.scene.house, &done.trial.task, &done.found_each)
                     .map_err(errors::plan)?;
                 let mut deployment = deployment.lock().unwrap_or_else(|p| p.into_inner());
                 let replays = deployment
-                    .replays(&problem, &truth, &[Some(found)], (chosen, cost))
+                    .replays(&problem, &truth, &done.found_each, (chosen, done.cost))
                     .map_err(errors::plan)?;
-                deployment.learn(cost, &replays).map_err(select_error)?;
+                deployment
+                    .learn(done.cost, &replays)
+                    .map_err(select_error)?;
                 Ok(replays)
             })
         })?;

@@ -4,7 +4,8 @@
 //! the conversion between Python and ferret's types — houses loaded or generated
 //! ([`houses`]), priors ([`prior`]), a search driven step by step ([`search`]), evaluations
 //! with `trials.csv`'s rows ([`evaluate`]), calibration of likelihood sources ([`calibrate`]),
-//! selection over an evaluation run ([`select`]), a live deployment's selector ([`deploy`]), the keyword arguments they share
+//! selection over an evaluation run ([`select`]), a live deployment's selector ([`deploy`]),
+//! household tasks from Python's arguments ([`tasks`]), the keyword arguments they share
 //! ([`settings`], and the planner's and prior's with the strategy registry: [`planning`]), progress on stderr ([`progress`]) and exception classes carrying the command
 //! line's messages ([`errors`]). It plans, simulates and evaluates nothing itself: every call
 //! goes to the crates `ferret eval` and `ferret serve` use.
@@ -23,6 +24,7 @@ pub mod progress;
 pub mod search;
 pub mod select;
 pub mod settings;
+pub mod tasks;
 
 /// The extension module `ferret._ferret`, re-exported by the `ferret` package.
 #[pymodule]

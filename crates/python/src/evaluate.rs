@@ -4,10 +4,11 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
+use ferret_lab::eval_run::check_listed_tasks_in;
 use ferret_lab::runs::{EvalRun, ReportView, RunInfo, RunWriter};
 use ferret_lab::shard::{SHARD_RULE, Shard, ShardRecord};
 use ferret_lab::{CELL_M, TrialRow};
-use ferret_lab::{DEFAULT_STRATEGIES, EvalContext, HouseInput, TrialDraw};
+use ferret_lab::{DEFAULT_STRATEGIES, EvalContext, HouseInput, Tasks, TrialDraw};
 use ferret_plan::TrialsPerHouse;
 use ferret_world::Scene;
 use pyo3::prelude::*;
@@ -47,8 +48,9 @@ pub struct PyEvaluation {
 impl PyEvaluation {
     /// The rows: dicts with `trials.csv`'s columns (`house`, `house_index`, `target`,
     /// `strategy`, `cost_m`, `searches`, `found`, `found_container`, `searched`,
-    /// `goal_containers`, and `cost_cells` with `cells=True`). A new list on every access: keep
-    /// it in a variable rather than indexing `rows` in a loop.
+    /// `goal_containers`, `cost_cells` with `cells=True`, and for household tasks `goal`,
+    /// `destination`, `found_each` and `delivery_m`). A new list on every access: keep it in a
+    /// variable rather than indexing `rows` in a loop.
     #[getter]
     fn rows(&self, py: Python<'_>) -> PyResult<Py<PyList>> {
         convert::rows_to_py(py, &self.rows)
@@ -104,8 +106,8 @@ impl PyEvaluation {
     /// Writes the files `ferret eval` writes into `dir` (created if missing): `trials.csv`
     /// with these rows, `summary.csv`, `paired.csv` (each strategy against the best, and against
     /// each of `paired_against`; not for a shard, whose comparisons `merge` makes over all
-    /// shards), `summary.md`, and `run.json`, which names the houses' source,
-    /// the prior, the planner, grid and protocol settings, so that `ferret.select(dir)` and
+    /// shards), `summary.md`, and `run.json`, which names the houses' source, the prior, the
+    /// planner, grid and protocol settings and the household tasks, so that `ferret.select(dir)` and
     /// `ferret select --trials dir` can replay the run. Possible when the houses come from one
     /// `load_houses` or `generate_houses` call and the prior is the default or a file; raises
     /// `ConfigError` saying why otherwise.
@@ -204,6 +206,20 @@ impl PyEvaluation {
 /// most every hundredth of it in between — and `None` or `False` (the default) shows nothing.
 /// An exception the callable raises stops the evaluation and is raised by `evaluate`.
 ///
+/// Household tasks replace the one target of each trial, as with `ferret eval --task` and
+/// `--tasks`: `task="all:3"` (or `"any:2"`) draws per house a task of that many distinct types
+/// present (from `seed`; `trials_per_house` of them, each another set), every one wanted or any
+/// one, and `deliver` brings what each found to `"start"`, `"room:<RoomType>"` (the centre of
+/// the house's first room of that type, e.g. `"room:Kitchen"`) or `"container:<ObjectType>"`
+/// (e.g. `"container:Sofa"`), its way there part of the cost. `tasks` lists the trials
+/// instead: the path of a tasks file (CSV `house,targets,goal,destination`, as `--tasks` reads
+/// it) or a list of dicts such as `{"house": 0, "targets": ["Mug", "Apple"], "goal": "all",
+/// "destination": "start"}` (`goal` defaults to `"all"`; `destination` is `"start"`,
+/// `"container:<id>"`, `"room:<id>"`, an `(x, y)` point in metres, or absent); every listed
+/// task is checked against its house before anything runs. Rows of tasks have the columns
+/// `goal`, `destination`, `found_each` and `delivery_m` too, and `target` is the targets joined
+/// by `+` (all) or `|` (any). Bad tasks raise `ConfigError` naming the keyword and the field.
+///
 /// `shard=(i, n)` runs only the houses whose file index is i
 /// modulo n (as `ferret eval --shard i/n`): exactly the trials one machine runs on them; `save`
 /// records the shard, and `ferret.merge` joins the shards' directories into the run of all
@@ -211,10 +227,10 @@ impl PyEvaluation {
 #[pyfunction]
 #[pyo3(signature = (
     houses, strategies = None, *, prior = None, seed = 0, trials_per_house = None,
-    reveal_fraction = 0.0, protocol = "ferret", cells = false, max_containers = 8,
-    exact_max = 16, search_cost = 0.0, config = None, llm_cache = None, offline = false,
-    keep_going = false, fusion = None, resolution = 0.05, robot_radius = 0.18,
-    wall_thickness = 0.05, progress = None, shard = None
+    reveal_fraction = 0.0, task = None, deliver = None, tasks = None, protocol = "ferret",
+    cells = false, max_containers = 8, exact_max = 16, search_cost = 0.0, config = None,
+    llm_cache = None, offline = false, keep_going = false, fusion = None, resolution = 0.05,
+    robot_radius = 0.18, wall_thickness = 0.05, progress = None, shard = None
 ))]
 pub fn evaluate(
     py: Python<'_>,
@@ -224,6 +240,9 @@ pub fn evaluate(
     seed: u64,
     trials_per_house: Option<&Bound<'_, PyAny>>,
     reveal_fraction: f64,
+    task: Option<&str>,
+    deliver: Option<&str>,
+    tasks: Option<&Bound<'_, PyAny>>,
     protocol: &str,
     cells: bool,
     max_containers: usize,
@@ -257,6 +276,14 @@ pub fn evaluate(
         Some(t) => convert::count_or_all(t, "trials_per_house")?,
         None => TrialsPerHouse::One,
     };
+    let tasks = crate::tasks::eval_tasks(task, deliver, tasks)?;
+    if let (Some(Tasks::Drawn { shape, .. }), TrialsPerHouse::All) = (&tasks, per_house) {
+        // Every set of targets would be far too many trials; the draw would refuse each house.
+        return Err(errors::config(format!(
+            "trials_per_house=\"all\": with task={:?}, give a number of tasks per house",
+            shape.to_string()
+        )));
+    }
     let protocol = settings::protocol(protocol)?;
     let shard = shard
         .map(|(i, n)| Shard::new(i, n))
@@ -264,6 +291,36 @@ pub fn evaluate(
         .map_err(|e| errors::config(format!("shard: {e}")))?;
     if houses.is_empty() {
         return Err(errors::config("houses: no houses to evaluate"));
+    }
+    let grid_params = grid.params(&protocol);
+    let draw = TrialDraw {
+        seed,
+        reveal_fraction,
+        per_house,
+        protocol: &protocol,
+        holdout: None,
+        tasks: tasks.as_ref(),
+    };
+    // Listed tasks are checked against every house given (a shard's too: the tasks of the
+    // other shards' houses must fit them as well), as `ferret eval --tasks` checks its file
+    // before anything runs.
+    if let Some(Tasks::Listed { .. }) = &tasks {
+        let scenes = scenes_of(&houses);
+        let source = houses
+            .first()
+            .map(|h| h.get().origin.describe())
+            .unwrap_or_default();
+        py.allow_threads(|| {
+            errors::guarded("evaluate", || {
+                check_listed_tasks_in(
+                    scenes.iter().map(|s| Ok(s.as_ref())),
+                    &source,
+                    &draw,
+                    &grid_params,
+                )
+                .map_err(|e| errors::config(format!("tasks: {}", ferret_world::error_chain(&e))))
+            })
+        })?;
     }
     let houses: Vec<Py<House>> = match shard {
         Some(sh) => {
@@ -292,14 +349,6 @@ pub fn evaluate(
             )));
         }
     }
-    let draw = TrialDraw {
-        seed,
-        reveal_fraction,
-        per_house,
-        protocol: &protocol,
-        holdout: None,
-        tasks: None,
-    };
     let run_info = run_info(&houses, &planning, &grid, &draw, &specs);
     let source = houses
         .first()
@@ -308,7 +357,7 @@ pub fn evaluate(
     let llm = settings::llm(config, llm_cache, offline, keep_going, fusion);
     let scenes: Vec<Scene> = scenes_of(&houses).iter().map(|s| Scene::clone(s)).collect();
     let house_indices: Vec<usize> = scenes.iter().map(|s| s.house.index).collect();
-    let params = grid.params(&protocol);
+    let params = grid_params;
     let feedback = progress::Interruptible::new(progress);
     let outcome = py.allow_threads(|| {
         errors::guarded("evaluate", || {
@@ -411,7 +460,7 @@ fn run_info(
         reveal_fraction: draw.reveal_fraction,
         trials_per_house: draw.per_house,
         protocol: *draw.protocol,
-        tasks: None,
+        tasks: draw.tasks.cloned(),
         strategies: strategies.to_vec(),
         trials_sha256: None,
         shard: None,

@@ -191,7 +191,7 @@ impl Planner {
     /// The rows whose target the belief has not found.
     fn wanted_rows(&self, belief: &Belief<'_>) -> Vec<usize> {
         (0..self.p.len())
-            .filter(|&i| belief.found(self.rows[i]).is_none())
+            .filter(|&i| self.rows.get(i).is_none_or(|&t| belief.found(t).is_none()))
             .collect()
     }
 
@@ -200,11 +200,15 @@ impl Planner {
         match (rows, self.goal) {
             ([one], _) => Wanted::One(self.p[*one].clone()),
             (_, Goal::Any) => {
-                let n = self.p.first().map_or(0, Vec::len);
+                let n = self.p.iter().map(Vec::len).max().unwrap_or(0);
                 Wanted::One(
                     (0..n)
                         .map(|c| {
-                            let none = self.p.iter().map(|row| 1.0 - row[c].get()).product::<f64>();
+                            let none = self
+                                .p
+                                .iter()
+                                .map(|row| row.get(c).map_or(1.0, |p| 1.0 - p.get()))
+                                .product::<f64>();
                             Probability::clamped(1.0 - none, 0.0, 1.0)
                         })
                         .collect(),

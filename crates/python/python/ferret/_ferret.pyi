@@ -13,6 +13,11 @@ DEFAULT_STRATEGIES: str
 _Path = Union[str, "os.PathLike[str]"]
 _Protocol = Literal["ferret", "paper"]
 _ContainerArg = Union[str, "Container"]
+_Goal = Literal["all", "any"]
+# A search's ``destination=``: "start", "container:<id>", "room:<id>", (x, y) metres, a Container.
+_DestinationArg = Union[str, Tuple[float, float], "Container", None]
+# A listed task of ``evaluate(tasks=[...])``: house, targets, goal and destination.
+_TaskDict = Dict[str, Any]
 # ``progress=``: True prints to stderr; a callable is called as ``progress(what, done, total)``.
 _Progress = Union[bool, None, Callable[[str, int, int], object]]
 
@@ -173,14 +178,17 @@ class Prior:
         """The embeddings of its learned likelihood (e.g. ``glove-6b-50d``), or None."""
 
 class Search:
-    """One trial in progress, driven step by step by a robot loop."""
+    """One trial in progress, driven step by step by a robot loop: one target, or a household
+    task (1 to 4 targets, every one or any one, optionally brought to a destination)."""
 
     def __init__(
         self,
         house: House,
-        target: str,
+        target: Union[str, Sequence[str]],
         strategy: str = "model/prior",
         *,
+        goal: _Goal = "all",
+        destination: _DestinationArg = None,
         prior: Union[Prior, _Path, None] = None,
         config: Optional[_Path] = None,
         llm_cache: Optional[_Path] = None,
@@ -194,43 +202,80 @@ class Search:
         wall_thickness: float = 0.05,
         protocol: _Protocol = "ferret",
     ) -> None:
-        """Starts a search for ``target`` in ``house`` with the strategy spec ``strategy``.
+        """Starts a search for ``target`` (an object type, or a list of 1 to 4 distinct ones
+        wanted ``goal="all"`` or ``"any"``) in ``house`` with the strategy spec ``strategy``,
+        bringing what it finds to ``destination`` (None, ``"start"``, ``"container:<id>"``,
+        ``"room:<id>"``, an ``(x, y)`` point in metres, or a Container of the house).
 
         Raises ConfigError for a target no container of the house holds, naming the type most
-        likely meant (``"wallet"``: did you mean ``"Wallet"``?)."""
+        likely meant (``"wallet"``: did you mean ``"Wallet"``?), a target given twice, more
+        than 4, an unknown goal, or a destination the house does not have or the robot cannot
+        reach."""
     def next_container(self) -> Optional[Container]:
-        """The container to search next, or None once found or everything was searched."""
+        """The container to search next, or None once found (the goal holds), everything was
+        searched, or the search was finished."""
     def record(
-        self, container: _ContainerArg, found: bool, objects: Optional[Sequence[str]] = None
+        self,
+        container: _ContainerArg,
+        found: bool = False,
+        objects: Optional[Sequence[str]] = None,
+        found_targets: Optional[Sequence[str]] = None,
     ) -> float:
-        """Records a searched container and what it held; returns the leg's length, metres."""
+        """Records a searched container and what it held; returns the leg's length, metres.
+
+        One target: ``found`` says it was there. Several: the targets found are those in
+        ``found_targets`` or ``objects``; ``found=True`` naming none raises ConfigError."""
+    def finish(self) -> float:
+        """Goes to the destination: returns the last leg, metres (0 without one), then part of
+        ``cost``; calling it again adds nothing."""
     def distance_to(self, container: _ContainerArg) -> float:
         """Travel distance from where the robot is to ``container``, metres."""
     def path_to(self, container: _ContainerArg) -> List[Tuple[float, float]]:
         """The shortest grid path from where the robot is to ``container``, (x, y) metres."""
+    def path_to_destination(self) -> Optional[List[Tuple[float, float]]]:
+        """The grid path from where the robot is to the destination, (x, y) metres; None
+        without a destination."""
     @property
     def cost(self) -> float:
-        """Metres travelled so far."""
+        """Metres travelled so far (with the way to the destination once finished)."""
     @property
     def searched(self) -> List[str]:
         """Ids of the containers searched, in order."""
     @property
     def found(self) -> Optional[Container]:
-        """The container where the target was found, or None."""
+        """The container where the target was found (where a task's goal came to hold), or
+        None."""
+    @property
+    def found_in(self) -> Dict[str, Container]:
+        """Each target found so far and the container it was first seen in, in task order."""
+    @property
+    def goal_holds(self) -> bool:
+        """True once every target (``all``) or one (``any``) was found."""
     @property
     def done(self) -> bool:
-        """True once the target was found or every container was searched."""
+        """True once the target was found (the goal holds), every container was searched, or
+        the search was finished."""
     @property
     def target(self) -> str:
-        """The object type searched for."""
+        """The object type searched for; a task's targets joined by ``+`` (all) or ``|`` (any)."""
+    @property
+    def targets(self) -> List[str]:
+        """The target types, in the task's order."""
+    @property
+    def goal(self) -> _Goal:
+        """``"all"`` or ``"any"``."""
+    @property
+    def destination(self) -> Optional[Tuple[float, float]]:
+        """Where the robot brings what it found, (x, y) metres, or None."""
     @property
     def strategy(self) -> str:
         """The strategy's spec."""
     @property
     def house(self) -> House:
         """The house searched."""
-    def likelihoods(self) -> Optional[List[float]]:
-        """The strategy's probability for each container (house order), or None without a source."""
+    def likelihoods(self, target: Optional[str] = None) -> Optional[List[float]]:
+        """The strategy's probability for each container (house order) that ``target`` (one
+        of the search's targets, default the first) is there, or None without a source."""
 
 class Deployment:
     """A live deployment: chooses each trial's strategy and learns from the robot's searches."""
@@ -256,7 +301,9 @@ class Deployment:
     def choose(self) -> str:
         """The strategy spec of the trial in progress (chosen now if none is)."""
     def finish(self, search: Search) -> Dict[str, float]:
-        """Ends the trial with a search that found its target; every candidate's cost on it."""
+        """Ends the trial with a search that found its target (whose task's goal holds; a
+        destination not yet reached is reached first); every candidate's cost on it, each
+        replayed on the same task."""
     def abandon(self) -> None:
         """Ends the trial in progress without a cost (the target was nowhere)."""
     @property
@@ -391,6 +438,9 @@ def evaluate(
     seed: int = 0,
     trials_per_house: Union[int, Literal["all"], None] = None,
     reveal_fraction: float = 0.0,
+    task: Optional[str] = None,
+    deliver: Optional[str] = None,
+    tasks: Union[_Path, Sequence[_TaskDict], None] = None,
     protocol: _Protocol = "ferret",
     cells: bool = False,
     max_containers: int = 8,
@@ -408,7 +458,10 @@ def evaluate(
     shard: Optional[Tuple[int, int]] = None,
 ) -> Evaluation:
     """Evaluates strategies on houses as ``ferret eval`` does (identical costs); with
-    ``shard=(i, n)`` only the houses whose file index is i modulo n."""
+    ``shard=(i, n)`` only the houses whose file index is i modulo n. ``task="all:3"`` (or
+    ``"any:2"``) draws household tasks per house, brought to ``deliver`` (``"start"``,
+    ``"room:<RoomType>"``, ``"container:<ObjectType>"``); ``tasks`` lists them (a tasks file's
+    path, or dicts with ``house``, ``targets``, ``goal``, ``destination``)."""
 
 def merge(
     runs: Sequence[_Path],

@@ -10,7 +10,9 @@ use ferret_llm::{
     FailurePolicy, LlmConfig, LlmOptions, LlmService, PrefetchSummary, Prefetched, TokenReport,
     prefetch_probabilities, prefetch_probabilities_after, register_fused, register_strategies,
 };
-use ferret_plan::{CandidateLimit, FusionFile, HoldOut, PlannerConfig, Prior, StrategyRegistry};
+use ferret_plan::{
+    CandidateLimit, FusionFile, HoldOut, PlannerConfig, Prior, StrategyRegistry, planned_spec,
+};
 use ferret_world::{House, ObjectType};
 use serde::{Deserialize, Serialize};
 
@@ -38,9 +40,15 @@ pub fn default_prior(count: usize, seed: u64) -> Result<Prior> {
 /// `fused/...`), so that a face can supply a prior it already holds instead of loading or
 /// training one per call.
 pub fn needs_prior(specs: &[String]) -> bool {
-    specs.iter().any(|s| {
+    specs.iter().map(|s| planned_spec(s)).any(|s| {
         s.starts_with("model/prior") || s.starts_with("model/learned") || s.starts_with("fused")
     })
+}
+
+/// The specs the strategies of `specs` plan with (`<spec>` of `sequential/<spec>`): what their
+/// LLM questions are asked for.
+fn planned_specs(specs: &[String]) -> Vec<String> {
+    specs.iter().map(|s| planned_spec(s).to_string()).collect()
 }
 
 /// Refuses a list option naming the same value twice (`--strategies a,b,a`): its results would
@@ -309,7 +317,7 @@ impl<'a> StrategiesBuilder<'a> {
 /// to ask (`fused/noise` is fused like an LLM source but asks nothing).
 pub fn asks_llm(specs: &[String]) -> bool {
     specs.iter().any(|s| {
-        ferret_plan::StrategySpec::parse(s).is_ok_and(|spec| {
+        ferret_plan::StrategySpec::parse(planned_spec(s)).is_ok_and(|spec| {
             ferret_llm::asks_probabilities(&spec.kind)
                 && ferret_llm::control_source(&spec).is_none()
         })
@@ -332,7 +340,8 @@ pub fn prefetch(
         return Ok(Vec::new());
     }
     feedback.begin("LLM questions", 0);
-    let summary = prefetch_probabilities(service, specs, trials, &|done, total| {
+    let planned = planned_specs(specs);
+    let summary = prefetch_probabilities(service, &planned, trials, &|done, total| {
         feedback.set_len(total);
         feedback.set_done(done);
     });
@@ -355,7 +364,7 @@ pub fn prefetch_quiet(
     }
     Ok(prefetch_probabilities_after(
         service,
-        specs,
+        &planned_specs(specs),
         trials,
         before,
         &|_, _| {},
@@ -403,7 +412,7 @@ pub fn prefetch_outcome(
     let dropped: Vec<String> = specs
         .iter()
         .filter(|s| {
-            ferret_plan::StrategySpec::parse(s)
+            ferret_plan::StrategySpec::parse(planned_spec(s))
                 .ok()
                 .and_then(|spec| ferret_llm::LlmSpec::parse(&spec))
                 .and_then(|p| p.ok())
@@ -519,6 +528,10 @@ mod tests {
     fn only_prior_and_fused_specs_need_the_prior() {
         assert!(needs_prior(&specs(&["oracle", "model/prior/exact"])));
         assert!(needs_prior(&specs(&["fused/p-yesno/gpt"])));
+        assert!(needs_prior(&specs(&["sequential/model/prior"])));
+        assert!(needs_prior(&specs(&["sequential/sequential/fused/noise"])));
+        assert!(!needs_prior(&specs(&["sequential/model/uniform"])));
+        assert!(asks_llm(&specs(&["sequential/llm+model/p-yesno/gpt"])));
         assert!(!needs_prior(&specs(&[
             "optimistic+greedy",
             "model/uniform",

@@ -117,7 +117,7 @@ pub use replay::{
 pub use replay_memo::ReplayMemo;
 pub use strategy::{
     ModelStrategy, SEQUENTIAL, SequentialStrategy, Strategy, StrategyRegistry, StrategySpec,
-    TrialContext, task_likelihoods,
+    TrialContext, planned_spec, task_likelihoods,
 };
 pub use task::{Destination, DestinationLegs, Goal, MAX_TARGETS, Task, TaskError};
 pub use task_table::{TaskProblem, TaskSolution, solve_task};

@@ -332,6 +332,19 @@ pub(crate) fn task_error(e: crate::task::TaskError) -> PlanError {
 /// The spec kind of [`SequentialStrategy`].
 pub const SEQUENTIAL: &str = "sequential";
 
+/// The spec a strategy plans with: `<spec>` of `sequential/<spec>` (at any depth), else the
+/// spec itself. What it needs (a prior, an LLM's answers) is what that spec needs.
+pub fn planned_spec(spec: &str) -> &str {
+    let mut s = spec.trim();
+    while let Some(inner) = s
+        .strip_prefix(SEQUENTIAL)
+        .and_then(|rest| rest.strip_prefix('/'))
+    {
+        s = inner;
+    }
+    s
+}
+
 /// `sequential/<spec>`: the single-target planner of `<spec>` looking for a task's targets one
 /// after another, then driving to the destination. On one target it is `<spec>` itself.
 pub struct SequentialStrategy {

@@ -106,14 +106,7 @@ pub fn registry(
     llm: &LlmSettings,
     specs: &[String],
 ) -> Result<Strategies, ferret_lab::LabError> {
-    // `sequential/<spec>` plans with `<spec>`, target after target: it needs the prior when
-    // `<spec>` does. The experiment layer's test reads the spec's start only, so a search of
-    // `sequential/model/prior` alone (the usual case for a Search) would get no prior.
-    let planned: Vec<String> = specs
-        .iter()
-        .map(|s| sequential_inner(s).to_string())
-        .collect();
-    let prior = if needs_prior(&planned) {
+    let prior = if needs_prior(specs) {
         Some(planning.prior.resolve()?)
     } else {
         None
@@ -121,14 +114,4 @@ pub fn registry(
     Strategies::builder(&planning.settings, llm)
         .prior(prior)
         .build()
-}
-
-/// The spec a `sequential/<spec>` strategy runs target after target (any nesting), or the spec
-/// itself.
-fn sequential_inner(spec: &str) -> &str {
-    let mut inner = spec.trim();
-    while let Some(rest) = inner.strip_prefix("sequential/") {
-        inner = rest;
-    }
-    inner
 }

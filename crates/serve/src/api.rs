@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use crate::model::TrialStatus;
+pub use crate::model::{DestinationBody, GoalName, TaskBody};
 
 /// Longest accepted request id, characters.
 pub const MAX_REQUEST_ID: usize = 200;
@@ -268,67 +269,6 @@ pub struct StartTrial {
     #[serde(default)]
     #[schema(value_type = Option<Vec<f64>>, min_items = 3, max_items = 3)]
     pub pose: Option<[f64; 3]>,
-}
-
-/// Whether a task wants every target or any one.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
-#[serde(rename_all = "lowercase")]
-pub enum GoalName {
-    /// Every target.
-    #[default]
-    All,
-    /// Any one of them.
-    Any,
-}
-
-impl From<GoalName> for ferret_plan::Goal {
-    fn from(g: GoalName) -> Self {
-        match g {
-            GoalName::All => ferret_plan::Goal::All,
-            GoalName::Any => ferret_plan::Goal::Any,
-        }
-    }
-}
-
-/// Where a task brings what it found, in the scene's names and map frame.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
-#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
-pub enum DestinationBody {
-    /// Back where the trial started ("bring it to me").
-    Start,
-    /// At a container, where the robot stands to search it.
-    Container {
-        /// The container's id.
-        #[schema(min_length = 1)]
-        id: String,
-    },
-    /// In a room, at the reachable point nearest its centre.
-    Room {
-        /// The room's name.
-        #[schema(min_length = 1)]
-        name: String,
-    },
-    /// At a point of the floor (the reachable point nearest it, within 0.5 m).
-    Point {
-        /// x, metres.
-        #[schema(minimum = -100000.0, maximum = 100000.0)]
-        x: f64,
-        /// y, metres.
-        #[schema(minimum = -100000.0, maximum = 100000.0)]
-        y: f64,
-    },
-}
-
-/// A trial's household task as stored: its targets, goal and destination.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct TaskBody {
-    /// The targets, in order.
-    pub targets: Vec<String>,
-    /// All or any.
-    pub goal: GoalName,
-    /// Where to bring them.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub destination: Option<DestinationBody>,
 }
 
 /// The destination of a trial's task, where it is.

@@ -221,7 +221,7 @@ pub struct NewTrial<'a> {
     /// How many of the deployment's trials had ended when it started.
     pub started_after: i64,
     /// The household task, for a trial of one.
-    pub task: Option<&'a crate::api::TaskBody>,
+    pub task: Option<&'a crate::model::TaskBody>,
 }
 
 impl Reader<'_> {

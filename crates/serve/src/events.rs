@@ -78,7 +78,7 @@ impl Frame {
     /// the channel is ignored, not passed on to pages).
     pub(crate) fn decode(text: &str) -> Option<Frame> {
         let (name, data) = text.split_once('\n')?;
-        if !matches!(name, "trial" | "deployment") || data.contains('\n') {
+        if !matches!(name, TRIAL | DEPLOYMENT) || data.contains('\n') {
             return None;
         }
         // Read for its deployment only; the rest is checked to be JSON without being kept.
@@ -90,13 +90,59 @@ impl Frame {
         Some(Frame {
             name: name.to_string(),
             data: data.to_string(),
-            deployment: (name == "trial").then_some(head.deployment).flatten(),
+            deployment: (name == TRIAL).then_some(head.deployment).flatten(),
         })
     }
 }
 
+/// The event every stream starts with.
+pub const HELLO: &str = "hello";
+/// A trial started, searched a container, or ended ([`TrialEvent`]).
+pub const TRIAL: &str = "trial";
+/// A deployment was created ([`DeploymentEvent`]).
+pub const DEPLOYMENT: &str = "deployment";
+/// The stream lost events: read the state again ([`ResyncEvent`]).
+pub const RESYNC: &str = "resync";
+
+/// The first event of every stream.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct HelloEvent {
+    /// Whether the stream carries the events of every replica (replicas sharing one
+    /// PostgreSQL) rather than this server's only.
+    pub shared: bool,
+}
+
+/// A deployment was created.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct DeploymentEvent {
+    /// Its id.
+    pub deployment: i64,
+}
+
+/// The stream fell behind and lost events, or the replica lost the events of others: read the
+/// state again.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ResyncEvent {
+    /// How many events this stream lost; null when the replica cannot tell (it lost its
+    /// listening session, and with it other replicas' events).
+    pub missed: Option<u64>,
+}
+
+/// Every kind of event a stream sends, with the name of its data's schema in the OpenAPI
+/// document: what the document's description of `GET /events` is made from.
+pub const EVENT_SCHEMAS: [(&str, &str); 4] = [
+    (HELLO, "HelloEvent"),
+    (TRIAL, "TrialEvent"),
+    (DEPLOYMENT, "DeploymentEvent"),
+    (RESYNC, "ResyncEvent"),
+];
+
 /// A trial as its event tells it: enough for a page's list of trials, not its whole state.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
 pub struct TrialEvent {
     /// Its id.
     pub trial: i64,
@@ -143,6 +189,12 @@ impl TrialEvent {
             observed,
         }
     }
+}
+
+/// An event's data as a stream sends it: one line of JSON. Its types hold numbers, strings and
+/// options only, which always serialize.
+pub(crate) fn json_of(event: &impl Serialize) -> String {
+    serde_json::to_string(event).unwrap_or_default()
 }
 
 /// Another replica's watchers: until when (ms on the hub's clock) and which deployments they
@@ -364,7 +416,7 @@ impl Events {
         }
         if let Ok(data) = data {
             self.publish(Frame {
-                name: "trial".into(),
+                name: TRIAL.into(),
                 data,
                 deployment: Some(state.deployment),
             });
@@ -374,8 +426,8 @@ impl Events {
     /// Publishes a new deployment.
     pub(crate) fn deployment(&self, id: i64) {
         self.publish(Frame {
-            name: "deployment".into(),
-            data: serde_json::json!({ "deployment": id }).to_string(),
+            name: DEPLOYMENT.into(),
+            data: json_of(&DeploymentEvent { deployment: id }),
             deployment: None,
         });
     }
@@ -384,8 +436,8 @@ impl Events {
     /// the events meanwhile).
     pub(crate) fn resync_all(&self) {
         self.deliver(Frame {
-            name: "resync".into(),
-            data: serde_json::json!({ "missed": null }).to_string(),
+            name: RESYNC.into(),
+            data: json_of(&ResyncEvent { missed: None }),
             deployment: None,
         });
     }
@@ -565,8 +617,10 @@ impl Watcher {
 /// The event telling a watcher that it lost `missed` events.
 fn resync(missed: u64) -> Arc<Frame> {
     Arc::new(Frame {
-        name: "resync".into(),
-        data: serde_json::json!({ "missed": missed }).to_string(),
+        name: RESYNC.into(),
+        data: json_of(&ResyncEvent {
+            missed: Some(missed),
+        }),
         deployment: None,
     })
 }

@@ -16,7 +16,14 @@ use super::HttpOptions;
         title = "ferret serve",
         description = "LLM-informed object search for a real robot: scenes, deployments with strategy selection, trials step by step. See docs/serve.md."
     ),
-    components(schemas(ErrorBody, ErrorDetail))
+    components(schemas(
+        ErrorBody,
+        ErrorDetail,
+        crate::events::HelloEvent,
+        crate::events::TrialEvent,
+        crate::events::DeploymentEvent,
+        crate::events::ResyncEvent
+    ))
 )]
 pub struct ApiDoc;
 
@@ -115,6 +122,7 @@ pub fn document(options: &HttpOptions, strategies: &[String], limits: &SceneLimi
             "description": "The robot's pose `[x, y, yaw°]` in the map frame, yaw within ±360°; default: the scene's start."
         });
     }
+    describe_event_stream(&mut doc);
     let paths: Vec<(String, String)> = doc
         .pointer("/paths")
         .and_then(Value::as_object)
@@ -204,4 +212,35 @@ fn links() -> Vec<(&'static str, &'static str, u16, Value)> {
         ("/deployments/{id}/trials", "post", 201, trial()),
         ("/trials/{id}/observations", "post", 200, trial()),
     ]
+}
+
+/// `GET /events` as OpenAPI 3.2 describes an event stream: `itemSchema` is one event, an
+/// object of its `event` name and its `data`, one line of JSON whose schema is the type the
+/// server serializes it from ([`EVENT_SCHEMAS`](crate::events::EVENT_SCHEMAS)).
+fn describe_event_stream(doc: &mut Value) {
+    doc["openapi"] = json!("3.2.0");
+    let kinds: Vec<Value> = crate::events::EVENT_SCHEMAS
+        .iter()
+        .map(|(name, schema)| {
+            json!({
+                "type": "object",
+                "title": name,
+                "required": ["event", "data"],
+                "additionalProperties": false,
+                "properties": {
+                    "event": {"const": name},
+                    "data": {
+                        "type": "string",
+                        "contentMediaType": "application/json",
+                        "contentSchema": {"$ref": format!("#/components/schemas/{schema}")}
+                    },
+                    "id": {"type": "string"},
+                    "retry": {"type": "integer", "minimum": 0}
+                }
+            })
+        })
+        .collect();
+    if let Some(ok) = doc.pointer_mut("/paths/~1events/get/responses/200/content") {
+        *ok = json!({"text/event-stream": {"itemSchema": {"oneOf": kinds}}});
+    }
 }

@@ -15,7 +15,7 @@ use bytes::Bytes;
 use futures_util::StreamExt;
 
 use crate::error::{ApiError, ErrorKind};
-use crate::events::{Frame, TooManyStreams};
+use crate::events::{Frame, HELLO, HelloEvent, TooManyStreams, json_of};
 use crate::service::Service;
 
 /// The page's files, with their paths and types.
@@ -74,7 +74,7 @@ const KEEP_ALIVE: Duration = Duration::from_secs(15);
 #[utoipa::path(get, path = "/events",
     params(("deployment" = Option<i64>, Query, description = "Only this deployment's trials (and every new deployment)", minimum = 1)),
     responses(
-    (status = 200, description = "Server-Sent Events: `hello` first (`{\"shared\": bool}`), then `trial` (a trial started, searched a container or ended: id, deployment, k, scene, target, strategy, status, searched, next, cost_m), `deployment` (`{\"deployment\": id}`, created) and `resync` (`{\"missed\": n}`: this stream fell behind and lost events; read the state again). With replicas on one PostgreSQL, every replica's events.", content_type = "text/event-stream", body = String),
+    (status = 200, description = "Server-Sent Events, each one line of JSON data: `hello` first (`HelloEvent`), then `trial` (`TrialEvent`: a trial started, searched a container or ended), `deployment` (`DeploymentEvent`: created) and `resync` (`ResyncEvent`: this stream lost events; read the state again). With replicas on one PostgreSQL, every replica's events. A comment line (`: keep-alive`) every 15 s.", content_type = "text/event-stream"),
     (status = 400, description = "The query is not `deployment=<id>`", body = crate::api::ErrorBody),
     (status = 503, description = "As many event streams are open as the server allows (--max-event-streams); retry later", body = crate::api::ErrorBody)))]
 /// The stream is written here rather than with axum's `Sse`, which sends each event as a write
@@ -98,8 +98,10 @@ pub(super) async fn events(State(s): State<Arc<Service>>, query: RawQuery) -> Re
         }
     };
     let hello = format!(
-        "event: hello\ndata: {}\n\n",
-        serde_json::json!({ "shared": s.is_shared() })
+        "event: {HELLO}\ndata: {}\n\n",
+        json_of(&HelloEvent {
+            shared: s.is_shared()
+        })
     );
     let first = futures_util::stream::once(async move { Bytes::from(hello) });
     let rest = futures_util::stream::unfold(

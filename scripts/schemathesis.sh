@@ -80,13 +80,14 @@ log "testing $URL/openapi.json ($EXAMPLES examples per operation)"
 started=$(date +%s)
 status=0
 # scripts/schemathesis_hooks.py gives every valid request id a fresh value (see there).
-# GET /events is left out: its reply is an event stream that never ends (the serve tests and
-# the browser tests read it).
+# GET /events, an event stream that never ends, is read for a second at most per case
+# (scripts/schemathesis.toml): each event against the document's itemSchema and its data against
+# the event's contentSchema.
 # The token goes through the document's security scheme (scripts/schemathesis.toml), not as a
 # header on every request, so that cases leaving it out really leave it out; the document itself
 # is fetched with it first.
 curl -sf -H "Authorization: Bearer $TOKEN" "$URL/openapi.json" -o "$WORK/openapi.json"
-(cd "$WORK" && FERRET_ST_TOKEN="$TOKEN" PYTHONPATH="$ROOT/scripts" SCHEMATHESIS_HOOKS=schemathesis_hooks "$ST" --config-file "$ROOT/scripts/schemathesis.toml" run "$WORK/openapi.json" --url "$URL" --checks all -n "$EXAMPLES" --exclude-path /events \
+(cd "$WORK" && FERRET_ST_TOKEN="$TOKEN" PYTHONPATH="$ROOT/scripts" SCHEMATHESIS_HOOKS=schemathesis_hooks "$ST" --config-file "$ROOT/scripts/schemathesis.toml" run "$WORK/openapi.json" --url "$URL" --checks all -n "$EXAMPLES" \
     --seed 1 --no-color) || status=$?
 log "finished in $(( $(date +%s) - started )) s with status $status"
 if [ "$status" -ne 0 ]; then

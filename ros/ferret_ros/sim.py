@@ -3,9 +3,10 @@
 They stand in for the robot in the tests and for a first run without one (docs/ros2.md):
 
 - `SimNav2` serves `navigate_to_pose`: it drives along ferret's own grid path from where the
-  robot is to the goal's container access point at `speed` m/s, reporting feedback, and
-  publishes the robot's pose on /amcl_pose. It can be told to abort goals or never finish them.
-  Like Nav2, it also drives to poses published on /goal_pose (without feedback).
+  robot is to the goal's container access point, or to any other point of the floor (a household
+  task's destination), at `speed` m/s, reporting feedback, and publishes the robot's pose on
+  /amcl_pose. It can be told to abort goals or never finish them. Like Nav2, it also drives to
+  poses published on /goal_pose (without feedback).
 - `SimDetector` reports, on `detections`, what the scene's ground truth holds in the container
   whose access point the robot stands at; it can be muted.
 - `MapServer` latches an occupancy grid on /map (transient local), as Nav2's map_server does.
@@ -18,7 +19,7 @@ import math
 import sys
 import threading
 import time
-from typing import List, Optional
+from typing import List, Optional, Tuple
 
 import rclpy
 from builtin_interfaces.msg import Duration
@@ -64,6 +65,8 @@ class SimNav2(Node):
         self.goals = 0
         self.drive_s: List[float] = []  # simulated driving time of each goal, seconds
         self.visited: List[str] = []
+        # Every goal received (NavigateToPose and /goal_pose), as (x, y).
+        self.goal_points: List[Tuple[float, float]] = []
         self.lock = threading.Lock()
         self.pose_pub = self.create_publisher(PoseWithCovarianceStamped, "/amcl_pose", LATCHED)
         self.reset()
@@ -81,9 +84,25 @@ class SimNav2(Node):
     def reset(self) -> None:
         """Back at the scene's start pose, as each trial of `ferret deploy` starts."""
         with self.lock:
-            self.at = None  # the container whose access point the robot is at; None: the start
+            # The container whose access point the robot is at, or the point of the floor it
+            # stands on (a tuple) away from every container; None: the start.
+            self.at = None
             self.position = (self.house.start[0], self.house.start[1])
         self._publish_pose(*self.position, self.house.start[2] if len(self.house.start) > 2 else 0)
+
+    def _search_from_here(self, destination=None):
+        """A ferret search standing where the robot stands (the start or a container), with a
+        destination to route to. Its target (one the scene holds, as a search needs) is never
+        looked for."""
+        with self.lock:
+            at = self.at
+        held = self.house.target_types()
+        s = ferret.Search(
+            self.house, held[0] if held else "_", "optimistic+greedy", destination=destination
+        )
+        if isinstance(at, str):
+            s.record(at, False, [])
+        return s
 
     def _route(self, c):
         """ferret's grid path and its length from where the robot is to `c`'s access point."""
@@ -91,13 +110,28 @@ class SimNav2(Node):
             at = self.at
         if at == c.id:
             return [tuple(c.access)], 0.0
-        # A search that has "searched" the container the robot is at stands where the robot
-        # stands; its target (one the scene holds, as a search needs) is never looked for.
-        held = self.house.target_types()
-        s = ferret.Search(self.house, held[0] if held else "_", "optimistic+greedy")
-        if at is not None:
-            s.record(at, False, [])
+        if isinstance(at, tuple):
+            # From a point of the floor: the way from the container to it, backwards.
+            held = self.house.target_types()
+            s = ferret.Search(
+                self.house, held[0] if held else "_", "optimistic+greedy", destination=at
+            )
+            s.record(c, False, [])
+            path = list(reversed(s.path_to_destination() or []))
+            return path, _length(path)
+        s = self._search_from_here()
         return s.path_to(c), s.distance_to(c)
+
+    def _route_to_point(self, x: float, y: float):
+        """ferret's grid path and its length from where the robot is to the reachable point
+        nearest (x, y) (within 0.5 m, as ferret takes a destination); a point it cannot reach
+        raises ferret.FerretError. From another such point, a straight line."""
+        with self.lock:
+            at, here = self.at, self.position
+        if isinstance(at, tuple):
+            return [here, (x, y)], math.dist(here, (x, y))
+        path = self._search_from_here((x, y)).path_to_destination() or []
+        return path, _length(path)
 
     def _failing(self) -> bool:
         return self.mode != "ok" and self.goals >= self.fail_from
@@ -119,19 +153,33 @@ class SimNav2(Node):
 
     def _on_goal_pose(self, msg: PoseStamped) -> None:
         self.goals += 1
-        c = container_at(self.house, msg.pose.position.x, msg.pose.position.y)
-        if c is None or self._failing():
-            return  # a goal it cannot or will not reach: the robot stays where it is
-        _, length = self._route(c)
+        x, y = msg.pose.position.x, msg.pose.position.y
+        self.goal_points.append((x, y))
+        if self._failing():
+            return  # a goal it will not reach: the robot stays where it is
+        c = container_at(self.house, x, y)
+        try:
+            _, length = self._route(c) if c is not None else self._route_to_point(x, y)
+        except ferret.FerretError:
+            return  # a goal it cannot reach
         if self.speed > 0:
             time.sleep(length / self.speed)
-        self._arrive(c, length / self.speed if self.speed > 0 else 0.0)
+        drive = length / self.speed if self.speed > 0 else 0.0
+        self._arrive(c if c is not None else (x, y), drive, _yaw_deg(msg.pose))
 
-    def _arrive(self, c, drive_s: float) -> None:
+    def _arrive(self, c, drive_s: float, yaw_deg: float = 0.0) -> None:
+        """At container `c`'s access point, facing it, or at the point `c` (x, y) facing
+        `yaw_deg`."""
+        self.drive_s.append(drive_s)
+        if isinstance(c, tuple):
+            with self.lock:
+                self.at = None if math.dist(c, self.house.start[:2]) <= AT_M else c
+                self.position = c
+            self._publish_pose(c[0], c[1], yaw_deg)
+            return
         with self.lock:
             self.at = c.id
             self.position = tuple(c.access)
-        self.drive_s.append(drive_s)
         self.visited.append(c.id)
         yaw = math.degrees(math.atan2(c.position[1] - c.access[1], c.position[0] - c.access[0]))
         self._publish_pose(c.access[0], c.access[1], yaw)
@@ -139,16 +187,17 @@ class SimNav2(Node):
     def _execute(self, handle):
         goal = handle.request.pose.pose
         result = NavigateToPose.Result()
-        c = container_at(self.house, goal.position.x, goal.position.y)
-        if c is None:
+        x, y = goal.position.x, goal.position.y
+        self.goal_points.append((x, y))
+        c = container_at(self.house, x, y)
+        try:
+            path, length = self._route(c) if c is not None else self._route_to_point(x, y)
+        except ferret.FerretError as e:
             result.error_code = NavigateToPose.Result.UNKNOWN
-            result.error_msg = (
-                f"no container access point at ({goal.position.x:.2f}, {goal.position.y:.2f})"
-            )
+            result.error_msg = f"no way to ({x:.2f}, {y:.2f}): {e}"
             handle.abort()
             return result
         failing = self._failing()
-        path, length = self._route(c)
         drive = length / self.speed if self.speed > 0 else 0.0
         started = time.monotonic()
         fb = NavigateToPose.Feedback()
@@ -159,8 +208,8 @@ class SimNav2(Node):
             if handle.is_cancel_requested:
                 handle.canceled()
                 return result
-            x, y = path[k] if path else self.position
-            fb.current_pose.pose.position.x, fb.current_pose.pose.position.y = x, y
+            px, py = path[k] if path else self.position
+            fb.current_pose.pose.position.x, fb.current_pose.pose.position.y = px, py
             frac = k / max(1, len(path) - 1)
             fb.distance_remaining = float(length * (1 - frac))
             elapsed = time.monotonic() - started
@@ -180,9 +229,18 @@ class SimNav2(Node):
                 time.sleep(0.02)
             handle.canceled()
             return result
-        self._arrive(c, time.monotonic() - started)
+        self._arrive(c if c is not None else (x, y), time.monotonic() - started, _yaw_deg(goal))
         handle.succeed()
         return result
+
+
+def _yaw_deg(pose) -> float:
+    q = pose.orientation
+    return math.degrees(math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z)))
+
+
+def _length(path) -> float:
+    return sum(math.dist(a, b) for a, b in zip(path, path[1:]))
 
 
 class SimDetector(Node):

@@ -108,7 +108,7 @@ impl Default for PlannerConfig {
 /// The model-based planner: chooses the first container of the ordering with least expected cost
 /// (paper eq. 3) over the candidates, given each container's probability; for a task, the first
 /// step of the policy with least expected cost until its goal holds and the robot stands at its
-/// destination ([`task_table`](crate::task_table)).
+/// destination ([`task_table`]).
 ///
 /// While one target is wanted (or any of several: one target of likelihood 1 − ∏(1 − p_t)) it
 /// solves the Held–Karp problem of eq. 3, with a destination's legs added to it; while several

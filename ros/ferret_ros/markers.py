@@ -1,6 +1,7 @@
 """What the node draws for rviz2 and Foxglove, with their stock displays and no plugin: a
 `visualization_msgs/MarkerArray` of the containers coloured by the belief, and a
-`nav_msgs/Path` of the route to the next container.
+`nav_msgs/Path` of the route to the next container (or, once a household task's goal holds, to
+its destination).
 
 Every array is a whole picture: it starts with a DELETEALL, so markers of an earlier trial (or an
 earlier step) never linger, and a viewer that joins late gets everything from the one latched
@@ -11,14 +12,18 @@ Namespaces (ids are the containers' indices in the scene, stable across a trial)
 - `containers`: a cylinder per container. Not yet searched: white (p = 0) through yellow to red
   (the largest p among the containers not yet searched); light grey when the strategy gives no
   likelihood. Searched in vain: dark grey. Where the target was found: green. The next container
-  is drawn larger.
+  is drawn larger. For a household task, p is the chance that the container holds a target still
+  wanted, and every container where a target was found is green.
 - `searched`: a black cross over each container searched in vain.
 - `next`: a blue ring around the next container (id 0; absent once the search has ended).
-- `labels`: the container's id and type, and its p (or "searched", "found").
+- `labels`: the container's id and type, and its p (or "searched", "found"; for a task "found"
+  and the targets found there).
+- `destination` (a task with a destination only): a purple diamond where the robot brings what
+  it found (id 0) and its label (id 1).
 """
 
 import math
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Collection, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, PoseStamped
@@ -39,6 +44,9 @@ FOUND = (0.1, 0.8, 0.2)
 CROSS = (0.0, 0.0, 0.0)
 RING = (0.1, 0.5, 1.0)
 TEXT = (1.0, 1.0, 1.0)
+DESTINATION = (0.6, 0.2, 0.85)
+# The destination's diamond: a flat square turned by 45 degrees, metres.
+DIAMOND_M = 0.4
 
 # Stamp 0: viewers draw these with the latest transform, so a latched array shown long after it
 # was sent still appears when the viewer's fixed frame is not the map frame.
@@ -89,12 +97,15 @@ def container_markers(
     places: Sequence,
     probability: Sequence[float],
     searched: Sequence[bool],
-    found: Optional[str],
+    found: Union[None, str, Mapping[str, Sequence[str]]],
     next_id: Optional[str],
+    destination: Optional[Tuple[float, float, str]] = None,
 ) -> MarkerArray:
     """The picture of one moment of a search. `places` are the scene's containers (`id`,
     `type`, `position`), `probability` and `searched` the belief in the same order, `found` the
-    container where the target was found, `next_id` the one the robot goes to next."""
+    container where the target was found (for a household task: each container where targets
+    were found, with them), `next_id` the one the robot goes to next, `destination` where a
+    task's robot brings what it found (x, y and a label)."""
     out = MarkerArray()
     clear = Marker()
     clear.header.frame_id = frame
@@ -104,9 +115,12 @@ def container_markers(
     out.markers.append(clear)
     open_ps = [p for p, s in zip(probability, searched) if not s and not math.isnan(p)]
     top = max(open_ps, default=0.0)
+    holding: Mapping[str, Sequence[str]] = (
+        {} if found is None else {found: ()} if isinstance(found, str) else found
+    )
     for i, (place, p, s) in enumerate(zip(places, probability, searched)):
         x, y = place.position
-        is_found = place.id == found
+        is_found = place.id in holding
         is_next = place.id == next_id
         size = NEXT_BODY_M if is_next else BODY_M
         body = _marker(frame, "containers", i, Marker.CYLINDER)
@@ -131,7 +145,7 @@ def container_markers(
         label.scale.z = TEXT_M
         label.color = _rgba(TEXT)
         if is_found:
-            state = "found"
+            state = " ".join(["found", ", ".join(holding[place.id])]).strip()
         elif s:
             state = "searched"
         elif math.isnan(p):
@@ -155,6 +169,24 @@ def container_markers(
                     )
                 )
             out.markers.append(ring)
+    if destination is not None:
+        x, y, name = destination
+        diamond = _marker(frame, "destination", 0, Marker.CUBE)
+        diamond.pose.position.x, diamond.pose.position.y = float(x), float(y)
+        diamond.pose.position.z = 0.03
+        diamond.pose.orientation.z = math.sin(math.pi / 8)
+        diamond.pose.orientation.w = math.cos(math.pi / 8)
+        diamond.scale.x = diamond.scale.y = DIAMOND_M
+        diamond.scale.z = 0.06
+        diamond.color = _rgba(DESTINATION, 0.9)
+        out.markers.append(diamond)
+        label = _marker(frame, "destination", 1, Marker.TEXT_VIEW_FACING)
+        label.pose.position.x, label.pose.position.y = float(x), float(y)
+        label.pose.position.z = 0.35
+        label.scale.z = TEXT_M
+        label.color = _rgba(TEXT)
+        label.text = f"destination: {name}"
+        out.markers.append(label)
     return out
 
 
@@ -199,16 +231,18 @@ def probabilities(
     ids: Sequence[str],
     now: Optional[Dict[str, float]],
     searched: Sequence[str],
-    found: Optional[str],
+    found: Union[None, str, Collection[str]],
 ) -> List[float]:
     """Per container: the planner's probability now where it gives one; otherwise 1 where the
-    target was found, 0 where searched in vain, NaN (unknown) elsewhere."""
+    target was found (a task's targets: any of the containers in `found`), 0 where searched in
+    vain, NaN (unknown) elsewhere."""
     done = set(searched)
+    holding = set() if found is None else {found} if isinstance(found, str) else set(found)
     out = []
     for i in ids:
         if now is not None and i in now and now[i] is not None:
             out.append(float(now[i]))
-        elif i == found:
+        elif i in holding:
             out.append(1.0)
         elif i in done:
             out.append(0.0)

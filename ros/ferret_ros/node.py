@@ -3,15 +3,17 @@
     python3 -m ferret_ros.node --ros-args -p scene:=examples/apartment/scene.yaml \\
         -p strategies:="['model/prior', 'model/uniform', 'optimistic+greedy']"
 
-Serves the action `~/search_object` (ferret_interfaces/action/SearchObject). For each step it
-asks ferret for the next container, sends a nav2_msgs/NavigateToPose goal to the container's
+Serves the action `~/search_object` (ferret_interfaces/action/SearchObject): one object, or a
+household task (several objects, all or any of them, brought to a destination). For each step
+it asks ferret for the next container, sends a nav2_msgs/NavigateToPose goal to the container's
 access point (or, with no Nav2 action server, a PoseStamped on /goal_pose and waits for the
 robot's pose to get there), waits for a ferret_interfaces/Detection from the detector for a
-bounded time, records what was seen and repeats until the target is found or every container
-was searched. Every wait has a timeout; a failed or timed-out step ends the goal with a status
-and a sentence saying why. The belief (per-container probability) is published on `~/belief`,
-drawn for rviz2 and Foxglove on `~/markers` (visualization_msgs/MarkerArray), and the route to
-the next container on `~/path` (nav_msgs/Path). See docs/ros2.md for the parameters and topics.
+bounded time, records what was seen and repeats until the goal holds or every container was
+searched; with a destination, it then sends the robot there the same way. Every wait has a
+timeout; a failed or timed-out step ends the goal with a status and a sentence saying why. The
+belief (per-container probability) is published on `~/belief`, drawn for rviz2 and Foxglove on
+`~/markers` (visualization_msgs/MarkerArray), and the route to the next container (or the
+destination) on `~/path` (nav_msgs/Path). See docs/ros2.md for the parameters and topics.
 """
 
 import math
@@ -46,8 +48,8 @@ from .planners import (
     Place,
     PlannerError,
     ServePlanner,
-    check_target,
 )
+from .tasks import Task, task_from_goal
 
 Status = SearchObject.Result
 
@@ -79,6 +81,12 @@ class GoalTiming:
     target: str
     steps: List[StepTiming] = field(default_factory=list)
     total_s: float = 0.0
+
+
+def listed(items, word: str) -> str:
+    """`a`, `a and b`, `a, b and c`."""
+    items = list(items)
+    return ", ".join(items[:-1]) + f" {word} " + items[-1] if len(items) > 1 else "".join(items)
 
 
 def yaw_to_quaternion(yaw: float):
@@ -262,9 +270,9 @@ class FerretNode(Node):
 
     def _on_goal(self, goal) -> GoalResponse:
         if self.busy.locked():
+            what = goal.target_type or "+".join(goal.target_types)
             self.get_logger().warning(
-                f"rejecting a search for {goal.target_type!r}: "
-                "a search is running (cancel it first)"
+                f"rejecting a search for {what!r}: a search is running (cancel it first)"
             )
             return GoalResponse.REJECT
         return GoalResponse.ACCEPT
@@ -282,15 +290,15 @@ class FerretNode(Node):
 
     def _search(self, handle) -> SearchObject.Result:
         goal = handle.request
-        target = goal.target_type.strip()
         log = self.get_logger()
-        if not target:
-            return self._end(handle, None, Status.REFUSED, "target_type is empty")
-        # Before waiting for the map: a misspelt target is refused at once, not after a search
-        # of every container.
+        # Before waiting for the map: a misspelt target or a bad task is refused at once, not
+        # after a search of every container.
         try:
+            scene = goal.scene or self.planner.scene_name
             known = self.planner.object_types(goal.scene)
-            check_target(target, known, goal.scene or self.planner.scene_name)
+            ids = [p.id for p in self.planner.places(goal.scene)]
+            rooms = self.planner.rooms(goal.scene)
+            task = task_from_goal(goal, known, ids, rooms, scene, self.frame)
         except PlannerError as e:
             return self._end(handle, None, Status.REFUSED, str(e))
         if self.get_parameter("require_map").value:
@@ -308,9 +316,12 @@ class FerretNode(Node):
                 if self.robot_pose is not None:
                     pose = (*self.robot_pose, self.robot_yaw_deg)
         try:
-            trial = self.planner.start(target, goal.scene, goal.deployment_id, pose)
+            trial = self.planner.start(task, goal.scene, goal.deployment_id, pose)
         except PlannerError as e:
-            return self._end(handle, None, Status.REFUSED, str(e))
+            message = str(e)
+            if e.field == "destination" and task.destination is not None:
+                message = f"{task.destination.field}: {message}"
+            return self._end(handle, None, Status.REFUSED, message)
         where = "the scene's start"
         if pose is not None:
             try:
@@ -319,11 +330,10 @@ class FerretNode(Node):
                 away = True
             if away:
                 where = f"({pose[0]:.2f}, {pose[1]:.2f})"
-        log.info(f"searching for {target} with {trial.strategy} from {where}")
-        timing = GoalTiming(target)
+        log.info(f"searching for {task.describe()} with {trial.strategy} from {where}")
+        timing = GoalTiming(task.label)
         self.timings.append(timing)
         places = {p.id: p for p in self.planner.places(goal.scene)}
-        found_at = None
         try:
             while True:
                 t0 = time.perf_counter()
@@ -332,14 +342,12 @@ class FerretNode(Node):
                     break
                 timing.steps.append(StepTiming(step.id))
                 st = timing.steps[-1]
-                fb = SearchObject.Feedback()
+                fb = self._feedback(trial)
                 fb.next_container = step.id
                 fb.next_container_type = step.type
                 fb.next_room = step.room
                 fb.next_pose = self._pose_for(step)
-                self._publish_belief(trial, target, places, None, step, fb.next_pose)
-                fb.travelled_m = trial.cost
-                fb.searched = len(trial.searched)
+                self._publish_belief(trial, places, step, fb.next_pose)
                 handle.publish_feedback(fb)
                 st.plan_s += time.perf_counter() - t0
 
@@ -356,25 +364,24 @@ class FerretNode(Node):
                 st.detect_s = time.perf_counter() - t2
 
                 t3 = time.perf_counter()
-                found = target in objects
-                trial.record(step.id, found, objects)
+                before = set(trial.found_in)
+                trial.record(step.id, objects)
                 log.info(
                     f"searched {step.id} ({step.type}, {step.room}): "
-                    f"{'found ' + target if found else 'no ' + target}; saw {objects or 'nothing'}"
+                    f"{self._seen(task, trial, before)}; saw {objects or 'nothing'}"
                 )
                 st.plan_s += time.perf_counter() - t3
                 st.total_s = time.perf_counter() - t0
-                if found:
-                    found_at = step.id
+                if trial.goal_holds:
                     break
         except StepFailed as e:
             self._abandon(trial)
-            self._publish_belief(trial, target, places, found_at)
+            self._publish_belief(trial, places)
             timing.total_s = time.perf_counter() - started
             return self._end(handle, trial, e.status, str(e))
         except PlannerError as e:
             self._abandon(trial)
-            self._publish_belief(trial, target, places, found_at)
+            self._publish_belief(trial, places)
             timing.total_s = time.perf_counter() - started
             return self._end(handle, trial, Status.PLANNER_ERROR, str(e))
         try:
@@ -382,22 +389,122 @@ class FerretNode(Node):
         except Exception as e:  # selection failed to learn; the search itself is complete
             log.error(f"selection could not learn from this trial: {e}")
             replays = None
-        self._publish_belief(trial, target, places, found_at)
+        held = trial.goal_holds
+        found_at = trial.found_at if held else None
+        status = Status.FOUND if held else Status.EXHAUSTED
+        failed = None
+        if task.destination is not None and trial.destination() is not None:
+            try:
+                self._deliver(handle, task, trial, places)
+            except StepFailed as e:
+                failed = e
+        what = self._outcome(task, trial, failed is None)
+        if replays:
+            what += "; replays " + ", ".join(f"{k} {v:.2f} m" for k, v in replays.items())
+        self._publish_belief(trial, places)
         timing.total_s = time.perf_counter() - started
-        if found_at is not None:
-            msg = (
-                f"found {target} in {found_at} after {len(trial.searched)} containers, "
-                f"{trial.cost:.2f} m ({trial.strategy})"
-            )
-            if replays:
-                msg += "; replays " + ", ".join(f"{k} {v:.2f} m" for k, v in replays.items())
-            return self._end(handle, trial, Status.FOUND, msg, found_at)
+        if failed is None:
+            delivered = task.destination is not None
+            return self._end(handle, trial, status, what, found_at, delivered)
+        there = task.destination.label()
+        if failed.status == Status.CANCELED:
+            message = f"canceled on the way to {there}, the search done: {what}"
+            return self._end(handle, trial, Status.CANCELED, message, found_at)
+        if held:
+            message = f"{what}; the search is done, but the robot did not reach {there}: {failed}"
+            return self._end(handle, trial, Status.DELIVERY_FAILED, message, found_at)
         return self._end(
-            handle,
-            trial,
-            Status.EXHAUSTED,
-            f"{target} not found in any of the {len(trial.searched)} containers",
+            handle, trial, Status.EXHAUSTED, f"{what}; the robot did not reach {there}: {failed}"
         )
+
+    def _feedback(self, trial) -> SearchObject.Feedback:
+        fb = SearchObject.Feedback()
+        fb.travelled_m = float(trial.cost)
+        fb.searched = len(trial.searched)
+        found_in = trial.found_in
+        fb.found_targets = list(found_in)
+        fb.found_containers = list(found_in.values())
+        return fb
+
+    @staticmethod
+    def _seen(task: Task, trial, before) -> str:
+        """A step's news for the log: which targets it found."""
+        if task.single:
+            target = task.targets[0]
+            return f"found {target}" if trial.goal_holds else f"no {target}"
+        new = [t for t in trial.found_in if t not in before]
+        return "found " + ", ".join(new) if new else "no target"
+
+    @staticmethod
+    def _outcome(task: Task, trial, delivered: bool) -> str:
+        """A sentence: what the search found, where, and what it cost (with a destination, the
+        way there included, whether or not the robot got there)."""
+        n, cost, strategy = len(trial.searched), trial.cost, trial.strategy
+        found_in = trial.found_in
+        if task.single:
+            if trial.goal_holds:
+                return (
+                    f"found {task.targets[0]} in {trial.found_at} after {n} containers, "
+                    f"{cost:.2f} m ({strategy})"
+                )
+            return f"{task.targets[0]} not found in any of the {n} containers"
+        where = listed([f"{t} in {c}" for t, c in found_in.items()], "and")
+        dest = task.destination
+        if trial.goal_holds:
+            said = f"found {where} after {n} container{'s' if n != 1 else ''}"
+        else:
+            missing = [t for t in task.targets if t not in found_in]
+            said = f"{listed(missing, 'or' if task.goal == 'any' else 'and')} not found in any "
+            said += f"of the {n} containers"
+            if found_in:
+                said += f" (found {where})"
+        if dest is None:
+            return f"{said}, {cost:.2f} m ({strategy})"
+        if delivered:
+            what = ("brought " + ("them" if len(found_in) > 1 else "it")) if found_in else "went"
+            return (
+                f"{said}, and {what} to {dest.label()}: {cost:.2f} m ({strategy}; "
+                f"{trial.delivery_m:.2f} m of it the way there)"
+            )
+        return (
+            f"{said}: {cost:.2f} m ({strategy}; {trial.delivery_m:.2f} m of it the way to "
+            f"{dest.label()})"
+        )
+
+    def _deliver(self, handle, task: Task, trial, places) -> None:
+        """Drives to the task's destination, the search done: a NavigateToPose goal there (or
+        the /goal_pose fallback). Raises StepFailed when the robot does not get there."""
+        x, y = trial.destination()
+        way = trial.destination_path()
+        dest = task.destination
+        yaw = dest.yaw
+        if dest.kind == "container" and dest.name in places:
+            c = places[dest.name]
+            yaw = math.atan2(c.position[1] - c.access[1], c.position[0] - c.access[0])
+        elif yaw is None:
+            # Heading along the way's last stretch (that of the robot as it arrives).
+            far = [p for p in way if math.dist(p, (x, y)) > 1e-6]
+            yaw = math.atan2(y - far[-1][1], x - far[-1][0]) if far else 0.0
+        place = Place(dest.label(), "destination", "", (x, y), (x, y))
+        pose = PoseStamped()
+        pose.header.frame_id = self.frame
+        pose.header.stamp = self.get_clock().now().to_msg()
+        pose.pose.position.x, pose.pose.position.y = x, y
+        o = pose.pose.orientation
+        o.x, o.y, o.z, o.w = yaw_to_quaternion(yaw)
+        fb = self._feedback(trial)
+        fb.travelled_m = float(trial.cost - trial.delivery_m)
+        fb.delivering = True
+        fb.next_container = dest.name if dest.kind == "container" else ""
+        fb.next_room = dest.name if dest.kind == "room" else ""
+        fb.next_pose = pose
+        self._publish_belief(trial, places, None, pose, way)
+        handle.publish_feedback(fb)
+        self.get_logger().info(
+            f"bringing {', '.join(trial.found_in) or 'nothing'} to {dest.label()} at "
+            f"({x:.2f}, {y:.2f}), {trial.delivery_m:.2f} m"
+        )
+        self._navigate(handle, place, pose)
 
     def _abandon(self, trial) -> None:
         """Gives the trial up (on the server too, with the serve backend)."""
@@ -406,16 +513,23 @@ class FerretNode(Node):
         if why:
             self.get_logger().warning(f"the server keeps the trial open: {why}")
 
-    def _end(self, handle, trial, status, message, container=None) -> SearchObject.Result:
+    def _end(
+        self, handle, trial, status, message, container=None, delivered=False
+    ) -> SearchObject.Result:
         r = SearchObject.Result()
         r.status = status
-        r.found = status == Status.FOUND
         r.container = container or ""
         r.message = message
+        r.delivered = delivered
         if trial is not None:
+            r.found = bool(trial.goal_holds)
             r.cost_m = float(trial.cost)
             r.searched_containers = list(trial.searched)
             r.strategy = trial.strategy
+            found_in = trial.found_in
+            r.found_targets = list(found_in)
+            r.found_containers = list(found_in.values())
+            r.delivery_m = float(trial.delivery_m)
         log = self.get_logger()
         if status == Status.FOUND:
             log.info(message)
@@ -576,36 +690,58 @@ class FerretNode(Node):
             )
         return seen
 
-    def _publish_belief(self, trial, target, places, found_at, step=None, goal=None) -> None:
-        """The belief, its markers and the route to `step` (none once the search has ended)."""
+    def _publish_belief(self, trial, places, step=None, goal=None, way=None) -> None:
+        """The belief, its markers and the route to `step` (or, while the robot brings what it
+        found to the destination, `way` to `goal`; none once the search has ended)."""
         log = self.get_logger()
         try:
             now = trial.belief()
         except Exception as e:  # a failing likelihood source must not stop the search itself
             log.warning(f"no probabilities for the belief: {e}")
             now = None
+        task = trial.task
         ids = list(places)
         searched = set(trial.searched)
+        found_in = trial.found_in
+        if task.single:
+            # One target: the picture it always was.
+            found = trial.found_at if trial.goal_holds else None
+            holding = found
+        else:
+            found = {}
+            for t, c in found_in.items():
+                found.setdefault(c, []).append(t)
+            holding = set(found)
         b = Belief()
         b.header.frame_id = self.frame
         b.header.stamp = self.get_clock().now().to_msg()
-        b.target_type = target
+        b.target_type = task.label
         b.strategy = trial.strategy
         b.containers = ids
         b.searched = [i in searched for i in ids]
-        b.probability = probabilities(ids, now, trial.searched, found_at)
+        b.probability = probabilities(ids, now, trial.searched, holding)
+        b.wanted_types = [] if trial.goal_holds else [t for t in task.targets if t not in found_in]
         self.belief_pub.publish(b)
+        destination = None
+        if task.destination is not None:
+            try:
+                at = trial.destination()
+            except PlannerError:
+                at = None
+            if at is not None:
+                destination = (at[0], at[1], task.destination.label())
         self.markers_pub.publish(
             container_markers(
                 self.frame,
                 list(places.values()),
                 b.probability,
                 b.searched,
-                found_at,
+                found,
                 step.id if step is not None else None,
+                destination,
             )
         )
-        points = []
+        points = way or []
         if step is not None:
             try:
                 points = trial.path_to(step)

@@ -3,12 +3,15 @@
 interface, so the ROS side does not know which it talks to.
 
 A *planner* holds the scene and, across trials, the deployment that selects the strategy of
-each trial (`ferret deploy`'s selection). `start(target, scene, deployment)` opens a *trial*:
-`next()` says which container to search (None once exhausted), `record()` what was seen there,
-`finish()` ends it (selection learns from a found target) and `abandon()` ends it after a
-failure (selection learns nothing). `belief()` gives the probability that each container holds
-the target now (None when the strategy has no likelihood), `path_to()` the planner's route to a
-container.
+each trial (`ferret deploy`'s selection). `start(task, scene, deployment)` opens a *trial* for a
+target or a household task (ferret_ros.tasks.Task: several targets, a goal, a destination):
+`next()` says which container to search (None once the goal holds or every container was
+searched), `record()` what was seen there, `finish()` ends it (selection learns from a search
+whose goal holds; with a destination, the way there is then part of its cost) and `abandon()`
+ends it after a failure (selection learns nothing). `found_in` says which targets were found
+where, `destination()` where the robot brings them and `destination_path()` the way there.
+`belief()` gives the probability that each container holds a target still wanted (None when the
+strategy has no likelihood), `path_to()` the planner's route to a container.
 """
 
 import difflib
@@ -21,11 +24,14 @@ import urllib.parse
 import urllib.request
 import uuid
 from dataclasses import dataclass
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import TYPE_CHECKING, Dict, List, Optional, Sequence, Tuple, Union
 
 import yaml
 
 import ferret
+
+if TYPE_CHECKING:
+    from .tasks import Task
 
 # A robot pose this close to the scene's start (metres) plans from the start itself.
 AT_START_M = 0.05
@@ -35,11 +41,13 @@ PLACED_MAX = 32
 
 class PlannerError(Exception):
     """ferret refused or failed; the message says why, for the action's result. `status` is the
-    HTTP status when `ferret serve` answered with an error."""
+    HTTP status when `ferret serve` answered with an error; `field` names what of a task was
+    refused when that was its destination (`destination`, the message then without the field)."""
 
-    def __init__(self, message: str, status: Optional[int] = None):
+    def __init__(self, message: str, status: Optional[int] = None, field: str = ""):
         super().__init__(message)
         self.status = status
+        self.field = field
 
 
 def path_problem(path: str, error: Exception) -> str:
@@ -215,11 +223,12 @@ class InProcessPlanner:
 
     def start(
         self,
-        target: str,
+        task: Union[str, "Task"],
         scene: str = "",
         deployment: int = 0,
         pose: Optional[Tuple[float, float, float]] = None,
     ) -> "InProcessTrial":
+        task = as_task(task)
         self._check_scene(scene)
         if deployment:
             raise PlannerError(
@@ -229,23 +238,55 @@ class InProcessPlanner:
         house = self.house_at(pose)
         strategy = self.deployment.choose() if self.deployment else self.strategies[0]
         try:
-            search = ferret.Search(house, target, strategy, **self.options)
+            if task.single:
+                # The paper's search, exactly as before tasks.
+                search = ferret.Search(house, task.targets[0], strategy, **self.options)
+            else:
+                search = ferret.Search(
+                    house,
+                    list(task.targets),
+                    strategy,
+                    goal=task.goal,
+                    destination=(
+                        task.destination.for_python() if task.destination is not None else None
+                    ),
+                    **self.options,
+                )
         except ferret.FerretError as e:
             if self.deployment:
                 self.deployment.abandon()
-            raise PlannerError(str(e)) from e
-        return InProcessTrial(self, search)
+            message = str(e)
+            if message.startswith("destination: "):
+                raise PlannerError(message[len("destination: ") :], field="destination") from e
+            raise PlannerError(message) from e
+        return InProcessTrial(self, search, task)
+
+    def rooms(self, scene: str = "") -> List[str]:
+        """The rooms' names, as a destination names them."""
+        self._check_scene(scene)
+        return [r.id for r in self.house.rooms]
+
+
+def as_task(task: Union[str, "Task"]) -> "Task":
+    """A target's name as the task of one target it is."""
+    from .tasks import Task
+
+    return Task((task,)) if isinstance(task, str) else task
 
 
 class InProcessTrial:
-    def __init__(self, planner: InProcessPlanner, search: "ferret.Search"):
+    def __init__(self, planner: InProcessPlanner, search: "ferret.Search", task: "Task"):
         self.planner = planner
         self.search = search
+        self.task = task
         self.strategy = search.strategy
         self.ended = False
         self._by_id = {p.id: p for p in planner._places}
-        self._likelihoods: Optional[List[float]] = None
+        self._likelihoods: Optional[Dict[str, List[float]]] = None
         self._asked = False
+        # The way from the last container to the destination, taken when the trial ends.
+        self._way: Optional[List[Tuple[float, float]]] = None
+        self.delivery_m = 0.0
 
     def next(self) -> Optional[Place]:
         try:
@@ -254,32 +295,84 @@ class InProcessTrial:
             raise PlannerError(str(e)) from e
         return None if c is None else self._by_id[c.id]
 
-    def record(self, container: str, found: bool, objects: Sequence[str]) -> float:
+    def record(self, container: str, objects: Sequence[str]) -> float:
+        """What the detector saw in `container`: the targets among `objects` are found."""
+        seen = [t for t in self.task.targets if t in objects]
         try:
-            return self.search.record(container, found, list(objects))
+            if self.task.single:
+                return self.search.record(container, bool(seen), list(objects))
+            return self.search.record(container, objects=list(objects), found_targets=seen)
         except ferret.FerretError as e:
             raise PlannerError(str(e)) from e
 
+    @property
+    def found_in(self) -> Dict[str, str]:
+        """Each target found so far and the container it was first seen in, in task order."""
+        return {t: c.id for t, c in self.search.found_in.items()}
+
+    @property
+    def goal_holds(self) -> bool:
+        return self.search.goal_holds
+
+    @property
+    def found_at(self) -> Optional[str]:
+        """The container where the goal came to hold."""
+        f = self.search.found
+        return None if f is None else f.id
+
+    def destination(self) -> Optional[Tuple[float, float]]:
+        """Where the robot brings what it found (the point it stands at there), or None."""
+        return self.search.destination
+
+    def destination_path(self) -> List[Tuple[float, float]]:
+        """ferret's way to the destination from the last container searched (from where the
+        robot is until the trial ends); empty without a destination."""
+        if self._way is not None:
+            return self._way
+        return [tuple(p) for p in self.search.path_to_destination() or []]
+
     def belief(self) -> Optional[Dict[str, float]]:
-        """Per container id: the strategy's likelihood before the search, 0 once searched in
-        vain, 1 where found (what `ferret serve`'s trial view gives); None without a likelihood
-        source. The source is asked once per trial: an LLM source that fails is not asked again
+        """Per container id: the chance that it holds a target still wanted, from the
+        strategy's likelihoods before the search, 0 once searched in vain, 1 where a target was
+        found (what `ferret serve`'s trial view gives); None without a likelihood source. For a
+        task, 1 - prod(1 - p_t) over the targets not found yet, 0 everywhere else once the goal
+        holds. The source is asked once per trial: an LLM source that fails is not asked again
         at every step."""
         if not self._asked:
             self._asked = True
-            self._likelihoods = self.search.likelihoods()
+            rows = {t: self.search.likelihoods(t) for t in self.task.targets}
+            if all(r is not None for r in rows.values()):
+                self._likelihoods = rows
         if self._likelihoods is None:
             return None
         searched = set(self.search.searched)
-        found = self.search.found
+        if len(self.task.targets) == 1:
+            (row,) = self._likelihoods.values()
+            found = self.search.found
+            out = {}
+            for p, likelihood in zip(self.planner._places, row):
+                if found is not None and p.id == found.id:
+                    out[p.id] = 1.0
+                elif p.id in searched:
+                    out[p.id] = 0.0
+                else:
+                    out[p.id] = float(likelihood)
+            return out
+        found_in = self.found_in
+        holding = set(found_in.values())
+        done = self.search.goal_holds
+        wanted = [r for t, r in self._likelihoods.items() if t not in found_in]
         out = {}
-        for p, likelihood in zip(self.planner._places, self._likelihoods):
-            if found is not None and p.id == found.id:
+        for i, p in enumerate(self.planner._places):
+            if p.id in holding:
                 out[p.id] = 1.0
-            elif p.id in searched:
+            elif done or p.id in searched:
                 out[p.id] = 0.0
             else:
-                out[p.id] = float(likelihood)
+                none = 1.0
+                for r in wanted:
+                    none *= 1.0 - float(r[i])
+                out[p.id] = 1.0 - none
         return out
 
     def path_to(self, place: Place) -> List[Tuple[float, float]]:
@@ -298,17 +391,27 @@ class InProcessTrial:
         return self.search.cost
 
     def finish(self) -> Optional[Dict[str, float]]:
-        """Ends the trial; with a deployment, every candidate's replay cost (found) or None."""
+        """Ends the trial; with a destination the robot's way there is added to its cost (the
+        driving itself is the node's). With a deployment, every candidate's replay cost when the
+        goal holds (the deployment learns), else None."""
         if self.ended:
             return None
         self.ended = True
+        if self.task.destination is not None:
+            self._way = [tuple(p) for p in self.search.path_to_destination() or []]
         d = self.planner.deployment
-        if d is None:
-            return None
-        if self.search.found is None:
-            d.abandon()
-            return None
-        return d.finish(self.search)
+        replays = None
+        try:
+            if d is not None:
+                if self.search.goal_holds:
+                    # Deployment.finish takes the search to its destination itself.
+                    replays = d.finish(self.search)
+                else:
+                    d.abandon()
+        finally:
+            if self.task.destination is not None:
+                self.delivery_m = self.search.finish()  # the same leg again once finished
+        return replays
 
     def abandon(self) -> None:
         if not self.ended:
@@ -364,9 +467,13 @@ class ServePlanner:
         except urllib.error.HTTPError as e:
             try:
                 err = json.loads(e.read()).get("error", {})
-                message = err.get("message", "")
+                message, field = err.get("message", ""), err.get("field", "")
             except (ValueError, AttributeError):
-                message = ""
+                message, field = "", ""
+            if field.startswith("destination"):
+                # A task's destination the scene does not have or the robot cannot reach: the
+                # node names the goal's own field.
+                raise PlannerError(message, status=e.code, field="destination") from e
             raise PlannerError(
                 f"ferret serve: {method} {path} -> {e.code}: {message}", status=e.code
             ) from e
@@ -406,13 +513,18 @@ class ServePlanner:
         start = self._scene(scene)["start"]
         return (start[0], start[1])
 
+    def rooms(self, scene: str = "") -> List[str]:
+        """The rooms' names, as a destination names them."""
+        return [r["name"] for r in self._scene(scene).get("rooms") or []]
+
     def start(
         self,
-        target: str,
+        task: Union[str, "Task"],
         scene: str = "",
         deployment: int = 0,
         pose: Optional[Tuple[float, float, float]] = None,
     ) -> "ServeTrial":
+        task = as_task(task)
         scene = scene or self.scene_name
         places = {p.id: p for p in self.places(scene)}
         if deployment == 0:
@@ -428,24 +540,43 @@ class ServePlanner:
             # A trial left open (this node stopped in the middle of a search, before it could
             # abandon it): go on with it when it looks for the same object.
             t = self.request("GET", f"/trials/{open_trial}")
-            if t["target"] != target or t["scene"] != scene:
+            if not same_task(t, task) or t["scene"] != scene:
                 raise PlannerError(
                     f"deployment {deployment} has trial {open_trial} open (a search for "
                     f"{t['target']} in {t['scene']}); finish that search first"
                 )
-            return ServeTrial(self, t, places)
-        body = {"scene": scene, "target": target}
+            return ServeTrial(self, t, places, task)
+        if task.single:
+            body = {"scene": scene, "target": task.targets[0]}
+        else:
+            body = {"scene": scene, "targets": list(task.targets), "goal": task.goal}
+            if task.destination is not None:
+                body["destination"] = task.destination.for_serve()
         if pose is not None:
             body["pose"] = [pose[0], pose[1], pose[2]]
         t = self.request("POST", f"/deployments/{deployment}/trials", body)
-        return ServeTrial(self, t, places)
+        return ServeTrial(self, t, places, task)
+
+
+def same_task(state: dict, task: "Task") -> bool:
+    """Whether a trial's state asks for `task` (an open trial the node may go on with)."""
+    if list(state.get("targets") or [state["target"]]) != list(task.targets):
+        return False
+    if state.get("goal", "all") != task.goal:
+        return False
+    d = state.get("destination")
+    if task.destination is None or d is None:
+        return task.destination is None and d is None
+    want = task.destination.for_serve()
+    return all(d.get(k) == v for k, v in want.items())
 
 
 class ServeTrial:
-    def __init__(self, planner: ServePlanner, state: dict, places: Dict[str, Place]):
+    def __init__(self, planner: ServePlanner, state: dict, places: Dict[str, Place], task: "Task"):
         self.planner = planner
         self.state = state
         self.places = places
+        self.task = task
         self.strategy = state["strategy"]
         self.ended = False
         # Why the server could not be told of an abandoned search, if it could not.
@@ -457,14 +588,52 @@ class ServeTrial:
             return None
         return self.places[n["container"]]
 
-    def record(self, container: str, found: bool, objects: Sequence[str]) -> float:
+    def record(self, container: str, objects: Sequence[str]) -> float:
+        """What the detector saw in `container`: the targets among `objects` are found."""
         before = self.state.get("cost_m") or 0.0
+        seen = [t for t in self.task.targets if t in objects]
+        body = {"container": container, "found": bool(seen), "objects": list(objects)}
+        if not self.task.single:
+            body["found_targets"] = seen
         self.state = self.planner.request(
-            "POST",
-            f"/trials/{self.state['trial']}/observations",
-            {"container": container, "found": found, "objects": list(objects)},
+            "POST", f"/trials/{self.state['trial']}/observations", body
         )
         return (self.state.get("cost_m") or 0.0) - before
+
+    @property
+    def found_in(self) -> Dict[str, str]:
+        """Each target found so far and the container it was first seen in, in task order (a
+        one-target trial's `found_in` stays empty until it ends: its found container then)."""
+        f = self.state.get("found_in") or {}
+        out = {t: f[t] for t in self.task.targets if t in f}
+        if not out and self.task.single and self.state.get("status") == "done":
+            out = {self.task.targets[0]: self.searched[-1]}
+        return out
+
+    @property
+    def goal_holds(self) -> bool:
+        return self.state.get("status") == "done"
+
+    @property
+    def found_at(self) -> Optional[str]:
+        """The container where the goal came to hold: the last searched, once done."""
+        return self.searched[-1] if self.goal_holds and self.searched else None
+
+    def destination(self) -> Optional[Tuple[float, float]]:
+        d = self.state.get("destination")
+        if not d or not d.get("at"):
+            return None
+        return (float(d["at"][0]), float(d["at"][1]))
+
+    def destination_path(self) -> List[Tuple[float, float]]:
+        """The server's way to the destination, once the trial has ended (`destination.path`)."""
+        d = self.state.get("destination") or {}
+        return [(float(x), float(y)) for x, y in d.get("path") or []]
+
+    @property
+    def delivery_m(self) -> float:
+        d = self.state.get("destination") or {}
+        return float(d.get("distance_m") or 0.0)
 
     def belief(self) -> Optional[Dict[str, float]]:
         """The trial view's likelihoods (`GET /trials/{id}/view`): what the server's web page

@@ -135,8 +135,13 @@ class Client:
         return sent.result().accepted
 
     def send(self, target, timeout=GOAL_TIMEOUT_S, cancel_after_feedback=False, while_running=None):
-        """Sends a goal and waits (bounded) for its result: (status, result, feedback list)."""
-        goal = SearchObject.Goal(target_type=target)
+        """Sends a goal (a target's name, or a SearchObject.Goal) and waits (bounded) for its
+        result: (status, result, feedback list)."""
+        goal = (
+            target
+            if isinstance(target, SearchObject.Goal)
+            else SearchObject.Goal(target_type=target)
+        )
         fbs = []
         first_fb = threading.Event()
 

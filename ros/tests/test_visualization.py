@@ -165,6 +165,8 @@ def test_markers_and_path_follow_an_in_process_search(start_node, robot, house):
     probs = dict(likelihoods, **{c: 0.0 for c in searched})
     check_picture(client.markers[n], ids, positions, probs, searched, result.container, None)
     assert client.paths[n].header.frame_id == "map" and list(client.paths[n].poses) == []
+    # No destination: nothing of a task's drawn.
+    assert all("destination" not in by_ns(m) for m in client.markers)
 
 
 def test_serve_belief_and_markers_carry_the_trial_view(start_node, robot, house, ferret_serve):
@@ -240,3 +242,157 @@ def test_serve_belief_and_markers_carry_the_trial_view(start_node, robot, house,
     check_picture(
         client.markers[-1], ids, positions, end["likelihoods"], searched, result.container, None
     )
+
+
+def task_search(house, targets, strategy, destination):
+    """A task searched by `ferret.Search` with the scene's ground truth: the containers in
+    order, where each target was found, the way to the destination and its length."""
+    s = ferret.Search(house, targets, strategy, destination=destination)
+    while (c := s.next_container()) is not None:
+        s.record(c, objects=house.contents(c))
+    way = s.path_to_destination()
+    leg = s.finish()
+    return s, {t: c.id for t, c in s.found_in.items()}, way, leg
+
+
+def task_belief(rows, ids, searched, found_in, holds):
+    """What the belief of a task should say: 1 where a target was found, 0 where searched in
+    vain (and everywhere once the goal holds), else 1 - prod(1 - p_t) over the targets still
+    wanted (`ferret serve`'s view computes the same)."""
+    wanted = [r for t, r in rows.items() if t not in found_in]
+    out = {}
+    for i, c in enumerate(ids):
+        if c in found_in.values():
+            out[c] = 1.0
+        elif holds or c in searched:
+            out[c] = 0.0
+        else:
+            none = 1.0
+            for r in wanted:
+                none *= 1.0 - r[i]
+            out[c] = 1.0 - none
+    return out
+
+
+def test_markers_and_belief_of_a_task(start_node, robot, house):
+    """A task of two targets brought to a room: at each step the belief is the chance that a
+    container holds a target still wanted (the targets' own likelihoods combined), the targets
+    found are green and labelled with what was found there, the destination is a diamond; once
+    the goal holds the path is ferret's way to the destination (its length the result's
+    delivery_m), and at the end the path is empty and nothing is wanted."""
+    nav, _, _ = robot
+    targets, strategy = ["Egg", "Statue"], STRATEGY
+    ids = [c.id for c in house.containers]
+    s, found_in, way, leg = task_search(house, targets, strategy, "room:bedroom")
+    searched = list(s.searched)
+    assert len(searched) >= 3 and len(set(found_in.values())) == 2
+    rows = {t: s.likelihoods(t) for t in targets}
+    _, client = start_node("ferret_task_markers", strategies=[strategy], plan_from_robot_pose=False)
+    nav.reset()
+    nav.speed = 10.0  # slow enough that each step's picture arrives before the next one
+    try:
+        goal = SearchObject.Goal(target_types=targets)
+        goal.destination_kind = SearchObject.Goal.DESTINATION_ROOM
+        goal.destination_id = "bedroom"
+        _, result, _ = client.send(goal)
+    finally:
+        nav.speed = 200.0
+    assert result.status == Status.FOUND and result.delivered, result.message
+    assert list(result.searched_containers) == searched
+    n = len(searched)
+    wait_until(
+        lambda: len(client.beliefs) >= n + 2 and len(client.markers) >= n + 2,
+        f"{n + 2} beliefs and pictures (one per step, one on the way, one at the end)",
+    )
+    assert (len(client.beliefs), len(client.markers), len(client.paths)) == (n + 2,) * 3
+    for k, belief in enumerate(client.beliefs):
+        before = searched[: min(k, n)]
+        found = {t: c for t, c in found_in.items() if c in before}
+        holds = k >= n
+        want = task_belief(rows, ids, before, found, holds)
+        assert belief.target_type == "Egg+Statue"
+        assert list(belief.containers) == ids
+        assert all(
+            math.isclose(p, want[c], abs_tol=1e-12) for c, p in zip(ids, belief.probability)
+        ), (k, list(belief.probability), want)
+        assert list(belief.wanted_types) == (
+            [] if holds else [t for t in targets if t not in found]
+        )
+        ns = by_ns(client.markers[k])
+        labels, bodies = ns["labels"], ns["containers"]
+        for c in set(found.values()):
+            i = ids.index(c)
+            here = [t for t, at in found.items() if at == c]
+            assert labels[i].text.endswith("found " + ", ".join(here)), labels[i].text
+            assert bodies[i].color.g > 0.5 > max(bodies[i].color.r, bodies[i].color.b)
+        crossed = {ids[i] for i in ns.get("searched", {})}
+        assert crossed == {c for c in before if c not in found.values()}
+        diamond, label = ns["destination"][0], ns["destination"][1]
+        assert math.dist((diamond.pose.position.x, diamond.pose.position.y), s.destination) < 1e-9
+        assert label.text == "destination: room bedroom"
+        assert ("next" in ns) == (k < n)
+    # On the way: ferret's way from the last container to the room, as long as the last leg.
+    on_the_way = path_points(client.paths[n])
+    assert math.dist(on_the_way[-1], s.destination) < 1e-9
+    assert all(math.dist(a, b) < 1e-9 for a, b in zip(on_the_way, way))
+    assert math.isclose(length(on_the_way), leg, abs_tol=1e-6)
+    assert math.isclose(result.delivery_m, leg, abs_tol=1e-9)
+    assert list(client.paths[n + 1].poses) == []
+
+
+def test_serve_belief_of_a_task_is_the_trial_view(start_node, robot, house, ferret_serve):
+    """With `ferret serve`, a task's belief is the view's `likelihoods` (the chance that a
+    container holds a target still wanted), which is the targets' own likelihoods combined as
+    the in-process node combines them; at the end, 1 where a target was found, and the
+    destination drawn where the server says it is."""
+    nav, _, _ = robot
+    targets = ["Egg", "Statue"]
+    ids = [c.id for c in house.containers]
+    rows = {t: ferret.Search(house, targets, STRATEGY).likelihoods(t) for t in targets}
+    _, client = start_node(
+        "ferret_serve_task_view",
+        backend="serve",
+        serve_url=ferret_serve,
+        serve_scene="apartment",
+        strategies=[STRATEGY],
+        plan_from_robot_pose=False,
+    )
+    during = {}
+
+    def while_driving_to_the_first():
+        wait_until(lambda: client.beliefs and client.markers, "the first step")
+        trial = get(ferret_serve + "/deployments/1")["open_trial"]
+        during["view"] = get(f"{ferret_serve}/trials/{trial}/view")
+        during["belief"] = client.beliefs[-1]
+        nav.speed = 200.0
+
+    goal = SearchObject.Goal(target_types=targets)
+    goal.destination_kind = SearchObject.Goal.DESTINATION_START
+    nav.reset()
+    nav.speed = 2.0
+    try:
+        _, result, _ = client.send(goal, while_running=while_driving_to_the_first)
+    finally:
+        nav.speed = 200.0
+    assert result.status == Status.FOUND and result.delivered, result.message
+    view, belief = during["view"], during["belief"]
+    assert view["trial"]["searched"] == [], "the view was read after the first observation"
+    probs = dict(zip(belief.containers, belief.probability))
+    assert probs == view["likelihoods"]
+    want = task_belief(rows, ids, [], {}, False)
+    assert all(math.isclose(probs[c], want[c], abs_tol=1e-12) for c in ids), (probs, want)
+    assert list(belief.wanted_types) == targets
+
+    trial = get(ferret_serve + "/deployments/1")["trials"][0]["trial"]
+    end = get(f"{ferret_serve}/trials/{trial}/view")
+    wait_until(lambda: list(client.paths[-1].poses) == [], "the empty path at the end")
+    last = client.beliefs[-1]
+    probs = dict(zip(last.containers, last.probability))
+    assert probs == end["likelihoods"]
+    found = dict(zip(result.found_targets, result.found_containers))
+    assert {c for c, p in probs.items() if p == 1.0} == set(found.values())
+    assert all(p == 0.0 for c, p in probs.items() if c not in found.values())
+    assert list(last.wanted_types) == []
+    diamond = by_ns(client.markers[-1])["destination"][0]
+    at = end["trial"]["destination"]["at"]
+    assert math.dist((diamond.pose.position.x, diamond.pose.position.y), at) < 1e-9

@@ -121,6 +121,15 @@ impl<'a> Belief<'a> {
         leg
     }
 
+    /// The robot travels to `c` without learning anything (a container a teammate searched
+    /// while it was on its way); returns the leg, metres.
+    pub fn visit(&mut self, c: usize) -> f64 {
+        let leg = self.distance_to(c);
+        self.travelled += leg;
+        self.position = Place::Container(c);
+        leg
+    }
+
     /// Marks as found in `c` every target of the task among `contents` not found before.
     fn note_found(&mut self, c: usize, contents: &[ObjectType]) {
         for (t, found) in self.task.targets().iter().zip(&mut self.found) {

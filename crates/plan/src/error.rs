@@ -23,6 +23,15 @@ pub enum PlanError {
         #[source]
         error: BoxError,
     },
+    /// A team that cannot work: no robots or too many, robots on different trials, a start
+    /// the house's start cannot reach.
+    #[error("{house}: team: {message}")]
+    Team {
+        /// The house's name.
+        house: String,
+        /// What is wrong.
+        message: String,
+    },
     /// A policy failed to choose.
     #[error("policy {policy}: {error}")]
     Policy {

@@ -86,6 +86,7 @@ pub mod replay_memo;
 pub mod strategy;
 pub mod task;
 pub mod task_table;
+pub mod team;
 pub mod trial;
 
 pub use belief::Belief;
@@ -117,10 +118,14 @@ pub use replay::{
 pub use replay_memo::ReplayMemo;
 pub use strategy::{
     ModelStrategy, SEQUENTIAL, SequentialStrategy, Strategy, StrategyRegistry, StrategySpec,
-    TrialContext, planned_spec, task_likelihoods,
+    TeamStrategy, TrialContext, planned_spec, task_likelihoods,
 };
 pub use task::{Destination, DestinationLegs, Goal, MAX_TARGETS, Task, TaskError};
 pub use task_table::{TaskProblem, TaskSolution, solve_task};
+pub use team::{
+    INDEPENDENT, MAX_ROBOTS, RobotRun, SPLIT, TeamOutcome, TeamSettings, TeamStarts, Teamwork,
+    draw_starts, run_team, split_rooms, team_destinations, team_distances,
+};
 pub use trial::{
     Search, TaskShape, TrialOutcome, TrialsPerHouse, draw_tasks, draw_trial, draw_trials,
     draw_trials_with, python_seed, run_trial,

@@ -589,64 +589,107 @@ pub fn oracle_route(
         Goal::All => usize::from(mask) == (1 << m) - 1,
         Goal::Any => mask != 0,
     };
-    let useful: Vec<usize> = belief
-        .unsearched()
-        .filter(|&c| holds.get(c).is_some_and(|&h| h != 0))
-        .collect();
-    let k = useful.len();
-    let states = (1usize << m) * k;
-    // cost[mask·k + i]: least travel to stand at useful[i] having found `mask`.
-    let mut cost = vec![f64::INFINITY; states];
-    let mut parent = vec![usize::MAX; states];
-    let at = |mask: u8, i: usize| usize::from(mask) * k + i;
-    for (i, &c) in useful.iter().enumerate() {
-        let s = at(holds[c], i);
-        let d = belief.distance_to(c);
-        if d < cost[s] {
-            cost[s] = d;
-        }
-    }
-    // Masks only grow along a route, so increasing masks are settled in order.
-    for mask in 1..(1u8 << m) {
-        if done(mask) {
-            continue;
-        }
+    let table = OracleTable::build(belief, holds, m, &done);
+    let end = |s: usize| {
+        table.cost[s] + destination.map_or(0.0, |g| g.from(Place::Container(table.container(s))))
+    };
+    let best = (0..table.cost.len())
+        .filter(|&s| done(table.mask(s)) && table.cost[s].is_finite())
+        .min_by(|&a, &b| end(a).total_cmp(&end(b)).then(a.cmp(&b)));
+    best.map_or_else(Vec::new, |s| table.route(s))
+}
+
+/// The least travel from the robot's position to every state of a route through containers
+/// holding targets: (targets found, the container it stands at), growing from those found by
+/// a first container. What the oracle's routes are read from.
+pub(crate) struct OracleTable {
+    /// The unsearched containers holding some target.
+    useful: Vec<usize>,
+    /// Per state `mask·k + i`: least travel to stand at `useful[i]` having found `mask`.
+    pub(crate) cost: Vec<f64>,
+    parent: Vec<usize>,
+}
+
+impl OracleTable {
+    /// The table of routes from the belief's position; `holds[c]` the bit set of the targets
+    /// (of `m`) container `c` holds. Routes end at a mask `stop` accepts (they grow no further).
+    pub(crate) fn build(
+        belief: &Belief<'_>,
+        holds: &[u8],
+        m: usize,
+        stop: &dyn Fn(u8) -> bool,
+    ) -> Self {
+        let useful: Vec<usize> = belief
+            .unsearched()
+            .filter(|&c| holds.get(c).is_some_and(|&h| h != 0))
+            .collect();
+        let k = useful.len();
+        let states = (1usize << m) * k;
+        let mut cost = vec![f64::INFINITY; states];
+        let mut parent = vec![usize::MAX; states];
+        let at = |mask: u8, i: usize| usize::from(mask) * k + i;
         for (i, &c) in useful.iter().enumerate() {
-            let here = cost[at(mask, i)];
-            if !here.is_finite() {
+            let s = at(holds[c], i);
+            let d = belief.distance_to(c);
+            if d < cost[s] {
+                cost[s] = d;
+            }
+        }
+        // Masks only grow along a route, so increasing masks are settled in order.
+        for mask in 1..(1u8 << m) {
+            if stop(mask) {
                 continue;
             }
-            for (j, &d) in useful.iter().enumerate() {
-                let next = mask | holds[d];
-                if next == mask {
+            for (i, &c) in useful.iter().enumerate() {
+                let here = cost[at(mask, i)];
+                if !here.is_finite() {
                     continue;
                 }
-                let v = here
-                    + belief
-                        .distances
-                        .between(Place::Container(c), Place::Container(d));
-                if v < cost[at(next, j)] {
-                    cost[at(next, j)] = v;
-                    parent[at(next, j)] = at(mask, i);
+                for (j, &d) in useful.iter().enumerate() {
+                    let next = mask | holds[d];
+                    if next == mask {
+                        continue;
+                    }
+                    let v = here
+                        + belief
+                            .distances
+                            .between(Place::Container(c), Place::Container(d));
+                    if v < cost[at(next, j)] {
+                        cost[at(next, j)] = v;
+                        parent[at(next, j)] = at(mask, i);
+                    }
                 }
             }
         }
+        Self {
+            useful,
+            cost,
+            parent,
+        }
     }
-    let end = |s: usize| {
-        let c = useful[s % k];
-        cost[s] + destination.map_or(0.0, |g| g.from(Place::Container(c)))
-    };
-    let best = (0..states)
-        .filter(|&s| done((s / k) as u8) && cost[s].is_finite())
-        .min_by(|&a, &b| end(a).total_cmp(&end(b)).then(a.cmp(&b)));
-    let mut route = Vec::new();
-    let mut s = best.unwrap_or(usize::MAX);
-    while s != usize::MAX {
-        route.push(useful[s % k]);
-        s = parent[s];
+
+    /// The targets found in state `s`.
+    pub(crate) fn mask(&self, s: usize) -> u8 {
+        // At most MAX_TARGETS bits: the quotient fits.
+        (s / self.useful.len().max(1)) as u8
     }
-    route.reverse();
-    route
+
+    /// The container the robot stands at in state `s`.
+    pub(crate) fn container(&self, s: usize) -> usize {
+        self.useful[s % self.useful.len()]
+    }
+
+    /// The containers of the route that ends in state `s`, in order.
+    pub(crate) fn route(&self, s: usize) -> Vec<usize> {
+        let mut route = Vec::new();
+        let mut s = s;
+        while s != usize::MAX {
+            route.push(self.container(s));
+            s = self.parent[s];
+        }
+        route.reverse();
+        route
+    }
 }
 
 /// One search after another: the single-target planner looks for the task's first target not

@@ -18,6 +18,7 @@ use crate::policy::{
 use crate::prior::{Prior, RawPrior};
 use crate::probability::Probability;
 use crate::problem::SearchProblem;
+use crate::team::{INDEPENDENT, SPLIT, Teamwork};
 
 /// What a strategy needs to start a trial.
 #[derive(Clone, Copy, Debug)]
@@ -53,6 +54,14 @@ pub trait Strategy: Send + Sync {
     /// `sequential/<spec>` runs target after target).
     fn planner_config(&self) -> Option<PlannerConfig> {
         None
+    }
+
+    /// How robots of a team running this strategy share the work (see [`run_team`]):
+    /// coordinated unless the spec says otherwise (`independent/<spec>`, `split/<spec>`).
+    ///
+    /// [`run_team`]: crate::run_team
+    fn teamwork(&self) -> Teamwork {
+        Teamwork::Coordinated
     }
 }
 
@@ -144,6 +153,19 @@ impl StrategyRegistry {
     /// source.
     pub fn build(&self, spec: &str) -> Result<Arc<dyn Strategy>, PlanError> {
         let parsed = StrategySpec::parse(spec)?;
+        let teamwork = [Teamwork::Independent, Teamwork::SplitByRegion]
+            .into_iter()
+            .find(|t| t.prefix() == Some(parsed.kind.as_str()));
+        if let Some(teamwork) = teamwork {
+            let inner = self.build(&parsed.args.join("/")).map_err(|e| match e {
+                PlanError::UnknownStrategy { reason, .. } => PlanError::UnknownStrategy {
+                    spec: parsed.raw.clone(),
+                    reason,
+                },
+                other => other,
+            })?;
+            return TeamStrategy::new(&parsed.raw, inner, teamwork).map(|s| Arc::new(s) as _);
+        }
         if parsed.kind == SEQUENTIAL {
             let inner = self.build(&parsed.args.join("/")).map_err(|e| match e {
                 PlanError::UnknownStrategy { reason, .. } => PlanError::UnknownStrategy {
@@ -336,13 +358,75 @@ pub const SEQUENTIAL: &str = "sequential";
 /// spec itself. What it needs (a prior, an LLM's answers) is what that spec needs.
 pub fn planned_spec(spec: &str) -> &str {
     let mut s = spec.trim();
-    while let Some(inner) = s
-        .strip_prefix(SEQUENTIAL)
-        .and_then(|rest| rest.strip_prefix('/'))
+    while let Some(inner) = [SEQUENTIAL, INDEPENDENT, SPLIT]
+        .iter()
+        .find_map(|kind| s.strip_prefix(kind).and_then(|rest| rest.strip_prefix('/')))
     {
         s = inner;
     }
     s
+}
+
+/// `independent/<spec>` and `split/<spec>`: `<spec>` itself, its robots working as the
+/// [`Teamwork`] says when several run one trial. One robot runs exactly `<spec>`.
+pub struct TeamStrategy {
+    name: String,
+    inner: Arc<dyn Strategy>,
+    teamwork: Teamwork,
+}
+
+impl TeamStrategy {
+    /// `inner`, named `name`, its robots working as `teamwork` says.
+    ///
+    /// # Errors
+    /// [`PlanError::UnknownStrategy`] for a teamwork wrapped around another
+    /// (`independent/split/...`).
+    pub fn new(
+        name: &str,
+        inner: Arc<dyn Strategy>,
+        teamwork: Teamwork,
+    ) -> Result<Self, PlanError> {
+        if inner.teamwork() != Teamwork::Coordinated {
+            return Err(PlanError::UnknownStrategy {
+                spec: name.to_string(),
+                reason: format!(
+                    "`{}` already says how robots share the work; give one of independent/ and split/",
+                    inner.name()
+                ),
+            });
+        }
+        Ok(Self {
+            name: name.to_string(),
+            inner,
+            teamwork,
+        })
+    }
+}
+
+impl Strategy for TeamStrategy {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn needs_ground_truth(&self) -> bool {
+        self.inner.needs_ground_truth()
+    }
+
+    fn policy<'a>(&'a self, ctx: &TrialContext<'a>) -> Result<Box<dyn Policy + 'a>, PlanError> {
+        self.inner.policy(ctx)
+    }
+
+    fn likelihood_source(&self) -> Option<&Arc<dyn LikelihoodSource>> {
+        self.inner.likelihood_source()
+    }
+
+    fn planner_config(&self) -> Option<PlannerConfig> {
+        self.inner.planner_config()
+    }
+
+    fn teamwork(&self) -> Teamwork {
+        self.teamwork
+    }
 }
 
 /// `sequential/<spec>`: the single-target planner of `<spec>` looking for a task's targets one

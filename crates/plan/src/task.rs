@@ -200,11 +200,7 @@ impl Destination {
             }
             distances.spot(house, cell).map_err(|e| err(e.to_string()))
         };
-        let at_spot = |s: Spot| DestinationLegs {
-            metres: places().map(|p| s.from(p)).collect(),
-            place: None,
-            spot: Some(s),
-        };
+        let at_spot = |s: Spot| DestinationLegs::to_spot(distances, s);
         match *self {
             Destination::Start => Ok(to_place(Place::Start)),
             Destination::Container { index } if index < n => Ok(to_place(Place::Container(index))),
@@ -258,6 +254,20 @@ impl DestinationLegs {
                 place: None,
                 spot: None,
             })
+    }
+
+    /// Legs to `spot` (a spot of `distances`' floor, see [`Distances::spot`]): a destination
+    /// that is no place of this map, such as another robot's start.
+    pub fn to_spot(distances: &Distances, spot: Spot) -> Self {
+        let n = distances.container_count();
+        Self {
+            metres: std::iter::once(Place::Start)
+                .chain((0..n).map(Place::Container))
+                .map(|p| spot.from(p))
+                .collect(),
+            place: None,
+            spot: Some(spot),
+        }
     }
 
     /// Travel from `place` to the destination, metres.

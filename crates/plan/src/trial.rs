@@ -640,6 +640,58 @@ impl<'a> Search<'a> {
         Ok(self.belief.search(c, seen))
     }
 
+    /// The container to search next while teammates are heading to `others`: chosen as if
+    /// they were searched in vain (this robot's plan only matters where they hold nothing) and
+    /// never one of them. `None` as [`next_container`](Self::next_container) says, and when
+    /// every container left is one of `others`. With no `others` it is `next_container`.
+    ///
+    /// # Errors
+    /// As [`next_container`](Self::next_container).
+    pub fn next_container_leaving(&mut self, others: &[usize]) -> Result<Option<usize>, PlanError> {
+        if others.is_empty() {
+            return self.next_container();
+        }
+        if self.belief.goal_holds() || self.delivered.is_some() {
+            return Ok(None);
+        }
+        let mut view = self.belief.clone();
+        for &c in others {
+            if c < view.house.containers.len() && !view.is_searched(c) {
+                view.reveal(c, Vec::new());
+            }
+        }
+        if view.unsearched_count() == 0 {
+            return Ok(None);
+        }
+        let c = self.policy.choose(&view)?;
+        self.check(c)?;
+        if others.contains(&c) {
+            return Err(PlanError::BadChoice {
+                policy: self.strategy.name().into(),
+                container: c,
+                why: "claimed by another robot",
+            });
+        }
+        Ok(Some(c))
+    }
+
+    /// Records that a teammate searched container `c` and saw `seen` there: known at once,
+    /// without this robot moving.
+    ///
+    /// # Errors
+    /// [`PlanError::BadChoice`] for a container that does not exist or was already searched.
+    pub fn observe(&mut self, c: usize, seen: Vec<ObjectType>) -> Result<(), PlanError> {
+        self.check(c)?;
+        self.belief.reveal(c, seen);
+        Ok(())
+    }
+
+    /// The robot drives to `c`, which was searched already (by a teammate, while it was on its
+    /// way), learning nothing; returns the leg, metres.
+    pub fn visit(&mut self, c: usize) -> f64 {
+        self.belief.visit(c)
+    }
+
     /// True once the task's goal holds (for one target: it was found).
     pub fn goal_holds(&self) -> bool {
         self.belief.goal_holds()
@@ -732,7 +784,7 @@ pub fn run_trial(
     })
 }
 
-fn contents_of(truth: &GroundTruth, c: usize) -> Vec<ObjectType> {
+pub(crate) fn contents_of(truth: &GroundTruth, c: usize) -> Vec<ObjectType> {
     truth
         .contents(c)
         .iter()

@@ -367,6 +367,38 @@ pub struct TaskArgs {
     pub tasks: Option<TaskFile>,
 }
 
+/// A team of robots on every trial.
+#[derive(clap::Args, Clone, Debug, Default)]
+pub struct TeamArgs {
+    /// Robots working together on every trial, 1 to 4: a container one opens is known to all,
+    /// and the cost is the makespan (metres until the goal held; robots drive at equal speed).
+    /// A plain spec coordinates its robots (each plans knowing where the others are heading);
+    /// independent/<spec> runs the single-robot plan on each, blind to the others, and
+    /// split/<spec> divides the rooms among them. trials.csv gains robots, total_travel_m and
+    /// searched_by.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(1..=4))]
+    pub robots: Option<u8>,
+    /// Where the robots start: `together` (all at the house's start) or `spread` (the first at
+    /// the start, the others on reachable floor drawn from --seed).
+    #[arg(
+        long,
+        value_name = "together|spread",
+        requires = "robots",
+        default_value = "together"
+    )]
+    pub starts: ferret_plan::TeamStarts,
+}
+
+impl TeamArgs {
+    /// The team these options ask for, if any.
+    pub fn team(&self) -> Option<ferret_plan::TeamSettings> {
+        self.robots.map(|robots| ferret_plan::TeamSettings {
+            robots: usize::from(robots),
+            starts: self.starts,
+        })
+    }
+}
+
 /// The lines of a tasks file.
 #[derive(Clone, Debug)]
 pub struct TaskFile(Vec<ferret_lab::TaskLine>);

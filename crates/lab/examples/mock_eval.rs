@@ -109,6 +109,7 @@ fn main() {
         protocol: &Protocol::FERRET,
         holdout: None,
         tasks: None,
+        team: None,
     };
     let targets = draw.targets(&scenes, &maps);
     let pairs: Vec<(&House, &ObjectType)> = targets.iter().map(|(h, t)| (*h, t)).collect();

@@ -106,6 +106,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         protocol: &Protocol::FERRET,
         holdout: None,
         tasks: Some(&tasks),
+        team: None,
     };
     let grid = GridParams::default();
     let per_house: Vec<Result<Vec<TrialRow>, String>> = scenes
@@ -165,6 +166,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         destination: None,
                         found_each: None,
                         delivery_m: None,
+                        robots: None,
+                        total_travel_m: None,
+                        searched_by: None,
                     });
                 }
             }

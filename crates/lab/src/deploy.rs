@@ -107,6 +107,7 @@ pub fn deploy(
         protocol: settings.protocol,
         holdout: None,
         tasks: settings.tasks,
+        team: None,
     };
     let mut done = Vec::new();
     let houses = order.houses().to_vec();

@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use ferret_plan::{Destination, Protocol, TrialSpec, TrialsPerHouse};
+use ferret_plan::{Destination, Protocol, TeamSettings, TrialSpec, TrialsPerHouse};
 use ferret_world::{ContainerSet, Distances, GridParams, Scene};
 
 use crate::error::{LabError, Result};
@@ -42,6 +42,8 @@ pub struct EvalJob<'a> {
     pub trials_per_house: TrialsPerHouse,
     /// Household tasks instead of one target per trial.
     pub tasks: Option<&'a Tasks>,
+    /// A team of robots on every trial instead of one.
+    pub team: Option<TeamSettings>,
     /// The protocol the trials follow.
     pub protocol: &'a Protocol,
     /// Costs in grid cells too.
@@ -92,6 +94,11 @@ impl EvalJob<'_> {
             )));
         }
         check_distinct("--strategies", self.specs)?;
+        if self.team.is_some() && self.protocol.travel_cost != ferret_world::TravelCost::Plain {
+            return Err(LabError::invalid(
+                "--robots: the soft travel cost measures one robot's legs; a team's makespan is measured in plain metres (use a protocol with the plain travel cost)",
+            ));
+        }
         if let Some(s) = self.paired_against.iter().find(|s| !self.specs.contains(s)) {
             return Err(LabError::invalid(format!(
                 "--paired-against {s}: not one of --strategies"
@@ -133,6 +140,7 @@ impl EvalJob<'_> {
             protocol,
             holdout: self.planning.holdout,
             tasks: self.tasks,
+            team: self.team,
         };
         check_holdout_has_trials(&open, &draw)?;
         let grid = GridParams {
@@ -241,6 +249,7 @@ impl EvalJob<'_> {
             trials_per_house: self.trials_per_house,
             protocol: *self.protocol,
             tasks: self.tasks.cloned(),
+            team: self.team,
             strategies: self.specs.to_vec(),
             trials_sha256: None,
             shard: self.shard.map(|sh| ShardRecord {

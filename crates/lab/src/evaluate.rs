@@ -5,8 +5,9 @@
 use std::sync::Arc;
 
 use ferret_plan::{
-    HoldOut, Protocol, SearchProblem, Strategy, TrialOutcome, TrialSpec, TrialsPerHouse,
-    draw_trials_with, run_trial,
+    HoldOut, Protocol, SearchProblem, Strategy, TeamOutcome, TeamSettings, TrialOutcome, TrialSpec,
+    TrialsPerHouse, draw_starts, draw_trials_with, run_team, run_trial, team_destinations,
+    team_distances,
 };
 use ferret_world::{GridParams, House, ObjectType, Scene};
 use rayon::prelude::*;
@@ -36,6 +37,9 @@ pub struct TrialDraw<'a> {
     pub holdout: Option<HoldOut>,
     /// Household tasks instead of one target per trial.
     pub tasks: Option<&'a Tasks>,
+    /// A team of robots on every trial instead of one robot (the rows then have the team's
+    /// columns, and their cost is the makespan).
+    pub team: Option<TeamSettings>,
 }
 
 impl TrialDraw<'_> {
@@ -571,7 +575,7 @@ fn evaluate_house(
     strategies: &[Arc<dyn Strategy>],
     draw: &TrialDraw<'_>,
 ) -> HouseRun {
-    let (_, distances) = match map {
+    let (grid, distances) = match map {
         Ok(m) => m,
         Err(e) => return (vec![], vec![e.to_string()], 0),
     };
@@ -579,6 +583,9 @@ fn evaluate_house(
         Ok(t) => t,
         Err(e) => return (vec![], vec![e.to_string()], 0),
     };
+    if let Some(team) = draw.team {
+        return evaluate_team(scene, (grid, distances), strategies, draw, team, trials);
+    }
     // A house's trials run in parallel too: houses differ in cost by far more than their
     // trials do, so a batch no longer waits for its one slow house on one thread. Collected in
     // order, the rows are those of one trial after another.
@@ -634,6 +641,135 @@ fn evaluate_house(
     (rows, errors, trials.len())
 }
 
+/// [`evaluate_house`] with a team on every trial: the robots' starts drawn and their distances
+/// measured once for the house, each trial run by [`run_team`].
+fn evaluate_team(
+    scene: &Scene,
+    (grid, distances): (&ferret_world::OccupancyGrid, &ferret_world::Distances),
+    strategies: &[Arc<dyn Strategy>],
+    draw: &TrialDraw<'_>,
+    team: TeamSettings,
+    trials: Vec<TrialSpec>,
+) -> HouseRun {
+    let house = &scene.house;
+    let starts = draw_starts(house, grid, team.robots, team.starts, draw.seed);
+    let robots = match team_distances(house, grid, distances, &starts) {
+        Ok(d) => d,
+        Err(e) => return (vec![], vec![e.to_string()], 0),
+    };
+    let tasks = draw.tasks.is_some();
+    let runs: Vec<std::result::Result<TrialRow, String>> = trials
+        .par_iter()
+        .flat_map_iter(|trial| {
+            let failed = move |s: &str, e: &dyn std::fmt::Display| {
+                format!("{}: {}: {s}: {e}", house.name, trial.task.targets_label())
+            };
+            let legs = team_destinations(house, &trial.task, &robots, grid.start_cell(), &starts);
+            let robots = &robots;
+            strategies.iter().map(move |s| {
+                let legs = legs.as_ref().map_err(|e| failed(s.name(), e))?;
+                let problems: Vec<SearchProblem<'_>> = robots
+                    .iter()
+                    .zip(legs)
+                    .map(|(d, l)| {
+                        let p = SearchProblem::new(house, d, trial);
+                        match l {
+                            Some(l) => p.with_destination(l),
+                            None => p,
+                        }
+                    })
+                    .collect();
+                run_team(s.as_ref(), &problems, &scene.truth)
+                    .map(|out| team_row(scene, trial, &out, tasks))
+                    .map_err(|e| failed(s.name(), &e))
+            })
+        })
+        .collect();
+    let mut rows = Vec::new();
+    let mut errors = Vec::new();
+    for run in runs {
+        match run {
+            Ok(row) => rows.push(row),
+            Err(e) => errors.push(e),
+        }
+    }
+    (rows, errors, trials.len())
+}
+
+/// Each robot's way on the floor in a team's row, first robot first: from its own start (the
+/// run's starts drawn again from `seed`) through the containers it searched, in order. The way
+/// a robot was on when the trial ended, and the way to a destination, are not in the row.
+///
+/// # Errors
+/// A row that is not a team's, distances that came from no grid, starts the house's start
+/// cannot reach.
+pub fn team_paths(
+    scene: &Scene,
+    distances: &ferret_world::Distances,
+    team: TeamSettings,
+    seed: u64,
+    row: &TrialRow,
+) -> Result<Vec<Vec<ferret_world::Point>>> {
+    let house = &scene.house;
+    let by: Vec<usize> = row
+        .searched_by
+        .as_deref()
+        .ok_or_else(|| {
+            crate::LabError::invalid(format!("{}: the row is not a team's", house.name))
+        })?
+        .split_whitespace()
+        .map(|r| r.parse::<usize>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|e| crate::LabError::invalid(format!("{}: searched_by: {e}", house.name)))?;
+    let grid = distances.grid().ok_or_else(|| {
+        crate::LabError::invalid(format!("{}: a team's paths need a grid", house.name))
+    })?;
+    let starts = draw_starts(house, grid, team.robots, team.starts, seed);
+    let robots = team_distances(house, grid, distances, &starts)?;
+    let searched: Vec<usize> = row
+        .searched
+        .split_whitespace()
+        .filter_map(|id| house.container_index(id))
+        .collect();
+    Ok(robots
+        .iter()
+        .enumerate()
+        .map(|(r, d)| {
+            let visits: Vec<ferret_world::Place> = std::iter::once(ferret_world::Place::Start)
+                .chain(
+                    searched
+                        .iter()
+                        .zip(&by)
+                        .filter(|(_, b)| **b == r)
+                        .map(|(&c, _)| ferret_world::Place::Container(c)),
+                )
+                .collect();
+            visits
+                .windows(2)
+                .filter_map(|w| d.path(w[0], w[1]))
+                .flatten()
+                .collect()
+        })
+        .collect())
+}
+
+/// The `trials.csv` row of a team's trial: [`trial_row`] of its outcome (the cost is the
+/// makespan) with the team's columns.
+pub fn team_row(scene: &Scene, trial: &TrialSpec, out: &TeamOutcome, tasks: bool) -> TrialRow {
+    TrialRow {
+        robots: Some(out.robots.len()),
+        total_travel_m: Some(out.total_travel),
+        searched_by: Some(
+            out.searched_by
+                .iter()
+                .map(ToString::to_string)
+                .collect::<Vec<_>>()
+                .join(" "),
+        ),
+        ..trial_row(scene, trial, &out.trial, tasks)
+    }
+}
+
 /// The `trials.csv` row of a finished trial; with `tasks`, the task's columns too (every row of
 /// a run of tasks has them, none of a run of single targets).
 pub fn trial_row(scene: &Scene, trial: &TrialSpec, out: &TrialOutcome, tasks: bool) -> TrialRow {
@@ -677,5 +813,8 @@ pub fn trial_row(scene: &Scene, trial: &TrialSpec, out: &TrialOutcome, tasks: bo
                 .join(" ")
         }),
         delivery_m: tasks.then_some(out.delivery),
+        robots: None,
+        total_travel_m: None,
+        searched_by: None,
     }
 }

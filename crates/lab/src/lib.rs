@@ -40,6 +40,7 @@
 //!     protocol: &Protocol::FERRET,
 //!     holdout: None,
 //!     tasks: None,
+//!     team: None,
 //! };
 //! let grid = GridParams::default();
 //! let run = EvalContext::new(&setup, &specs, &draw, &grid, &llm, &Silent)
@@ -85,7 +86,7 @@ pub use error::{LabError, Result};
 pub use eval_run::{EvalDone, EvalJob, ShownHouse};
 pub use evaluate::{
     EvalContext, Evaluation, EvaluationTotals, HouseInput, HouseOutcome, SpecEvaluation, TrialDraw,
-    default_batch, evaluate, trial_row,
+    default_batch, evaluate, team_paths, team_row, trial_row,
 };
 pub use feedback::{Feedback, Silent};
 pub use ferret_select::HouseOrder;

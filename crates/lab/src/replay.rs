@@ -254,6 +254,7 @@ fn run_draw(info: &RunInfo) -> TrialDraw<'_> {
         protocol: &info.protocol,
         holdout: info.planning.holdout,
         tasks: info.tasks.as_ref(),
+        team: None,
     }
 }
 
@@ -737,6 +738,9 @@ mod tests {
             destination: None,
             found_each: None,
             delivery_m: None,
+            robots: None,
+            total_travel_m: None,
+            searched_by: None,
         }
     }
 

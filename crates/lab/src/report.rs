@@ -62,6 +62,39 @@ pub fn paired_markdown(paired: &[PairedRow]) -> String {
     md
 }
 
+/// A run of teams: each strategy's makespan beside what the whole team drove (nothing for a
+/// run of one robot).
+pub fn team_markdown(summary: &[SummaryRow]) -> String {
+    if summary.iter().all(|r| r.mean_total_travel_m.is_none()) {
+        return String::new();
+    }
+    let mut md = String::from(
+        "
+## Teams
+
+The cost above is the makespan: metres until the goal held (robots drive at equal speed). What the whole team drove, beside it:
+
+| strategy | mean makespan (m) | mean total travel (m) | total / makespan |
+|---|---:|---:|---:|
+",
+    );
+    for r in summary {
+        if let Some(t) = r.mean_total_travel_m {
+            let ratio = if r.mean_m > 0.0 {
+                t / r.mean_m
+            } else {
+                f64::NAN
+            };
+            md += &format!(
+                "| {} | {:.2} | {:.2} | {:.2} |
+",
+                r.strategy, r.mean_m, t, ratio
+            );
+        }
+    }
+    md
+}
+
 /// What a run's `summary.md` shows.
 #[derive(Clone, Copy, Debug)]
 pub struct RunFigures<'a> {
@@ -101,6 +134,7 @@ pub fn run_markdown(f: &RunFigures<'_>) -> String {
     if f.cells {
         md += &cells_markdown(f.summary);
     }
+    md += &team_markdown(f.summary);
     if let Some(means) = f.reference_means {
         md += &reference_means_markdown(means);
     }

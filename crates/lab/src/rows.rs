@@ -48,6 +48,17 @@ pub struct TrialRow {
     /// The last leg, to the destination, metres (part of `cost_m`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub delivery_m: Option<f64>,
+    /// Robots of the team, in a run of teams (these last three columns are absent otherwise;
+    /// `cost_m` is then the makespan: metres until the goal held, and with a destination the
+    /// last robot carrying a target stood there).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robots: Option<usize>,
+    /// Metres driven by the whole team.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub total_travel_m: Option<f64>,
+    /// Which robot (0 first) searched each container of `searched`, space separated.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub searched_by: Option<String>,
 }
 
 /// The paper's unit of cost: a grid cell of 0.05 m (its table I is in these cells).

@@ -48,6 +48,9 @@ pub struct RunInfo {
     /// Household tasks instead of one target per trial; absent for single targets.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tasks: Option<crate::tasks::Tasks>,
+    /// The team on every trial, in a run of teams.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub team: Option<ferret_plan::TeamSettings>,
     /// Strategies in order.
     pub strategies: Vec<String>,
     /// SHA-256 of the trials.csv written with this file, so that a trials.csv of another run

@@ -36,6 +36,10 @@ pub struct SummaryRow {
     /// Half-width of the 95 % interval in 0.05 m cells (`--cells` only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ci95_cells: Option<f64>,
+    /// Mean metres driven by the whole team (a run of teams only; the cost is then the
+    /// makespan).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mean_total_travel_m: Option<f64>,
 }
 
 impl SummaryRow {
@@ -105,6 +109,8 @@ pub struct CostTable {
 struct CostEntry {
     house_index: usize,
     cost_m: f64,
+    /// A team's total travel, NaN for one robot.
+    total_travel_m: f64,
     strategy: u32,
     target: u32,
 }
@@ -139,6 +145,7 @@ impl CostTable {
         self.entries.push(CostEntry {
             house_index: row.house_index,
             cost_m: row.cost_m,
+            total_travel_m: row.total_travel_m.unwrap_or(f64::NAN),
             strategy,
             target,
         });
@@ -174,6 +181,19 @@ impl CostTable {
             target: name(e.target),
             cost_m: e.cost_m,
         })
+    }
+
+    /// The mean total travel of `strategy`'s teams, when every one of its rows is a team's.
+    pub fn mean_total_travel(&self, strategy: &str) -> Option<f64> {
+        let id = *self.ids.get(strategy)?;
+        let v: Vec<f64> = self
+            .entries
+            .iter()
+            .filter(|e| e.strategy == id)
+            .map(|e| e.total_travel_m)
+            .collect();
+        (!v.is_empty() && v.iter().all(|x| !x.is_nan()))
+            .then(|| v.iter().sum::<f64>() / v.len() as f64)
     }
 
     /// The costs of `strategy`'s trials, in row order.
@@ -263,6 +283,7 @@ pub fn summarize_costs(costs: &CostTable, order: &[String]) -> Vec<SummaryRow> {
                 mean_cells: None,
                 median_cells: None,
                 ci95_cells: None,
+                mean_total_travel_m: costs.mean_total_travel(s),
             }
         })
         .collect()
@@ -406,6 +427,9 @@ mod tests {
             destination: None,
             found_each: None,
             delivery_m: None,
+            robots: None,
+            total_travel_m: None,
+            searched_by: None,
         }
     }
 

@@ -45,6 +45,7 @@ fn draw() -> TrialDraw<'static> {
         protocol: &Protocol::FERRET,
         holdout: None,
         tasks: None,
+        team: None,
     }
 }
 
@@ -63,6 +64,7 @@ fn info(shard: Option<ShardRecord>) -> RunInfo {
         trials_per_house: TrialsPerHouse::Count(2),
         protocol: Protocol::FERRET,
         tasks: None,
+        team: None,
         strategies: specs(),
         trials_sha256: None,
         shard,

@@ -140,6 +140,7 @@ fn eval_run(dir: &std::path::Path, count: usize) -> EvalRun {
         protocol: &Protocol::FERRET,
         holdout: None,
         tasks: None,
+        team: None,
     };
     let ev = evaluate(&loaded.scenes, &maps, &strategies, &draw, &Silent);
     assert!(ev.errors.is_empty(), "{:?}", ev.errors);
@@ -156,6 +157,7 @@ fn eval_run(dir: &std::path::Path, count: usize) -> EvalRun {
         trials_per_house: TrialsPerHouse::One,
         protocol: Protocol::FERRET,
         tasks: None,
+        team: None,
         strategies: names,
         trials_sha256: None,
         shard: None,

@@ -60,6 +60,7 @@ fn evaluate_runs_every_strategy_on_the_same_trials_and_ticks_once_per_house() {
         protocol: &Protocol::FERRET,
         holdout: None,
         tasks: None,
+        team: None,
     };
     let count = Count::default();
     let ev = evaluate(&scenes, &maps, &s, &draw, &count);
@@ -101,6 +102,7 @@ fn a_deployment_step_learns_what_run_trial_and_replay_costs_say() {
         protocol: &protocol,
         holdout: None,
         tasks: None,
+        team: None,
     };
     for scene in &scenes {
         let (_, distances) =

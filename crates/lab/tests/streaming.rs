@@ -38,6 +38,7 @@ fn info(strategies: &[String], count: usize) -> RunInfo {
         trials_per_house: TrialsPerHouse::Count(2),
         protocol: Protocol::FERRET,
         tasks: None,
+        team: None,
         strategies: strategies.to_vec(),
         trials_sha256: None,
         shard: None,
@@ -102,6 +103,7 @@ fn a_streamed_evaluation_writes_the_in_memory_run_byte_for_byte() {
         protocol: &Protocol::FERRET,
         holdout: None,
         tasks: None,
+        team: None,
     };
     let grid = GridParams::default();
     let houses: Vec<usize> = loaded.scenes.iter().map(|s| s.house.index).collect();
@@ -220,6 +222,9 @@ fn row(strategy: &str, house_index: usize, target: &str, cost_m: f64, searched: 
         destination: None,
         found_each: None,
         delivery_m: None,
+        robots: None,
+        total_travel_m: None,
+        searched_by: None,
     }
 }
 

@@ -300,6 +300,7 @@ pub fn evaluate(
         protocol: &protocol,
         holdout: None,
         tasks: tasks.as_ref(),
+        team: None,
     };
     // Listed tasks are checked against every house given (a shard's too: the tasks of the
     // other shards' houses must fit them as well), as `ferret eval --tasks` checks its file
@@ -461,6 +462,7 @@ fn run_info(
         trials_per_house: draw.per_house,
         protocol: *draw.protocol,
         tasks: draw.tasks.cloned(),
+        team: draw.team,
         strategies: strategies.to_vec(),
         trials_sha256: None,
         shard: None,

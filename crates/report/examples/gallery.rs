@@ -94,6 +94,8 @@ fn house_figures(house: &House, dir: &Path, stem: &str, ext: &str) -> BoxResult<
             goal_labels: Vec::new(),
             destination: None,
             color: None,
+            team_paths: Vec::new(),
+            searched_by: Vec::new(),
         },
         TrajectoryPanel {
             title: "example: a two-stop search".into(),
@@ -104,6 +106,8 @@ fn house_figures(house: &House, dir: &Path, stem: &str, ext: &str) -> BoxResult<
             goal_labels: Vec::new(),
             destination: None,
             color: None,
+            team_paths: Vec::new(),
+            searched_by: Vec::new(),
         },
         TrajectoryPanel {
             title: "oracle".into(),
@@ -114,6 +118,8 @@ fn house_figures(house: &House, dir: &Path, stem: &str, ext: &str) -> BoxResult<
             goal_labels: Vec::new(),
             destination: None,
             color: None,
+            team_paths: Vec::new(),
+            searched_by: Vec::new(),
         },
     ];
     let topts = TrajectoryOptions {

@@ -189,6 +189,13 @@ pub struct TrajectoryPanel {
     pub destination: Option<Point>,
     /// Path colour; [`Rgb::palette`] of the panel's index when `None`.
     pub color: Option<Rgb>,
+    /// For a team: the paths of the robots after the first (whose path is `path`), each
+    /// drawn in a colour of its own ([`Rgb::palette`] of the robot's index, the first robot's
+    /// too); empty for one robot.
+    pub team_paths: Vec<Vec<Point>>,
+    /// For a team: which robot (0 first) searched each container of `searched`, its badge in
+    /// that robot's colour; empty for one robot.
+    pub searched_by: Vec<usize>,
 }
 
 /// Options of a trajectory figure.
@@ -282,7 +289,20 @@ pub fn draw_trajectories(
     for p in panels {
         let what = format!("trajectory panel `{}`", p.title);
         check_points(&what, &p.path)?;
+        for path in &p.team_paths {
+            check_points(&what, path)?;
+        }
         check_points(&what, p.destination.as_slice())?;
+        if !p.searched_by.is_empty() && p.searched_by.len() != p.searched.len() {
+            return Err(ReportError::invalid(
+                what,
+                format!(
+                    "{} robots named for {} containers searched",
+                    p.searched_by.len(),
+                    p.searched.len()
+                ),
+            ));
+        }
         if !p.cost_m.is_finite() {
             return Err(ReportError::invalid(
                 what,
@@ -304,7 +324,12 @@ pub fn draw_trajectories(
             ));
         }
     }
-    let (min, max) = extent(house, panels.iter().flat_map(|p| p.path.iter().copied()));
+    let (min, max) = extent(
+        house,
+        panels
+            .iter()
+            .flat_map(|p| p.path.iter().chain(p.team_paths.iter().flatten()).copied()),
+    );
     let (w_m, h_m) = (max.x - min.x, max.z - min.z);
     let s = match opts.px_per_m {
         Some(s) if s.is_finite() && s > 0.0 => s.min(2000.0 / w_m.max(h_m)),
@@ -1434,7 +1459,12 @@ impl Picture for Trajectories<'_> {
                 [px((b.x0, b.y0)), px((b.x1, b.y1))],
                 RGBColor(150, 150, 150).stroke_width(1),
             ))?;
-            draw_path(root, &l, &panel.path, color)?;
+            let team = !panel.team_paths.is_empty() || !panel.searched_by.is_empty();
+            let robot_color = |r: usize| if team { Rgb::palette(r) } else { color };
+            draw_path(root, &l, &panel.path, robot_color(0))?;
+            for (r, path) in panel.team_paths.iter().enumerate() {
+                draw_path(root, &l, path, robot_color(r + 1))?;
+            }
             let start = l.to_pixel(house.start.position);
             draw_start_marker(root, start, heading_px(&house.start))?;
             let destination = panel.destination.map(|d| l.to_pixel(d));
@@ -1444,6 +1474,9 @@ impl Picture for Trajectories<'_> {
 
             let mut soft = furniture_boxes(house, &l);
             soft.extend(path_boxes(&l, &panel.path, 5.0));
+            for path in &panel.team_paths {
+                soft.extend(path_boxes(&l, path, 5.0));
+            }
             soft.extend(start_boxes(house, &l));
             let mut placer = Placer::new(b.grown(-2.0), soft);
             for b in start_boxes(house, &l) {
@@ -1457,14 +1490,14 @@ impl Picture for Trajectories<'_> {
             for (n, &c) in panel.searched.iter().enumerate() {
                 let at = BoxPx::around(footprint_px(&l, &house.containers[c].footprint)).center();
                 placer.reserve(BoxPx::centred(at, (22.0, 22.0)));
-                badges.push((at, n + 1));
+                badges.push((at, n + 1, panel.searched_by.get(n).copied().unwrap_or(0)));
             }
             let mut avoid = start_boxes(house, &l);
             avoid.extend(path_boxes(&l, &panel.path, 8.0));
             avoid.extend(
                 badges
                     .iter()
-                    .map(|&(at, _)| BoxPx::centred(at, (24.0, 24.0))),
+                    .map(|&(at, _, _)| BoxPx::centred(at, (24.0, 24.0))),
             );
             draw_room_labels(root, house, &l, &mut placer, 13.0, &avoid)?;
             let goal_labels: Vec<(usize, String, Rgb)> = panel
@@ -1480,8 +1513,8 @@ impl Picture for Trajectories<'_> {
                 })
                 .collect();
             draw_container_labels(root, house, &l, &mut placer, &goal_labels, 11.5)?;
-            for (at, n) in badges {
-                draw_badge(root, at, &n.to_string(), color)?;
+            for (at, n, r) in badges {
+                draw_badge(root, at, &n.to_string(), robot_color(r))?;
             }
             draw_scale_bar(root, &l)?;
             for (i, line) in self.lists[k].iter().enumerate() {

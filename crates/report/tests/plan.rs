@@ -242,6 +242,8 @@ fn panels() -> Vec<TrajectoryPanel> {
             goal_labels: Vec::new(),
             destination: None,
             color: None,
+            team_paths: Vec::new(),
+            searched_by: Vec::new(),
         },
         TrajectoryPanel {
             title: "llm+model/p-context-a/gpt-5-mini".into(),
@@ -256,6 +258,8 @@ fn panels() -> Vec<TrajectoryPanel> {
             goal_labels: Vec::new(),
             destination: None,
             color: None,
+            team_paths: Vec::new(),
+            searched_by: Vec::new(),
         },
         TrajectoryPanel {
             title: "oracle".into(),
@@ -270,6 +274,8 @@ fn panels() -> Vec<TrajectoryPanel> {
             goal_labels: Vec::new(),
             destination: None,
             color: Some(Rgb::new(10, 20, 30)),
+            team_paths: Vec::new(),
+            searched_by: Vec::new(),
         },
     ]
 }

@@ -129,6 +129,8 @@ fn real_houses_are_drawn() {
             goal_labels: Vec::new(),
             destination: None,
             color: None,
+            team_paths: Vec::new(),
+            searched_by: Vec::new(),
         }];
         draw_trajectories(
             house,

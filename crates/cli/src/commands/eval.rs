@@ -36,6 +36,8 @@ pub struct Args {
     pub protocol: ProtocolArgs,
     #[command(flatten)]
     pub tasks: crate::args::TaskArgs,
+    #[command(flatten)]
+    pub team: crate::args::TeamArgs,
     /// Strategies, comma separated: optimistic+greedy, model/uniform, model/prior (calibrated),
     /// model/prior-raw (the uncalibrated estimate of earlier versions), model/noise (a control
     /// that knows nothing), each with /exact, /exact<N> or /k<N>, oracle (a model spec ending in
@@ -116,6 +118,7 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
         reveal_fraction: args.reveal_fraction,
         trials_per_house: args.trials_per_house,
         tasks: tasks.as_ref(),
+        team: args.team.team(),
         protocol: &protocol,
         cells: args.cells,
         paired_against: &args.paired_against,
@@ -135,6 +138,7 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
     } else {
         draw_pictures(
             &Pictures {
+                team: args.team.team(),
                 out: &args.out,
                 strategies: &args.strategies,
                 ran: &names,
@@ -179,8 +183,10 @@ pub struct Pictures<'a> {
     pub ran: &'a [String],
     /// Houses evaluated (the violin plot's title).
     pub houses: usize,
-    /// The trial seed (the violins' jitter).
+    /// The trial seed (the violins' jitter, and a team's starts).
     pub seed: u64,
+    /// The team of every trial, in a run of teams.
+    pub team: Option<ferret_plan::TeamSettings>,
 }
 
 /// Says why trajectories.png was not drawn: no house where every strategy finished (or not
@@ -222,7 +228,8 @@ pub fn draw_pictures(
     }
     if let Some(h) = shown {
         crate::output::write_with_path(&p.out.join("trajectories.png"), |path| {
-            draw_house_trajectories(&h.scene, &h.distances, p.ran, &h.rows, path)
+            let team = p.team.map(|t| (t, p.seed));
+            draw_house_trajectories(&h.scene, &h.distances, p.ran, &h.rows, team, path)
         })?;
         drawn.push("trajectories.png");
     }
@@ -231,12 +238,14 @@ pub fn draw_pictures(
 
 /// Draws every strategy's trajectory on one house side by side, from the trials already run
 /// (`rows`): nothing is run again, so no LLM is asked twice. A task's panels mark the
-/// containers holding each target and the destination, and its route ends there.
+/// containers holding each target and the destination, and its route ends there. A team's
+/// panels (`team`: the run's team and seed) draw each robot's way in its own colour.
 pub fn draw_house_trajectories(
     scene: &Scene,
     distances: &Distances,
     strategies: &[String],
     rows: &[TrialRow],
+    team: Option<(ferret_plan::TeamSettings, u64)>,
     out: &Path,
 ) -> Result<()> {
     let house = &scene.house;
@@ -293,15 +302,43 @@ pub fn draw_house_trajectories(
             delivery: row.delivery_m.unwrap_or(0.0),
             delivered_to: legs.as_ref().and_then(|l| l.place()),
         };
+        let (path, team_paths, searched_by) = match team {
+            Some((t, seed)) => {
+                let mut paths = ferret_lab::team_paths(scene, distances, t, seed, row)?;
+                let first = if paths.is_empty() {
+                    Vec::new()
+                } else {
+                    paths.remove(0)
+                };
+                let by = row
+                    .searched_by
+                    .as_deref()
+                    .unwrap_or_default()
+                    .split_whitespace()
+                    .filter_map(|r| r.parse().ok())
+                    .collect();
+                (first, paths, by)
+            }
+            None => (
+                o.trajectory(distances, legs.as_ref()).unwrap_or_default(),
+                Vec::new(),
+                Vec::new(),
+            ),
+        };
         panels.push(TrajectoryPanel {
-            title: s.clone(),
+            title: match team {
+                Some((t, _)) => format!("{s} ({} robots)", t.robots),
+                None => s.clone(),
+            },
             cost_m: o.cost,
-            path: o.trajectory(distances, legs.as_ref()).unwrap_or_default(),
+            path,
             searched,
             goals: goals.clone(),
             goal_labels: goal_labels.clone(),
             destination: legs.as_ref().and_then(|l| l.point(distances)),
             color: None,
+            team_paths,
+            searched_by,
         });
     }
     let what = task_words(&task);

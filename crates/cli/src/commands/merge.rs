@@ -156,6 +156,7 @@ fn draw_merged_pictures(merged: &MergedDir, out: &Path) -> Result<Vec<&'static s
             ran: &merged.ran,
             houses: merged.houses.len(),
             seed: info.seed,
+            team: info.team,
         },
         &merged.written.costs,
         shown.as_ref(),

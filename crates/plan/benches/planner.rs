@@ -1,7 +1,8 @@
 //! Decision latency of the exact planner (targets: ≤ 50 µs at n = 8, ≤ 100 ms at n = 16), of
 //! the task table (targets: ≤ 2 ms for 3 targets over 8 candidates, ≤ 200 ms over 12), and the
 //! cost of a whole trial of `model/…/exact`, where a trial needs a new table only when its
-//! candidate set changes.
+//! candidate set changes; and a robot's decision in a team of 3 at K = 8 (target ≤ 5 ms): the
+//! belief seen with the two containers the others are heading to left out, planned afresh.
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use ferret_plan::{
@@ -151,5 +152,36 @@ fn bench_trial(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench, bench_task, bench_trial);
+fn bench_team(c: &mut Criterion) {
+    let mut group = c.benchmark_group("team_decision");
+    // 22 containers, as a val150 house has; the paper's K = 8.
+    let (house, distances, p) = house(22, 11);
+    let task = Task::single(ObjectType::new("RemoteControl"));
+    let config = PlannerConfig::default();
+    let mut belief = Belief::new(&house, &distances, &task);
+    belief.search(3, Vec::new());
+    // What `Search::next_container_leaving` does for the third robot of a team: a view with
+    // the others' claims (the two likeliest containers) searched in vain, a fresh plan.
+    let mut likeliest: Vec<usize> = (0..22).filter(|&c| c != 3).collect();
+    likeliest.sort_by(|&a, &b| p[b].get().total_cmp(&p[a].get()));
+    for robots in [1usize, 3] {
+        let claims: Vec<usize> = likeliest[..robots - 1].to_vec();
+        group.bench_with_input(
+            BenchmarkId::new("k8_robots", robots),
+            &claims,
+            |b, claims| {
+                b.iter(|| {
+                    let mut view = belief.clone();
+                    for &c in claims {
+                        view.reveal(c, Vec::new());
+                    }
+                    Planner::new(p.clone(), config).choose(&view)
+                })
+            },
+        );
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench, bench_task, bench_trial, bench_team);
 criterion_main!(benches);

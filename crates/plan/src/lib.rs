@@ -117,14 +117,14 @@ pub use replay::{
 };
 pub use replay_memo::ReplayMemo;
 pub use strategy::{
-    ModelStrategy, SEQUENTIAL, SequentialStrategy, Strategy, StrategyRegistry, StrategySpec,
-    TeamStrategy, TrialContext, planned_spec, task_likelihoods,
+    INDEPENDENT, ModelStrategy, SEQUENTIAL, SPLIT, SequentialStrategy, Strategy, StrategyRegistry,
+    StrategySpec, TeamStrategy, Teamwork, TrialContext, planned_spec, task_likelihoods,
 };
 pub use task::{Destination, DestinationLegs, Goal, MAX_TARGETS, Task, TaskError};
 pub use task_table::{TaskProblem, TaskSolution, solve_task};
 pub use team::{
-    INDEPENDENT, MAX_ROBOTS, RobotRun, SPLIT, TeamOutcome, TeamSettings, TeamStarts, Teamwork,
-    draw_starts, run_team, split_rooms, team_destinations, team_distances,
+    MAX_ROBOTS, RobotRun, TeamOutcome, TeamSettings, TeamStarts, draw_starts, run_team,
+    split_rooms, team_destinations, team_distances,
 };
 pub use trial::{
     Search, TaskShape, TrialOutcome, TrialsPerHouse, draw_tasks, draw_trial, draw_trials,

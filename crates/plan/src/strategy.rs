@@ -18,7 +18,6 @@ use crate::policy::{
 use crate::prior::{Prior, RawPrior};
 use crate::probability::Probability;
 use crate::problem::SearchProblem;
-use crate::team::{INDEPENDENT, SPLIT, Teamwork};
 
 /// What a strategy needs to start a trial.
 #[derive(Clone, Copy, Debug)]
@@ -64,6 +63,44 @@ pub trait Strategy: Send + Sync {
         Teamwork::Coordinated
     }
 }
+
+/// How the robots of a team share the work.
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "kebab-case")]
+pub enum Teamwork {
+    /// Each robot's next container is chosen knowing where the others are heading: as if
+    /// those containers were searched in vain (this robot's plan matters only where they hold
+    /// nothing), and never one of them. Sequential greedy assignment: robots choose in turn as
+    /// they become free.
+    #[default]
+    Coordinated,
+    /// Each robot runs the single-robot plan on what the team has seen, blind to where the
+    /// others are heading: two may drive to the same container. The baseline to beat.
+    Independent,
+    /// The rooms are divided among the robots ([`split_rooms`](crate::split_rooms)); each plans its share, leaving
+    /// the others' shares and claims alone, and once its share is done helps anywhere (as
+    /// coordinated).
+    SplitByRegion,
+}
+
+impl Teamwork {
+    /// The spec prefix of the strategies that work this way (`independent/model/prior`);
+    /// `None` for coordinated, the way a plain spec works.
+    pub fn prefix(self) -> Option<&'static str> {
+        match self {
+            Teamwork::Coordinated => None,
+            Teamwork::Independent => Some(INDEPENDENT),
+            Teamwork::SplitByRegion => Some(SPLIT),
+        }
+    }
+}
+
+/// Spec kind of [`Teamwork::Independent`] strategies.
+pub const INDEPENDENT: &str = "independent";
+/// Spec kind of [`Teamwork::SplitByRegion`] strategies.
+pub const SPLIT: &str = "split";
 
 /// A parsed spec string: its kind (first `/`-separated part) and arguments.
 #[derive(Clone, Debug, PartialEq, Eq)]

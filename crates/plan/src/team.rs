@@ -21,48 +21,12 @@ use crate::belief::Belief;
 use crate::error::PlanError;
 use crate::policy::OracleTable;
 use crate::problem::SearchProblem;
-use crate::strategy::Strategy;
+use crate::strategy::{Strategy, Teamwork};
 use crate::task::{DestinationLegs, Goal, Task, TaskError};
 use crate::trial::{Search, TrialOutcome, contents_of};
 
 /// The most robots a team has.
 pub const MAX_ROBOTS: usize = 4;
-
-/// How the robots of a team share the work.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Teamwork {
-    /// Each robot's next container is chosen knowing where the others are heading: as if
-    /// those containers were searched in vain (this robot's plan matters only where they hold
-    /// nothing), and never one of them. Sequential greedy assignment: robots choose in turn as
-    /// they become free.
-    #[default]
-    Coordinated,
-    /// Each robot runs the single-robot plan on what the team has seen, blind to where the
-    /// others are heading: two may drive to the same container. The baseline to beat.
-    Independent,
-    /// The rooms are divided among the robots ([`split_rooms`]); each plans its share, leaving
-    /// the others' shares and claims alone, and once its share is done helps anywhere (as
-    /// coordinated).
-    SplitByRegion,
-}
-
-impl Teamwork {
-    /// The spec prefix of the strategies that work this way (`independent/model/prior`);
-    /// `None` for coordinated, the way a plain spec works.
-    pub fn prefix(self) -> Option<&'static str> {
-        match self {
-            Teamwork::Coordinated => None,
-            Teamwork::Independent => Some(INDEPENDENT),
-            Teamwork::SplitByRegion => Some(SPLIT),
-        }
-    }
-}
-
-/// Spec kind of [`Teamwork::Independent`] strategies.
-pub const INDEPENDENT: &str = "independent";
-/// Spec kind of [`Teamwork::SplitByRegion`] strategies.
-pub const SPLIT: &str = "split";
 
 /// Where the robots of a team start.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -234,8 +198,9 @@ pub struct RobotRun {
     /// Metres it drove until the trial ended (a leg under way counted as far as it got;
     /// the way to the destination included).
     pub travelled: f64,
-    /// The container it was on its way to when the trial ended, if any.
-    pub heading: Option<usize>,
+    /// The container it was on its way to when the trial ended, if any, and when it would
+    /// have got there (metres from the trial's start).
+    pub heading: Option<(usize, f64)>,
     /// Whether it drove to the destination at the end.
     pub delivered: bool,
 }
@@ -367,7 +332,7 @@ pub fn run_team(
                     }
                 }
                 Steer::Plan => {
-                    let others = leaving(&members, r, teamwork, regions.as_deref());
+                    let others = leaving(&members, r, now, teamwork, regions.as_deref());
                     members[r].search.next_container_leaving(&others)?
                 }
             };
@@ -455,7 +420,7 @@ pub fn run_team(
             RobotRun {
                 searched: m.searched.clone(),
                 travelled: m.search.belief().travelled() + under_way,
-                heading: m.claim.map(|x| x.0),
+                heading: m.claim,
                 delivered,
             }
         })
@@ -529,20 +494,26 @@ fn arrive(
 fn leaving(
     members: &[Member<'_>],
     r: usize,
+    now: f64,
     teamwork: Teamwork,
     regions: Option<&[usize]>,
 ) -> Vec<usize> {
     if teamwork == Teamwork::Independent {
         return Vec::new();
     }
+    // A claim is left to its robot when it gets there no later than this one would; one that
+    // this robot would reach first stays open to it (the other's trip is then wasted, but the
+    // container is searched sooner: what makes the goal hold early).
+    let b = members[r].search.belief();
     let mut out: Vec<usize> = members
         .iter()
         .enumerate()
         .filter(|&(o, _)| o != r)
-        .filter_map(|(_, m)| m.claim.map(|x| x.0))
+        .filter_map(|(_, m)| m.claim)
+        .filter(|&(c, arrival)| arrival <= now + b.distance_to(c))
+        .map(|(c, _)| c)
         .collect();
     if let Some(owner) = regions {
-        let b = members[r].search.belief();
         let open = |c: usize| !b.is_searched(c) && !out.contains(&c);
         let mine_left = (0..owner.len()).any(|c| owner[c] == r && open(c));
         if mine_left {

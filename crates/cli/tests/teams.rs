@@ -60,6 +60,20 @@ fn eval_of_a_team_writes_its_columns_summary_and_picture() {
     );
     let summary = read_csv(&out.join("summary.csv"));
     assert!(summary.iter().all(|r| !r["mean_total_travel_m"].is_empty()));
+    // Selection replays one robot's searches: a run of teams is refused, saying why.
+    let o = ferret(&[
+        "select",
+        "--trials",
+        s(&out),
+        "--out",
+        s(&dir.path().join("select")),
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        text(&o).contains("teams of 2 robots") && text(&o).contains("cannot replay a team's"),
+        "{}",
+        text(&o)
+    );
     let info = read_json(&out.join("run.json"));
     assert_eq!(info["team"]["robots"], 2);
     assert_eq!(info["team"]["starts"], "together");

@@ -94,11 +94,7 @@ impl EvalJob<'_> {
             )));
         }
         check_distinct("--strategies", self.specs)?;
-        if self.team.is_some() && self.protocol.travel_cost != ferret_world::TravelCost::Plain {
-            return Err(LabError::invalid(
-                "--robots: the soft travel cost measures one robot's legs; a team's makespan is measured in plain metres (use a protocol with the plain travel cost)",
-            ));
-        }
+        check_team(self.team, self.protocol)?;
         if let Some(s) = self.paired_against.iter().find(|s| !self.specs.contains(s)) {
             return Err(LabError::invalid(format!(
                 "--paired-against {s}: not one of --strategies"
@@ -266,6 +262,20 @@ impl EvalJob<'_> {
             }),
             merged_from: Vec::new(),
         }
+    }
+}
+
+/// Refuses a team under a protocol whose cost a team cannot have: a team's makespan is plain
+/// metres, the soft travel cost measures one robot's legs.
+pub fn check_team(team: Option<TeamSettings>, protocol: &Protocol) -> Result<()> {
+    match team {
+        Some(t) if protocol.travel_cost != ferret_world::TravelCost::Plain => {
+            Err(LabError::invalid(format!(
+                "a team of {} robots: a team's makespan is measured in plain metres, and this protocol's soft travel cost measures one robot's legs (use a protocol with the plain travel cost)",
+                t.robots
+            )))
+        }
+        _ => Ok(()),
     }
 }
 

@@ -83,7 +83,7 @@ pub mod tasks;
 
 pub use deploy::{DeploySettings, DeployedTrial, deploy, house_order};
 pub use error::{LabError, Result};
-pub use eval_run::{EvalDone, EvalJob, ShownHouse};
+pub use eval_run::{EvalDone, EvalJob, ShownHouse, check_team};
 pub use evaluate::{
     EvalContext, Evaluation, EvaluationTotals, HouseInput, HouseOutcome, SpecEvaluation, TrialDraw,
     default_batch, evaluate, team_paths, team_row, trial_row,

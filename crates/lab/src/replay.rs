@@ -293,6 +293,12 @@ pub fn replay_table(
 ) -> Result<ReplayTable> {
     let info = &run.info;
     let rows = &run.rows;
+    if let Some(team) = info.team {
+        return Err(LabError::invalid(format!(
+            "the run's trials were done by teams of {} robots; selection replays one robot's searches and cannot replay a team's: select over a run without --robots",
+            team.robots
+        )));
+    }
     // Counterfactual replays are other numbers than pessimistic ones: they are cached under a
     // key of their own (the pessimistic key stays the plain one, so existing caches stay valid).
     let key = match protocol.replay {

@@ -220,6 +220,12 @@ impl PyEvaluation {
 /// `goal`, `destination`, `found_each` and `delivery_m` too, and `target` is the targets joined
 /// by `+` (all) or `|` (any). Bad tasks raise `ConfigError` naming the keyword and the field.
 ///
+/// `robots=N` (1 to 4) runs every trial with a team, as `ferret eval --robots` does:
+/// `starts="together"` (every robot at the house's start) or `"spread"` (the others on
+/// reachable floor drawn from `seed`); `cost_m` is then the makespan and the rows have
+/// `robots`, `total_travel_m` and `searched_by` too. Strategies `independent/<spec>` and
+/// `split/<spec>` share the work otherwise than a plain spec, which coordinates its robots.
+///
 /// `shard=(i, n)` runs only the houses whose file index is i
 /// modulo n (as `ferret eval --shard i/n`): exactly the trials one machine runs on them; `save`
 /// records the shard, and `ferret.merge` joins the shards' directories into the run of all
@@ -230,7 +236,8 @@ impl PyEvaluation {
     reveal_fraction = 0.0, task = None, deliver = None, tasks = None, protocol = "ferret",
     cells = false, max_containers = 8, exact_max = 16, search_cost = 0.0, config = None,
     llm_cache = None, offline = false, keep_going = false, fusion = None, resolution = 0.05,
-    robot_radius = 0.18, wall_thickness = 0.05, progress = None, shard = None
+    robot_radius = 0.18, wall_thickness = 0.05, progress = None, shard = None, robots = None,
+    starts = "together"
 ))]
 pub fn evaluate(
     py: Python<'_>,
@@ -258,6 +265,8 @@ pub fn evaluate(
     wall_thickness: f64,
     progress: Option<progress::Progress>,
     shard: Option<(usize, usize)>,
+    robots: Option<usize>,
+    starts: &str,
 ) -> PyResult<PyEvaluation> {
     // Every argument is checked before any work, as the command line checks its options.
     let grid = Grid::new(resolution, robot_radius, wall_thickness)?;
@@ -285,6 +294,23 @@ pub fn evaluate(
         )));
     }
     let protocol = settings::protocol(protocol)?;
+    let starts: ferret_plan::TeamStarts = starts
+        .parse()
+        .map_err(|e: String| errors::config(format!("starts={starts:?}: {e}")))?;
+    let team = match robots {
+        Some(n) => Some(
+            ferret_plan::TeamSettings::new(n, starts)
+                .map_err(|e| errors::config(format!("robots={n}: {e}")))?,
+        ),
+        None if starts != ferret_plan::TeamStarts::Together => {
+            return Err(errors::config(format!(
+                "starts={:?}: only with robots=",
+                starts.to_string()
+            )));
+        }
+        None => None,
+    };
+    ferret_lab::check_team(team, &protocol).map_err(errors::lab)?;
     let shard = shard
         .map(|(i, n)| Shard::new(i, n))
         .transpose()
@@ -300,7 +326,7 @@ pub fn evaluate(
         protocol: &protocol,
         holdout: None,
         tasks: tasks.as_ref(),
-        team: None,
+        team,
     };
     // Listed tasks are checked against every house given (a shard's too: the tasks of the
     // other shards' houses must fit them as well), as `ferret eval --tasks` checks its file

@@ -456,12 +456,16 @@ def evaluate(
     wall_thickness: float = 0.05,
     progress: _Progress = None,
     shard: Optional[Tuple[int, int]] = None,
+    robots: Optional[int] = None,
+    starts: Literal["together", "spread"] = "together",
 ) -> Evaluation:
     """Evaluates strategies on houses as ``ferret eval`` does (identical costs); with
     ``shard=(i, n)`` only the houses whose file index is i modulo n. ``task="all:3"`` (or
     ``"any:2"``) draws household tasks per house, brought to ``deliver`` (``"start"``,
     ``"room:<RoomType>"``, ``"container:<ObjectType>"``); ``tasks`` lists them (a tasks file's
-    path, or dicts with ``house``, ``targets``, ``goal``, ``destination``)."""
+    path, or dicts with ``house``, ``targets``, ``goal``, ``destination``). ``robots=N`` runs
+    every trial with a team of N robots (``starts="together"`` or ``"spread"``), as ``ferret
+    eval --robots`` does: ``cost_m`` is the makespan."""
 
 def merge(
     runs: Sequence[_Path],

@@ -22,20 +22,14 @@ PER_HOUSE="${FERRET_FIG_TRIALS:-3}"
 # shellcheck source=scripts/lib/ferret-bin.sh
 source "$ROOT/scripts/lib/ferret-bin.sh"
 ferret="$(ferret_bin)"
-if [ -n "${FERRET_FIG_OUT:-}" ]; then
-    out="$FERRET_FIG_OUT"
-    mkdir -p "$out"
-else
-    out="$(mktemp -d)"
-    trap 'rm -rf "$out"' EXIT
-fi
+# shellcheck source=scripts/lib/figures.sh
+source "$ROOT/scripts/lib/figures.sh"
+figures_dir
 log() { printf '[task-figures %s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }
 
 houses=(--houses "$DATA/multiroom-val150.jsonl.gz" --asset-db "$DATA/databases/asset-database.json")
 log "training the prior"
-"$ferret" prior train --houses "$DATA/smallhouse-train1000.jsonl.gz" \
-    --also "$DATA/oneroom-train500.jsonl.gz" --asset-db "$DATA/databases/asset-database.json" \
-    --out "$out/prior.json" >&2
+figures_prior "$ferret" "$DATA"
 
 echo "# Household tasks on multiroom-val150"
 echo

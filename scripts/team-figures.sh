@@ -20,20 +20,14 @@ DATA="${FERRET_PROCTHOR_DIR:?set FERRET_PROCTHOR_DIR to the ProcTHOR directory}"
 # shellcheck source=scripts/lib/ferret-bin.sh
 source "$ROOT/scripts/lib/ferret-bin.sh"
 ferret="$(ferret_bin)"
-if [ -n "${FERRET_FIG_OUT:-}" ]; then
-    out="$FERRET_FIG_OUT"
-    mkdir -p "$out"
-else
-    out="$(mktemp -d)"
-    trap 'rm -rf "$out"' EXIT
-fi
+# shellcheck source=scripts/lib/figures.sh
+source "$ROOT/scripts/lib/figures.sh"
+figures_dir
 log() { printf '[team-figures %s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }
 
 houses=(--houses "$DATA/multiroom-val150.jsonl.gz" --asset-db "$DATA/databases/asset-database.json")
 log "training the prior"
-"$ferret" prior train --houses "$DATA/smallhouse-train1000.jsonl.gz" \
-    --also "$DATA/oneroom-train500.jsonl.gz" --asset-db "$DATA/databases/asset-database.json" \
-    --out "$out/prior.json" >&2
+figures_prior "$ferret" "$DATA"
 
 team="model/prior,independent/model/prior,split/model/prior,model/uniform,independent/model/uniform,oracle"
 for kind in one all:2; do

@@ -630,15 +630,17 @@ fn evaluate_house(
             })
         })
         .collect();
-    let mut rows = Vec::new();
-    let mut errors = Vec::new();
-    for run in runs {
-        match run {
-            Ok(row) => rows.push(row),
-            Err(e) => errors.push(e),
-        }
-    }
-    (rows, errors, trials.len())
+    house_run(runs, trials.len())
+}
+
+/// A house's rows and failures, in the order of its trials' runs.
+fn house_run(runs: Vec<std::result::Result<TrialRow, String>>, trials: usize) -> HouseRun {
+    let (ok, failed): (Vec<_>, Vec<_>) = runs.into_iter().partition(|r| r.is_ok());
+    (
+        ok.into_iter().filter_map(|r| r.ok()).collect(),
+        failed.into_iter().filter_map(|r| r.err()).collect(),
+        trials,
+    )
 }
 
 /// [`evaluate_house`] with a team on every trial: the robots' starts drawn and their distances
@@ -685,15 +687,7 @@ fn evaluate_team(
             })
         })
         .collect();
-    let mut rows = Vec::new();
-    let mut errors = Vec::new();
-    for run in runs {
-        match run {
-            Ok(row) => rows.push(row),
-            Err(e) => errors.push(e),
-        }
-    }
-    (rows, errors, trials.len())
+    house_run(runs, trials.len())
 }
 
 /// Each robot's way on the floor in a team's row, first robot first: from its own start (the

@@ -46,7 +46,9 @@ pub struct Args {
     /// llm+model/<prompt>/<llm>[/exact], fused/<prompt>/<llm>[/exact] (with --fusion) and
     /// llm-direct/p-direct/<llm> (prompts: p-yesno, p-choice, p-batch, p-context-a,
     /// p-context-b, p-minimal, p-direct, or a template path); with --task, also
-    /// sequential/<spec> (the planner of <spec> looking for one target after another).
+    /// sequential/<spec> (the planner of <spec> looking for one target after another); with
+    /// --robots, independent/<spec> (each robot blind to the others) and split/<spec> (the
+    /// rooms divided among the robots), a plain spec coordinating its robots.
     #[arg(long, value_delimiter = ',', default_value = DEFAULT_STRATEGIES)]
     pub strategies: Vec<String>,
     /// Seed of the trials (targets drawn per house).

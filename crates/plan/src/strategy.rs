@@ -194,23 +194,11 @@ impl StrategyRegistry {
             .into_iter()
             .find(|t| t.prefix() == Some(parsed.kind.as_str()));
         if let Some(teamwork) = teamwork {
-            let inner = self.build(&parsed.args.join("/")).map_err(|e| match e {
-                PlanError::UnknownStrategy { reason, .. } => PlanError::UnknownStrategy {
-                    spec: parsed.raw.clone(),
-                    reason,
-                },
-                other => other,
-            })?;
+            let inner = self.build_wrapped(&parsed)?;
             return TeamStrategy::new(&parsed.raw, inner, teamwork).map(|s| Arc::new(s) as _);
         }
         if parsed.kind == SEQUENTIAL {
-            let inner = self.build(&parsed.args.join("/")).map_err(|e| match e {
-                PlanError::UnknownStrategy { reason, .. } => PlanError::UnknownStrategy {
-                    spec: parsed.raw.clone(),
-                    reason,
-                },
-                other => other,
-            })?;
+            let inner = self.build_wrapped(&parsed)?;
             return SequentialStrategy::new(&parsed.raw, inner).map(|s| Arc::new(s) as _);
         }
         match self.kinds.get(&parsed.kind) {
@@ -220,6 +208,18 @@ impl StrategyRegistry {
                 reason: format!("known forms: {}", self.usage().join(", ")),
             }),
         }
+    }
+
+    /// The strategy a wrapper spec (`sequential/<spec>`, `independent/<spec>`, ...) wraps; an
+    /// unknown one is reported under the whole spec, as it was written.
+    fn build_wrapped(&self, wrapper: &StrategySpec) -> Result<Arc<dyn Strategy>, PlanError> {
+        self.build(&wrapper.args.join("/")).map_err(|e| match e {
+            PlanError::UnknownStrategy { reason, .. } => PlanError::UnknownStrategy {
+                spec: wrapper.raw.clone(),
+                reason,
+            },
+            other => other,
+        })
     }
 
     /// The registry of built-in strategies: `optimistic+greedy`, `model/<source>[/<limit>]` with

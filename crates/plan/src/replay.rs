@@ -189,3 +189,45 @@ pub fn replay_costs(
     }
     Ok(costs)
 }
+
+/// The replay costs of every candidate on a team's finished trial whose targets were found in
+/// `found_each`: each candidate run by the same team (one problem per robot, each from its own
+/// start) in the pessimistic hindsight world, scored by its makespan. `deployed` keeps the
+/// deployed candidate's own cost, as in [`replay_costs`].
+///
+/// # Errors
+/// A goal that did not hold, a candidate that never reaches it in the hindsight world, and
+/// what [`run_team`](crate::run_team) refuses.
+pub fn replay_team_costs(
+    candidates: &[std::sync::Arc<dyn Strategy>],
+    problems: &[SearchProblem<'_>],
+    found_each: &[Option<usize>],
+    deployed: (usize, f64),
+) -> Result<Vec<f64>, PlanError> {
+    let first = problems.first().ok_or_else(|| PlanError::Team {
+        house: String::new(),
+        message: "a team needs at least one robot".into(),
+    })?;
+    let (house, task) = (first.house, first.task());
+    let hindsight = hindsight_truth(house, task, found_each)?;
+    candidates
+        .iter()
+        .enumerate()
+        .map(|(j, s)| {
+            if j == deployed.0 {
+                return Ok(deployed.1);
+            }
+            let team = crate::team::run_team(s.as_ref(), problems, &hindsight)?;
+            match team.trial.found {
+                Some(_) => Ok(team.trial.cost),
+                None => Err(PlanError::Replay {
+                    house: house.name.clone(),
+                    message: format!(
+                        "{} never reached the goal of {task} with its team",
+                        s.name()
+                    ),
+                }),
+            }
+        })
+        .collect()
+}

@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use crate::model::TrialStatus;
-pub use crate::model::{DestinationBody, GoalName, TaskBody};
+pub use crate::model::{DestinationBody, GoalName, TaskBody, TeamRobot};
 
 /// Longest accepted request id, characters.
 pub const MAX_REQUEST_ID: usize = 200;
@@ -269,6 +269,13 @@ pub struct StartTrial {
     #[serde(default)]
     #[schema(value_type = Option<Vec<f64>>, min_items = 3, max_items = 3)]
     pub pose: Option<[f64; 3]>,
+    /// A team of 1 to 4 robots that search together, each by its own id: each asks for its
+    /// next container (`POST /trials/{id}/claims`) and reports what it saw with its id; no two
+    /// robots are given the same container. Default: one robot, as the trial's own replies
+    /// steer.
+    #[serde(default)]
+    #[schema(min_items = 1, max_items = 4)]
+    pub robots: Option<Vec<TeamRobot>>,
 }
 
 /// The destination of a trial's task, where it is.
@@ -312,6 +319,43 @@ pub struct Observe {
     #[serde(default)]
     #[schema(minimum = 0.0, maximum = 100000.0)]
     pub travelled_m: Option<f64>,
+    /// The robot that searched it: required in a team's trial (one of its `robots`).
+    #[serde(default)]
+    #[schema(pattern = r"^[A-Za-z0-9_./-]{1,64}$")]
+    pub robot: Option<String>,
+}
+
+/// `POST /trials/{id}/claims`: a robot of a team asks for its next container.
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ClaimNext {
+    /// Makes a retried request harmless.
+    #[serde(default)]
+    #[schema(min_length = 1, max_length = 200)]
+    pub request_id: Option<String>,
+    /// The robot asking: one of the trial's `robots`.
+    #[schema(pattern = r"^[A-Za-z0-9_./-]{1,64}$")]
+    pub robot: String,
+}
+
+/// A robot of a team's trial as it stands.
+#[derive(Clone, Debug, Serialize, Deserialize, ToSchema)]
+pub struct RobotState {
+    /// Its id.
+    pub id: String,
+    /// Where it is: where it started, or the access point of the last container it searched
+    /// (map frame, metres).
+    pub at: [f64; 2],
+    /// The container it claimed, if any: it is the only robot sent there.
+    pub claim: Option<String>,
+    /// Seconds until the claim lapses unless the robot is heard from.
+    pub claim_expires_in_s: Option<f64>,
+    /// The containers it searched, in order.
+    pub searched: Vec<String>,
+    /// Map distance it drove so far, metres.
+    pub cost_m: f64,
+    /// Seconds since it last called; `None` before its first call.
+    pub heard_s_ago: Option<f64>,
 }
 
 /// `POST /trials/{id}/abandon`: the robot gives the search up (it failed, or was called away).
@@ -436,8 +480,13 @@ pub struct TrialState {
     pub cost_m: f64,
     /// Sum of the robot's reported odometry, when it reported any.
     pub travelled_m: Option<f64>,
-    /// Where to search next (while searching).
+    /// Where to search next (while searching). In a team's trial: the container claimed for
+    /// the robot that asked (none when everything left is claimed by its teammates: ask again).
     pub next: Option<NextContainer>,
+    /// A team's robots, in the order the trial named them; `cost_m` is then the makespan
+    /// (the longest way any robot drove).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robots: Option<Vec<RobotState>>,
     /// Every candidate's replay cost (done trials).
     pub replays_m: Option<BTreeMap<String, f64>>,
 }
@@ -607,6 +656,12 @@ impl WithRequestId for AbandonTrial {
 }
 
 impl WithRequestId for Observe {
+    fn request_id_mut(&mut self) -> &mut Option<String> {
+        &mut self.request_id
+    }
+}
+
+impl WithRequestId for ClaimNext {
     fn request_id_mut(&mut self) -> &mut Option<String> {
         &mut self.request_id
     }

@@ -117,6 +117,8 @@ pub struct StoredTrial {
     pub end_seq: Option<i64>,
     /// Its household task (targets, goal, destination); `None` for one target.
     pub task: Option<TaskBody>,
+    /// The robots of a team that searches it together; `None` for one robot.
+    pub robots: Option<Vec<TeamRobot>>,
 }
 
 /// One search reported by the robot.
@@ -132,6 +134,8 @@ pub struct StoredObservation {
     pub travelled: Option<f64>,
     /// The leg's map distance, metres.
     pub leg: f64,
+    /// The robot of a team that searched it.
+    pub robot: Option<String>,
 }
 
 /// A stored reply to a request with a `request_id`.
@@ -230,4 +234,29 @@ pub struct TaskBody {
     /// Where to bring them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub destination: Option<DestinationBody>,
+}
+
+/// A robot of a team trial: its id and where it starts.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TeamRobot {
+    /// How the robot names itself in every request of the trial: 1 to 64 letters, digits,
+    /// `_`, `-`, `.` or `/` (a ROS namespace serves).
+    #[schema(pattern = r"^[A-Za-z0-9_./-]{1,64}$")]
+    pub id: String,
+    /// Its pose `[x, y, yaw°]` in the map frame; default: the trial's start.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(value_type = Option<Vec<f64>>, min_items = 3, max_items = 3)]
+    pub pose: Option<[f64; 3]>,
+}
+
+/// A team robot's row: its claim and when it was last heard from.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct StoredRobot {
+    /// Its id.
+    pub robot: String,
+    /// The container it claimed, if any, and when the claim lapses (ms since the Unix epoch).
+    pub claim: Option<(String, i64)>,
+    /// When it last called, ms since the Unix epoch.
+    pub heard_ms: i64,
 }

@@ -90,6 +90,7 @@ mod tests {
             travelled_m: None,
             next: None,
             replays_m: None,
+            robots: None,
         })
     }
 

@@ -327,6 +327,7 @@ mod tests {
                         started_after: ended,
                         end_seq: None,
                         task: None,
+                        robots: None,
                     });
                 }
             }

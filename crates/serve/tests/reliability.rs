@@ -266,6 +266,7 @@ fn the_openapi_links_name_operations_that_exist() {
         ("/deployments", "post", "201"),
         ("/deployments/{id}/trials", "post", "201"),
         ("/trials/{id}/observations", "post", "200"),
+        ("/trials/{id}/claims", "post", "200"),
     ] {
         let links = doc["paths"][path][method]["responses"][status]["links"]
             .as_object()
@@ -279,7 +280,7 @@ fn the_openapi_links_name_operations_that_exist() {
             followed += 1;
         }
     }
-    assert_eq!(followed, 9);
+    assert_eq!(followed, 15);
 }
 
 #[test]

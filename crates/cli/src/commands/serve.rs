@@ -142,6 +142,11 @@ pub struct Args {
     /// is back.
     #[arg(long, value_name = "SECS", default_value_t = 30.0)]
     llm_retry_after: f64,
+    /// Seconds a robot of a team keeps its claim on a container without a word from it
+    /// (a claim, an observation); past it a teammate may be sent there. Every replica of one
+    /// database should be given the same.
+    #[arg(long, value_name = "SECS", default_value_t = ferret_serve::service::DEFAULT_CLAIM_TTL.as_secs_f64())]
+    claim_ttl: f64,
 }
 
 fn seconds(name: &str, v: f64) -> Result<Duration> {
@@ -222,6 +227,7 @@ fn check(args: &Args) -> Result<Checked> {
             kept_replays: args.kept_replays,
             kept_plans: args.kept_plans,
             max_event_streams: args.max_event_streams,
+            claim_ttl: seconds("--claim-ttl", args.claim_ttl)?,
             ..ServiceOptions::default()
         },
         serve: ServeOptions {

@@ -30,8 +30,8 @@ use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
 use crate::api::{
-    AbandonTrial, CreateDeployment, DeploymentState, DeploymentSummary, ErrorBody, Observe,
-    SceneDetail, SceneSummary, StartTrial, TrialState, TrialView, UploadScene,
+    AbandonTrial, ClaimNext, CreateDeployment, DeploymentState, DeploymentSummary, ErrorBody,
+    Observe, SceneDetail, SceneSummary, StartTrial, TrialState, TrialView, UploadScene,
 };
 use crate::error::{ApiError, ErrorKind};
 use crate::model::ApiReply;
@@ -224,6 +224,21 @@ async fn post_observation(
     blocking(move || s.record_observation(trial, b.value, &b.raw)).await
 }
 
+#[utoipa::path(post, path = "/trials/{id}/claims", request_body = ClaimNext,
+    operation_id = "claim",
+    params(("id" = i64, Path, description = "Trial id", minimum = 1), ("Idempotency-Key" = Option<String>, Header, description = "The request id, as the request_id field (either, or both the same)")),
+    responses((status = 200, description = "The team's trial, with the container claimed for the robot that asked in `next` (none while everything left is claimed by its teammates, or once the trial has ended); asking again renews the claim", body = TrialState),
+        (status = 404, description = "No such trial", body = ErrorBody),
+        (status = 422, description = "The trial has no team, or the robot is not one of its robots", body = ErrorBody),
+        (status = 503, description = "A strategy could not plan (an LLM endpoint is down); retry later", body = ErrorBody)))]
+async fn claim_container(
+    State(s): State<Arc<Service>>,
+    Id(trial, _): Id<TrialId>,
+    b: JsonBody<ClaimNext>,
+) -> Response {
+    blocking(move || s.claim_container(trial, b.value, &b.raw)).await
+}
+
 #[utoipa::path(post, path = "/trials/{id}/abandon", request_body = AbandonTrial,
     operation_id = "abandon",
     params(("id" = i64, Path, description = "Trial id", minimum = 1), ("Idempotency-Key" = Option<String>, Header, description = "The request id, as the request_id field (either, or both the same)")),
@@ -250,6 +265,7 @@ fn routes() -> (Router<Arc<Service>>, utoipa::openapi::OpenApi) {
         .routes(routes!(start_trial))
         .routes(routes!(get_trial))
         .routes(routes!(post_observation))
+        .routes(routes!(claim_container))
         .routes(routes!(abandon_trial))
         .routes(routes!(trial_view))
         .routes(routes!(view::events))

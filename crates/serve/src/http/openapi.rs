@@ -190,6 +190,7 @@ fn links() -> Vec<(&'static str, &'static str, u16, Value)> {
         json!({
             "GetTrial": to("get_trial", "id", "trial"),
             "Observe": to("observe", "id", "trial"),
+            "Claim": to("claim", "id", "trial"),
             "Abandon": to("abandon", "id", "trial"),
         })
     };
@@ -211,6 +212,7 @@ fn links() -> Vec<(&'static str, &'static str, u16, Value)> {
         ),
         ("/deployments/{id}/trials", "post", 201, trial()),
         ("/trials/{id}/observations", "post", 200, trial()),
+        ("/trials/{id}/claims", "post", 200, trial()),
     ]
 }
 

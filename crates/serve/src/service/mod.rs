@@ -15,6 +15,7 @@ mod replies;
 mod scenes;
 mod starts;
 mod tasks;
+mod teams;
 mod trials;
 
 use std::collections::BTreeMap;
@@ -30,6 +31,10 @@ use crate::events::Events;
 use crate::grids::Grids;
 use crate::model::{ApiReply, Outcome, SceneLimits};
 use crate::store::Store;
+
+/// How long a team robot's claim holds without a word from it, by default: a robot drives a
+/// few metres and searches a container in well under a minute.
+pub const DEFAULT_CLAIM_TTL: std::time::Duration = std::time::Duration::from_secs(60);
 
 /// How the service bounds its work.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -57,6 +62,9 @@ pub struct ServiceOptions {
     pub kept_plans: usize,
     /// Event streams (`GET /events`, the live page's) open at once, at most.
     pub max_event_streams: usize,
+    /// How long a team robot's claim on a container holds without a word from it: past it,
+    /// a teammate may be sent there.
+    pub claim_ttl: std::time::Duration,
 }
 
 impl Default for ServiceOptions {
@@ -71,6 +79,7 @@ impl Default for ServiceOptions {
             kept_replays: 4096,
             kept_plans: 2048,
             max_event_streams: crate::events::DEFAULT_MAX_STREAMS,
+            claim_ttl: DEFAULT_CLAIM_TTL,
         }
     }
 }

@@ -48,6 +48,7 @@ impl Service {
             }
         })?;
         let asked = Asked::from(requested_task(&req, &placed)?);
+        self.check_team(&req)?;
         self.stored_candidates(deployment, &spec)?;
         // Made alone: the trial as stored is kept, so that planning it needs no read.
         let alone = || {
@@ -187,6 +188,7 @@ impl Service {
                 chosen,
                 started_after: counts.ended as i64,
                 task: asked.task.as_ref(),
+                robots: req.robots.as_deref(),
             };
             finals.push(w.insert_trial_last(id, &new));
             trials.push(StoredTrial {
@@ -203,6 +205,7 @@ impl Service {
                 started_after: new.started_after,
                 end_seq: None,
                 task: asked.task.clone(),
+                robots: req.robots.clone(),
             });
         }
         Ok((trials, finals))
@@ -227,6 +230,16 @@ impl Service {
             Some(row) if row.id == id => row,
             _ => self.trial_row(id)?,
         };
+        if row.robots.is_some() {
+            // Each robot of a team asks for its own first container.
+            let state = self.team_state_now(&row)?;
+            let reply = json(Outcome::Created, &state)?;
+            if let Some(claim) = claim {
+                claim.replace(&reply)?;
+            }
+            self.told(state, None);
+            return Ok(reply);
+        }
         let spec = self.spec(row.deployment)?;
         let candidates = self.stored_candidates(row.deployment, &spec)?;
         let strategy = candidates
@@ -350,6 +363,7 @@ mod tests {
                 goal: None,
                 destination: None,
                 pose: None,
+                robots: None,
             },
             asked: Asked {
                 label: "Wallet".into(),

@@ -56,6 +56,9 @@ impl Service {
     /// `GET /trials/{id}`.
     pub fn get_trial(&self, id: i64) -> Result<ApiReply, ApiError> {
         let row = self.trial_row(id)?;
+        if row.robots.is_some() {
+            return json(Outcome::Done, &self.team_state_now(&row)?);
+        }
         let t = self.stored_trial(&row)?;
         json(Outcome::Done, &Self::state_of(&row, &t)?)
     }
@@ -94,9 +97,11 @@ impl Service {
     pub fn trial_view(&self, id: i64) -> Result<ApiReply, ApiError> {
         let row = self.trial_row(id)?;
         let t = self.stored_trial(&row)?;
+        // A team's claims change without an observation: its state is always read anew.
         let state = match self.recent.get(id, t.observations.len(), row.status) {
-            Some(kept) => TrialState::clone(&kept),
-            None => Self::state_of(&row, &t)?,
+            Some(kept) if row.robots.is_none() => TrialState::clone(&kept),
+            _ if row.robots.is_some() => self.team_state_now(&row)?,
+            _ => Self::state_of(&row, &t)?,
         };
         let house = &t.placed.house;
         let mut searched = Vec::with_capacity(t.observations.len());
@@ -112,7 +117,13 @@ impl Service {
         let start = super::scenes::start_pose(house);
         let mut route = vec![[start[0], start[1]]];
         let mut from = Place::Start;
-        for &(c, _) in &searched {
+        // A team's searches are no one robot's way.
+        let own_way = if row.robots.is_some() {
+            &[][..]
+        } else {
+            &searched[..]
+        };
+        for &(c, _) in own_way {
             let to = Place::Container(c);
             // Each leg begins where the last ended.
             route.extend(t.placed.path(from, to).iter().skip(1).copied());
@@ -197,6 +208,16 @@ impl Service {
         })?;
         let targets = targets_of(&row);
         let (objects, found) = observed(&req, &targets)?;
+        if row.robots.is_some() {
+            return self.record_team_observation((&row, &req, body), (c, objects, found), claim);
+        }
+        if let Some(robot) = &req.robot {
+            return Err(ApiError::new(
+                ErrorKind::Invalid,
+                "robot",
+                format!("{robot:?}: trial {id} is searched by one robot and has no team"),
+            ));
+        }
         // The search this replica kept after the trial's last reply, else one rebuilt.
         let mut live = match self.searches.take(id, observations.len()) {
             Some(live) => live,
@@ -208,6 +229,7 @@ impl Service {
             objects,
             travelled: req.travelled_m,
             leg: 0.0,
+            robot: None,
         };
         let seen = seen(&observation, &targets);
         let task = row.task.as_ref();
@@ -590,6 +612,7 @@ pub(super) fn trial_state(
                 .zip(r.iter().copied())
                 .collect()
         }),
+        robots: None,
     }
 }
 

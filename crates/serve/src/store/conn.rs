@@ -133,6 +133,7 @@ impl Reader<'_> {
             "trials",
             "observations",
             "requests",
+            "trial_robots",
         ] {
             self.conn.query(
                 &format!("SELECT count(*) FROM (SELECT * FROM {table} LIMIT 1) AS one"),

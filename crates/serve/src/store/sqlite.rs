@@ -17,7 +17,7 @@ use super::value::{Row, Value};
 
 /// Schema migrations, version `i + 1` at index `i`. Version 1 is the schema of the first
 /// servers, written with `IF NOT EXISTS` so that it also describes their files.
-const MIGRATIONS: [&[&str]; 3] = [
+const MIGRATIONS: [&[&str]; 4] = [
     &["CREATE TABLE IF NOT EXISTS scenes (
         name TEXT PRIMARY KEY, body TEXT NOT NULL);
     CREATE TABLE IF NOT EXISTS deployments (
@@ -42,6 +42,14 @@ const MIGRATIONS: [&[&str]; 3] = [
     ],
     // Household tasks: a trial's targets, goal and destination (JSON; NULL for one target).
     &["ALTER TABLE trials ADD COLUMN task TEXT;"],
+    // Teams: a trial's robots (JSON; NULL for one robot), who searched each container, and each
+    // robot's claim and when it was last heard from.
+    &["ALTER TABLE trials ADD COLUMN robots TEXT;
+    ALTER TABLE observations ADD COLUMN robot TEXT;
+    CREATE TABLE trial_robots (
+        trial INTEGER NOT NULL REFERENCES trials(id), robot TEXT NOT NULL,
+        claim TEXT, claim_expires_ms INTEGER, heard_ms INTEGER NOT NULL,
+        PRIMARY KEY (trial, robot), UNIQUE (trial, claim));"],
 ];
 
 pub(super) struct Sqlite {

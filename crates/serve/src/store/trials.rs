@@ -13,13 +13,13 @@ const PROGRESS: &str = "SELECT status, (SELECT count(*) FROM observations WHERE 
      FROM trials WHERE id = $1";
 
 const INSERT_OBSERVATION: &str =
-    "INSERT INTO observations (trial, seq, container, found, objects, travelled, leg)
-     VALUES ($1, $2, $3, $4, $5, $6, $7)";
+    "INSERT INTO observations (trial, seq, container, found, objects, travelled, leg, robot)
+     VALUES ($1, $2, $3, $4, $5, $6, $7, $8)";
 
 /// A deployment's trials started after its first `$2` or ended after its first `$3`.
 pub(super) const SINCE: &str = "deployment = $1 AND (k > $2 OR end_seq > $3)";
 
-pub(super) const TRIAL_COLUMNS: &str = "id, deployment, k, scene, target, pose, chosen, status, cost, replays, started_after, end_seq, task";
+pub(super) const TRIAL_COLUMNS: &str = "id, deployment, k, scene, target, pose, chosen, status, cost, replays, started_after, end_seq, task, robots";
 
 impl Conn<'_> {
     /// A trial's status and observation count from a row of [`PROGRESS`].
@@ -73,6 +73,10 @@ impl Conn<'_> {
                         .map(serde_json::from_value)
                         .transpose()
                         .map_err(|_| bad("task"))?,
+                    robots: json(13, "robots")?
+                        .map(serde_json::from_value)
+                        .transpose()
+                        .map_err(|_| bad("robots"))?,
                 })
             })
             .collect()
@@ -89,9 +93,12 @@ impl Writer<'_> {
         let task = t
             .task
             .map(|task| serde_json::to_value(task).unwrap_or_default().to_string());
+        let robots = t
+            .robots
+            .map(|r| serde_json::to_value(r).unwrap_or_default().to_string());
         Final {
-            sql: "INSERT INTO trials (id, deployment, k, scene, target, pose, chosen, status, started_after, task)
-                 VALUES ($1, $2, $3, $4, $5, $6, $7, 'searching', $8, $9)",
+            sql: "INSERT INTO trials (id, deployment, k, scene, target, pose, chosen, status, started_after, task, robots)
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, 'searching', $8, $9, $10)",
             params: vec![
                 id.into(),
                 t.deployment.into(),
@@ -102,6 +109,7 @@ impl Writer<'_> {
                 (t.chosen as i64).into(),
                 t.started_after.into(),
                 task.into(),
+                robots.into(),
             ],
         }
     }
@@ -155,6 +163,7 @@ impl Writer<'_> {
                     serde_json::json!(o.objects).to_string().into(),
                     o.travelled.into(),
                     o.leg.into(),
+                    o.robot.clone().into(),
                 ],
             });
         }
@@ -222,6 +231,8 @@ pub struct NewTrial<'a> {
     pub started_after: i64,
     /// The household task, for a trial of one.
     pub task: Option<&'a crate::model::TaskBody>,
+    /// The team, for a trial searched by several robots.
+    pub robots: Option<&'a [crate::model::TeamRobot]>,
 }
 
 impl Reader<'_> {
@@ -297,7 +308,7 @@ impl Reader<'_> {
     pub fn observations(&self, trial: i64) -> Result<Vec<StoredObservation>, StoreError> {
         let c = &self.conn;
         c.query(
-            "SELECT container, found, objects, travelled, leg FROM observations
+            "SELECT container, found, objects, travelled, leg, robot FROM observations
              WHERE trial = $1 ORDER BY seq",
             &[trial.into()],
         )?
@@ -313,6 +324,7 @@ impl Reader<'_> {
                 leg: c
                     .real(r, 4, "observation leg")?
                     .ok_or_else(|| c.corrupt(format!("trial {trial}: leg")))?,
+                robot: c.text(r, 5, "observation robot")?,
             })
         })
         .collect()

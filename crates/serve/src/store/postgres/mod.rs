@@ -23,7 +23,7 @@ pub(super) use conn::Conn;
 use conn::{On, Tx, TxState};
 
 /// Schema migrations, version `i + 1` at index `i` (the same versions as SQLite's).
-const MIGRATIONS: [&[&str]; 3] = [
+const MIGRATIONS: [&[&str]; 4] = [
     &["CREATE TABLE scenes (name TEXT PRIMARY KEY, body TEXT NOT NULL);
     CREATE TABLE deployments (id BIGSERIAL PRIMARY KEY, spec TEXT NOT NULL);
     CREATE TABLE trials (
@@ -46,11 +46,20 @@ const MIGRATIONS: [&[&str]; 3] = [
     ],
     // Household tasks: a trial's targets, goal and destination (JSON; NULL for one target).
     &["ALTER TABLE trials ADD COLUMN task TEXT;"],
+    // Teams: a trial's robots (JSON; NULL for one robot), who searched each container, and each
+    // robot's claim and when it was last heard from.
+    &["ALTER TABLE trials ADD COLUMN robots TEXT;
+    ALTER TABLE observations ADD COLUMN robot TEXT;
+    CREATE TABLE trial_robots (
+        trial BIGINT NOT NULL REFERENCES trials(id), robot TEXT NOT NULL,
+        claim TEXT, claim_expires_ms BIGINT, heard_ms BIGINT NOT NULL,
+        PRIMARY KEY (trial, robot), UNIQUE (trial, claim));"],
 ];
 
 /// What a new connection's server process runs first: planning it opens every table of the
 /// schema and their indexes (it returns no row).
-const WARM: &str = "SELECT 1 FROM scenes, deployments, trials, observations, requests LIMIT 0";
+const WARM: &str =
+    "SELECT 1 FROM scenes, deployments, trials, observations, requests, trial_robots LIMIT 0";
 
 /// `e` and what caused it, as one line: the pool's and the driver's errors say only "db error"
 /// and keep the server's words (such as "too many connections for role") in their sources.

@@ -682,3 +682,89 @@ fn sigpipe_from_a_page_gone_mid_stream_leaves_the_server_serving() {
     );
     assert_eq!(get(&format!("{}/health", server.url))["status"], "ok");
 }
+
+/// `bench serve --team 3`: homes whose trials three robots search together, each robot asking
+/// for its own containers: no container held by two robots in any reply, every robot's
+/// acknowledged observations stored as its own, every trial started once per home. On
+/// SQLite in-process, and (with `FERRET_TEST_POSTGRES`) with the team's robots spread over two
+/// `ferret serve` replicas of one PostgreSQL database.
+#[test]
+fn bench_serve_teams_claim_no_container_twice() {
+    let dir = tempfile::tempdir().unwrap();
+    let houses = dir.path().join("houses.jsonl");
+    let out = ferret(&[
+        "generate",
+        "--count",
+        "6",
+        "--seed",
+        "5",
+        "--out",
+        s(&houses),
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    let pg = std::env::var("FERRET_TEST_POSTGRES").ok();
+    if pg.is_none() {
+        eprintln!(
+            "the PostgreSQL half skipped: set FERRET_TEST_POSTGRES to a PostgreSQL URL (eval \"$(scripts/postgres.sh start)\" starts a throwaway server and sets it)"
+        );
+    }
+    let mut runs = vec![vec![]];
+    if let Some(pg) = &pg {
+        runs.push(vec![
+            "--replicas".to_string(),
+            "2".into(),
+            "--db".into(),
+            pg.clone(),
+        ]);
+    }
+    for extra in runs {
+        let mut args = vec![
+            "bench",
+            "serve",
+            "--houses",
+            s(&houses),
+            "--strategies",
+            STRATEGIES,
+            "--deployments",
+            "4",
+            "--team",
+            "3",
+            "--trials",
+            "5",
+            "--json",
+        ];
+        args.extend(extra.iter().map(String::as_str));
+        let out = ferret(&args);
+        assert!(out.status.success(), "{extra:?}: {}", text(&out));
+        let line: Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(line["team"], 3, "{line}");
+        assert_eq!(line["double_claims"], 0, "{line}");
+        let count = |kind: &str| {
+            line["by_reply"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|k| k["reply"] == kind)
+                .map(|k| k["count"].as_u64().unwrap())
+                .unwrap()
+        };
+        assert_eq!(
+            count("start"),
+            4 * 5,
+            "one start per home and trial: {line}"
+        );
+        assert!(count("claim") >= 4 * 5 * 3, "each robot claims: {line}");
+        for field in [
+            "errors",
+            "lost_observations",
+            "duplicated_observations",
+            "mismatched_deployments",
+        ] {
+            assert_eq!(line[field], 0, "{field}: {line}");
+        }
+        assert!(
+            line["verified_observations"].as_u64().unwrap() >= 20,
+            "{line}"
+        );
+    }
+}

@@ -44,9 +44,14 @@ pub struct ServeArgs {
         default_value = "optimistic+greedy,model/uniform,model/uniform/exact"
     )]
     strategies: Vec<String>,
-    /// Concurrent deployments (robots).
+    /// Concurrent deployments (robots; with --team, homes).
     #[arg(long, default_value_t = 50)]
     deployments: usize,
+    /// Robots per home (1 to 4): above 1, each deployment is a home whose trials a team of
+    /// this many robots searches together, each robot asking for its own containers and
+    /// talking to a replica of its own; the run then counts containers claimed twice.
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=4))]
+    team: u8,
     /// Trials per deployment; deployment d runs houses d·trials .. in file order (wrapping).
     #[arg(long, default_value_t = 20)]
     trials: usize,
@@ -160,6 +165,8 @@ struct ServeLine {
     /// Plans' first steps each server keeps per scene, when given (else its default).
     kept_plans: Option<usize>,
     deployments: usize,
+    /// Robots searching each trial together.
+    team: u8,
     trials: usize,
     #[serde(flatten)]
     measured: LoadReport,
@@ -231,6 +238,7 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
             .map(std::time::Duration::from_secs_f64),
         pages: args.pages,
         stalled_pages: args.stalled_pages,
+        team: usize::from(args.team),
     };
     let run = load::drive(&runtime, urls, plans, settings, &mut replicas, on_trial);
     bar.finish_and_clear();
@@ -248,6 +256,7 @@ fn serve(args: ServeArgs) -> Result<ExitCode> {
         kept_plans: args.kept_plans,
         database: if postgres { "postgres" } else { "sqlite" }.into(),
         deployments: args.deployments,
+        team: args.team,
         trials: args.trials,
         measured: run?.report(args.trials),
         database_mib: (!postgres).then(|| {
@@ -422,10 +431,11 @@ fn print_serve_line(line: &ServeLine) {
         line.database,
         line.kept_replays,
         line.deployments,
-        if line.shared_deployment {
-            "robots sharing one deployment"
-        } else {
-            "deployments"
+        match (line.shared_deployment, line.team) {
+            (true, 1) => "robots sharing one deployment".to_string(),
+            (false, 1) => "deployments".to_string(),
+            (true, n) => format!("homes of {n} robots sharing one deployment"),
+            (false, n) => format!("homes of {n} robots"),
         },
         line.trials,
         if line.fresh_trials {
@@ -469,6 +479,9 @@ fn print_serve_line(line: &ServeLine) {
         println!(
             "replica 0 resident memory from a quarter into the run: {first:.1} MiB, {max:.1} MiB at most, {last:.1} MiB at the end"
         );
+    }
+    if let Some(d) = m.double_claims {
+        println!("teams: {d} containers claimed by two robots at once");
     }
     println!(
         "read back: {} acknowledged observations, {} lost, {} duplicated; {} deployments with other trials than their robot started{}",

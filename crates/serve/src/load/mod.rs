@@ -72,6 +72,10 @@ pub struct FleetSettings {
     pub pages: usize,
     /// Pages that open the event stream and never read it.
     pub stalled_pages: usize,
+    /// Robots per home: above 1, each entry of the plans is a home whose trials a team of
+    /// this many robots searches together (one trial at a time, every robot asking for its
+    /// own containers).
+    pub team: usize,
 }
 
 /// What a fleet did: each robot's requests and latencies, and what was read back.
@@ -151,15 +155,25 @@ pub fn drive(
             })
         });
         let started = Instant::now();
+        let team = settings.team.max(1);
         let tasks: Vec<_> = plans
             .into_iter()
             .enumerate()
-            .map(|(r, trials)| {
+            .map(|(h, trials)| {
                 let (client, urls, on_trial) = (client.clone(), urls.clone(), on_trial.clone());
                 tokio::spawn(async move {
-                    let mut robot = Robot::new(client, urls, r);
-                    robot.run(trials, on_trial.as_ref(), shared).await;
-                    robot
+                    if team == 1 {
+                        let mut robot = Robot::new(client, urls, h);
+                        robot.run(trials, on_trial.as_ref(), shared).await;
+                        return vec![robot];
+                    }
+                    // Robot m of home h starts on replica h·team + m (mod replicas): a team's
+                    // robots talk to different replicas.
+                    let mut members: Vec<Robot> = (0..team)
+                        .map(|m| Robot::new(client.clone(), urls.clone(), h * team + m))
+                        .collect();
+                    Robot::run_home(&mut members, trials, on_trial.as_ref(), shared).await;
+                    members
                 })
             })
             .collect();
@@ -173,7 +187,7 @@ pub fn drive(
         }
         let mut robots = Vec::new();
         for t in tasks {
-            robots.push(
+            robots.extend(
                 t.await
                     .map_err(|e| LoadError::Setup(format!("a robot failed: {e}")))?,
             );

@@ -13,7 +13,7 @@ pub const TIMED_STARTS: usize = 20;
 /// Latencies of one kind of reply.
 #[derive(Clone, Debug, Serialize)]
 pub struct KindLine {
-    /// `start`, `step` or `end`.
+    /// `start`, `step`, `end` or `claim`.
     pub reply: &'static str,
     /// Replies of this kind.
     pub count: usize,
@@ -59,6 +59,9 @@ pub struct LoadReport {
     pub duplicated_observations: usize,
     /// Deployments whose stored trials are not the ones their robot started.
     pub mismatched_deployments: usize,
+    /// Team runs: replies in which two robots of a trial held one container, and robots sent
+    /// to a container a teammate had searched; `None` for robots alone.
+    pub double_claims: Option<usize>,
     /// Median start of each robot's trials 11–30 and of its last 20, when it ran 60 or more:
     /// whether a start costs more as its deployment's history grows.
     pub start_early_p50_ms: Option<f64>,
@@ -80,6 +83,7 @@ impl LoadReport {
             && self.lost_observations == 0
             && self.duplicated_observations == 0
             && self.mismatched_deployments == 0
+            && self.double_claims.unwrap_or(0) == 0
     }
 }
 
@@ -109,6 +113,7 @@ impl FleetRun {
             (Reply::Start, "start"),
             (Reply::Step, "step"),
             (Reply::End, "end"),
+            (Reply::Claim, "claim"),
         ]
         .into_iter()
         .map(|(kind, name)| {
@@ -157,6 +162,10 @@ impl FleetRun {
             lost_observations: v.lost,
             duplicated_observations: v.duplicated,
             mismatched_deployments: v.mismatched,
+            double_claims: robots
+                .iter()
+                .any(|r| r.team_id.is_some())
+                .then(|| robots.iter().map(|r| r.double_claims).sum()),
             start_early_p50_ms: by_history(false),
             start_late_p50_ms: by_history(true),
             pages: self.pages.clone(),

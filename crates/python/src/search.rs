@@ -363,15 +363,62 @@ impl PySearch {
     /// task's goal holds), every container was searched, or the search was finished. Asking
     /// again before `record()` proposes the same one. Releases the GIL while the strategy
     /// decides (an LLM strategy may ask its endpoint).
-    fn next_container(&mut self, py: Python<'_>) -> PyResult<Option<PyContainer>> {
+    ///
+    /// In a team, `leaving` lists the containers teammates are on their way to (ids or
+    /// `Container`s): never proposed, and planned around as if they held nothing (this robot's
+    /// plan only matters where they do not); `None` when every container left is one of them.
+    #[pyo3(signature = (leaving = None))]
+    fn next_container(
+        &mut self,
+        py: Python<'_>,
+        leaving: Option<Vec<Bound<'_, PyAny>>>,
+    ) -> PyResult<Option<PyContainer>> {
+        let others = {
+            let house = self.house.get();
+            leaving
+                .unwrap_or_default()
+                .iter()
+                .map(|c| house.container_index(c))
+                .collect::<PyResult<Vec<usize>>>()?
+        };
         let live = self.live();
         let next = py.allow_threads(|| {
             errors::guarded("Search.next_container", || {
-                live.with_dependent_mut(|_, s| s.next_container())
+                live.with_dependent_mut(|_, s| s.next_container_leaving(&others))
                     .map_err(errors::plan)
             })
         })?;
         Ok(next.map(|c| self.container(c)))
+    }
+
+    /// Records what a teammate saw in `container` (arguments as `record()`): known to this
+    /// robot at once, without it moving. Raises `SearchError` for a container not in the house
+    /// or already searched, and after `finish()`.
+    #[pyo3(signature = (container, found = false, objects = None, found_targets = None))]
+    fn observe(
+        &mut self,
+        container: &Bound<'_, PyAny>,
+        found: bool,
+        objects: Option<Vec<String>>,
+        found_targets: Option<Vec<String>>,
+    ) -> PyResult<()> {
+        let (c, id) = {
+            let house = self.house.get();
+            let c = house.container_index(container)?;
+            (c, house.scene.house.containers[c].id.clone())
+        };
+        if self.finished {
+            return Err(errors::search(
+                "the search was finished (finish()): start a new Search",
+            ));
+        }
+        let seen = self.observed(found, objects, found_targets)?;
+        self.live().with_dependent_mut(|_, s| {
+            if s.belief().is_searched(c) {
+                return Err(errors::search(format!("{id:?} was already searched")));
+            }
+            s.observe(c, seen).map_err(errors::plan)
+        })
     }
 
     /// Records that the robot searched `container` (its id or the `Container`) and what it saw
@@ -522,7 +569,8 @@ impl PySearch {
         })
     }
 
-    /// Ids of the containers searched, in order.
+    /// Ids of the containers this robot searched, in order (not those a teammate searched and
+    /// it `observe`d).
     #[getter]
     fn searched(&mut self) -> Vec<String> {
         let order = self

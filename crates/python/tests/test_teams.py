@@ -68,3 +68,79 @@ def test_one_robot_is_the_evaluation_without_a_team(houses):
 def test_bad_teams_raise_config_error_naming_the_keyword(houses, kw, says):
     with pytest.raises(ferret.ConfigError, match=says):
         ferret.evaluate(houses[:2], ["model/prior"], **kw)
+
+
+def team_loop(house, target, robots, strategy="model/prior"):
+    """A team of `robots` searches driven from Python, as robots sharing a trial drive it: each
+    robot in turn searches the container it is heading to, every teammate `observe`s what it
+    saw, and a robot with nothing to do is sent to a container no teammate is heading to
+    (`next_container(leaving=...)`). Returns the searches and who searched what, in order."""
+    team = [ferret.Search(house, target, strategy) for _ in range(robots)]
+    heading = [None] * robots
+    order = []
+    turn = 0
+    while not team[0].goal_holds:
+        for r, s in enumerate(team):
+            if heading[r] is None:
+                others = [h for o, h in enumerate(heading) if o != r and h is not None]
+                heading[r] = s.next_container(leaving=others)
+        movers = [r for r in range(robots) if heading[r] is not None]
+        if not movers:
+            break
+        r = movers[turn % len(movers)]
+        turn += 1
+        c, heading[r] = heading[r], None
+        seen = house.contents(c)
+        team[r].record(c, target in seen, seen)
+        for o, s in enumerate(team):
+            if o != r:
+                s.observe(c, target in seen, seen)
+        order.append((r, c.id))
+    return team, order
+
+
+def test_a_team_driven_from_python_never_sends_two_robots_to_one_container(houses):
+    for house in houses:
+        for target in house.target_types()[:2]:
+            team, order = team_loop(house, target, 3)
+            searched = [c for _, c in order]
+            assert len(set(searched)) == len(searched), (house.name, target, order)
+            # Everyone knows the goal holds once one robot found it, and where.
+            assert all(s.goal_holds for s in team)
+            assert len({s.found.id for s in team}) == 1
+            assert target in house.contents(team[0].found)
+            # Each robot's own searches are its `searched`, and it moved only for them.
+            for r, s in enumerate(team):
+                mine = [c for who, c in order if who == r]
+                assert s.searched == mine
+                assert (s.cost > 0) == bool(mine)
+
+
+def test_leaving_and_observe_change_the_plan_as_a_teammate_would(houses):
+    # A house and target whose first proposal holds no target (so that a teammate's search
+    # there is in vain).
+    house, target, first = next(
+        (h, t, f)
+        for h in houses
+        for t in h.target_types()
+        if t not in h.contents(f := ferret.Search(h, t, "model/prior").next_container())
+    )
+    # Never the container a teammate is heading to.
+    s = ferret.Search(house, target, "model/prior")
+    second = s.next_container(leaving=[first])
+    assert second is not None and second.id != first.id
+    assert s.next_container(leaving=[first.id]) == second
+    # A teammate's search in vain there: this robot plans as if it had been told so, without
+    # moving (no cost), and the container is never proposed again.
+    s.observe(first, False, house.contents(first))
+    assert s.cost == 0.0 and s.searched == []
+    assert s.next_container() is not None and s.next_container().id != first.id
+    # Only the teammates' containers left: nothing to do.
+    everything = [c for c in house.containers if c.id not in s.searched]
+    assert s.next_container(leaving=everything) is None
+    # A teammate found it: the goal holds for this robot too.
+    holder = next(c for c in house.containers if target in house.contents(c))
+    s.observe(holder, True, house.contents(holder))
+    assert s.goal_holds and s.found.id == holder.id and s.next_container() is None
+    with pytest.raises(ferret.SearchError, match="already searched"):
+        s.observe(holder, True)

@@ -211,9 +211,21 @@ class Search:
         likely meant (``"wallet"``: did you mean ``"Wallet"``?), a target given twice, more
         than 4, an unknown goal, or a destination the house does not have or the robot cannot
         reach."""
-    def next_container(self) -> Optional[Container]:
+    def next_container(
+        self, leaving: Optional[Sequence[_ContainerArg]] = None
+    ) -> Optional[Container]:
         """The container to search next, or None once found (the goal holds), everything was
-        searched, or the search was finished."""
+        searched, or the search was finished. In a team, ``leaving`` lists the containers
+        teammates are heading to: never proposed (None when only those are left)."""
+    def observe(
+        self,
+        container: _ContainerArg,
+        found: bool = False,
+        objects: Optional[Sequence[str]] = None,
+        found_targets: Optional[Sequence[str]] = None,
+    ) -> None:
+        """Records what a teammate saw in ``container`` (arguments as ``record``): known at
+        once, without this robot moving."""
     def record(
         self,
         container: _ContainerArg,

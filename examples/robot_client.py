@@ -14,6 +14,12 @@ trial up (`abandoned`), so the trial is not left open. The simulated robot's eye
 a second before each search, so that a person can follow it on the server's live view (open the
 server's address in a browser).
 
+With `--robot ID --team ID1,ID2,...` (and a shared `--deployment`) the client is one robot of a
+team that searches each trial together: the team's first robot starts each trial naming the
+team, the others join it; every robot asks for its own next container (`POST
+/trials/{id}/claims`), which the server gives to no teammate, and reports with its id. Run one
+client per robot, each with its own `--robot`.
+
 On a real robot (a ROS node, say) only `search_container()` changes: send a navigation goal to the
 proposal's `path` end / access point, run the detector, and report the object types it saw and the
 odometry of the leg. Everything else (the request ids, the retries, the loop) stays as it is.
@@ -195,6 +201,76 @@ def run_trial(api, trial_id, target, strategy, reply, containers, log, pace=0.0)
     }
 
 
+def join_team_trial(api, dep, target, me, after_k, log, wait_s=60.0):
+    """The trial of deployment `dep` that the team's first robot started for `target` naming
+    robot `me`, started after trial number `after_k`: waits for it up to `wait_s` seconds."""
+    deadline = time.monotonic() + wait_s
+    while True:
+        state = api.get(f"/deployments/{quote(dep)}")
+        for t in state.get("trials") or []:
+            if t.get("k", 0) <= after_k or t.get("target") != target:
+                continue
+            trial = api.get(f"/trials/{quote(t['trial'])}")
+            if any(r.get("id") == me for r in trial.get("robots") or []):
+                return trial
+        if time.monotonic() > deadline:
+            raise SystemExit(
+                f"error: robot {me}: no trial for {target} naming it in deployment {dep} after "
+                f"{wait_s:g} s (is the team's first robot running with the same --team?)"
+            )
+        log(f"robot {me}: waiting for the team's trial for {target}")
+        time.sleep(0.05)
+
+
+def run_team_trial(api, trial, me, containers, log, pace=0.0):
+    """Robot `me`'s part of team trial `trial` (its state): claims a container, searches it,
+    reports it with its id, until the trial ends. Returns the trial's summary with the
+    containers this robot searched."""
+    trial_id, target = trial["trial"], trial["target"]
+    claim_path = f"/trials/{quote(trial_id)}/claims"
+    reply = api.post(claim_path, {"robot": me})
+    searched = []
+    # The server ends a trial once its goal holds or every container was searched; waits for
+    # teammates are bounded by the server's claim time, searches by the containers.
+    for _ in range(100 * (len(containers) + 1)):
+        if reply.get("status") != "searching":
+            break
+        proposal = reply.get("next")
+        if not proposal:
+            # Everything left is a teammate's: ask again in a moment.
+            time.sleep(0.1)
+            reply = api.post(claim_path, {"robot": me})
+            continue
+        time.sleep(pace)
+        cid, seen, travelled = search_container(proposal, containers, target)
+        found = target in seen
+        log(f"  trial {trial_id} robot {me}: {cid}: {'FOUND' if found else 'not there'}")
+        obs = {"robot": me, "container": cid, "found": found, "objects": seen}
+        if travelled is not None:
+            obs["travelled_m"] = travelled
+        try:
+            reply = api.post(f"/trials/{quote(trial_id)}/observations", obs)
+            searched.append(cid)
+        except ApiError as e:
+            if e.status != 409:
+                raise
+            # The trial ended meanwhile (a teammate found it), or a teammate got there first
+            # (this robot's claim had lapsed): read where it stands.
+            log(f"  trial {trial_id} robot {me}: {e.message}")
+            reply = api.post(claim_path, {"robot": me})
+    mine = next((r for r in reply.get("robots") or [] if r.get("id") == me), {})
+    return {
+        "trial": trial_id,
+        "target": target,
+        "strategy": reply.get("strategy"),
+        "cost_m": mine.get("cost_m"),
+        "searched": searched,
+        "status": reply.get("status"),
+        "team_cost_m": reply.get("cost_m"),
+        "k": reply.get("k"),
+    }
+
+
 def resume_open_trial(api, trial_id, containers, log, pace=0.0):
     """Finishes a trial left open (the client stopped mid-trial). GET /trials/{id} gives the trial
     so far; its `next` is the container still to search."""
@@ -287,6 +363,15 @@ def parse_args(argv):
         "/trials/{id}/abandon) instead of finishing it",
     )
     ap.add_argument(
+        "--robot",
+        help="this robot's id in a team (letters, digits, _ - . /); with --team",
+    )
+    ap.add_argument(
+        "--team",
+        help="comma-separated ids of the team that searches each trial together, this "
+        "robot's among them; the first starts the trials. Needs --deployment",
+    )
+    ap.add_argument(
         "--pace",
         type=float,
         default=0.0,
@@ -312,6 +397,16 @@ def parse_args(argv):
         args.strategies = [s.strip() for s in args.strategies.split(",") if s.strip()]
         if not args.strategies:
             ap.error("--strategies names no strategy")
+    if (args.team is None) != (args.robot is None):
+        ap.error("--robot and --team go together")
+    if args.team is not None:
+        args.team = [r.strip() for r in args.team.split(",") if r.strip()]
+        if args.robot not in args.team:
+            ap.error(f"--robot {args.robot!r} is not in --team {','.join(args.team)}")
+        if len(set(args.team)) != len(args.team):
+            ap.error("--team names a robot twice")
+        if not args.deployment:
+            ap.error("--team needs --deployment: the team's robots share one")
     return args
 
 
@@ -337,7 +432,9 @@ def run(args, log):
 
     trials = []
     targets = list(args.targets)
-    open_id = open_trial_id(state)
+    # A team's robots find their trials by the team's names (join_team_trial), not as the
+    # deployment's open trial.
+    open_id = open_trial_id(state) if args.team is None else None
     if open_id is not None and args.abandon_open:
         t = api.post(f"/trials/{quote(open_id)}/abandon", {})
         log(f"gave up open trial {open_id} ({t.get('target')}, {t.get('strategy')})")
@@ -360,6 +457,28 @@ def run(args, log):
             targets.remove(summary["target"])
         if not args.json:
             print_trial(len(trials), summary)
+
+    if args.team is not None:
+        after_k = 0
+        for target in targets:
+            if args.robot == args.team[0]:
+                trial = api.post(
+                    f"/deployments/{quote(dep)}/trials",
+                    {
+                        "scene": args.scene,
+                        "target": target,
+                        "robots": [{"id": r} for r in args.team],
+                    },
+                )
+                log(f"trial {trial['trial']}: {target}, team {','.join(args.team)}")
+            else:
+                trial = join_team_trial(api, dep, target, args.robot, after_k, log)
+            summary = run_team_trial(api, trial, args.robot, containers, log, args.pace)
+            after_k = summary.get("k") or after_k
+            trials.append(summary)
+            if not args.json:
+                print_trial(len(trials), summary)
+        return dep, trials, api.get(f"/deployments/{quote(dep)}")
 
     for target in targets:
         # No pose: the robot starts from the scene's start pose. A real robot sends its

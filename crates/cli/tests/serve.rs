@@ -157,6 +157,99 @@ fn the_paper_targets_through_the_python_client_cost_what_deploy_says() {
     server.kill();
 }
 
+/// Three `examples/robot_client.py` processes, one per robot of a team (`--robot`, `--team`),
+/// search the five targets together in one deployment against a real `ferret serve`: each
+/// trial holds the three robots, no container is searched twice, every robot's searches are
+/// its own in the trial, and more than one robot searched in some trial.
+#[test]
+fn three_python_clients_search_as_one_team() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(&dir.path().join("serve.sqlite"));
+    let (st, dep) = post(&format!("{}/deployments", server.url), json!({"seed": 4}));
+    assert_eq!(st, 201, "{dep}");
+    let id = dep["id"].as_i64().unwrap().to_string();
+    let team = ["kitchen-bot", "hall-bot", "upstairs-bot"];
+    let robots: Vec<_> = team
+        .iter()
+        .map(|me| {
+            Command::new("python3")
+                .arg(repo().join("examples/robot_client.py"))
+                .args(["--url", &server.url, "--scene", "apartment"])
+                .args(["--deployment", &id, "--targets", TARGETS, "--json"])
+                .args(["--robot", me, "--team", &team.join(",")])
+                // As robots take time to drive: the team's searches interleave.
+                .args(["--pace", "0.2"])
+                .env_remove("FERRET_SERVE_TOKEN")
+                .stdout(std::process::Stdio::piped())
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .expect("python3 runs")
+        })
+        .collect();
+    let mut mine: Vec<(String, i64, Vec<String>)> = Vec::new();
+    for (me, child) in team.iter().zip(robots) {
+        let o = child.wait_with_output().unwrap();
+        assert!(o.status.success(), "{me}: {}", text(&o));
+        let report: Value = serde_json::from_slice(&o.stdout).unwrap();
+        let trials = report["trials"].as_array().unwrap();
+        assert_eq!(trials.len(), 5, "{me}: {report}");
+        for t in trials {
+            let searched = t["searched"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|c| c.as_str().unwrap().to_string())
+                .collect();
+            mine.push((me.to_string(), t["trial"].as_i64().unwrap(), searched));
+        }
+    }
+    let state = get(&format!("{}/deployments/{id}", server.url));
+    let trials = state["trials"].as_array().unwrap();
+    assert_eq!(trials.len(), 5, "one trial per target: {state}");
+    let mut several = 0;
+    for t in trials {
+        assert_eq!(t["status"], "done", "{state}");
+        let trial = get(&format!("{}/trials/{}", server.url, t["trial"]));
+        let searched: Vec<&str> = trial["searched"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c.as_str().unwrap())
+            .collect();
+        let unique: std::collections::BTreeSet<&&str> = searched.iter().collect();
+        assert_eq!(unique.len(), searched.len(), "searched twice: {trial}");
+        let robots = trial["robots"].as_array().unwrap();
+        let ids: Vec<&str> = robots.iter().map(|r| r["id"].as_str().unwrap()).collect();
+        assert_eq!(ids, team, "{trial}");
+        let active = robots
+            .iter()
+            .filter(|r| !r["searched"].as_array().unwrap().is_empty())
+            .count();
+        several += usize::from(active > 1);
+        for r in robots {
+            let theirs: Vec<String> = r["searched"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|c| c.as_str().unwrap().to_string())
+                .collect();
+            let client = mine
+                .iter()
+                .find(|(me, trial, _)| {
+                    me == r["id"].as_str().unwrap() && Some(*trial) == t["trial"].as_i64()
+                })
+                .map(|(_, _, s)| s.clone())
+                .unwrap();
+            assert_eq!(theirs, client, "{trial}");
+        }
+    }
+    assert!(
+        several > 0,
+        "no trial was searched by more than one robot: {state}"
+    );
+    server.kill();
+}
+
 /// A trial left open on the server (a robot stopped mid-search) is given up by the Python
 /// client's `--abandon-open`: it reads `abandoned`, and the client's own trials follow it.
 #[test]

@@ -197,6 +197,12 @@ async fn three_robots_never_share_a_container_and_plan_with_what_all_saw() {
         assert!(steps <= 7, "more searches than containers");
     }
     assert_eq!(last["status"], "done", "{last}");
+    assert!(
+        claims(&last).is_empty(),
+        "an ended trial holds claims: {last}"
+    );
+    let (_, read) = s.get(&format!("/trials/{trial}")).await;
+    assert!(claims(&read).is_empty(), "{read}");
     let searched = strings(&last["searched"]);
     let unique: BTreeSet<&String> = searched.iter().collect();
     assert_eq!(unique.len(), searched.len(), "a container searched twice");

@@ -331,7 +331,14 @@ impl Service {
                 Some(&req.container),
                 claimed.as_ref().map(|(n, at)| (n.as_str(), *at)),
             ));
-            let robots = with_claim(robots, (robot, Some(&req.container)), claimed, now);
+            let mut robots = with_claim(robots, (robot, Some(&req.container)), claimed, now);
+            if status != TrialStatus::Searching {
+                // An ended trial sends no robot anywhere.
+                finals.push(w.release_claims_last(id));
+                for r in &mut robots {
+                    r.claim = None;
+                }
+            }
             let from = searches[me].belief().position();
             let step = next.map(|n| next_container(&team.placed[me], from, n));
             let state = team.state(&ended, &all, &robots, now, step)?;
@@ -570,6 +577,7 @@ impl TeamTrial {
         next: Option<NextContainer>,
     ) -> Result<TrialState, ApiError> {
         let searches = self.searches(observations)?;
+        let status = row.status;
         let mut team = Vec::with_capacity(self.robots.len());
         let mut longest = 0.0_f64;
         for (r, robot) in self.robots.iter().enumerate() {
@@ -591,7 +599,8 @@ impl TeamTrial {
             let row = robots.iter().find(|s| s.robot == robot.id);
             let claim = row
                 .and_then(|s| s.claim.clone())
-                .filter(|(_, expires)| *expires > now);
+                .filter(|(_, expires)| *expires > now)
+                .filter(|_| status == TrialStatus::Searching);
             let cost = search.belief().travelled();
             longest = longest.max(cost);
             team.push(RobotState {

@@ -36,6 +36,15 @@ impl Reader<'_> {
 }
 
 impl Writer<'_> {
+    /// A statement that lets go of every claim of `trial` (it has ended), to run with the
+    /// commit after [`claim_last`](Self::claim_last)'s.
+    pub fn release_claims_last(&self, trial: i64) -> Final {
+        Final {
+            sql: "UPDATE trial_robots SET claim = NULL, claim_expires_ms = NULL WHERE trial = $1",
+            params: vec![trial.into()],
+        }
+    }
+
     /// Statements that let go of the claims of `trial` that lapsed by `now_ms` and of any claim
     /// on `searched` (a container just searched), then record that `robot` was heard from at
     /// `now_ms`, holding `claim` (a container and when it lapses) or nothing: to run with the

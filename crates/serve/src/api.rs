@@ -611,6 +611,20 @@ pub struct TrialView {
     /// For a household task of several targets, each target's likelihoods as `likelihoods`
     /// has them for one; null otherwise.
     pub target_likelihoods: Option<BTreeMap<String, BTreeMap<String, f64>>>,
+    /// A team's robots, in the trial's order, each with its own way (`route` is then empty);
+    /// null for one robot.
+    pub robot_routes: Option<Vec<RobotRoute>>,
+}
+
+/// One robot of a team's trial as its picture needs it.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct RobotRoute {
+    /// Its id.
+    pub id: String,
+    /// Its way so far: cell centres from its start through each container it searched.
+    pub route: Vec<[f64; 2]>,
+    /// The way from where it is to the container it claimed, while it holds one.
+    pub claim_path: Option<Vec<[f64; 2]>>,
 }
 
 /// Error body.

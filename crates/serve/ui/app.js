@@ -42,6 +42,8 @@
   const DESTINATION = "#7e22ce";
 
   const $ = (id) => document.getElementById(id);
+  // A team's robots, in the trial's order: the first is the one robot's blue.
+  const ROBOT_COLOURS = ["#1d4ed8", "#c2410c", "#047857", "#7c3aed"];
 
   // Everything the page knows. `epoch` changes with every start (a new token, a refusal), and
   // answers to requests of an older epoch are dropped, so nothing of a refused session shows.
@@ -579,6 +581,8 @@
   // Applies `e` to the picture; false when it cannot follow from what is shown.
   function applyStep(e) {
     const v = S.view;
+    // A team's step moves one robot of several, and claims change without one: read the picture.
+    if (v.robot_routes) return false;
     const t = v.trial;
     const n = t.searched.length;
     if (e.searched < n || (e.searched === n && e.observed)) return true; // shown already
@@ -967,7 +971,44 @@
       titled(route, `route so far: ${fmtM(trial.cost_m)} m`);
       gPaths.appendChild(route);
     }
-    const next = trial && trial.status === "searching" ? trial.next : null;
+    // A team's robots: each one's way so far, where it is, and the way to its claim.
+    const team = (view && view.robot_routes) || [];
+    team.forEach((r, i) => {
+      const colour = ROBOT_COLOURS[i % ROBOT_COLOURS.length];
+      if (r.route.length > 1) {
+        const way = svg("polyline", {
+          class: "robot-route",
+          points: pts(r.route),
+          fill: "none",
+          stroke: colour,
+          "stroke-width": 3.5,
+          "stroke-linejoin": "round",
+          "stroke-linecap": "round",
+          "stroke-opacity": 0.85,
+          "data-robot": r.id,
+          "data-points": r.route.length,
+        });
+        titled(way, `robot ${r.id}: its way so far`);
+        gPaths.appendChild(way);
+      }
+      if (r.claim_path && r.claim_path.length > 1) {
+        const state = (trial.robots || []).find((x) => x.id === r.id) || {};
+        const claim = svg("polyline", {
+          class: "claim-path",
+          points: pts(r.claim_path),
+          fill: "none",
+          stroke: colour,
+          "stroke-width": 2.5,
+          "stroke-dasharray": "7 5",
+          "stroke-linecap": "round",
+          "data-robot": r.id,
+          "data-container": state.claim || "",
+        });
+        titled(claim, `robot ${r.id} is heading to ${state.claim}`);
+        gPaths.appendChild(claim);
+      }
+    });
+    const next = trial && trial.status === "searching" && !team.length ? trial.next : null;
     if (next && next.path && next.path.length > 1) {
       const path = svg("polyline", {
         id: "next-path",
@@ -1137,8 +1178,45 @@
       gMarks.appendChild(mark);
     }
 
+    // Where each robot of a team is, named, and how long since it was heard from.
+    team.forEach((r, i) => {
+      const at = r.route[r.route.length - 1];
+      const state = (trial.robots || []).find((x) => x.id === r.id) || {};
+      const mark = svg("g", { class: "team-robot", "data-robot": r.id });
+      mark.appendChild(
+        svg("circle", {
+          cx: X(at[0]),
+          cy: Y(at[1]),
+          r: 6,
+          fill: ROBOT_COLOURS[i % ROBOT_COLOURS.length],
+          stroke: "#fff",
+          "stroke-width": 2,
+        }),
+      );
+      // Robots standing together (at the start, say) get their names one above another.
+      const near = team
+        .slice(0, i)
+        .filter((o) => Math.hypot(...o.route[o.route.length - 1].map((v, k) => v - at[k])) < 0.4)
+        .length;
+      mark.appendChild(
+        svg(
+          "text",
+          { x: X(at[0]) + 9, y: Y(at[1]) - 8 - 13 * near, class: "robot-label" },
+          r.id,
+        ),
+      );
+      const heard =
+        state.heard_s_ago == null ? "not heard from yet" : `heard ${state.heard_s_ago.toFixed(0)} s ago`;
+      titled(
+        mark,
+        `robot ${r.id}: ${plural((state.searched || []).length, "search", "searches")}, ` +
+          `${fmtM(state.cost_m)} m, ${state.claim ? `heading to ${state.claim}` : "no claim"}, ${heard}`,
+      );
+      gMarks.appendChild(mark);
+    });
+
     // Where the robot is: the end of its route (the start before its first search).
-    if (trial) {
+    if (trial && !team.length) {
       const at = view.route && view.route.length ? view.route[view.route.length - 1] : scene.start;
       const robot = svg("circle", {
         id: "robot",
@@ -1410,7 +1488,30 @@
       fact("target", trial.target, "fact-target");
     }
     fact("strategy", trial.strategy, "fact-strategy");
-    fact(ended ? "cost" : "cost so far", `${fmtM(trial.cost_m)} m`, "fact-cost");
+    if (trial.robots) {
+      const list = el("span", {});
+      trial.robots.forEach((r, i) => {
+        if (i) list.append(document.createTextNode(", "));
+        list.append(
+          el(
+            "span",
+            {
+              // The colour by class: the page's policy allows no inline style.
+              class: `robot-badge robot-${i % ROBOT_COLOURS.length}`,
+              "data-robot": r.id,
+              "data-claim": r.claim || "",
+            },
+            `${r.id} ${r.claim ? "→ " + r.claim : "·"} ${fmtM(r.cost_m)} m`,
+          ),
+        );
+      });
+      fact("robots", list, "fact-robots");
+    }
+    fact(
+      ended ? (trial.robots ? "makespan" : "cost") : "cost so far",
+      `${fmtM(trial.cost_m)} m`,
+      "fact-cost",
+    );
     const total = S.scene ? S.scene.containers.length : null;
     fact(
       "searched",

@@ -24,7 +24,9 @@ use super::replies::{Begun, RequestClaim};
 use super::tasks::{destination_state, seen, targets_of, trial_spec};
 use super::trials::{next_container, trial_state};
 use super::{Service, json};
-use crate::api::{ClaimNext, NextContainer, Observe, RobotState, StartTrial, TrialState};
+use crate::api::{
+    ClaimNext, NextContainer, Observe, RobotRoute, RobotState, StartTrial, TrialState,
+};
 use crate::error::{ApiError, ErrorKind, plan_error};
 use crate::grids::Placed;
 use crate::model::{
@@ -367,6 +369,47 @@ impl Service {
         let observations = self.store.read(|r| r.observations(row.id))?;
         let robots = self.store.read(|r| r.trial_robots(row.id))?;
         team.state(row, &observations, &robots, now_ms(), None)
+    }
+
+    /// Each robot's way so far and to its claim, for the picture of team trial `row` whose
+    /// state is `state`.
+    pub(super) fn team_routes(
+        &self,
+        row: &StoredTrial,
+        state: &TrialState,
+    ) -> Result<Vec<RobotRoute>, ApiError> {
+        let team = self.team_trial(row)?;
+        let observations = self.store.read(|r| r.observations(row.id))?;
+        let mut out = Vec::with_capacity(team.robots.len());
+        for (r, robot) in team.robots.iter().enumerate() {
+            let p = &team.placed[r];
+            let start = p.house.start.position;
+            let mut route = vec![[start.x, start.z]];
+            let mut from = Place::Start;
+            for o in observations
+                .iter()
+                .filter(|o| o.robot.as_deref() == Some(robot.id.as_str()))
+            {
+                let to = Place::Container(team.container(&o.container)?);
+                route.extend(p.path(from, to).iter().skip(1).copied());
+                from = to;
+            }
+            let claimed = state
+                .robots
+                .as_ref()
+                .and_then(|rs| rs.iter().find(|s| s.id == robot.id))
+                .and_then(|s| s.claim.as_deref());
+            let claim_path = match claimed {
+                Some(c) => Some(p.path(from, Place::Container(team.container(c)?)).to_vec()),
+                None => None,
+            };
+            out.push(RobotRoute {
+                id: robot.id.clone(),
+                route,
+                claim_path,
+            });
+        }
+        Ok(out)
     }
 
     fn claim_ttl_ms(&self) -> i64 {

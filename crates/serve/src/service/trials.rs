@@ -134,6 +134,10 @@ impl Service {
         }
         let (likelihoods, target_likelihoods) =
             view_likelihoods(t.strategy.as_ref(), house, &state, &searched)?;
+        let robot_routes = match row.robots {
+            Some(_) => Some(self.team_routes(&row, &state)?),
+            None => None,
+        };
         let view = TrialView {
             trial: state,
             start,
@@ -149,6 +153,7 @@ impl Service {
                 .collect(),
             likelihoods,
             target_likelihoods,
+            robot_routes,
         };
         json(Outcome::Done, &view)
     }

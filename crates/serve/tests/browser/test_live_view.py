@@ -281,6 +281,79 @@ def test_a_task_shows_every_target_and_the_destination(serve, view):
     v.check_clean()
 
 
+TEAM_SHOWN = """(e) => {
+  const card = document.querySelector("#plan-card");
+  if (card.dataset.trial !== String(e.trial) || card.dataset.status !== e.status) return false;
+  // Every robot named on the plan, where the server says it is, with its way so far.
+  const marks = [...document.querySelectorAll("#plan .team-robot")];
+  if (marks.map((m) => m.dataset.robot).join() !== e.robots.join()) return false;
+  for (const r of e.robots) {
+    const way = document.querySelector(`#plan .robot-route[data-robot="${r}"]`);
+    if ((way ? Number(way.dataset.points) : 0) !== e.points[r]) return false;
+    const claim = document.querySelector(`#plan .claim-path[data-robot="${r}"]`);
+    if ((claim ? claim.dataset.container : "") !== e.claims[r]) return false;
+    const badge = document.querySelector(`#fact-robots [data-robot="${r}"]`);
+    if (!badge || badge.dataset.claim !== e.claims[r]) return false;
+  }
+  // One robot's single route and proposal are not drawn for a team.
+  return !document.querySelector("#route") && !document.querySelector("#next-path");
+}"""
+
+
+def test_a_team_shows_every_robot_its_way_and_its_claim(serve, view):
+    server = serve()
+    v = view(server).open(token=TOKEN)
+    v.wait_live()
+    robot = Robot(server.api)
+    dep = robot.deploy(strategies=["model/prior"])
+    team = ["kitchen-bot", "hall-bot", "upstairs-bot"]
+    trial = server.api.post(
+        f"/deployments/{seg(dep['id'])}/trials",
+        {"scene": "apartment", "target": "Wallet", "robots": [{"id": r} for r in team]},
+    )
+    tid = seg(trial["trial"])
+    heading = {}
+    for r in team:
+        reply = server.api.post(f"/trials/{tid}/claims", {"robot": r})
+        heading[r] = reply["next"]["container"] if reply["next"] else None
+    turn = 0
+    while True:
+        shown = server.api.get(f"/trials/{tid}/view")
+        state = shown["trial"]
+        expected = {
+            "trial": state["trial"],
+            "status": state["status"],
+            "robots": team,
+            "points": {
+                r["id"]: (len(r["route"]) if len(r["route"]) > 1 else 0)
+                for r in shown["robot_routes"]
+            },
+            "claims": {
+                r["id"]: (r["claim"] if r["claim"] and rr["claim_path"] else "")
+                for r, rr in zip(state["robots"], shown["robot_routes"])
+            },
+        }
+        v.within(TEAM_SHOWN, expected, what=f"team trial after {state['searched']}")
+        if len(state["searched"]) == 2:
+            v.shot("serve-view-team.png")
+        if state["status"] != "searching":
+            break
+        movers = [r for r in team if heading.get(r)]
+        assert movers, state
+        r = movers[turn % len(movers)]
+        turn += 1
+        c = heading[r]
+        seen = robot.contents[c]
+        reply = server.api.post(
+            f"/trials/{tid}/observations",
+            {"robot": r, "container": c, "found": "Wallet" in seen, "objects": seen},
+        )
+        heading[r] = reply["next"]["container"] if reply["next"] else None
+    assert state["status"] == "done"
+    assert sum(1 for r in state["robots"] if r["searched"]) >= 2, state
+    v.check_clean()
+
+
 def test_the_page_asks_only_for_what_changed(serve, view):
     server = serve()
     robot = Robot(server.api)

@@ -60,24 +60,73 @@ fn eval_of_a_team_writes_its_columns_summary_and_picture() {
     );
     let summary = read_csv(&out.join("summary.csv"));
     assert!(summary.iter().all(|r| !r["mean_total_travel_m"].is_empty()));
-    // Selection replays one robot's searches: a run of teams is refused, saying why.
-    let o = ferret(&[
-        "select",
-        "--trials",
-        s(&out),
-        "--out",
-        s(&dir.path().join("select")),
-    ]);
-    assert!(!o.status.success());
-    assert!(
-        text(&o).contains("teams of 2 robots") && text(&o).contains("cannot replay a team's"),
-        "{}",
-        text(&o)
-    );
     let info = read_json(&out.join("run.json"));
     assert_eq!(info["team"]["robots"], 2);
     assert_eq!(info["team"]["starts"], "together");
     assert!(out.join("trajectories.png").metadata().unwrap().len() > 10_000);
+}
+
+/// Selection over a run of teams replays each strategy with the same team from the same
+/// starts: where a strategy's own trial found the target in the container the deployed one
+/// did, its replay is exactly its own makespan (its searches before meet nothing in either
+/// world), which one robot's replay would not be.
+#[test]
+fn select_over_a_team_run_replays_each_strategy_with_the_team() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let specs = "model/prior,independent/model/prior,split/model/prior";
+    let o = eval(
+        &out,
+        &["--robots", "2", "--starts", "spread", "--strategies", specs],
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let o = ferret(&[
+        "select",
+        "--trials",
+        s(&out),
+        "--trials-per-deployment",
+        "8",
+        "--out",
+        s(&dir.path().join("select")),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let rows = read_csv(&out.join("trials.csv"));
+    let row = |house: &str, strategy: &str| {
+        rows.iter()
+            .find(|r| r["house_index"] == house && r["strategy"] == strategy)
+            .unwrap()
+    };
+    let replays = std::fs::read_to_string(out.join("replay.csv")).unwrap();
+    let mut reader = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .from_reader(replays.as_bytes());
+    let (mut same, mut all) = (0, 0);
+    for r in reader.deserialize::<std::collections::HashMap<String, String>>() {
+        let r = r.unwrap();
+        let (deployed, replayed) = (
+            row(&r["house_index"], &r["deployed"]),
+            row(&r["house_index"], &r["strategy"]),
+        );
+        all += 1;
+        if deployed["found_container"] == replayed["found_container"] {
+            let replay: f64 = r["replay_cost_m"].parse().unwrap();
+            assert!(
+                (replay - cost(replayed)).abs() < 1e-9,
+                "{r:?}: replay {replay} vs the team's own {}",
+                cost(replayed)
+            );
+            same += 1;
+        }
+    }
+    assert_eq!(
+        all,
+        10 * 3 * 2,
+        "every strategy replayed on every other's trial"
+    );
+    assert!(
+        same >= 10,
+        "{same} of {all} replays on a trial found where the strategy found it"
+    );
 }
 
 /// A team of one is the run without a team, row for row; independent robots all at the start

@@ -643,6 +643,65 @@ fn house_run(runs: Vec<std::result::Result<TrialRow, String>>, trials: usize) ->
     )
 }
 
+/// A house's team: each robot's start and its distances, drawn and measured once for the house
+/// (the starts from the run's seed), shared by its evaluation and its replays.
+pub(crate) struct HouseTeam {
+    starts: Vec<ferret_world::grid::Cell>,
+    robots: Vec<ferret_world::Distances>,
+    grid_start: ferret_world::grid::Cell,
+}
+
+impl HouseTeam {
+    /// The team of `team` robots in `house` on `grid` (`distances` from the house's start).
+    ///
+    /// # Errors
+    /// A start the house's start cannot reach.
+    pub(crate) fn new(
+        house: &House,
+        (grid, distances): (&ferret_world::OccupancyGrid, &ferret_world::Distances),
+        team: TeamSettings,
+        seed: u64,
+    ) -> std::result::Result<Self, ferret_plan::PlanError> {
+        let starts = draw_starts(house, grid, team.robots, team.starts, seed);
+        let robots = team_distances(house, grid, distances, &starts)?;
+        Ok(Self {
+            starts,
+            robots,
+            grid_start: grid.start_cell(),
+        })
+    }
+
+    /// The task's destination on each robot's map.
+    pub(crate) fn legs(
+        &self,
+        house: &House,
+        task: &ferret_plan::Task,
+    ) -> std::result::Result<Vec<Option<ferret_plan::DestinationLegs>>, ferret_plan::TaskError>
+    {
+        team_destinations(house, task, &self.robots, self.grid_start, &self.starts)
+    }
+
+    /// Each robot's search problem of `trial`, with `legs` from [`legs`](Self::legs).
+    pub(crate) fn problems<'a>(
+        &'a self,
+        house: &'a House,
+        trial: &'a TrialSpec,
+        legs: &'a [Option<ferret_plan::DestinationLegs>],
+    ) -> Vec<SearchProblem<'a>> {
+        self.robots
+            .iter()
+            .zip(legs)
+            .map(|(d, l)| {
+                let p = SearchProblem::new(house, d, trial);
+                match l {
+                    Some(l) => p.with_destination(l),
+                    None => p,
+                }
+            })
+            .collect()
+    }
+}
+
 /// [`evaluate_house`] with a team on every trial: the robots' starts drawn and their distances
 /// measured once for the house, each trial run by [`run_team`].
 fn evaluate_team(
@@ -654,9 +713,8 @@ fn evaluate_team(
     trials: Vec<TrialSpec>,
 ) -> HouseRun {
     let house = &scene.house;
-    let starts = draw_starts(house, grid, team.robots, team.starts, draw.seed);
-    let robots = match team_distances(house, grid, distances, &starts) {
-        Ok(d) => d,
+    let members = match HouseTeam::new(house, (grid, distances), team, draw.seed) {
+        Ok(t) => t,
         Err(e) => return (vec![], vec![e.to_string()], 0),
     };
     let tasks = draw.tasks.is_some();
@@ -666,21 +724,11 @@ fn evaluate_team(
             let failed = move |s: &str, e: &dyn std::fmt::Display| {
                 format!("{}: {}: {s}: {e}", house.name, trial.task.targets_label())
             };
-            let legs = team_destinations(house, &trial.task, &robots, grid.start_cell(), &starts);
-            let robots = &robots;
+            let legs = members.legs(house, &trial.task);
+            let members = &members;
             strategies.iter().map(move |s| {
                 let legs = legs.as_ref().map_err(|e| failed(s.name(), e))?;
-                let problems: Vec<SearchProblem<'_>> = robots
-                    .iter()
-                    .zip(legs)
-                    .map(|(d, l)| {
-                        let p = SearchProblem::new(house, d, trial);
-                        match l {
-                            Some(l) => p.with_destination(l),
-                            None => p,
-                        }
-                    })
-                    .collect();
+                let problems = members.problems(house, trial, legs);
                 run_team(s.as_ref(), &problems, &scene.truth)
                     .map(|out| team_row(scene, trial, &out, tasks))
                     .map_err(|e| failed(s.name(), &e))

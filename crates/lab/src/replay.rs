@@ -9,14 +9,17 @@ use std::path::Path;
 use std::sync::{Arc, Mutex};
 
 use ferret_llm::LlmService;
-use ferret_plan::{PlanError, Protocol, ReplayMode, SearchProblem, Strategy, replay_outcome_with};
+use ferret_plan::{
+    PlanError, Protocol, ReplayMode, SearchProblem, Strategy, replay_outcome_with,
+    replay_team_cost_with,
+};
 use ferret_select::{CostTable, ORACLE};
 use ferret_world::{Distances, Scene};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{LabError, Result};
-use crate::evaluate::TrialDraw;
+use crate::evaluate::{HouseTeam, TrialDraw};
 use crate::feedback::Feedback;
 use crate::houses::{Mapped, build_maps};
 use crate::rows::TrialRow;
@@ -293,12 +296,6 @@ pub fn replay_table(
 ) -> Result<ReplayTable> {
     let info = &run.info;
     let rows = &run.rows;
-    if let Some(team) = info.team {
-        return Err(LabError::invalid(format!(
-            "the run's trials were done by teams of {} robots; selection replays one robot's searches and cannot replay a team's: select over a run without --robots",
-            team.robots
-        )));
-    }
     // Counterfactual replays are other numbers than pessimistic ones: they are cached under a
     // key of their own (the pessimistic key stays the plain one, so existing caches stay valid).
     let key = match protocol.replay {
@@ -619,6 +616,16 @@ pub fn replay_house(
 ) -> Result<Vec<ReplayRow>> {
     let house = &scene.house;
     let drawn = run_draw(info).trials(scene)?;
+    // A team's trials are replayed by the same team, from the same starts.
+    let team = match info.team {
+        Some(t) => {
+            let grid = distances.grid().ok_or_else(|| {
+                LabError::invalid(format!("{}: a team's replay needs a grid", house.name))
+            })?;
+            Some(HouseTeam::new(house, (grid, distances), t, info.seed)?)
+        }
+        None => None,
+    };
     let mut out = Vec::new();
     for (target, rows) in trials {
         let Some(trial) = drawn
@@ -631,8 +638,7 @@ pub fn replay_house(
             )));
         };
         replay_trial(
-            scene,
-            distances,
+            (scene, distances, team.as_ref()),
             strategies,
             rows,
             trial,
@@ -643,10 +649,10 @@ pub fn replay_house(
     Ok(out)
 }
 
-/// The replay costs of every strategy on one trial, for every deployed strategy.
+/// The replay costs of every strategy on one trial, for every deployed strategy (run by
+/// `team` when the trial was a team's: its makespan).
 fn replay_trial(
-    scene: &Scene,
-    distances: &Distances,
+    (scene, distances, team): (&Scene, &Distances, Option<&HouseTeam>),
     strategies: &[Arc<dyn Strategy>],
     rows: &HashMap<&str, &TrialRow>,
     trial: &ferret_plan::TrialSpec,
@@ -660,6 +666,14 @@ fn replay_trial(
         .map(|d| d.legs(house, distances))
         .transpose()
         .map_err(PlanError::Task)?;
+    let team_legs = team
+        .map(|t| t.legs(house, &trial.task))
+        .transpose()
+        .map_err(PlanError::Task)?;
+    let team_problems = match (team, &team_legs) {
+        (Some(t), Some(l)) => Some(t.problems(house, trial, l)),
+        _ => None,
+    };
     for deployed in strategies {
         let row = rows.get(deployed.name()).ok_or_else(|| {
             LabError::invalid(format!("{}: no trial of {}", house.name, deployed.name()))
@@ -680,8 +694,13 @@ fn replay_trial(
             if s.name() == deployed.name() {
                 continue;
             }
-            let c = replay_outcome_with(mode, s.as_ref(), &problem, &scene.truth, &found_each)?
-                .reported_cost(house, distances, travel)?;
+            let c = match &team_problems {
+                Some(problems) => {
+                    replay_team_cost_with(mode, s.as_ref(), problems, &scene.truth, &found_each)?
+                }
+                None => replay_outcome_with(mode, s.as_ref(), &problem, &scene.truth, &found_each)?
+                    .reported_cost(house, distances, travel)?,
+            };
             out.push(ReplayRow {
                 house_index: house.index,
                 target: label.clone(),

@@ -114,7 +114,7 @@ pub use protocol::{
 };
 pub use replay::{
     hindsight_truth, replay_cost, replay_cost_with, replay_costs, replay_outcome_with,
-    replay_team_costs,
+    replay_team_cost_with, replay_team_costs,
 };
 pub use replay_memo::ReplayMemo;
 pub use strategy::{

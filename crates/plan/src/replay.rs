@@ -190,6 +190,45 @@ pub fn replay_costs(
     Ok(costs)
 }
 
+/// The replay cost of `strategy` run by a team (one problem per robot, each from its own start)
+/// on a finished trial, under `mode` (see [`replay_cost_with`]): the team's makespan until the
+/// goal holds in the hindsight world (pessimistic) or in the true world `truth`
+/// (counterfactual).
+///
+/// # Errors
+/// A goal that did not hold, a team that never reaches it, and what
+/// [`run_team`](crate::run_team) refuses.
+pub fn replay_team_cost_with(
+    mode: ReplayMode,
+    strategy: &dyn Strategy,
+    problems: &[SearchProblem<'_>],
+    truth: &GroundTruth,
+    found_each: &[Option<usize>],
+) -> Result<f64, PlanError> {
+    let first = problems.first().ok_or_else(|| PlanError::Team {
+        house: String::new(),
+        message: "a team needs at least one robot".into(),
+    })?;
+    let (house, task) = (first.house, first.task());
+    let team = match mode {
+        ReplayMode::Pessimistic => {
+            let hindsight = hindsight_truth(house, task, found_each)?;
+            crate::team::run_team(strategy, problems, &hindsight)?
+        }
+        ReplayMode::Counterfactual => crate::team::run_team(strategy, problems, truth)?,
+    };
+    match team.trial.found {
+        Some(_) => Ok(team.trial.cost),
+        None => Err(PlanError::Replay {
+            house: house.name.clone(),
+            message: format!(
+                "{} never reached the goal of {task} with its team",
+                strategy.name()
+            ),
+        }),
+    }
+}
+
 /// The replay costs of every candidate on a team's finished trial whose targets were found in
 /// `found_each`: each candidate run by the same team (one problem per robot, each from its own
 /// start) in the pessimistic hindsight world, scored by its makespan. `deployed` keeps the
@@ -204,12 +243,8 @@ pub fn replay_team_costs(
     found_each: &[Option<usize>],
     deployed: (usize, f64),
 ) -> Result<Vec<f64>, PlanError> {
-    let first = problems.first().ok_or_else(|| PlanError::Team {
-        house: String::new(),
-        message: "a team needs at least one robot".into(),
-    })?;
-    let (house, task) = (first.house, first.task());
-    let hindsight = hindsight_truth(house, task, found_each)?;
+    // The true world is not needed in the pessimistic replay.
+    let nothing = GroundTruth::new(Vec::new());
     candidates
         .iter()
         .enumerate()
@@ -217,17 +252,13 @@ pub fn replay_team_costs(
             if j == deployed.0 {
                 return Ok(deployed.1);
             }
-            let team = crate::team::run_team(s.as_ref(), problems, &hindsight)?;
-            match team.trial.found {
-                Some(_) => Ok(team.trial.cost),
-                None => Err(PlanError::Replay {
-                    house: house.name.clone(),
-                    message: format!(
-                        "{} never reached the goal of {task} with its team",
-                        s.name()
-                    ),
-                }),
-            }
+            replay_team_cost_with(
+                ReplayMode::Pessimistic,
+                s.as_ref(),
+                problems,
+                &nothing,
+                found_each,
+            )
         })
         .collect()
 }

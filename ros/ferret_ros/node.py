@@ -107,6 +107,11 @@ class FerretNode(Node):
         p("llm_config", "")
         p("serve_url", "")
         p("serve_scene", "")
+        # A team on `ferret serve`: this robot's id (default: its namespace, else the node's
+        # name) and the ids of the robots that search each trial together.
+        p("serve_robot_id", "")
+        p("serve_team", [""])
+        p("serve_team_wait_s", 60.0)
         p("map_topic", "/map")
         p("map_frame", "map")
         p("require_map", True)
@@ -151,6 +156,10 @@ class FerretNode(Node):
                     c=float(g("selection_c")),
                     seed=int(g("seed")),
                     token=os.environ.get("FERRET_SERVE_TOKEN"),
+                    robot_id=g("serve_robot_id")
+                    or (self.get_namespace() if self.get_namespace() != "/" else self.get_name()),
+                    team=[t for t in g("serve_team") if t],
+                    team_wait_s=float(g("serve_team_wait_s")),
                 )
             else:
                 raise PlannerError(f"parameter `backend`: {backend!r}, expected python or serve")
@@ -368,7 +377,7 @@ class FerretNode(Node):
                 trial.record(step.id, objects)
                 log.info(
                     f"searched {step.id} ({step.type}, {step.room}): "
-                    f"{self._seen(task, trial, before)}; saw {objects or 'nothing'}"
+                    f"{self._seen(task, trial, before, objects)}; saw {objects or 'nothing'}"
                 )
                 st.plan_s += time.perf_counter() - t3
                 st.total_s = time.perf_counter() - t0
@@ -427,11 +436,12 @@ class FerretNode(Node):
         return fb
 
     @staticmethod
-    def _seen(task: Task, trial, before) -> str:
-        """A step's news for the log: which targets it found."""
+    def _seen(task: Task, trial, before, objects) -> str:
+        """A step's news for the log: which targets it found (in a team, what this robot saw,
+        whatever its teammates found meanwhile)."""
         if task.single:
             target = task.targets[0]
-            return f"found {target}" if trial.goal_holds else f"no {target}"
+            return f"found {target}" if target in objects else f"no {target}"
         new = [t for t in trial.found_in if t not in before]
         return "found " + ", ".join(new) if new else "no target"
 

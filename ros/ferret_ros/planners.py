@@ -19,6 +19,7 @@ import json
 import math
 import os
 import tempfile
+import time
 import urllib.error
 import urllib.parse
 import urllib.request
@@ -437,8 +438,21 @@ class ServePlanner:
         seed: int = 0,
         token: Optional[str] = None,
         timeout_s: float = 30.0,
+        robot_id: str = "",
+        team: Sequence[str] = (),
+        team_wait_s: float = 60.0,
     ):
         self.url = url.rstrip("/")
+        # A team (robot ids, this robot's among them) searches each trial together: the first
+        # starts it, the others join it (see ServeTeamTrial).
+        self.robot_id = robot_id
+        self.team = [r for r in team if r]
+        self.team_wait_s = team_wait_s
+        if self.team and robot_id not in self.team:
+            raise PlannerError(
+                f"parameter `serve_team`: {list(self.team)} does not name this robot "
+                f"({robot_id!r}, parameter `serve_robot_id`)"
+            )
         self.token = token or None
         self.timeout_s = timeout_s
         self.scene_name = scene
@@ -534,6 +548,8 @@ class ServePlanner:
                     body["strategies"] = self.strategies
                 self.deployment_id = self.request("POST", "/deployments", body)["id"]
             deployment = self.deployment_id
+        if self.team:
+            return self._team_trial(task, scene, deployment, places, pose)
         state = self.request("GET", f"/deployments/{deployment}")
         open_trial = state.get("open_trial")
         if open_trial:
@@ -556,6 +572,44 @@ class ServePlanner:
             body["pose"] = [pose[0], pose[1], pose[2]]
         t = self.request("POST", f"/deployments/{deployment}/trials", body)
         return ServeTrial(self, t, places, task)
+
+    def _team_trial(self, task, scene, deployment, places, pose) -> "ServeTeamTrial":
+        """The team's trial for `task`: started by the team's first robot (naming the team,
+        from this robot's pose), found among the deployment's trials by the others (the newest
+        one naming this robot that asks for the same and that this robot has not searched)."""
+        if task.destination is not None:
+            raise PlannerError(
+                "a team's robots do not bring what they found yet: give the team a task "
+                "without a destination",
+                field="destination",
+            )
+        if self.robot_id == self.team[0]:
+            if task.single:
+                body = {"scene": scene, "target": task.targets[0]}
+            else:
+                body = {"scene": scene, "targets": list(task.targets), "goal": task.goal}
+            if pose is not None:
+                body["pose"] = [pose[0], pose[1], pose[2]]
+            body["robots"] = [{"id": r} for r in self.team]
+            t = self.request("POST", f"/deployments/{deployment}/trials", body)
+            return ServeTeamTrial(self, t, places, task)
+        deadline = time.monotonic() + self.team_wait_s
+        while True:
+            state = self.request("GET", f"/deployments/{deployment}")
+            for summary in reversed(state.get("trials") or []):
+                if summary.get("status") != "searching":
+                    continue
+                t = self.request("GET", f"/trials/{summary['trial']}")
+                mine = [r for r in t.get("robots") or [] if r.get("id") == self.robot_id]
+                if mine and same_task(t, task) and t["scene"] == scene and not mine[0]["searched"]:
+                    return ServeTeamTrial(self, t, places, task)
+            if time.monotonic() > deadline:
+                raise PlannerError(
+                    f"no trial of deployment {deployment} for {task.label} names this robot "
+                    f"({self.robot_id}) after {self.team_wait_s:g} s: the team's first robot, "
+                    f"{self.team[0]}, starts it"
+                )
+            time.sleep(0.1)
 
 
 def same_task(state: dict, task: "Task") -> bool:
@@ -687,3 +741,73 @@ class ServeTrial:
             self.state = self.planner.request("POST", f"/trials/{self.state['trial']}/abandon", {})
         except PlannerError as e:
             self.abandon_error = str(e)
+
+
+class ServeTeamTrial(ServeTrial):
+    """This robot's part of a team's trial on `ferret serve`: the server claims each robot's
+    next container (never a teammate's), and every robot reports with its id. A robot with
+    nothing left to claim waits for its teammates; the trial ends for all once one finds what
+    it asks for. The cost is this robot's own way (the trial's is the team's makespan)."""
+
+    # How often a robot with nothing to do asks again, and for how long at most.
+    POLL_S = 0.1
+
+    def __init__(self, planner: ServePlanner, state: dict, places: Dict[str, Place], task: "Task"):
+        super().__init__(planner, state, places, task)
+        self.state = self._claim()
+
+    def _claim(self) -> dict:
+        return self.planner.request(
+            "POST", f"/trials/{self.state['trial']}/claims", {"robot": self.planner.robot_id}
+        )
+
+    def next(self) -> Optional[Place]:
+        deadline = time.monotonic() + self.planner.team_wait_s
+        while self.state.get("status") == "searching" and not self.state.get("next"):
+            if time.monotonic() > deadline:
+                raise PlannerError(
+                    f"trial {self.state['trial']}: nothing left for {self.planner.robot_id} to "
+                    f"search for {self.planner.team_wait_s:g} s while its teammates hold the rest"
+                )
+            time.sleep(self.POLL_S)
+            self.state = self._claim()
+        return super().next()
+
+    def record(self, container: str, objects: Sequence[str]) -> float:
+        before = self.cost
+        seen = [t for t in self.task.targets if t in objects]
+        body = {
+            "robot": self.planner.robot_id,
+            "container": container,
+            "found": bool(seen),
+            "objects": list(objects),
+        }
+        if not self.task.single:
+            body["found_targets"] = seen
+        try:
+            self.state = self.planner.request(
+                "POST", f"/trials/{self.state['trial']}/observations", body
+            )
+        except PlannerError as e:
+            if e.status != 409:
+                raise
+            # The trial ended meanwhile (a teammate found it), or a teammate searched there
+            # first: where the team stands now.
+            self.state = self._claim()
+        return self.cost - before
+
+    @property
+    def cost(self) -> float:
+        me = [r for r in self.state.get("robots") or [] if r.get("id") == self.planner.robot_id]
+        return float(me[0].get("cost_m") or 0.0) if me else 0.0
+
+    @property
+    def mine(self) -> List[str]:
+        """The containers this robot searched."""
+        me = [r for r in self.state.get("robots") or [] if r.get("id") == self.planner.robot_id]
+        return list(me[0].get("searched") or []) if me else []
+
+    def abandon(self) -> None:
+        """A robot of a team that fails leaves the trial to its teammates: its claim lapses on
+        the server, and the trial goes on."""
+        self.ended = True

@@ -56,8 +56,9 @@ class SimNav2(Node):
     `fail_from`-th on is aborted after its first feedback), "hang" (such goals never end until
     canceled), "reject" (they are rejected)."""
 
-    def __init__(self, house, speed: float = 50.0, name: str = "sim_nav2"):
-        super().__init__(name)
+    def __init__(self, house, speed: float = 50.0, name: str = "sim_nav2", namespace: str = ""):
+        # In a namespace (one robot of several), every name below is that robot's own.
+        super().__init__(name, namespace=namespace)
         self.house = house
         self.speed = speed
         self.mode = "ok"
@@ -68,9 +69,9 @@ class SimNav2(Node):
         # Every goal received (NavigateToPose and /goal_pose), as (x, y).
         self.goal_points: List[Tuple[float, float]] = []
         self.lock = threading.Lock()
-        self.pose_pub = self.create_publisher(PoseWithCovarianceStamped, "/amcl_pose", LATCHED)
+        self.pose_pub = self.create_publisher(PoseWithCovarianceStamped, "amcl_pose", LATCHED)
         self.reset()
-        self.create_subscription(PoseStamped, "/goal_pose", self._on_goal_pose, 10)
+        self.create_subscription(PoseStamped, "goal_pose", self._on_goal_pose, 10)
         self.server = ActionServer(
             self,
             NavigateToPose,
@@ -247,13 +248,15 @@ class SimDetector(Node):
     """Reports the ground truth of the container the robot stands at (from /amcl_pose): once
     on arrival and then at `rate_hz`. `muted` makes it report nothing."""
 
-    def __init__(self, house, rate_hz: float = 10.0, name: str = "sim_detector"):
-        super().__init__(name)
+    def __init__(
+        self, house, rate_hz: float = 10.0, name: str = "sim_detector", namespace: str = ""
+    ):
+        super().__init__(name, namespace=namespace)
         self.house = house
         self.muted = False
         self.at = None
         self.pub = self.create_publisher(Detection, "detections", 10)
-        self.create_subscription(PoseWithCovarianceStamped, "/amcl_pose", self._on_pose, LATCHED)
+        self.create_subscription(PoseWithCovarianceStamped, "amcl_pose", self._on_pose, LATCHED)
         self.create_timer(1.0 / rate_hz, self._report)
 
     def _on_pose(self, msg) -> None:

@@ -103,20 +103,23 @@ class Client:
     """The action client a user's code would be, plus listeners of the belief, the markers and
     the path."""
 
-    def __init__(self, node_name):
-        self.node = Node("test_client_" + node_name.replace("-", "_"))
-        self.action = ActionClient(self.node, SearchObject, f"/{node_name}/search_object")
+    def __init__(self, node_name, namespace=""):
+        self.node = Node(
+            "test_client_" + (namespace + "_" + node_name).strip("_").replace("-", "_")
+        )
+        at = f"/{namespace}/{node_name}" if namespace else f"/{node_name}"
+        self.action = ActionClient(self.node, SearchObject, f"{at}/search_object")
         self.beliefs = []
         self.markers = []
         self.paths = []
         self.node.create_subscription(
-            Belief, f"/{node_name}/belief", lambda m: self.beliefs.append(m), KEEP_ALL
+            Belief, f"{at}/belief", lambda m: self.beliefs.append(m), KEEP_ALL
         )
         self.node.create_subscription(
-            MarkerArray, f"/{node_name}/markers", lambda m: self.markers.append(m), KEEP_ALL
+            MarkerArray, f"{at}/markers", lambda m: self.markers.append(m), KEEP_ALL
         )
         self.node.create_subscription(
-            PathMsg, f"/{node_name}/path", lambda m: self.paths.append(m), KEEP_ALL
+            PathMsg, f"{at}/path", lambda m: self.paths.append(m), KEEP_ALL
         )
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(self.node)
@@ -177,16 +180,18 @@ class Client:
 class FerretProcess:
     """`python -m ferret_ros.node` with parameters, its log in a file shown on failure."""
 
-    def __init__(self, tmp_path, name, params):
-        self.name = name
+    def __init__(self, tmp_path, name, params, namespace=""):
+        self.name = f"{namespace}-{name}" if namespace else name
         args = [sys.executable, "-m", "ferret_ros.node", "--ros-args", "-r", f"__node:={name}"]
+        if namespace:
+            args += ["-r", f"__ns:=/{namespace}"]
         for k, v in params.items():
             if isinstance(v, list):
                 v = "[" + ",".join(f"'{x}'" for x in v) + "]"
             elif isinstance(v, bool):
                 v = "true" if v else "false"
             args += ["-p", f"{k}:={v}"]
-        self.log_path = tmp_path / f"{name}.log"
+        self.log_path = tmp_path / f"{self.name}.log"
         self.log = open(self.log_path, "w")
         env = dict(os.environ, PYTHONPATH=str(ROS_DIR), PYTHONUNBUFFERED="1")
         self.proc = subprocess.Popen(args, stdout=self.log, stderr=subprocess.STDOUT, env=env)
@@ -213,10 +218,10 @@ def start_node(ros, robot, tmp_path):
     is up. Stops both after the test, printing the node's log when the test failed."""
     started = []
 
-    def start(name, **params):
+    def start(name, namespace="", **params):
         params.setdefault("scene", str(SCENE))
-        p = FerretProcess(tmp_path, name, params)
-        c = Client(name)
+        p = FerretProcess(tmp_path, name, params, namespace)
+        c = Client(name, namespace)
         started.append((p, c))
         if not c.action.wait_for_server(timeout_sec=START_TIMEOUT_S):
             raise AssertionError(

@@ -642,14 +642,15 @@ fn a_replica_killed_mid_burst_loses_and_doubles_no_acknowledged_observation() {
         line["verified_observations"].as_u64().unwrap() > 100,
         "{line}"
     );
-    for field in [
-        "errors",
-        "lost_observations",
-        "duplicated_observations",
-        "mismatched_deployments",
-    ] {
-        assert_eq!(line[field], 0, "{field}: {line}");
-    }
+    assert_zero(
+        &line,
+        &[
+            "errors",
+            "lost_observations",
+            "duplicated_observations",
+            "mismatched_deployments",
+        ],
+    );
 }
 
 /// Robots sharing one deployment (`bench serve --shared-deployment`): every start answered
@@ -681,15 +682,16 @@ fn bench_serve_runs_robots_sharing_one_deployment_without_refusals() {
         .find(|k| k["reply"] == "start")
         .map(|k| k["count"].as_u64().unwrap());
     assert_eq!(starts, Some(48), "{line}");
-    for field in [
-        "refused_starts",
-        "errors",
-        "lost_observations",
-        "duplicated_observations",
-        "mismatched_deployments",
-    ] {
-        assert_eq!(line[field], 0, "{field}: {line}");
-    }
+    assert_zero(
+        &line,
+        &[
+            "refused_starts",
+            "errors",
+            "lost_observations",
+            "duplicated_observations",
+            "mismatched_deployments",
+        ],
+    );
     assert!(
         line["verified_observations"].as_u64().unwrap() >= 48,
         "{line}"
@@ -721,9 +723,10 @@ fn bench_serve_fresh_trials_never_repeats_a_trial() {
     assert!(out.status.success(), "{}", text(&out));
     let line: Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(line["fresh_trials"], true, "{line}");
-    for field in ["errors", "lost_observations", "duplicated_observations"] {
-        assert_eq!(line[field], 0, "{field}: {line}");
-    }
+    assert_zero(
+        &line,
+        &["errors", "lost_observations", "duplicated_observations"],
+    );
     let store = ferret_serve::Store::open(&db).unwrap();
     let trials: Vec<_> = store
         .read(|r| {
@@ -847,17 +850,25 @@ fn bench_serve_teams_claim_no_container_twice() {
             "one start per home and trial: {line}"
         );
         assert!(count("claim") >= 4 * 5 * 3, "each robot claims: {line}");
-        for field in [
-            "errors",
-            "lost_observations",
-            "duplicated_observations",
-            "mismatched_deployments",
-        ] {
-            assert_eq!(line[field], 0, "{field}: {line}");
-        }
+        assert_zero(
+            &line,
+            &[
+                "errors",
+                "lost_observations",
+                "duplicated_observations",
+                "mismatched_deployments",
+            ],
+        );
         assert!(
             line["verified_observations"].as_u64().unwrap() >= 20,
             "{line}"
         );
+    }
+}
+
+/// Asserts that every one of `fields` of a `bench serve --json` line is 0.
+fn assert_zero(line: &Value, fields: &[&str]) {
+    for field in fields {
+        assert_eq!(line[*field], 0, "{field}: {line}");
     }
 }

@@ -163,6 +163,33 @@ impl PySearch {
             .collect()
     }
 
+    /// A container `record` or `observe` is told was searched, and what was seen there,
+    /// checked: in the house, not searched yet, the search not finished.
+    fn searched_there(
+        &mut self,
+        container: &Bound<'_, PyAny>,
+        (found, objects, found_targets): (bool, Option<Vec<String>>, Option<Vec<String>>),
+    ) -> PyResult<(usize, Vec<ObjectType>)> {
+        let (c, id) = {
+            let house = self.house.get();
+            let c = house.container_index(container)?;
+            (c, house.scene.house.containers[c].id.clone())
+        };
+        if self.finished {
+            return Err(errors::search(
+                "the search was finished (finish()): start a new Search",
+            ));
+        }
+        let seen = self.observed(found, objects, found_targets)?;
+        if self
+            .live()
+            .with_dependent_mut(|_, s| s.belief().is_searched(c))
+        {
+            return Err(errors::search(format!("{id:?} was already searched")));
+        }
+        Ok((c, seen))
+    }
+
     /// The object types `record` is told were seen in a container, checked: those listed in
     /// `objects`, the targets named in `found_targets`, and for one target the target itself
     /// when `found`.
@@ -402,23 +429,9 @@ impl PySearch {
         objects: Option<Vec<String>>,
         found_targets: Option<Vec<String>>,
     ) -> PyResult<()> {
-        let (c, id) = {
-            let house = self.house.get();
-            let c = house.container_index(container)?;
-            (c, house.scene.house.containers[c].id.clone())
-        };
-        if self.finished {
-            return Err(errors::search(
-                "the search was finished (finish()): start a new Search",
-            ));
-        }
-        let seen = self.observed(found, objects, found_targets)?;
-        self.live().with_dependent_mut(|_, s| {
-            if s.belief().is_searched(c) {
-                return Err(errors::search(format!("{id:?} was already searched")));
-            }
-            s.observe(c, seen).map_err(errors::plan)
-        })
+        let (c, seen) = self.searched_there(container, (found, objects, found_targets))?;
+        self.live()
+            .with_dependent_mut(|_, s| s.observe(c, seen).map_err(errors::plan))
     }
 
     /// Records that the robot searched `container` (its id or the `Container`) and what it saw
@@ -440,11 +453,8 @@ impl PySearch {
         objects: Option<Vec<String>>,
         found_targets: Option<Vec<String>>,
     ) -> PyResult<f64> {
-        let (c, id) = {
-            let house = self.house.get();
-            let c = house.container_index(container)?;
-            (c, house.scene.house.containers[c].id.clone())
-        };
+        // A container not in the house is refused before anything else.
+        self.house.get().container_index(container)?;
         let goal_at = self.live().with_dependent_mut(|_, s| s.goal_container());
         if let Some(f) = goal_at {
             let at = self.house.get().scene.house.containers[f].id.clone();
@@ -460,18 +470,9 @@ impl PySearch {
                 )
             }));
         }
-        if self.finished {
-            return Err(errors::search(
-                "the search was finished (finish()): start a new Search",
-            ));
-        }
-        let seen = self.observed(found, objects, found_targets)?;
-        self.live().with_dependent_mut(|_, s| {
-            if s.belief().is_searched(c) {
-                return Err(errors::search(format!("{id:?} was already searched")));
-            }
-            s.record(c, seen).map_err(errors::plan)
-        })
+        let (c, seen) = self.searched_there(container, (found, objects, found_targets))?;
+        self.live()
+            .with_dependent_mut(|_, s| s.record(c, seen).map_err(errors::plan))
     }
 
     /// Ends the search: the robot goes from where it stands to the task's destination, and

@@ -9,41 +9,13 @@ use std::collections::BTreeSet;
 use std::sync::Arc;
 use std::time::Duration;
 
-use ferret_serve::{HttpOptions, ServeOptions, Service};
+use ferret_serve::Service;
 use ferret_world::GridParams;
 use serde_json::{Value, json};
 use support::events::Stream;
 use support::{TARGETS, strategies};
 
 const SECOND: std::time::Duration = std::time::Duration::from_secs(1);
-
-/// A replica: its own service, store (pool and claims session) and port.
-async fn replica(url: &str) -> (String, tokio::task::JoinHandle<()>) {
-    let service = tokio::task::block_in_place(|| {
-        let service =
-            Service::new(support::connect(url), GridParams::default(), strategies()).unwrap();
-        service.add_scene("flat", support::flat()).unwrap();
-        service
-    });
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-    let addr = listener.local_addr().unwrap();
-    let options = HttpOptions {
-        listen: Some(addr),
-        ..HttpOptions::default()
-    };
-    let app = ferret_serve::router(Arc::new(service), &options).unwrap();
-    let handle = tokio::spawn(async move {
-        ferret_serve::serve(
-            listener,
-            app,
-            ServeOptions::default(),
-            std::future::pending(),
-        )
-        .await
-        .unwrap();
-    });
-    (format!("http://{addr}"), handle)
-}
 
 /// What contents each container of the scene holds, for answering the robot's searches.
 fn contents(container: &str) -> Vec<&'static str> {
@@ -159,8 +131,8 @@ async fn two_replicas_share_a_deployment_without_losing_or_doubling_a_trial() {
     let Some(url) = support::postgres_or_skip("two_replicas_share_a_deployment") else {
         return;
     };
-    let (a, ha) = replica(&url).await;
-    let (b, hb) = replica(&url).await;
+    let (a, ha) = support::server::replica(&url).await;
+    let (b, hb) = support::server::replica(&url).await;
     let urls = Arc::new(vec![a.clone(), b.clone()]);
     let client = reqwest::Client::new();
     let dep = post(
@@ -236,8 +208,8 @@ async fn a_request_id_is_one_request_across_replicas() {
     let Some(url) = support::postgres_or_skip("a_request_id_is_one_request_across_replicas") else {
         return;
     };
-    let (a, ha) = replica(&url).await;
-    let (b, hb) = replica(&url).await;
+    let (a, ha) = support::server::replica(&url).await;
+    let (b, hb) = support::server::replica(&url).await;
     // Hold the id from a third session, as a replica in the middle of the request would.
     let holder = tokio::task::block_in_place(|| support::connect(&url));
     let claim = tokio::task::block_in_place(|| holder.claim("dep-x").unwrap());
@@ -294,8 +266,8 @@ async fn a_page_on_one_replica_sees_a_trial_driven_through_another() {
     else {
         return;
     };
-    let (a, ha) = replica(&url).await;
-    let (b, hb) = replica(&url).await;
+    let (a, ha) = support::server::replica(&url).await;
+    let (b, hb) = support::server::replica(&url).await;
     let client = reqwest::Client::new();
     let mut page = Stream::open_at(&client, &a, None).await.1.unwrap();
     assert_eq!(
@@ -371,8 +343,8 @@ async fn replicas_notify_each_other_only_while_a_page_watches() {
     else {
         return;
     };
-    let (a, ha) = replica(&url).await;
-    let (b, hb) = replica(&url).await;
+    let (a, ha) = support::server::replica(&url).await;
+    let (b, hb) = support::server::replica(&url).await;
     let (listener, mut connection) = tokio_postgres::connect(&url, tokio_postgres::NoTls)
         .await
         .unwrap();

@@ -12,10 +12,10 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use support::server::{Server, start, start_with};
-use support::{SCENE, contents, strategies};
+use support::{SCENE, contents};
 
 use ferret_plan::{PlannerConfig, Search, SearchProblem, StrategyRegistry, TrialSpec};
-use ferret_serve::{HttpOptions, ServeOptions, Service, ServiceOptions};
+use ferret_serve::{ServeOptions, ServiceOptions};
 use ferret_world::{GridParams, ObjectType, SceneFile};
 use serde_json::{Value, json};
 
@@ -55,22 +55,21 @@ fn strings(v: &Value) -> Vec<String> {
         .collect()
 }
 
-/// The container robot `me` should be sent to next, planned here from the state before its
-/// observation of `container` (what each robot searched, every teammate's claim) with the
-/// trial's strategy: its own searches move it, its teammates' are known.
-fn expected_next(before: &Value, me: &str, container: &str, target: &str) -> Option<String> {
+/// The container robot `me` should be sent to next, planned here with the trial's strategy
+/// from `state` (what each robot searched, every teammate's claim) and, when `me` reports
+/// `searched` in the same request, that search too: its own searches move it, its teammates'
+/// are known, their claims left to them.
+fn expected_next(state: &Value, me: &str, searched: Option<&str>) -> Option<String> {
     let file = SceneFile::parse(SCENE, Path::new("flat.json")).unwrap();
     let scene = file.to_scene(Path::new("flat.json"), None).unwrap();
     let house = &scene.house;
     let (_, distances) = ferret_world::distance::build(house, &GridParams::default()).unwrap();
     let registry = StrategyRegistry::builtin(None, PlannerConfig::default(), 10);
-    let strategy = registry
-        .build(before["strategy"].as_str().unwrap())
-        .unwrap();
-    let trial = TrialSpec::single(ObjectType::new(target));
+    let strategy = registry.build(state["strategy"].as_str().unwrap()).unwrap();
+    let trial = TrialSpec::single(ObjectType::new(state["target"].as_str().unwrap()));
     let problem = SearchProblem::new(house, &distances, &trial);
     let mut search = Search::start(strategy.as_ref(), &problem, None).unwrap();
-    let by: BTreeMap<String, String> = before["robots"]
+    let by: BTreeMap<String, String> = state["robots"]
         .as_array()
         .unwrap()
         .iter()
@@ -82,15 +81,15 @@ fn expected_next(before: &Value, me: &str, container: &str, target: &str) -> Opt
         })
         .collect();
     let file_json: Value = serde_json::from_str(SCENE).unwrap();
-    let mut order = strings(&before["searched"]);
-    order.push(container.to_string());
+    let mut order = strings(&state["searched"]);
+    order.extend(searched.map(str::to_string));
     for c in &order {
         let i = house.container_index(c).unwrap();
         let seen: Vec<ObjectType> = contents(&file_json, c)
             .iter()
             .map(ObjectType::new)
             .collect();
-        if c == container || by.get(c).map(String::as_str) == Some(me) {
+        if Some(c.as_str()) == searched || by.get(c).map(String::as_str) == Some(me) {
             search.record(i, seen).unwrap();
         } else {
             search.observe(i, seen).unwrap();
@@ -99,9 +98,9 @@ fn expected_next(before: &Value, me: &str, container: &str, target: &str) -> Opt
     if search.goal_holds() {
         return None;
     }
-    let others: Vec<usize> = claims(before)
+    let others: Vec<usize> = claims(state)
         .iter()
-        .filter(|(r, c)| r.as_str() != me && c.as_str() != container)
+        .filter(|(r, c)| r.as_str() != me && Some(c.as_str()) != searched)
         .map(|(_, c)| house.container_index(c).unwrap())
         .collect();
     search
@@ -164,7 +163,7 @@ async fn three_robots_never_share_a_container_and_plan_with_what_all_saw() {
         else {
             panic!("robots have nothing to do while the trial searches: {last}");
         };
-        let expected = expected_next(&last, &robot, &container, "Wallet");
+        let expected = expected_next(&last, &robot, Some(&container));
         let (status, reply) = s
             .post(
                 &format!("/trials/{trial}/observations"),
@@ -348,10 +347,10 @@ async fn a_silent_robots_claim_lapses() {
         .post(&format!("/trials/{trial}/claims"), json!({"robot": "b"}))
         .await;
     let b_next = b["next"]["container"].as_str().unwrap().to_string();
-    assert_eq!(Some(b_next.clone()), expected_next_claim(&now, "b"), "{b}");
+    assert_eq!(Some(b_next.clone()), expected_next(&now, "b", None), "{b}");
     let mut with_a = now.clone();
     with_a["robots"][0]["claim"] = json!(first);
-    let kept_off = expected_next_claim(&with_a, "b");
+    let kept_off = expected_next(&with_a, "b", None);
     assert_ne!(kept_off.as_deref(), Some(first.as_str()));
     // A trial whose claims lapse and come back to the first choice: a's container goes to b.
     let (_, started) = s
@@ -394,48 +393,6 @@ async fn a_silent_robots_claim_lapses() {
             .contains("by robot a"),
         "{again}"
     );
-}
-
-/// The container robot `me` is sent to by a claim from state `now` (no observation).
-fn expected_next_claim(now: &Value, me: &str) -> Option<String> {
-    let file = SceneFile::parse(SCENE, Path::new("flat.json")).unwrap();
-    let scene = file.to_scene(Path::new("flat.json"), None).unwrap();
-    let house = &scene.house;
-    let (_, distances) = ferret_world::distance::build(house, &GridParams::default()).unwrap();
-    let registry = StrategyRegistry::builtin(None, PlannerConfig::default(), 10);
-    let strategy = registry.build(now["strategy"].as_str().unwrap()).unwrap();
-    let trial = TrialSpec::single(ObjectType::new(now["target"].as_str().unwrap()));
-    let problem = SearchProblem::new(house, &distances, &trial);
-    let mut search = Search::start(strategy.as_ref(), &problem, None).unwrap();
-    let file_json: Value = serde_json::from_str(SCENE).unwrap();
-    let mine: Vec<String> = now["robots"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|r| r["id"] == me)
-        .flat_map(|r| strings(&r["searched"]))
-        .collect();
-    for c in strings(&now["searched"]) {
-        let i = house.container_index(&c).unwrap();
-        let seen = contents(&file_json, &c)
-            .iter()
-            .map(ObjectType::new)
-            .collect();
-        if mine.contains(&c) {
-            search.record(i, seen).unwrap();
-        } else {
-            search.observe(i, seen).unwrap();
-        }
-    }
-    let others: Vec<usize> = claims(now)
-        .iter()
-        .filter(|(r, _)| r.as_str() != me)
-        .map(|(_, c)| house.container_index(c).unwrap())
-        .collect();
-    search
-        .next_container_leaving(&others)
-        .unwrap()
-        .map(|c| house.containers[c].id.clone())
 }
 
 /// Every bad robot id gets a 4xx naming the field and saying what is wrong; nothing is stored
@@ -611,34 +568,6 @@ async fn robots_racing_for_claims_get_distinct_containers() {
     }
 }
 
-/// A replica on a shared PostgreSQL database offering the scene `flat`.
-async fn replica(url: &str) -> (String, tokio::task::JoinHandle<()>) {
-    let service = tokio::task::block_in_place(|| {
-        let service =
-            Service::new(support::connect(url), GridParams::default(), strategies()).unwrap();
-        service.add_scene("flat", support::flat()).unwrap();
-        service
-    });
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-    let addr = listener.local_addr().unwrap();
-    let options = HttpOptions {
-        listen: Some(addr),
-        ..HttpOptions::default()
-    };
-    let app = ferret_serve::router(Arc::new(service), &options).unwrap();
-    let handle = tokio::spawn(async move {
-        ferret_serve::serve(
-            listener,
-            app,
-            ServeOptions::default(),
-            std::future::pending(),
-        )
-        .await
-        .unwrap();
-    });
-    (format!("http://{addr}"), handle)
-}
-
 /// Three robots of each of four trials, each robot on its own replica of two, all at once:
 /// no container is searched twice or claimed by two robots, every acknowledged observation is
 /// stored, every trial ends done.
@@ -647,8 +576,8 @@ async fn robots_on_two_replicas_share_one_trial() {
     let Some(url) = support::postgres_or_skip("robots_on_two_replicas_share_one_trial") else {
         return;
     };
-    let (a, ha) = replica(&url).await;
-    let (b, hb) = replica(&url).await;
+    let (a, ha) = support::server::replica(&url).await;
+    let (b, hb) = support::server::replica(&url).await;
     let client = reqwest::Client::new();
     let scene: Value = client
         .get(format!("{a}/scenes/flat"))

@@ -121,3 +121,32 @@ impl Server {
         (r.status().as_u16(), r.json().await.unwrap())
     }
 }
+
+/// A replica on the shared PostgreSQL database at `url`, offering the scene `flat`, on
+/// 127.0.0.1: its URL and the task serving it.
+pub async fn replica(url: &str) -> (String, tokio::task::JoinHandle<()>) {
+    let service = tokio::task::block_in_place(|| {
+        let service =
+            Service::new(super::connect(url), GridParams::default(), strategies()).unwrap();
+        service.add_scene("flat", super::flat()).unwrap();
+        service
+    });
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let options = HttpOptions {
+        listen: Some(addr),
+        ..HttpOptions::default()
+    };
+    let app = ferret_serve::router(Arc::new(service), &options).unwrap();
+    let handle = tokio::spawn(async move {
+        ferret_serve::serve(
+            listener,
+            app,
+            ServeOptions::default(),
+            std::future::pending(),
+        )
+        .await
+        .unwrap();
+    });
+    (format!("http://{addr}"), handle)
+}

@@ -25,6 +25,28 @@ async fn deployment(s: &Server, body: Value) -> i64 {
     dep["id"].as_i64().unwrap()
 }
 
+/// Robot `robot`'s claim in trial `trial`: the trial's state, its container in `next`.
+async fn claim(s: &Server, trial: i64, robot: &str) -> Value {
+    let (status, reply) = s
+        .post(&format!("/trials/{trial}/claims"), json!({"robot": robot}))
+        .await;
+    assert_eq!(status, 200, "{reply}");
+    reply
+}
+
+/// A trial for the Wallet in deployment `id` searched by `robots`; its id.
+async fn start_team(s: &Server, id: i64, robots: &[&str]) -> i64 {
+    let team: Vec<Value> = robots.iter().map(|r| json!({"id": r})).collect();
+    let (status, started) = s
+        .post(
+            &format!("/deployments/{id}/trials"),
+            json!({"scene": "flat", "target": "Wallet", "robots": team}),
+        )
+        .await;
+    assert_eq!(status, 201, "{started}");
+    started["trial"].as_i64().unwrap()
+}
+
 /// What robot `robot` reports after searching `container` of the scene, for target `target`.
 fn observation(scene: &Value, robot: &str, container: &str, target: &str) -> Value {
     let seen = contents(scene, container);
@@ -147,9 +169,7 @@ async fn three_robots_never_share_a_container_and_plan_with_what_all_saw() {
     let firsts: BTreeSet<&String> = next.values().collect();
     assert_eq!(firsts.len(), 3, "three robots, three containers: {next:?}");
     // Asking again gives the same claim.
-    let (_, again) = s
-        .post(&format!("/trials/{trial}/claims"), json!({"robot": "b"}))
-        .await;
+    let again = claim(&s, trial, "b").await;
     assert_eq!(
         again["next"]["container"].as_str(),
         Some(next["b"].as_str())
@@ -312,20 +332,10 @@ async fn a_silent_robots_claim_lapses() {
     let s = start_with(None, None, options, ServeOptions::default()).await;
     let (_, scene) = s.get("/scenes/flat").await;
     let id = deployment(&s, json!({"strategies": ["model/uniform"]})).await;
-    let (_, started) = s
-        .post(
-            &format!("/deployments/{id}/trials"),
-            json!({"scene": "flat", "target": "Wallet", "robots": [{"id": "a"}, {"id": "b"}]}),
-        )
-        .await;
-    let trial = started["trial"].as_i64().unwrap();
-    let (_, a) = s
-        .post(&format!("/trials/{trial}/claims"), json!({"robot": "a"}))
-        .await;
+    let trial = start_team(&s, id, &["a", "b"]).await;
+    let a = claim(&s, trial, "a").await;
     let first = a["next"]["container"].as_str().unwrap().to_string();
-    let (_, b) = s
-        .post(&format!("/trials/{trial}/claims"), json!({"robot": "b"}))
-        .await;
+    let b = claim(&s, trial, "b").await;
     let held = b["next"]["container"].as_str().unwrap().to_string();
     assert_ne!(held, first, "a's claim is a's while it lasts");
     // b gives its claim up by searching it; a stays silent past its claim time.
@@ -343,9 +353,7 @@ async fn a_silent_robots_claim_lapses() {
     assert!(a_now["claim"].is_null(), "a's claim lapsed: {now}");
     assert!(a_now["heard_s_ago"].as_f64().unwrap() >= 0.5, "{now}");
     // b plans as if a held nothing; with a's claim still there it would be kept off it.
-    let (_, b) = s
-        .post(&format!("/trials/{trial}/claims"), json!({"robot": "b"}))
-        .await;
+    let b = claim(&s, trial, "b").await;
     let b_next = b["next"]["container"].as_str().unwrap().to_string();
     assert_eq!(Some(b_next.clone()), expected_next(&now, "b", None), "{b}");
     let mut with_a = now.clone();
@@ -353,22 +361,12 @@ async fn a_silent_robots_claim_lapses() {
     let kept_off = expected_next(&with_a, "b", None);
     assert_ne!(kept_off.as_deref(), Some(first.as_str()));
     // A trial whose claims lapse and come back to the first choice: a's container goes to b.
-    let (_, started) = s
-        .post(
-            &format!("/deployments/{id}/trials"),
-            json!({"scene": "flat", "target": "Wallet", "robots": [{"id": "a"}, {"id": "b"}]}),
-        )
-        .await;
-    let trial = started["trial"].as_i64().unwrap();
-    let (_, a) = s
-        .post(&format!("/trials/{trial}/claims"), json!({"robot": "a"}))
-        .await;
+    let trial = start_team(&s, id, &["a", "b"]).await;
+    let a = claim(&s, trial, "a").await;
     let first = a["next"]["container"].as_str().unwrap().to_string();
     tokio::time::sleep(Duration::from_millis(600)).await;
     // Same start, same knowledge: b's best is a's, now free.
-    let (_, b) = s
-        .post(&format!("/trials/{trial}/claims"), json!({"robot": "b"}))
-        .await;
+    let b = claim(&s, trial, "b").await;
     assert_eq!(b["next"]["container"].as_str(), Some(first.as_str()), "{b}");
     // a comes back and reports it first: taken, and b's claim there let go.
     let (status, late) = s

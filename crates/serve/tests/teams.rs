@@ -509,6 +509,38 @@ async fn bad_robots_are_refused_naming_the_field() {
         let (_, state) = s.get(&format!("/trials/{t}")).await;
         assert_eq!(state["searched"], json!([]), "{state}");
     }
+    // Abandoned, a team's trial costs its makespan, not the sum of its robots' ways.
+    let abandoned = start_team(&s, id, &["a", "b"]).await;
+    let first = claim(&s, abandoned, "a").await;
+    let second = claim(&s, abandoned, "b").await;
+    let mut ways = Vec::new();
+    for (robot, c) in [("a", &first), ("b", &second)] {
+        let c = c["next"]["container"].as_str().unwrap();
+        let (status, r) = s
+            .post(
+                &format!("/trials/{abandoned}/observations"),
+                json!({"robot": robot, "container": c, "found": false, "objects": []}),
+            )
+            .await;
+        assert_eq!(status, 200, "{r}");
+        ways = r["robots"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x["cost_m"].as_f64().unwrap())
+            .collect();
+    }
+    let (status, ended) = s
+        .post(&format!("/trials/{abandoned}/abandon"), json!({}))
+        .await;
+    assert_eq!(status, 200, "{ended}");
+    assert_eq!(ended["status"], "abandoned");
+    let longest = ways.iter().copied().fold(0.0, f64::max);
+    assert!(ways.iter().all(|w| *w > 0.0), "{ways:?}");
+    assert!(
+        (ended["cost_m"].as_f64().unwrap() - longest).abs() < 1e-9,
+        "{ended}"
+    );
     // A container a teammate searched: 409 naming who.
     let (_, _) = s
         .post(

@@ -362,7 +362,12 @@ impl Service {
         check_searching(&row)?;
         let observations = self.store.read(|r| r.observations(id))?;
         let spec = self.spec(row.deployment)?;
-        let cost: f64 = observations.iter().map(|o| o.leg).sum();
+        // A team's cost is its makespan: the longest way any one robot drove.
+        let mut ways: BTreeMap<Option<&str>, f64> = BTreeMap::new();
+        for o in &observations {
+            *ways.entry(o.robot.as_deref()).or_default() += o.leg;
+        }
+        let cost = ways.values().copied().fold(0.0, f64::max);
         // Where the task would have brought what it found: no way there, the search was given
         // up where the robot is.
         let destination = match &row.task {

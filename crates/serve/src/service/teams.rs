@@ -170,7 +170,8 @@ impl Service {
             let now = now_ms();
             let (row, observations, robots) = locked(w, &row)?;
             if row.status != TrialStatus::Searching {
-                let state = team.state(&row, &observations, &robots, now, None)?;
+                let searches = team.searches(&observations)?;
+                let state = team.state(&row, (&observations, &searches), &robots, now, None)?;
                 return Ok((json(Outcome::Done, &state)?, Vec::new()));
             }
             let mut searches = team.searches(&observations)?;
@@ -199,7 +200,7 @@ impl Service {
             let robots = with_claim(robots, (&req.robot, None), claimed, now);
             let from = searches[me].belief().position();
             let step = next.map(|c| next_container(&team.placed[me], from, c));
-            let state = team.state(&row, &observations, &robots, now, step)?;
+            let state = team.state(&row, (&observations, &searches), &robots, now, step)?;
             let reply = json(Outcome::Done, &state)?;
             told = Some(state);
             Ok((reply, finals))
@@ -343,7 +344,14 @@ impl Service {
             }
             let from = searches[me].belief().position();
             let step = next.map(|n| next_container(&team.placed[me], from, n));
-            let state = team.state(&ended, &all, &robots, now, step)?;
+            // A trial done has sent its carriers on to the destination in `searches`; its
+            // robots are shown as they searched, rebuilt.
+            let state = if status == TrialStatus::Done {
+                let rebuilt = team.searches(&all)?;
+                team.state(&ended, (&all, &rebuilt), &robots, now, step)?
+            } else {
+                team.state(&ended, (&all, &searches), &robots, now, step)?
+            };
             let reply = json(Outcome::Done, &state)?;
             told = Some((state, observation));
             Ok((reply, finals))
@@ -368,7 +376,8 @@ impl Service {
         let team = self.team_trial(row)?;
         let observations = self.store.read(|r| r.observations(row.id))?;
         let robots = self.store.read(|r| r.trial_robots(row.id))?;
-        team.state(row, &observations, &robots, now_ms(), None)
+        let searches = team.searches(&observations)?;
+        team.state(row, (&observations, &searches), &robots, now_ms(), None)
     }
 
     /// Each robot's way so far and to its claim, for the picture of team trial `row` whose
@@ -611,15 +620,16 @@ impl TeamTrial {
     }
 
     /// The trial's state with every robot's: where it is, its claim, what it searched.
+    /// `searches` are the robots' searches of `observations` (as [`searches`](Self::searches)
+    /// rebuilds them), given by a caller that holds them already.
     fn state(
         &self,
         row: &StoredTrial,
-        observations: &[StoredObservation],
+        (observations, searches): (&[StoredObservation], &[Search<'_>]),
         robots: &[StoredRobot],
         now: i64,
         next: Option<NextContainer>,
     ) -> Result<TrialState, ApiError> {
-        let searches = self.searches(observations)?;
         let status = row.status;
         let mut team = Vec::with_capacity(self.robots.len());
         let mut longest = 0.0_f64;

@@ -1,7 +1,9 @@
 //! Serving the router on a TCP listener with the guards a robot's network needs: a deadline for
 //! a request's headers and one for its body, an idle timeout for kept-alive connections, and a
 //! cap on open connections. At the cap the connection idle the longest is closed to make room, so a client
-//! that opens and holds many connections cannot lock a normal one out.
+//! that opens and holds many connections cannot lock a normal one out. A connection is idle only
+//! while it has no request in flight and no reply still being written: an event stream open for
+//! hours is never timed out nor evicted.
 //!
 //! Hand-written over hyper because `axum::serve` has no header timeout, idle timeout or cap,
 //! and on running out of file descriptors it pauses accepting for a second at a time.
@@ -223,9 +225,18 @@ async fn connection(
             let body_timeout = options.body_timeout;
             async move {
                 let req = req.map(|b| axum::body::Body::new(Deadline::new(b, body_timeout)));
+                // The request stays in flight until its reply's body has been sent, not just its
+                // headers: an event stream is a reply that lasts for hours, and a connection
+                // writing one is neither idle (to be timed out) nor the idlest (to be evicted).
                 let reply = app.oneshot(req).await;
-                drop(guard);
-                reply
+                reply.map(|r| {
+                    r.map(|body| {
+                        axum::body::Body::new(Sending {
+                            inner: body,
+                            _in_flight: guard,
+                        })
+                    })
+                })
             }
         })
     };
@@ -268,6 +279,32 @@ async fn connection(
         }
     }
     registry.lock().remove(&id);
+}
+
+/// A reply's body that keeps its request in flight until it has been sent (or dropped).
+struct Sending {
+    inner: axum::body::Body,
+    _in_flight: InFlight,
+}
+
+impl Body for Sending {
+    type Data = Bytes;
+    type Error = axum::Error;
+
+    fn poll_frame(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+    ) -> Poll<Option<Result<Frame<Bytes>, Self::Error>>> {
+        Pin::new(&mut self.get_mut().inner).poll_frame(cx)
+    }
+
+    fn is_end_stream(&self) -> bool {
+        self.inner.is_end_stream()
+    }
+
+    fn size_hint(&self) -> SizeHint {
+        self.inner.size_hint()
+    }
 }
 
 /// The error a request body gives when it has not arrived by its deadline.

@@ -565,3 +565,70 @@ async fn a_stream_of_one_deployment_carries_its_trials_and_new_deployments_only(
         ("deployment".into(), json!({ "deployment": c }))
     );
 }
+
+/// An event stream counted as idle once its headers were sent: it was closed at the idle timeout
+/// plus the header timeout however many events it carried, and it was the first connection
+/// closed when plain connects reached the cap.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_event_stream_outlives_the_idle_timeout_and_is_never_the_one_evicted_at_the_cap() {
+    const CAP: usize = 8;
+    let s = start_http(
+        None,
+        ServiceOptions::default(),
+        ServeOptions {
+            header_timeout: Duration::from_millis(300),
+            idle_timeout: Duration::from_millis(400),
+            max_connections: CAP,
+            ..ServeOptions::default()
+        },
+        |_| {},
+    )
+    .await;
+    let (status, stream) = Stream::open(&s, None).await;
+    assert_eq!(status, 200);
+    let mut stream = stream.unwrap();
+    assert_eq!(stream.next(SECOND).await.0, "hello");
+    // A fresh connection per write, so that no pooled connection is the one evicted mid-request.
+    let writer = reqwest::Client::builder()
+        .pool_max_idle_per_host(0)
+        .build()
+        .unwrap();
+    let create = || async {
+        let r = writer
+            .post(format!("{}/deployments", s.url))
+            .json(&json!({}))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 201);
+        r.json::<Value>().await.unwrap()["id"].as_i64().unwrap()
+    };
+    // Ten times the idle timeout and the header timeout together: events, then quiet, then
+    // events again.
+    let mut expected = Vec::new();
+    let started = std::time::Instant::now();
+    while started.elapsed() < Duration::from_secs(7) {
+        if started.elapsed() < Duration::from_secs(3) || started.elapsed() > Duration::from_secs(5)
+        {
+            expected.push(create().await);
+        }
+        tokio::time::sleep(Duration::from_millis(150)).await;
+    }
+    // Three times the cap in plain connects that never send a request.
+    let flood: Vec<_> = (0..3 * CAP)
+        .map(|_| std::net::TcpStream::connect(s.url.trim_start_matches("http://")).unwrap())
+        .collect();
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    expected.push(create().await);
+    let mut got = Vec::new();
+    while got.len() < expected.len() {
+        let (name, data) = stream.next(SECOND).await;
+        if name == "deployment" {
+            got.push(data["deployment"].as_i64().unwrap());
+        } else {
+            assert_eq!(name, "keep-alive", "{name}: {data}");
+        }
+    }
+    assert_eq!(got, expected, "every event, on one stream");
+    drop(flood);
+}

@@ -872,3 +872,182 @@ fn assert_zero(line: &Value, fields: &[&str]) {
         assert_eq!(line[*field], 0, "{field}: {line}");
     }
 }
+
+/// A fresh database on the PostgreSQL server at `admin` (a URL ending in `/database`).
+fn fresh_database(admin: &str, name: &str) -> String {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let (client, connection) = tokio_postgres::connect(admin, tokio_postgres::NoTls)
+            .await
+            .unwrap();
+        tokio::spawn(connection);
+        for sql in [
+            format!("DROP DATABASE IF EXISTS {name}"),
+            format!("CREATE DATABASE {name}"),
+        ] {
+            client.batch_execute(&sql).await.unwrap();
+        }
+    });
+    format!("{}/{name}", admin.rsplit_once('/').unwrap().0)
+}
+
+/// The reply to a POST when it was a success; `None` for an error or no reply.
+async fn acknowledged(client: &reqwest::Client, url: String, body: Value) -> Option<Value> {
+    let r = client.post(url).json(&body).send().await.ok()?;
+    r.status().is_success().then_some(())?;
+    r.json::<Value>().await.ok()
+}
+
+/// A replica killed (SIGKILL) between a write's commit and its notification took that event
+/// with it: a page on the other replica never heard of it, and was not told to read again. Now
+/// every acknowledged event reaches the page, or the page is told to read everything again.
+/// Needs a PostgreSQL server (`FERRET_TEST_POSTGRES`).
+#[test]
+fn a_page_gets_every_acknowledged_event_or_a_resync_when_the_other_replica_is_killed() {
+    let Ok(admin) = std::env::var("FERRET_TEST_POSTGRES") else {
+        eprintln!(
+            "skipped: set FERRET_TEST_POSTGRES to a PostgreSQL URL (eval \"$(scripts/postgres.sh start)\" starts a throwaway server and sets it)"
+        );
+        return;
+    };
+    let db = fresh_database(&admin, &format!("ferret_cli_kill_{}", std::process::id()));
+    let replica = || {
+        let scene = apartment();
+        Server::spawn(
+            &[
+                "--scene",
+                s(&scene),
+                "--strategies",
+                STRATEGIES,
+                "--listen",
+                "127.0.0.1:0",
+                "--db",
+                &db,
+            ],
+            &[],
+        )
+    };
+    let (a, b) = (replica(), replica());
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .unwrap();
+    let client = reqwest::Client::new();
+    let deployment = rt
+        .block_on(acknowledged(
+            &client,
+            format!("{}/deployments", b.url),
+            json!({}),
+        ))
+        .unwrap()["id"]
+        .as_i64()
+        .unwrap();
+    // The page on B, reading its stream into `heard`.
+    type Heard = std::sync::Arc<std::sync::Mutex<Vec<(String, Value)>>>;
+    let heard: Heard = Heard::default();
+    let page = {
+        let (heard, url) = (
+            heard.clone(),
+            format!("{}/events?deployment={deployment}", b.url),
+        );
+        let client = client.clone();
+        rt.spawn(async move {
+            let mut r = client.get(url).send().await.unwrap();
+            let mut buffer = String::new();
+            while let Ok(Some(chunk)) = r.chunk().await {
+                buffer.push_str(std::str::from_utf8(&chunk).unwrap());
+                while let Some(end) = buffer.find("\n\n") {
+                    let block: String = buffer.drain(..end + 2).collect();
+                    let name = block.lines().find_map(|l| l.strip_prefix("event: "));
+                    let data = block.lines().find_map(|l| l.strip_prefix("data: "));
+                    if let (Some(name), Some(data)) = (name, data) {
+                        let data = serde_json::from_str(data).unwrap();
+                        heard.lock().unwrap().push((name.to_string(), data));
+                    }
+                }
+            }
+        })
+    };
+    // Until the other replica has heard that B's page watches (it publishes only then).
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    // A robot on A, as fast as A answers, until A is gone: every reply is an acknowledged
+    // event (trial, containers searched, status).
+    let robot = {
+        let (url, client) = (a.url.clone(), client.clone());
+        let post = move |url: String, body: Value| {
+            let client = client.clone();
+            async move { acknowledged(&client, url, body).await }
+        };
+        rt.spawn(async move {
+            let mut acked = Vec::new();
+            'trials: loop {
+                let Some(mut t) = post(
+                    format!("{url}/deployments/{deployment}/trials"),
+                    json!({"scene": "apartment", "target": "Wallet"}),
+                )
+                .await
+                else {
+                    break;
+                };
+                let id = t["trial"].as_i64().unwrap();
+                loop {
+                    acked.push((
+                        id,
+                        t["searched"].as_array().unwrap().len(),
+                        t["status"].as_str().unwrap().to_string(),
+                    ));
+                    if t["status"] != "searching" {
+                        break;
+                    }
+                    let c = t["next"]["container"].clone();
+                    match post(
+                        format!("{url}/trials/{id}/observations"),
+                        json!({"container": c, "found": false, "objects": []}),
+                    )
+                    .await
+                    {
+                        Some(next) => t = next,
+                        None => break 'trials,
+                    }
+                }
+            }
+            acked
+        })
+    };
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    a.kill();
+    let acked = rt.block_on(robot).unwrap();
+    // Long enough for B to notice that A left.
+    std::thread::sleep(std::time::Duration::from_secs(3));
+    page.abort();
+    let heard = heard.lock().unwrap().clone();
+    assert!(
+        acked.len() > 20,
+        "the kill came mid-run: {} acknowledged",
+        acked.len()
+    );
+    let resynced = heard.iter().any(|(name, _)| name == "resync");
+    let got: std::collections::BTreeSet<(i64, usize, String)> = heard
+        .iter()
+        .filter(|(name, _)| name == "trial")
+        .map(|(_, e)| {
+            (
+                e["trial"].as_i64().unwrap(),
+                usize::try_from(e["searched"].as_u64().unwrap()).unwrap(),
+                e["status"].as_str().unwrap().to_string(),
+            )
+        })
+        .collect();
+    let missed: Vec<_> = acked.iter().filter(|e| !got.contains(e)).collect();
+    assert!(
+        missed.is_empty() || resynced,
+        "{} of {} acknowledged events never reached the page, and no resync: {missed:?}",
+        missed.len(),
+        acked.len()
+    );
+    drop(b);
+}

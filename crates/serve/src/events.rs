@@ -6,6 +6,8 @@
 //! On SQLite (one server) the hub hands an event to its watchers at once. On PostgreSQL the
 //! event goes out as a `NOTIFY` and every replica's listening session (this one's too) hands it
 //! to its own watchers, so a page on one replica sees the trials a robot drives through another.
+//! Whatever cannot travel that way (an event too long, a replica gone before it sent its last
+//! ones) reaches the other replicas' watchers as a `resync`, never as silence.
 //!
 //! Memory is bounded whatever the watchers do: every watcher reads the same ring of the last
 //! [`RING`] events; one that falls further behind (a client that stops reading) loses the oldest
@@ -42,9 +44,13 @@ pub(crate) const WATCHING: &str = "watching";
 /// published together go in one notification up to it.
 pub(crate) const MAX_NOTIFICATION: usize = 7_900;
 
-/// Longest trial event: one that would be longer goes without the way to its next container
-/// (a page then reads the trial's picture).
+/// Longest trial event: one that would be longer goes without the way to its next container,
+/// then without its observation (a page then reads the trial's picture).
 const MAX_EVENT: usize = 7_000;
+
+/// Longest list of deployments a replica says it watches; past it, it says it watches all
+/// (more events than its pages want, rather than a word too long for a notification).
+const MAX_WATCHING_LIST: usize = 4_000;
 
 /// How often a replica with watchers says so.
 pub(crate) const HEARTBEAT: std::time::Duration = std::time::Duration::from_secs(5);
@@ -78,7 +84,7 @@ impl Frame {
     /// the channel is ignored, not passed on to pages).
     pub(crate) fn decode(text: &str) -> Option<Frame> {
         let (name, data) = text.split_once('\n')?;
-        if !matches!(name, TRIAL | DEPLOYMENT) || data.contains('\n') {
+        if !matches!(name, TRIAL | DEPLOYMENT | RESYNC) || data.contains('\n') {
             return None;
         }
         // Read for its deployment only; the rest is checked to be JSON without being kept.
@@ -87,6 +93,11 @@ impl Frame {
             deployment: Option<i64>,
         }
         let head: Head = serde_json::from_str(data).ok()?;
+        if name == RESYNC {
+            // Another replica's word that its events were lost on the way: whatever it counted,
+            // this replica cannot tell how many of them its watchers wanted.
+            return Some((*resync_unknown()).clone());
+        }
         Some(Frame {
             name: name.to_string(),
             data: data.to_string(),
@@ -414,12 +425,19 @@ impl Events {
             event.next_path = None;
             data = serde_json::to_string(&event);
         }
-        if let Ok(data) = data {
-            self.publish(Frame {
+        if data.as_ref().is_ok_and(|d| d.len() > MAX_EVENT) {
+            event.observed = None;
+            data = serde_json::to_string(&event);
+        }
+        match data {
+            Ok(data) if data.len() <= MAX_EVENT => self.publish(Frame {
                 name: TRIAL.into(),
                 data,
                 deployment: Some(state.deployment),
-            });
+            }),
+            // Names are bounded where they come in, so this is a safeguard: every watcher reads
+            // again rather than one missing the trial's change.
+            _ => self.publish((*resync_unknown()).clone()),
         }
     }
 
@@ -435,11 +453,7 @@ impl Events {
     /// Every watcher told to read everything again (the listener lost its session, and with it
     /// the events meanwhile).
     pub(crate) fn resync_all(&self) {
-        self.deliver(Frame {
-            name: RESYNC.into(),
-            data: json_of(&ResyncEvent { missed: None }),
-            deployment: None,
-        });
+        self.deliver((*resync_unknown()).clone());
     }
 
     /// Streams open now.
@@ -531,7 +545,12 @@ impl Watching {
             "*".to_string()
         } else {
             let ids: Vec<String> = here.keys().flatten().map(i64::to_string).collect();
-            ids.join(",")
+            let list = ids.join(",");
+            if list.len() > MAX_WATCHING_LIST {
+                "*".to_string()
+            } else {
+                list
+            }
         };
         Some(format!("{WATCHING}\n{which}"))
     }
@@ -614,6 +633,20 @@ impl Watcher {
     }
 }
 
+/// The event telling every watcher that events were lost, how many unknown.
+fn resync_unknown() -> Arc<Frame> {
+    Arc::new(Frame {
+        name: RESYNC.into(),
+        data: json_of(&ResyncEvent { missed: None }),
+        deployment: None,
+    })
+}
+
+/// What a replica sends the others in place of events they did not get: a `resync`.
+pub(crate) fn lost_word() -> String {
+    resync_unknown().encode()
+}
+
 /// The event telling a watcher that it lost `missed` events.
 fn resync(missed: u64) -> Arc<Frame> {
     Arc::new(Frame {
@@ -679,6 +712,26 @@ mod tests {
         assert!(events.watch(None).is_err(), "and opens none");
     }
 
+    /// 450 pages on deployments with long ids made a list too long for one notification: it was
+    /// dropped, and the other replicas sent this one nothing.
+    #[test]
+    fn a_replica_watching_too_many_deployments_to_list_says_it_watches_all() {
+        let events = Events::new(500);
+        let watchers: Vec<Watcher> = (0..450)
+            .map(|i| events.watch(Some(i64::MAX - i)).expect("a slot"))
+            .collect();
+        let word = events.watching_word().expect("watchers");
+        assert_eq!(word, format!("{WATCHING}\n*"));
+        drop(watchers);
+        let few: Vec<Watcher> = (1..=3)
+            .map(|i| events.watch(Some(i64::MAX - i)).expect("a slot"))
+            .collect();
+        let word = events.watching_word().expect("watchers");
+        assert!(word.ends_with(&format!(",{}", i64::MAX - 1)), "{word}");
+        assert!(word.len() + events.replica().len() < MAX_NOTIFICATION);
+        drop(few);
+    }
+
     #[test]
     fn only_our_own_frames_pass_between_replicas() {
         let f = Frame {
@@ -687,10 +740,15 @@ mod tests {
             deployment: Some(7),
         };
         assert_eq!(Frame::decode(&f.encode()), Some(f));
+        assert_eq!(
+            Frame::decode("resync\n{\"missed\":3}"),
+            Some((*resync_unknown()).clone()),
+            "another replica's lost events: how many of them this one's pages wanted is unknown"
+        );
         for stranger in [
             "hello",
             "trial\nnot json",
-            "resync\n{}",
+            "resync\nnot json",
             "script\n{}",
             "trial\n{}\n{}",
         ] {

@@ -320,7 +320,7 @@ async fn a_page_on_one_replica_sees_a_trial_driven_through_another() {
     tokio::task::block_in_place(|| {
         support::psql(
             &url,
-            "SELECT pg_terminate_backend(pid) FROM pg_stat_activity WHERE query LIKE 'LISTEN%' AND datname = current_database() AND pid <> pg_backend_pid()",
+            "SELECT pg_terminate_backend(pid) FROM pg_stat_activity WHERE application_name LIKE 'ferret-replica:%' AND datname = current_database() AND pid <> pg_backend_pid()",
         );
     });
     let (name, _) = page.next(Duration::from_secs(5)).await;
@@ -495,4 +495,71 @@ async fn a_replica_opens_its_connections_before_the_first_request() {
     .await
     .unwrap();
     assert!(created.is_ok(), "{:?}", created.err());
+}
+
+/// An observation listing 300 object names made a trial event too long for one notification:
+/// it was dropped, and a page on the other replica never saw the search nor the trial's end.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn an_event_too_long_for_a_notification_still_reaches_the_other_replicas_page() {
+    let Some(url) = support::postgres_or_skip(
+        "an_event_too_long_for_a_notification_still_reaches_the_other_replicas_page",
+    ) else {
+        return;
+    };
+    let (a, ha) = support::server::replica(&url).await;
+    let (b, hb) = support::server::replica(&url).await;
+    let client = reqwest::Client::new();
+    let mut page = Stream::open_at(&client, &a, None).await.1.unwrap();
+    assert_eq!(page.next(SECOND).await.0, "hello");
+    let robot = |path: String, body: Value| {
+        let (client, url) = (client.clone(), format!("{b}{path}"));
+        async move {
+            let r = client.post(url).json(&body).send().await.unwrap();
+            assert!(r.status().is_success());
+            r.json::<Value>().await.unwrap()
+        }
+    };
+    let id = robot("/deployments".into(), json!({})).await["id"]
+        .as_i64()
+        .unwrap();
+    let trial = robot(
+        format!("/deployments/{id}/trials"),
+        json!({"scene": "flat", "target": "Wallet"}),
+    )
+    .await;
+    let tid = trial["trial"].as_i64().unwrap();
+    // Far more than a notification holds (8000 bytes).
+    let objects: Vec<String> = (0..300)
+        .map(|i| format!("Thing{i:04}{}", "X".repeat(40)))
+        .collect();
+    let c = trial["next"]["container"].as_str().unwrap();
+    let after = robot(
+        format!("/trials/{tid}/observations"),
+        json!({"container": c, "found": false, "objects": objects}),
+    )
+    .await;
+    let ended = robot(format!("/trials/{tid}/abandon"), json!({})).await;
+    assert_eq!(ended["status"], "abandoned");
+    // The page hears the search (without its long list: it reads the trial's picture for
+    // that) and the end, or is told to read everything again.
+    let mut searched = None;
+    loop {
+        let (name, e) = page.next(Duration::from_secs(3)).await;
+        if name == "resync" {
+            break;
+        }
+        if name != "trial" || e["trial"].as_i64() != Some(tid) {
+            continue;
+        }
+        if e["searched"] == 1 && e["status"] == "searching" {
+            assert!(e["observed"].is_null(), "{e}");
+            assert_eq!(e["next"], after["next"]["container"]);
+            searched = Some(e);
+        } else if e["status"] == "abandoned" {
+            assert!(searched.is_some(), "the search's event came before the end");
+            break;
+        }
+    }
+    ha.abort();
+    hb.abort();
 }

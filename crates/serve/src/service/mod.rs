@@ -217,6 +217,7 @@ impl Service {
             every: crate::events::HEARTBEAT,
             sender: events.replica().to_string(),
             max_bytes: crate::events::MAX_NOTIFICATION,
+            lost: crate::events::lost_word(),
             beat: Arc::new(move || watched.watching_word()),
         };
         if let Some(outbox) =

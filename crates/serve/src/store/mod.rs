@@ -280,10 +280,14 @@ pub struct FeedOptions {
     /// Longest notification: texts sent together go in one notification up to it, after the
     /// sender's line, separated by blank lines.
     pub max_bytes: usize,
+    /// What is sent in place of texts the other replicas did not get (one too long for a
+    /// notification, or a batch the database refused): it tells them to read everything again.
+    pub lost: String,
 }
 
 /// What a replica's listener hands on ([`Store::feed`]): a notification's text, or `None` when
-/// notifications may have been missed (its session was lost and is back).
+/// notifications may have been missed (its session was lost and is back, or another replica
+/// left the database without a word: killed, its events of the last moment never sent).
 pub type Deliver = std::sync::Arc<dyn Fn(Option<String>) + Send + Sync>;
 
 /// A request key held across replicas; released when dropped (or when the replica holding it

@@ -1,7 +1,6 @@
 //! The word index of an embeddings package: a parquet file with one string column (`index`) whose
 //! row i is the word of row i of the matrix.
 
-use std::fs::File;
 use std::path::Path;
 
 use parquet::basic::Type as PhysicalType;
@@ -35,10 +34,7 @@ pub(crate) fn read_words(path: &Path) -> Result<Vec<String>, EmbedError> {
         path: path.to_owned(),
         what,
     };
-    let file = File::open(path).map_err(|source| EmbedError::Io {
-        path: path.to_owned(),
-        source,
-    })?;
+    let file = crate::file::open(path)?;
     let reader = SerializedFileReader::new(file).map_err(pq)?;
     let meta = reader.metadata();
     let schema = meta.file_metadata().schema_descr();
@@ -127,7 +123,7 @@ pub(crate) mod tests {
                 .set_compression(parquet::basic::Compression::SNAPPY)
                 .build(),
         );
-        let file = File::create(path).expect("create");
+        let file = std::fs::File::create(path).expect("create");
         let mut writer = SerializedFileWriter::new(file, Arc::new(schema), props).expect("writer");
         let mut group = writer.next_row_group().expect("row group");
         let mut column = group.next_column().expect("column").expect("one column");

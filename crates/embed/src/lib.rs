@@ -20,6 +20,7 @@
 //! tokenizers) and nothing at run time unless a model is opened.
 
 mod error;
+mod file;
 mod index;
 #[cfg(feature = "minilm")]
 mod minilm;

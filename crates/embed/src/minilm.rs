@@ -59,12 +59,7 @@ impl SentenceModel {
         tokenizer_path: &Path,
         weights_path: &Path,
     ) -> Result<(String, Self), EmbedError> {
-        let read = |path: &Path| {
-            std::fs::read(path).map_err(|source| EmbedError::Io {
-                path: path.to_owned(),
-                source,
-            })
-        };
+        let read = crate::file::read;
         let model_err = |path: &Path, what: String| EmbedError::Model {
             path: path.to_owned(),
             what,

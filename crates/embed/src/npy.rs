@@ -36,97 +36,44 @@ pub struct Matrix {
     pub data: Vec<f32>,
 }
 
+/// Most values a matrix may hold: 2^30 float32s, 4 GiB (GloVe's largest table, 2.2 M words of
+/// 300 numbers, is 0.6 of it). A header claiming more is refused before anything is allocated.
+pub const MAX_VALUES: usize = 1 << 30;
+
 /// Reads a 2-D `<f4` matrix from an `.npy` file, converting Fortran order to row-major.
 ///
-/// Refuses other dtypes, other numbers of dimensions, a malformed header and a file whose length
-/// is not exactly header plus `rows × cols × 4` bytes.
+/// Refuses other dtypes, other numbers of dimensions, a malformed header, a matrix of more than
+/// [`MAX_VALUES`] numbers and a file whose length is not exactly header plus `rows × cols × 4`
+/// bytes, all before reading the values.
 pub fn read_npy(path: &Path) -> Result<Matrix, EmbedError> {
+    read_npy_checked(path, |_| Ok(()))
+}
+
+/// [`read_npy`], with `check` run on the header's shape (rows, columns) before the values are
+/// read: a matrix that does not fit what is beside it costs no more than its header.
+pub(crate) fn read_npy_checked(
+    path: &Path,
+    check: impl FnOnce((usize, usize)) -> Result<(), EmbedError>,
+) -> Result<Matrix, EmbedError> {
     let io = |source| EmbedError::Io {
         path: path.to_owned(),
         source,
     };
-    let bad = |what: String| EmbedError::Npy {
-        path: path.to_owned(),
-        what,
-    };
-    let mut file = File::open(path).map_err(io)?;
-    let actual = file.metadata().map_err(io)?.len();
-
-    let mut preamble = [0u8; 8];
-    read_prefix(&mut file, &mut preamble, path, "the magic and version")?;
-    if &preamble[..6] != MAGIC {
-        return Err(bad(format!(
-            "not an NPY file: it starts with {:?}, not \\x93NUMPY",
-            String::from_utf8_lossy(&preamble[..6])
-        )));
-    }
-    let (major, minor) = (preamble[6], preamble[7]);
-    let header_len = match major {
-        1 => {
-            let mut len = [0u8; 2];
-            read_prefix(&mut file, &mut len, path, "the header length")?;
-            usize::from(u16::from_le_bytes(len))
-        }
-        2 | 3 => {
-            let mut len = [0u8; 4];
-            read_prefix(&mut file, &mut len, path, "the header length")?;
-            usize::try_from(u32::from_le_bytes(len)).unwrap_or(usize::MAX)
-        }
-        _ => {
-            return Err(bad(format!(
-                "NPY format version {major}.{minor} is not supported (1, 2 or 3)"
-            )));
-        }
-    };
-    if header_len > MAX_HEADER {
-        return Err(bad(format!(
-            "the header claims {header_len} bytes; NPY headers are a few hundred"
-        )));
-    }
-    let mut header = vec![0u8; header_len];
-    read_prefix(&mut file, &mut header, path, "the header")?;
-    // Versions 1 and 2 use latin-1, 3 UTF-8; a float32 matrix header is plain ASCII in all.
-    let header = std::str::from_utf8(&header)
-        .map_err(|_| bad("the header is not ASCII/UTF-8 text".to_owned()))?;
-    let header = parse_header(header).map_err(|what| bad(format!("header: {what}")))?;
-    if header.descr != DESCR_F32 {
-        return Err(bad(format!(
-            "dtype {:?} is not supported: expected {DESCR_F32:?} (little-endian float32)",
-            header.descr
-        )));
-    }
-    let [rows, cols] = header.shape[..] else {
-        return Err(bad(format!(
-            "shape {:?} is not supported: expected a 2-D matrix (words, dimensions)",
-            header.shape
-        )));
-    };
-    if rows == 0 || cols == 0 {
-        return Err(bad(format!("the matrix is empty (shape ({rows}, {cols}))")));
-    }
-
-    let preamble_len = (8 + if major == 1 { 2 } else { 4 } + header_len) as u64;
-    let values = rows.checked_mul(cols);
-    let expected = values
-        .and_then(|v| u64::try_from(v).ok())
-        .and_then(|v| v.checked_mul(4))
-        .and_then(|v| v.checked_add(preamble_len));
-    let (Some(values), Some(expected)) = (values, expected) else {
-        return Err(bad(format!(
-            "shape ({rows}, {cols}) is too large to address"
-        )));
-    };
-    if actual != expected {
-        return Err(EmbedError::NpySize {
+    let mut file = crate::file::open(path)?;
+    let header = read_header(&mut file, path)?;
+    let (rows, cols) = (header.rows, header.cols);
+    check((rows, cols))?;
+    let values = rows * cols;
+    let mut data = Vec::new();
+    data.try_reserve_exact(values)
+        .map_err(|_| EmbedError::Npy {
             path: path.to_owned(),
-            rows,
-            dim: cols,
-            expected,
-            actual,
-        });
-    }
-
-    let mut data = vec![0f32; values];
+            what: format!(
+                "shape ({rows}, {cols}): {} MB of memory could not be had",
+                values.saturating_mul(4) / 1_000_000
+            ),
+        })?;
+    data.resize(values, 0f32);
     let mut bytes = vec![0u8; CHUNK_VALUES.min(values) * 4];
     // `k` counts values in file order. In C order that is the row-major index already; in
     // Fortran order value k is column k / rows, row k % rows.
@@ -156,6 +103,101 @@ pub fn read_npy(path: &Path) -> Result<Matrix, EmbedError> {
         k += n;
     }
     Ok(Matrix { rows, cols, data })
+}
+
+/// What the header of a float32 matrix says, checked against the file's length.
+struct Shape {
+    rows: usize,
+    cols: usize,
+    fortran_order: bool,
+}
+
+/// Reads and checks the preamble and header of the `.npy` file open as `file`, leaving it at
+/// the first value.
+fn read_header(file: &mut File, path: &Path) -> Result<Shape, EmbedError> {
+    let io = |source| EmbedError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let bad = |what: String| EmbedError::Npy {
+        path: path.to_owned(),
+        what,
+    };
+    let actual = file.metadata().map_err(io)?.len();
+    let mut preamble = [0u8; 8];
+    read_prefix(file, &mut preamble, path, "the magic and version")?;
+    if &preamble[..6] != MAGIC {
+        return Err(bad(format!(
+            "not an NPY file: it starts with {:?}, not \\x93NUMPY",
+            String::from_utf8_lossy(&preamble[..6])
+        )));
+    }
+    let (major, minor) = (preamble[6], preamble[7]);
+    let header_len = match major {
+        1 => {
+            let mut len = [0u8; 2];
+            read_prefix(file, &mut len, path, "the header length")?;
+            usize::from(u16::from_le_bytes(len))
+        }
+        2 | 3 => {
+            let mut len = [0u8; 4];
+            read_prefix(file, &mut len, path, "the header length")?;
+            usize::try_from(u32::from_le_bytes(len)).unwrap_or(usize::MAX)
+        }
+        _ => {
+            return Err(bad(format!(
+                "NPY format version {major}.{minor} is not supported (1, 2 or 3)"
+            )));
+        }
+    };
+    if header_len > MAX_HEADER {
+        return Err(bad(format!(
+            "the header claims {header_len} bytes; NPY headers are a few hundred"
+        )));
+    }
+    let mut header = vec![0u8; header_len];
+    read_prefix(file, &mut header, path, "the header")?;
+    // Versions 1 and 2 use latin-1, 3 UTF-8; a float32 matrix header is plain ASCII in all.
+    let header = std::str::from_utf8(&header)
+        .map_err(|_| bad("the header is not ASCII/UTF-8 text".to_owned()))?;
+    let header = parse_header(header).map_err(|what| bad(format!("header: {what}")))?;
+    if header.descr != DESCR_F32 {
+        return Err(bad(format!(
+            "dtype {:?} is not supported: expected {DESCR_F32:?} (little-endian float32)",
+            header.descr
+        )));
+    }
+    let [rows, cols] = header.shape[..] else {
+        return Err(bad(format!(
+            "shape {:?} is not supported: expected a 2-D matrix (words, dimensions)",
+            header.shape
+        )));
+    };
+    if rows == 0 || cols == 0 {
+        return Err(bad(format!("the matrix is empty (shape ({rows}, {cols}))")));
+    }
+    let values = rows.checked_mul(cols).filter(|v| *v <= MAX_VALUES);
+    let Some(values) = values else {
+        return Err(bad(format!(
+            "shape ({rows}, {cols}) is more than the {MAX_VALUES} numbers (4 GiB) ferret reads"
+        )));
+    };
+    let preamble_len = (8 + if major == 1 { 2 } else { 4 } + header_len) as u64;
+    let expected = values as u64 * 4 + preamble_len;
+    if actual != expected {
+        return Err(EmbedError::NpySize {
+            path: path.to_owned(),
+            rows,
+            dim: cols,
+            expected,
+            actual,
+        });
+    }
+    Ok(Shape {
+        rows,
+        cols,
+        fortran_order: header.fortran_order,
+    })
 }
 
 /// Fills `buf` from the start of the file, naming the part that is missing on a short file.

@@ -4,8 +4,9 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use crate::index::read_words;
+use crate::npy::read_npy_checked;
 use crate::table::from_text;
-use crate::{EmbedError, Embeddings, read_npy};
+use crate::{EmbedError, Embeddings};
 
 /// The text table's file name inside a folder.
 const TEXT_FILE: &str = "vectors.txt";
@@ -188,16 +189,21 @@ fn open_package(matrix_path: &Path) -> Result<Embeddings, EmbedError> {
         index = %index_path.display(),
         "reading an embeddings package"
     );
-    let matrix = read_npy(matrix_path)?;
+    // The words first: a matrix whose rows are not one per word is refused on its header,
+    // before gigabytes of values are read.
     let words = read_words(&index_path)?;
-    if words.len() != matrix.rows {
-        return Err(EmbedError::CountMismatch {
-            matrix: matrix_path.to_owned(),
-            rows: matrix.rows,
-            index: index_path,
-            words: words.len(),
-        });
-    }
+    let matrix = read_npy_checked(matrix_path, |(rows, _)| {
+        if rows == words.len() {
+            Ok(())
+        } else {
+            Err(EmbedError::CountMismatch {
+                matrix: matrix_path.to_owned(),
+                rows,
+                index: index_path.clone(),
+                words: words.len(),
+            })
+        }
+    })?;
     // `glove_6B_50d` → `glove-6b-50d`: a stable, lowercase id for fingerprints.
     let id = stem.to_lowercase().replace('_', "-");
     Embeddings::from_matrix(id, matrix, words)
@@ -324,6 +330,81 @@ mod tests {
         let msg = err.to_string();
         assert!(msg.contains("glove_6B_2d_emb.npy has 3 rows"), "{msg}");
         assert!(msg.contains("glove_6B_index.parquet has 2 words"), "{msg}");
+    }
+
+    /// A FIFO named like a matrix blocked `prior train` (and a server's trial starts and its
+    /// shutdown) for good: it is refused at once, by name.
+    #[cfg(unix)]
+    #[test]
+    fn a_fifo_in_place_of_the_matrix_is_refused_at_once() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let data = write_package(dir.path(), &[Some("a"), Some("b"), Some("c")]);
+        let matrix = data.join("glove_6B_2d_emb.npy");
+        fs::remove_file(&matrix).expect("rm");
+        let status = std::process::Command::new("mkfifo")
+            .arg(&matrix)
+            .status()
+            .expect("mkfifo");
+        assert!(status.success());
+        // Run where a hang fails the test instead of blocking it.
+        let (tx, rx) = std::sync::mpsc::channel();
+        let root = dir.path().to_owned();
+        std::thread::spawn(move || {
+            let _ = tx.send(
+                Embeddings::open(&root)
+                    .map(|_| ())
+                    .map_err(|e| e.to_string()),
+            );
+        });
+        let got = rx
+            .recv_timeout(std::time::Duration::from_secs(30))
+            .expect("opening a FIFO blocked");
+        let msg = got.expect_err("a FIFO is no matrix");
+        assert!(msg.contains("glove_6B_2d_emb.npy"), "{msg}");
+        assert!(msg.contains("a FIFO"), "{msg}");
+    }
+
+    /// A header claiming 80 M rows of 50 numbers (a sparse file of that length) aborted the
+    /// process trying to allocate 16 GB; a matrix whose rows do not match its index was read
+    /// whole before the mismatch was seen.
+    #[test]
+    fn a_matrix_too_large_or_not_one_row_per_word_is_refused_on_its_header() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let data = write_package(dir.path(), &[Some("a"), Some("b"), Some("c")]);
+        let matrix = data.join("glove_6B_2d_emb.npy");
+        let sparse = |rows: u64, cols: u64| {
+            let header =
+                format!("{{'descr': '<f4', 'fortran_order': False, 'shape': ({rows}, {cols}), }}");
+            write_npy(&matrix, &header, &[]);
+            let f = fs::OpenOptions::new()
+                .write(true)
+                .open(&matrix)
+                .expect("open");
+            let len = f.metadata().expect("meta").len();
+            f.set_len(len + rows * cols * 4).expect("sparse");
+        };
+        sparse(80_000_000, 50);
+        let msg = Embeddings::open(dir.path())
+            .expect_err("too large")
+            .to_string();
+        assert!(msg.contains("glove_6B_2d_emb.npy"), "{msg}");
+        assert!(
+            msg.contains("(80000000, 50)") && msg.contains("4 GiB"),
+            "{msg}"
+        );
+        sparse(1_000_000, 50);
+        let err = Embeddings::open(dir.path()).expect_err("3 words");
+        assert!(
+            matches!(
+                err,
+                EmbedError::CountMismatch {
+                    rows: 1_000_000,
+                    words: 3,
+                    ..
+                }
+            ),
+            "{err:?}"
+        );
     }
 
     #[test]

@@ -1,7 +1,6 @@
 //! Plain text tables in GloVe's own format: `word v1 v2 … vd` per line, separated by spaces (or
 //! tabs), with an optional first line `# id: NAME`.
 
-use std::fs::File;
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 
@@ -29,7 +28,7 @@ pub(crate) fn read_text(path: &Path) -> Result<TextTable, EmbedError> {
         line,
         what,
     };
-    let mut reader = BufReader::new(File::open(path).map_err(io)?);
+    let mut reader = BufReader::new(crate::file::open(path)?);
     let mut id = None;
     let mut words = Vec::new();
     let mut dim = None;

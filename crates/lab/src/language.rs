@@ -97,16 +97,19 @@ pub fn train_learned(
 pub struct LazyEmbeddings {
     dir: PathBuf,
     expected: String,
+    dim: usize,
     opened: OnceLock<std::result::Result<Embeddings, String>>,
     cache: Mutex<BTreeMap<String, Vec<f32>>>,
 }
 
 impl LazyEmbeddings {
-    /// Embeddings from `dir`, which must be those `expected` (the learned part's embedding id).
-    pub fn new(dir: PathBuf, expected: &str) -> Self {
+    /// Embeddings from `dir`, which must be those `expected` (the learned part's embedding id)
+    /// with vectors of `dim` numbers.
+    pub fn new(dir: PathBuf, expected: &str, dim: usize) -> Self {
         Self {
             dir,
             expected: expected.to_string(),
+            dim,
             opened: OnceLock::new(),
             cache: Mutex::new(BTreeMap::new()),
         }
@@ -139,6 +142,16 @@ impl NameVectors for LazyEmbeddings {
                         self.expected
                     ));
                 }
+                // Checked once here, not as a wrong-length vector at every name asked.
+                if e.dim() != self.dim {
+                    return Err(format!(
+                        "embeddings {} ({}) have vectors of {} numbers, but the prior's learned part was trained on {}-number vectors: give the embeddings it was trained with",
+                        self.dir.display(),
+                        e.id(),
+                        e.dim(),
+                        self.dim
+                    ));
+                }
                 Ok(e)
             })
             .as_ref()
@@ -158,7 +171,7 @@ impl NameVectors for LazyEmbeddings {
 pub fn with_embeddings(prior: Arc<Prior>, dir: Option<&Path>) -> Arc<Prior> {
     match (prior.learned(), embeddings_dir(dir)) {
         (Some(learned), Some(dir)) if prior.embedder().is_none() => {
-            let lazy = LazyEmbeddings::new(dir, &learned.embedding);
+            let lazy = LazyEmbeddings::new(dir, &learned.embedding, learned.dim);
             Arc::new(prior.with_embedder(Embedder(Arc::new(lazy))))
         }
         _ => prior,
@@ -199,18 +212,26 @@ mod tests {
     fn the_embeddings_folder_is_opened_only_for_a_name_the_file_lacks() {
         let dir = tempfile::tempdir().unwrap();
         std::fs::write(dir.path().join("vectors.txt"), "fridge 1 0 0\nsoap 0 1 0\n").unwrap();
-        let lazy = LazyEmbeddings::new(dir.path().to_path_buf(), "vectors");
+        let lazy = LazyEmbeddings::new(dir.path().to_path_buf(), "vectors", 3);
         assert!(!lazy.is_open());
         let v = lazy.vector("Soap").unwrap();
         assert!(lazy.is_open());
         assert!((v[1] - 1.0).abs() < 1e-6, "{v:?}");
-        let other = LazyEmbeddings::new(dir.path().to_path_buf(), "glove-6b-50d");
+        let other = LazyEmbeddings::new(dir.path().to_path_buf(), "glove-6b-50d", 3);
         let err = other.vector("Soap").unwrap_err();
         assert!(err.contains("glove-6b-50d"), "{err}");
-        let missing = LazyEmbeddings::new(dir.path().join("nowhere"), "vectors");
+        let missing = LazyEmbeddings::new(dir.path().join("nowhere"), "vectors", 3);
         let err = missing.vector("Soap").unwrap_err();
         assert!(
             err.contains("nowhere") && err.contains(INSTALL_HINT),
+            "{err}"
+        );
+        // Embeddings of the right name but another length (a 49-column matrix for a 50-number
+        // prior) were taken, and every name then failed on its own.
+        let narrower = LazyEmbeddings::new(dir.path().to_path_buf(), "vectors", 4);
+        let err = narrower.vector("Soap").unwrap_err();
+        assert!(
+            err.contains("vectors of 3 numbers") && err.contains("4-number"),
             "{err}"
         );
     }

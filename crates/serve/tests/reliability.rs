@@ -299,6 +299,51 @@ fn allowed_origins_and_hosts_get_in() {
     assert_eq!(raw(s.addr, req).0, 200);
 }
 
+/// The CORS layer ran before the guards: a preflight (`OPTIONS`) naming another server in its
+/// Host was answered 200 without a token. It now passes the Host and Origin checks first.
+#[test]
+fn a_cors_preflight_is_refused_for_a_foreign_host_or_origin_and_answered_for_the_allowed_one() {
+    let s = start(Setup {
+        http: HttpOptions {
+            token: Some("s3cret".into()),
+            cors_origins: vec!["http://robot-ui.local:3000".into()],
+            ..HttpOptions::default()
+        },
+        ..Setup::default()
+    });
+    let preflight = |host: &str, origin: &str| {
+        let mut c = std::net::TcpStream::connect(s.addr).unwrap();
+        c.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
+        write!(
+            c,
+            "OPTIONS /scenes HTTP/1.1\r\nHost: {host}\r\nOrigin: {origin}\r\nAccess-Control-Request-Method: GET\r\nAccess-Control-Request-Headers: authorization\r\nConnection: close\r\n\r\n"
+        )
+        .unwrap();
+        let mut reply = String::new();
+        let _ = c.read_to_string(&mut reply);
+        reply
+    };
+    let own = s.addr.to_string();
+    let allowed = preflight(&own, "http://robot-ui.local:3000");
+    assert!(allowed.starts_with("HTTP/1.1 200"), "{allowed}");
+    assert!(
+        allowed
+            .to_ascii_lowercase()
+            .contains("access-control-allow-origin: http://robot-ui.local:3000"),
+        "{allowed}"
+    );
+    let foreign_host = preflight("evil.example", "http://robot-ui.local:3000");
+    assert!(foreign_host.starts_with("HTTP/1.1 403"), "{foreign_host}");
+    let foreign_origin = preflight(&own, "http://evil.example");
+    assert!(
+        foreign_origin.starts_with("HTTP/1.1 403"),
+        "{foreign_origin}"
+    );
+    // Past the preflight, the request itself still needs the token.
+    let (st, _) = get(&s, "/scenes", &["Origin: http://robot-ui.local:3000"]);
+    assert_eq!(st, 401);
+}
+
 /// The scheme of `Authorization` is case-insensitive (RFC 9110); lowercase `bearer` was refused.
 #[test]
 fn the_bearer_scheme_is_case_insensitive_and_an_empty_token_is_refused() {

@@ -172,6 +172,15 @@ impl Guards {
                 "requests from browser pages are refused unless their origin is allowed (--cors-origin)",
             ));
         }
+        // A browser's CORS preflight carries no credentials (it cannot): past the Host and
+        // Origin checks above, the CORS layer inside answers it.
+        let preflight = *req.method() == Method::OPTIONS
+            && !self.origins.is_empty()
+            && headers.contains_key(header::ORIGIN)
+            && headers.contains_key(header::ACCESS_CONTROL_REQUEST_METHOD);
+        if preflight {
+            return Ok(());
+        }
         if let Some(token) = &self.token
             && req.uri().path() != "/health"
             && !super::view::is_page(req.uri().path())

@@ -6,7 +6,8 @@
 //! Every request passes the guards in this order: `Host` must name this server (403), a
 //! browser's `Origin` must be one allowed for CORS (403), the bearer token must match when one
 //! is set (401); then a route that takes a body wants JSON (415) no larger than the limit
-//! (413), and other methods on a route are 405 whatever their body. Together
+//! (413), and other methods on a route are 405 whatever their body. A CORS preflight passes the
+//! Host and Origin checks like any request, then is answered without a token. Together
 //! they keep a web page the robot's operator happens to open from driving the robot (a form or
 //! `text/plain` post, a DNS-rebinding page).
 
@@ -329,8 +330,8 @@ pub fn router(service: Arc<Service>, options: &HttpOptions) -> Result<Router, Ap
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
         .with_state(service)
-        .layer(DefaultBodyLimit::max(options.max_body_bytes))
-        .layer(middleware::from_fn_with_state(guards, guard));
+        .layer(DefaultBodyLimit::max(options.max_body_bytes));
+    // Inside the guards: a preflight from a foreign Host or Origin is refused like any request.
     if !options.cors_origins.is_empty() {
         let origins = options.origins()?;
         app = app.layer(
@@ -344,5 +345,6 @@ pub fn router(service: Arc<Service>, options: &HttpOptions) -> Result<Router, Ap
                 ]),
         );
     }
+    let app = app.layer(middleware::from_fn_with_state(guards, guard));
     Ok(app)
 }

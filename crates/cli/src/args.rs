@@ -62,12 +62,13 @@ impl HouseArgs {
     }
 
     /// Like [`load`](Self::load), ProcTHOR files read with the container set `containers`
-    /// (generated houses and scene files name their containers themselves).
-    pub fn load_for(&self, containers: ContainerSet) -> Result<LoadedHouses> {
-        self.load_inner(self.skip_invalid, containers)
+    /// (generated houses and scene files name their containers themselves), each house kept
+    /// with only what training counts (see [`ferret_lab::HouseSource::load_types_only`]).
+    pub fn load_types_only(&self, containers: ContainerSet) -> Result<LoadedHouses> {
+        Ok(self.source().load_types_only(containers)?)
     }
 
-    /// Like [`load_for`](Self::load_for), only the houses of `shard` (see
+    /// Like [`load`](Self::load), only the houses of `shard` (see
     /// [`HouseSource::load_shard`]).
     pub fn load_shard(
         &self,

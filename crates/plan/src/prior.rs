@@ -274,7 +274,10 @@ impl Prior {
     /// Fits the Platt scaling: each fold's houses (every target present, every container) are
     /// scored by a prior counted on the other folds.
     fn cross_fit(scenes: &[&Scene], smoothing: f64, folds: usize) -> Option<PriorCalibration> {
-        let mut rows: Vec<([f64; 2], bool)> = Vec::new();
+        // Questions grouped by their counted probability (positives, total): tens of millions of
+        // questions over a large training set share a few hundred thousand values, and a row
+        // per question would hold them all in memory.
+        let mut groups: BTreeMap<u64, (f64, f64)> = BTreeMap::new();
         for f in 0..folds {
             let counted = Self::count(
                 scenes
@@ -293,21 +296,31 @@ impl Prior {
                 for target in scene.truth.target_types() {
                     for (c, &(by_container, pair)) in kinds.iter().enumerate() {
                         let p = counted.counted_from(&target, by_container, pair);
-                        rows.push((
-                            [crate::logistic::logit(p), 1.0],
-                            scene.truth.holds(c, &target),
-                        ));
+                        let group = groups
+                            .entry(crate::logistic::logit(p).to_bits())
+                            .or_default();
+                        group.1 += 1.0;
+                        if scene.truth.holds(c, &target) {
+                            group.0 += 1.0;
+                        }
                     }
                 }
             }
         }
-        let w = crate::logistic::fit(&rows, [1.0, 0.0], [true, false])?;
+        let rows: Vec<([f64; 2], f64, f64)> = groups
+            .iter()
+            .map(|(x, &(positives, total))| ([f64::from_bits(*x), 1.0], positives, total))
+            .collect();
+        let w = crate::logistic::fit_counts(&rows, [1.0, 0.0], [true, false])?;
+        let (positives, pairs) = groups
+            .values()
+            .fold((0.0, 0.0), |(p, n), g| (p + g.0, n + g.1));
         Some(PriorCalibration {
             a: w[0],
             c: w[1],
             folds,
-            pairs: rows.len() as u64,
-            positives: rows.iter().filter(|r| r.1).count() as u64,
+            pairs: pairs as u64,
+            positives: positives as u64,
         })
     }
 

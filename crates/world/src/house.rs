@@ -313,6 +313,33 @@ pub struct Scene {
     pub truth: GroundTruth,
 }
 
+impl Scene {
+    /// The scene with only what is counted of it: the types of its rooms and containers, which
+    /// room each container stands in, and the types of what each holds. Walls, doors, other
+    /// furniture, floor outlines and object ids are dropped, so that training on tens of
+    /// thousands of houses holds a fraction of their geometry in memory. Not a scene to plan on.
+    #[must_use]
+    pub fn into_types_only(mut self) -> Scene {
+        let h = &mut self.house;
+        h.walls = Vec::new();
+        h.doors = Vec::new();
+        h.obstacles = Vec::new();
+        h.map = None;
+        for room in &mut h.rooms {
+            room.floor.vertices = Vec::new();
+        }
+        h.rooms.shrink_to_fit();
+        h.containers.shrink_to_fit();
+        for held in &mut self.truth.contents {
+            for object in held.iter_mut() {
+                object.id = String::new();
+            }
+            held.shrink_to_fit();
+        }
+        self
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -82,14 +82,14 @@ pub fn run(cmd: Command) -> Result<ExitCode> {
 }
 
 fn train(args: TrainArgs) -> Result<ExitCode> {
-    let mut loaded = args.houses.load_for(args.containers)?;
+    let mut loaded = args.houses.load_types_only(args.containers)?;
     for path in &args.also {
         let more = HouseArgs {
             houses: Some(path.clone()),
             range: None,
             ..args.houses.clone()
         }
-        .load_for(args.containers)?;
+        .load_types_only(args.containers)?;
         loaded.scenes.extend(more.scenes);
         loaded.skipped.extend(more.skipped);
     }

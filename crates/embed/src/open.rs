@@ -206,7 +206,14 @@ fn open_package(matrix_path: &Path) -> Result<Embeddings, EmbedError> {
     })?;
     // `glove_6B_50d` → `glove-6b-50d`: a stable, lowercase id for fingerprints.
     let id = stem.to_lowercase().replace('_', "-");
-    Embeddings::from_matrix(id, matrix, words)
+    // A bad value is the matrix file's fault: its error names the file as well as the word.
+    Embeddings::from_matrix(id, matrix, words).map_err(|e| match e {
+        EmbedError::Table { what, .. } => EmbedError::Npy {
+            path: matrix_path.to_owned(),
+            what,
+        },
+        other => other,
+    })
 }
 
 /// Loads a sentence-embedding model: `model.safetensors` and the tokenizer and config beside
@@ -404,6 +411,25 @@ mod tests {
                 }
             ),
             "{err:?}"
+        );
+    }
+
+    /// A NaN in the matrix was reported under the table's id alone: the error names the file,
+    /// the row's word and the value.
+    #[test]
+    fn a_value_that_is_not_finite_names_the_file_and_the_word() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let data = write_package(dir.path(), &[Some("the"), Some("fridge"), Some("kitchen")]);
+        write_npy(
+            &data.join("glove_6B_2d_emb.npy"),
+            "{'descr': '<f4', 'fortran_order': False, 'shape': (3, 2), }",
+            &[1.0, 2.0, 3.0, f32::NAN, 5.0, 6.0],
+        );
+        let msg = Embeddings::open(dir.path()).expect_err("NaN").to_string();
+        assert!(msg.contains("glove_6B_2d_emb.npy"), "{msg}");
+        assert!(
+            msg.contains("\"fridge\"") && msg.contains("value 2"),
+            "{msg}"
         );
     }
 

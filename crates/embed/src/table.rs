@@ -119,6 +119,18 @@ impl Embeddings {
         matrix: Matrix,
         words: Vec<String>,
     ) -> Result<Self, EmbedError> {
+        if let Some(at) = matrix.data.iter().position(|v| !v.is_finite()) {
+            let (row, col) = (at / matrix.cols.max(1), at % matrix.cols.max(1));
+            return Err(EmbedError::Table {
+                id,
+                what: format!(
+                    "row {row} (the word {:?}), value {}: {} is not a finite number",
+                    words.get(row).map_or("", String::as_str),
+                    col + 1,
+                    matrix.data[at]
+                ),
+            });
+        }
         let mut rows = HashMap::with_capacity(words.len());
         let mut duplicates = 0usize;
         for (row, word) in words.into_iter().enumerate() {
@@ -135,12 +147,6 @@ impl Embeddings {
                 duplicates,
                 "words listed more than once keep their first row"
             );
-        }
-        if matrix.data.iter().any(|v| !v.is_finite()) {
-            return Err(EmbedError::Table {
-                id,
-                what: "the matrix holds values that are not finite".to_owned(),
-            });
         }
         Ok(Self {
             id,

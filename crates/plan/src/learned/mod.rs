@@ -338,6 +338,11 @@ fn mean_logit(heads: &[Head], x: &[f32]) -> f64 {
     heads.iter().map(|h| f64::from(h.logit(x))).sum::<f64>() / heads.len() as f64
 }
 
+/// Largest weight a file's fits may hold. Fits over logits give weights of order one (a trained
+/// file's are within ±2); a weight of a thousand already makes every answer 0 or 1, so one past
+/// it is a damaged or hand-edited file, not a fit.
+const MAX_FIT_WEIGHT: f64 = 1_000.0;
+
 fn learned_error(message: impl Into<String>) -> PlanError {
     PlanError::Learned {
         message: message.into(),
@@ -356,7 +361,7 @@ impl Learned {
         }
         if let Some((name, v)) = self.vectors.iter().find(|(_, v)| v.len() != self.dim) {
             return Err(format!(
-                "the vector of `{name}` has {} numbers, the file says {}",
+                "vectors.{name}: {} numbers, the file says {}",
                 v.len(),
                 self.dim
             ));
@@ -364,32 +369,44 @@ impl Learned {
         for (what, model) in [("language", &self.language), ("control", &self.control)] {
             if model.heads.len() != self.settings.folds || model.heads.iter().any(Vec::is_empty) {
                 return Err(format!(
-                    "{what}: {} folds of heads for {} folds",
+                    "{what}.heads: {} folds of heads for {} folds",
                     model.heads.len(),
                     self.settings.folds
                 ));
             }
-            if model
-                .heads
-                .iter()
-                .flatten()
-                .any(|h| !h.is_well_formed() || h.inputs() != head_inputs(self.dim))
-            {
+            for (f, fold) in model.heads.iter().enumerate() {
+                for (i, h) in fold.iter().enumerate() {
+                    if !h.is_well_formed() {
+                        return Err(format!(
+                            "{what}.heads[{f}][{i}]: its layers do not chain, or a weight is not a finite number"
+                        ));
+                    }
+                    if h.inputs() != head_inputs(self.dim) {
+                        return Err(format!(
+                            "{what}.heads[{f}][{i}]: {} inputs, where {}-number vectors make {}",
+                            h.inputs(),
+                            self.dim,
+                            head_inputs(self.dim)
+                        ));
+                    }
+                }
+            }
+            if model.fusion.len() != FUSION_WEIGHTS {
                 return Err(format!(
-                    "{what}: a head does not fit {}-number vectors",
-                    self.dim
+                    "{what}.fusion: {} weights, not {FUSION_WEIGHTS}",
+                    model.fusion.len()
                 ));
             }
-            if model.fusion.len() != FUSION_WEIGHTS
-                || !model
-                    .fusion
+            for (field, weights) in [("fusion", &model.fusion[..]), ("head_fit", &model.head_fit)] {
+                if let Some((i, w)) = weights
                     .iter()
-                    .chain(&model.head_fit)
-                    .all(|w| w.is_finite())
-            {
-                return Err(format!(
-                    "{what}: the fits are not {FUSION_WEIGHTS} + 2 finite numbers"
-                ));
+                    .enumerate()
+                    .find(|(_, w)| !(w.is_finite() && w.abs() <= MAX_FIT_WEIGHT))
+                {
+                    return Err(format!(
+                        "{what}.{field}[{i}]: {w} is not a weight a fit gives (a finite number within ±{MAX_FIT_WEIGHT})"
+                    ));
+                }
             }
         }
         Ok(())

@@ -208,6 +208,36 @@ fn a_prior_file_with_a_learned_part_reads_back_as_written_and_a_damaged_one_is_r
     std::fs::write(&path, value.to_string()).unwrap();
     let err = Prior::load(&path).unwrap_err().to_string();
     assert!(err.contains("base64"), "{err}");
+
+    // Fits no training gives were taken (`[1e308, 1e308]` moved every answer), and a NaN
+    // weight was reported as a head of the wrong width: each now names its field.
+    let damaged = |edit: &dyn Fn(&mut serde_json::Value)| {
+        let mut value: serde_json::Value =
+            serde_json::from_str(&serde_json::to_string(&prior).unwrap()).unwrap();
+        edit(&mut value);
+        std::fs::write(&path, value.to_string()).unwrap();
+        Prior::load(&path).unwrap_err().to_string()
+    };
+    let err =
+        damaged(&|v| v["learned"]["language"]["head_fit"] = serde_json::json!([1e308, 1e308]));
+    assert!(
+        err.contains("language.head_fit[0]") && err.contains("±1000"),
+        "{err}"
+    );
+    let err = damaged(&|v| v["learned"]["control"]["fusion"][3] = serde_json::json!(-5000.0));
+    assert!(err.contains("control.fusion[3]"), "{err}");
+    let err = damaged(&|v| {
+        use base64::Engine;
+        let engine = base64::engine::general_purpose::STANDARD;
+        let w = &mut v["learned"]["language"]["heads"][1][0]["layers"][0]["w"];
+        let mut bytes = engine.decode(w.as_str().unwrap()).unwrap();
+        bytes[..4].copy_from_slice(&f32::NAN.to_le_bytes());
+        *w = engine.encode(bytes).into();
+    });
+    assert!(
+        err.contains("language.heads[1][0]") && err.contains("finite"),
+        "{err}"
+    );
 }
 
 fn source(prior: Prior, kind: LearnedKind) -> Result<LearnedSource, String> {

@@ -970,6 +970,38 @@ fn a_new_pose_is_one_search_on_the_scenes_grid() {
     );
 }
 
+/// An abandoned trial's cost read `-0.0` in one route and `0.0` in another: every route says
+/// `0.0`.
+#[test]
+fn a_trial_abandoned_before_moving_costs_zero_in_every_route() {
+    let s = start(Setup::default());
+    let (_, dep) = post_json(&s, "/deployments", &json!({}));
+    let (st, trial) = post_json(
+        &s,
+        &format!("/deployments/{}/trials", dep["id"]),
+        &json!({"scene": "flat", "target": "Egg"}),
+    );
+    assert_eq!(st, 201, "{trial}");
+    let id = &trial["trial"];
+    let (st, ended) = post_json(&s, &format!("/trials/{id}/abandon"), &json!({}));
+    assert_eq!(st, 200, "{ended}");
+    let mut texts = vec![ended.to_string()];
+    for path in [
+        format!("/trials/{id}"),
+        format!("/trials/{id}/view"),
+        format!("/deployments/{}", dep["id"]),
+        "/deployments".to_string(),
+    ] {
+        let (st, body) = get(&s, &path, &[]);
+        assert_eq!(st, 200, "{path}");
+        texts.push(String::from_utf8_lossy(&body).into_owned());
+    }
+    for text in texts {
+        assert!(!text.contains("-0.0"), "{text}");
+    }
+    assert_eq!(ended["cost_m"], 0.0);
+}
+
 /// A yaw of 1e308 was taken (it names no direction); `c: -0.0` was stored and echoed as `-0.0`;
 /// `Host: localhost..` passed as `localhost`.
 #[test]

@@ -16,6 +16,25 @@ use crate::geometry::{Footprint, Point, Polygon, Rect};
 #[serde(transparent)]
 pub struct ObjectType(pub String);
 
+/// Longest room or object type name a file may give: the longest in ProcTHOR is 17 letters.
+/// Names travel into prompts, prior files and pages; a 100 KB name is a damaged file.
+pub const MAX_TYPE_NAME: usize = 100;
+
+/// Why `name` cannot be a room or object type read from a file, if it cannot: a type is 1 to
+/// [`MAX_TYPE_NAME`] letters and digits (CamelCase, `kind` such as `example`).
+pub fn type_name_problem(name: &str, kind: &str, example: &str) -> Option<String> {
+    let chars = name.chars().count();
+    if chars > 0 && chars <= MAX_TYPE_NAME && name.chars().all(char::is_alphanumeric) {
+        return None;
+    }
+    // A long or binary name is shown by its start only.
+    let shown: String = name.chars().take(40).collect();
+    let more = if chars > 40 { "…" } else { "" };
+    Some(format!(
+        "{shown:?}{more} ({chars} characters) is not a CamelCase {kind} such as {example}: 1 to {MAX_TYPE_NAME} letters and digits"
+    ))
+}
+
 impl ObjectType {
     /// An object type from its CamelCase name.
     pub fn new(name: impl Into<String>) -> Self {

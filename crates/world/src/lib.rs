@@ -27,8 +27,8 @@ pub use error::{HouseLocation, Result, WorldError, error_chain};
 pub use geometry::{Footprint, Point, Polygon, Rect};
 pub use grid::{GridParams, OccupancyGrid};
 pub use house::{
-    Container, Door, GroundTruth, House, ObjectType, Obstacle, Pose, Room, RoomType, Scene,
-    SmallObject, Wall,
+    Container, Door, GroundTruth, House, MAX_TYPE_NAME, ObjectType, Obstacle, Pose, Room, RoomType,
+    Scene, SmallObject, Wall, type_name_problem,
 };
 pub use map::{MapCell, OccupancyMap};
 pub use rules::{AccessRule, ContainerSet, TravelCost};

@@ -297,14 +297,10 @@ impl SceneFile {
                     format!("{:?} is used by an earlier room", r.name),
                 ));
             }
-            if r.room_type.trim().is_empty() || !r.room_type.chars().all(char::is_alphanumeric) {
-                return Err(err(
-                    at("type"),
-                    format!(
-                        "{:?} is not a CamelCase room type such as LivingRoom",
-                        r.room_type
-                    ),
-                ));
+            if let Some(problem) =
+                crate::house::type_name_problem(&r.room_type, "room type", "LivingRoom")
+            {
+                return Err(err(at("type"), problem));
             }
             if r.polygon.len() < 3 {
                 return Err(err(
@@ -428,11 +424,10 @@ impl SceneFile {
             };
             let mut held = Vec::with_capacity(c.contents.len());
             for (k, t) in c.contents.iter().enumerate() {
-                if t.trim().is_empty() || !t.chars().all(char::is_alphanumeric) {
-                    return Err(err(
-                        format!("containers[{i}].contents[{k}]"),
-                        format!("{t:?} is not a CamelCase object type such as CellPhone"),
-                    ));
+                if let Some(problem) =
+                    crate::house::type_name_problem(t, "object type", "CellPhone")
+                {
+                    return Err(err(format!("containers[{i}].contents[{k}]"), problem));
                 }
                 held.push(SmallObject {
                     id: format!("{}|{t}|{k}", c.id),
@@ -509,11 +504,8 @@ fn check_object(
             format!("{id:?} is used by an earlier container or obstacle"),
         ));
     }
-    if object_type.trim().is_empty() || !object_type.chars().all(char::is_alphanumeric) {
-        return Err((
-            "type",
-            format!("{object_type:?} is not a CamelCase object type such as Dresser"),
-        ));
+    if let Some(problem) = crate::house::type_name_problem(object_type, "object type", "Dresser") {
+        return Err(("type", problem));
     }
     Ok(())
 }

@@ -729,3 +729,31 @@ fn the_streaming_reader_stops_at_the_first_invalid_house_after_its_range() {
         Err(WorldError::Range { .. })
     ));
 }
+
+/// A room type of 100 KB with control characters was read, counted and written into a prior
+/// file: a type name is 1 to 100 letters and digits, and the field is named.
+#[test]
+fn type_names_that_are_not_short_camel_case_are_errors() {
+    let mut h = fixture::house_a();
+    h["rooms"][1]["roomType"] = json!(format!("Kitchen\u{7}\n{}", "x".repeat(100_000)));
+    let err = parse(&h).unwrap_err().to_string();
+    assert!(err.contains("rooms[1].roomType"), "{err}");
+    assert!(
+        err.contains("100009 characters") && err.len() < 500,
+        "{err}"
+    );
+    let mut h = fixture::house_a();
+    h["rooms"][0]["roomType"] = json!("");
+    assert_eq!(invalid_field(parse(&h)), "rooms[0].roomType");
+    let mut h = fixture::house_a();
+    h["objects"][0]["children"][1]["objectType"] = json!("Apple Pie");
+    assert_eq!(
+        invalid_field(parse(&h)),
+        "objects[0].children[1].objectType"
+    );
+    let mut h = fixture::house_a();
+    h["objects"][5]["objectType"] = json!("D".repeat(101));
+    assert_eq!(invalid_field(parse(&h)), "objects[5].objectType");
+    h["objects"][5]["objectType"] = json!("D".repeat(100));
+    assert!(parse(&h).is_ok());
+}

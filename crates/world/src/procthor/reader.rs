@@ -18,7 +18,7 @@ use crate::error::{HouseLocation, Result, WorldError};
 use crate::geometry::{Footprint, Point, Polygon, segment_distance};
 use crate::house::{
     Container, Door, GroundTruth, House, ObjectType, Obstacle, Pose, Room, RoomType, Scene,
-    SmallObject, Wall,
+    SmallObject, Wall, type_name_problem,
 };
 use crate::rules::ContainerSet;
 
@@ -604,6 +604,9 @@ pub fn scene_from_raw_with(
                 format!("degenerate polygon of area {area} m²"),
             ));
         }
+        if let Some(problem) = type_name_problem(&r.room_type, "room type", "LivingRoom") {
+            return Err(invalid(format!("rooms[{i}].roomType"), problem));
+        }
         rooms.push(Room {
             id: r.id.clone(),
             room_type: RoomType::new(r.room_type.clone()),
@@ -682,6 +685,9 @@ pub fn scene_from_raw_with(
                 ObjectType::new("Unknown")
             }
         };
+        if let Some(problem) = type_name_problem(object_type.as_str(), "object type", "Fridge") {
+            return Err(invalid(field("objectType"), problem));
+        }
         if is_wall_mounted(&object_type) {
             continue;
         }
@@ -720,23 +726,28 @@ pub fn scene_from_raw_with(
                     ),
                 });
             }
-            contents.push(
-                o.children
-                    .iter()
-                    .filter_map(|c| {
-                        let t = type_of(c)?;
-                        let keep = if furniture {
-                            !top_level.contains(&t.as_str().to_lowercase())
-                        } else {
-                            is_searchable_content(&t)
-                        };
-                        keep.then(|| SmallObject {
-                            id: c.id.clone(),
-                            object_type: t,
-                        })
-                    })
-                    .collect(),
-            );
+            let mut held = Vec::new();
+            for (j, c) in o.children.iter().enumerate() {
+                let Some(t) = type_of(c) else { continue };
+                if let Some(problem) = type_name_problem(t.as_str(), "object type", "CellPhone") {
+                    return Err(invalid(
+                        field(&format!("children[{j}].objectType")),
+                        problem,
+                    ));
+                }
+                let keep = if furniture {
+                    !top_level.contains(&t.as_str().to_lowercase())
+                } else {
+                    is_searchable_content(&t)
+                };
+                if keep {
+                    held.push(SmallObject {
+                        id: c.id.clone(),
+                        object_type: t,
+                    });
+                }
+            }
+            contents.push(held);
             containers.push(Container {
                 id: o.id.clone(),
                 object_type,

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Lints what cargo does not: every Python file (ruff: its formatting and its lints, configured in
 # ruff.toml), every shell script (shellcheck), the relative links of README.md and docs/*.md
-# (scripts/check-links.py: files that exist, anchors that name a heading) and the imports between
-# each crate's modules (scripts/module-cycles.py: no circle).
+# (scripts/check-links.py: files that exist, anchors that name a heading), the README's quick
+# start test command against .ci/run, and the imports between each crate's modules
+# (scripts/module-cycles.py: no circle).
 #
 #   scripts/lint.sh              # check everything; exits 1 if anything is off
 #   scripts/lint.sh install      # only make the cached venv
@@ -47,6 +48,15 @@ failed=()
 "$VENV/bin/shellcheck" -x -e SC2119 scripts/*.sh scripts/lib/*.sh .ci/run ros/*.sh \
     || failed+=(shellcheck)
 python3 scripts/check-links.py README.md docs/*.md || failed+=("relative links")
+# The README's quick start works on a fresh machine: its test command (the second line of its
+# first code block) is one .ci/run calls verbatim, and not .ci/run itself, which needs the
+# ProcTHOR folder, PostgreSQL and apt.
+quick_test="$(awk '/^## Quick start/ {q = 1} q && /^```/ {if (c) exit; c = 1; next} c' README.md \
+    | sed -n 2p | sed 's/ *#.*//')"
+if [ -z "$quick_test" ] || [[ "$quick_test" == *".ci/run"* ]] || ! grep -qxF "$quick_test" .ci/run; then
+    log "README quick start: test command '$quick_test' is not one .ci/run runs as it stands"
+    failed+=("README quick start")
+fi
 # Each crate's modules import one another without a circle (scripts/module-cycles.py prints any).
 python3 scripts/module-cycles.py crates >/dev/null || {
     python3 scripts/module-cycles.py crates || true
@@ -57,4 +67,4 @@ if [ "${#failed[@]}" -gt 0 ]; then
     for check in "${failed[@]}"; do log "failed: $check"; done
     exit 1
 fi
-log "Python, shell scripts, links and module imports: all clean"
+log "Python, shell scripts, links, quick start and module imports: all clean"

@@ -632,3 +632,53 @@ async fn an_event_stream_outlives_the_idle_timeout_and_is_never_the_one_evicted_
     assert_eq!(got, expected, "every event, on one stream");
     drop(flood);
 }
+
+/// A second server on the robots' SQLite file (`--view-only`, say) showed "live" and never
+/// heard of the first one's writes: its pages are now told to read again within a second of
+/// another process's commit, and never for their own server's writes.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_page_hears_within_a_second_of_another_process_writing_the_sqlite_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("robots.sqlite");
+    let viewer = start(Some(&db), None).await;
+    let (status, stream) = Stream::open(&viewer, None).await;
+    assert_eq!(status, 200);
+    let mut page = stream.unwrap();
+    assert_eq!(page.next(SECOND).await.0, "hello");
+    // The server's own write is an event, not a resync.
+    for _ in 0..2 {
+        let (st, _) = viewer.post("/deployments", json!({})).await;
+        assert_eq!(st, 201);
+        assert_eq!(
+            page.next(SECOND).await.0,
+            "deployment",
+            "no resync before it"
+        );
+        tokio::time::sleep(Duration::from_millis(600)).await;
+    }
+    // Another process's write: here another store on the same file, as a second server has.
+    let other = db.clone();
+    tokio::task::spawn_blocking(move || {
+        let service = ferret_serve::Service::new(
+            ferret_serve::Store::open(&other).unwrap(),
+            ferret_world::GridParams::default(),
+            support::strategies(),
+        )
+        .unwrap();
+        service
+            .create_deployment(serde_json::from_str("{}").unwrap(), b"{}")
+            .unwrap();
+    })
+    .await
+    .unwrap();
+    let written = std::time::Instant::now();
+    let (name, data) = page.next(SECOND).await;
+    assert_eq!(
+        (name.as_str(), &data),
+        ("resync", &json!({"missed": null})),
+        "the first event after the other's write"
+    );
+    assert!(written.elapsed() < SECOND);
+    let (_, list) = viewer.get("/deployments").await;
+    assert_eq!(list.as_array().unwrap().len(), 3, "{list}");
+}

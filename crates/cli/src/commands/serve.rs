@@ -3,6 +3,7 @@
 //! the same registry as `ferret eval`, and the service crate drives the same trial step and
 //! selector as `ferret deploy`.
 
+use std::io::Write as _;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -357,6 +358,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
             .add_scene(&name, scene)
             .map_err(|e| anyhow::anyhow!("{}: scene {name}: {}", path.display(), e.message))?;
     }
+    let has_token = checked.token.is_some();
     let options = HttpOptions {
         token: checked.token,
         cors_origins: args.cors_origin.clone(),
@@ -380,6 +382,17 @@ pub fn run(args: Args) -> Result<ExitCode> {
             "ferret serve: listening on http://{addr} (db {db}; strategies {}){}",
             names.join(", "),
             if args.view_only { "; view-only" } else { "" }
+        );
+        // Whoever started the server may have read the line above and closed the pipe: this
+        // one is for a person, and is not worth stopping the server for.
+        let _ = writeln!(
+            std::io::stdout(),
+            "ferret serve: live view at http://{addr}/ (open it in a browser{})",
+            if has_token {
+                "; it asks for the token once"
+            } else {
+                ""
+            }
         );
         ferret_serve::serve(listener, app, checked.serve, stopping)
             .await

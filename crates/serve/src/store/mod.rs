@@ -213,7 +213,9 @@ impl Store {
     /// listens on `channel` (calling `deliver` with each notification's text, or `None` after
     /// a lost session came back) and the returned sender's texts go out as notifications, at
     /// most `queue` waiting, packed as `options` says, with what `options.beat` gives every
-    /// `options.every`. On SQLite (one server) there is nobody else: `None`.
+    /// `options.every`. On SQLite there is no channel (`None`); while `options.beat` says this
+    /// server has watchers, a commit another process makes to the file (a second server on
+    /// it) calls `deliver(None)` within [`OTHERS_EVERY`].
     ///
     /// # Errors
     /// The PostgreSQL client's runtime is gone.
@@ -225,7 +227,15 @@ impl Store {
         options: FeedOptions,
     ) -> Result<Option<tokio::sync::mpsc::Sender<String>>, StoreError> {
         match &self.backend {
-            Backend::Sqlite(_) => Ok(None),
+            Backend::Sqlite(s) => {
+                let beat = options.beat.clone();
+                s.watch_others(
+                    OTHERS_EVERY,
+                    std::sync::Arc::new(move || beat().is_some()),
+                    deliver,
+                );
+                Ok(None)
+            }
             Backend::Postgres(p) => p.feed(channel, queue, deliver, options).map(Some),
         }
     }
@@ -267,6 +277,9 @@ impl Store {
         }
     }
 }
+
+/// How often a SQLite server with watchers looks for other processes' commits to its file.
+pub const OTHERS_EVERY: std::time::Duration = std::time::Duration::from_millis(250);
 
 /// How a replica's notifications are sent ([`Store::feed`]): packed, named after their sender,
 /// and with what `beat` gives sent again every `every`.

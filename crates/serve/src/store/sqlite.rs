@@ -4,7 +4,7 @@
 //! version in `PRAGMA user_version`.
 
 use std::path::{Path, PathBuf};
-use std::sync::{Mutex, MutexGuard, PoisonError};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError, Weak};
 use std::time::{Duration, Instant};
 
 use rusqlite::config::DbConfig;
@@ -53,7 +53,8 @@ const MIGRATIONS: [&[&str]; 4] = [
 ];
 
 pub(super) struct Sqlite {
-    conn: Mutex<Connection>,
+    /// Shared with the thread that watches for other processes' commits (a `Weak` there).
+    conn: Arc<Mutex<Connection>>,
     pub(super) file: String,
     /// The file, for checks on a connection of their own; `None` in memory.
     path: Option<PathBuf>,
@@ -74,7 +75,7 @@ impl Drop for Sqlite {
         // (the next start calls it malformed), and with another file put in its place it
         // deletes the log now beside that one. So the connection closes without it, leaving
         // the file as it was found and the log with the writes since its last copy.
-        let conn = self.conn.get_mut().unwrap_or_else(PoisonError::into_inner);
+        let conn = self.lock();
         if let Err(e) = conn.set_db_config(DbConfig::SQLITE_DBCONFIG_NO_CKPT_ON_CLOSE, true) {
             tracing::error!("{}: cannot keep closing from writing to it: {e}", self.file);
         }
@@ -213,7 +214,7 @@ impl Sqlite {
             .map_err(sql)?;
         migrate(&mut conn, &file)?;
         Ok(Sqlite {
-            conn: Mutex::new(conn),
+            conn: Arc::new(Mutex::new(conn)),
             file,
             path: None,
             last_check: Mutex::new(None),
@@ -282,6 +283,56 @@ impl Sqlite {
             file: self.file.clone(),
             what,
         })
+    }
+
+    /// Calls `changed` (from a thread of its own) within `every` of a commit that another
+    /// process made to the file, while `watched` says someone looks: a second `ferret serve`
+    /// (`--view-only`, say) on the robots' file tells its pages to read again. SQLite's
+    /// `data_version` moves only for other connections' commits, and this server has one. Ends
+    /// with the store; nothing for a database in memory.
+    pub(super) fn watch_others(
+        &self,
+        every: Duration,
+        watched: Arc<dyn Fn() -> bool + Send + Sync>,
+        changed: super::Deliver,
+    ) {
+        if self.path.is_none() {
+            return;
+        }
+        let conn: Weak<Mutex<Connection>> = Arc::downgrade(&self.conn);
+        let file = self.file.clone();
+        let spawned = std::thread::Builder::new()
+            .name("ferret-sqlite-watch".into())
+            .spawn(move || {
+                let mut last: Option<i64> = None;
+                loop {
+                    std::thread::sleep(every);
+                    let Some(conn) = conn.upgrade() else { return };
+                    if !watched() {
+                        last = None;
+                        continue;
+                    }
+                    let version = conn
+                        .lock()
+                        .unwrap_or_else(PoisonError::into_inner)
+                        .query_row("PRAGMA data_version", [], |r| r.get::<_, i64>(0));
+                    match version {
+                        Ok(v) => {
+                            if last.is_some_and(|l| l != v) {
+                                changed(None);
+                            }
+                            last = Some(v);
+                        }
+                        Err(e) => tracing::debug!("{file}: cannot read data_version: {e}"),
+                    }
+                }
+            });
+        if let Err(e) = spawned {
+            tracing::warn!(
+                "{}: cannot watch for other processes' changes: {e}",
+                self.file
+            );
+        }
     }
 
     pub(super) fn lock(&self) -> MutexGuard<'_, Connection> {

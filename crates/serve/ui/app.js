@@ -60,6 +60,8 @@
       depId: null,
       depPicked: false,
       dep: null,
+      // While the deployment is read: the events that came meanwhile.
+      depReading: null,
       live: new Map(),
       watchedId: null,
       follow: true,
@@ -228,11 +230,39 @@
     ensureStream();
   }
 
+  // A trial's event on a deployment as the page holds it: the trial's row and the open trials.
+  function applyToDeployment(dep, e) {
+    let row = dep.trials.find((t) => t.trial === e.trial);
+    if (!row) {
+      row = { trial: e.trial, k: e.k, target: e.target, strategy: e.strategy, cost_m: null };
+      dep.trials.push(row);
+    }
+    // An event older than what the row shows (a trial ended) changes nothing.
+    if (row.status && row.status !== "searching" && e.status === "searching") return;
+    row.status = e.status;
+    if (e.status !== "searching") row.cost_m = e.cost_m;
+    const open = new Set(dep.open_trials);
+    if (e.status === "searching") open.add(e.trial);
+    else open.delete(e.trial);
+    dep.open_trials = [...open].sort((a, b) => a - b);
+  }
+
   async function fetchDeployment() {
     const id = S.depId;
     if (id == null) return;
-    const dep = await api(`/deployments/${seg(id)}`);
+    // The server reads the deployment at some moment of this request: the events that come
+    // meanwhile may be newer than what it returns, and are applied to it again. Without this a
+    // read that crossed a robot's last trials put the page back on an earlier trial for good.
+    const reading = [];
+    S.depReading = reading;
+    let dep;
+    try {
+      dep = await api(`/deployments/${seg(id)}`);
+    } finally {
+      if (S.depReading === reading) S.depReading = null;
+    }
     if (id !== S.depId) return; // another was selected meanwhile; its own fetch follows
+    for (const e of reading) applyToDeployment(dep, e);
     S.dep = dep;
     const item = S.deployments.find((d) => d.id === id);
     if (item) {
@@ -528,18 +558,11 @@
       item.open_trials = [...open].sort((a, b) => a - b);
       renderDeploymentSelect();
     }
+    // A deployment being read may have been read before this event: it is applied again to
+    // what the read returns.
+    if (S.depReading && e.deployment === S.depId) S.depReading.push(e);
     if (S.dep && e.deployment === S.dep.id) {
-      let row = S.dep.trials.find((t) => t.trial === e.trial);
-      if (!row) {
-        row = { trial: e.trial, k: e.k, target: e.target, strategy: e.strategy, cost_m: null };
-        S.dep.trials.push(row);
-      }
-      row.status = e.status;
-      if (e.status !== "searching") row.cost_m = e.cost_m;
-      const open = new Set(S.dep.open_trials);
-      if (e.status === "searching") open.add(e.trial);
-      else open.delete(e.trial);
-      S.dep.open_trials = [...open].sort((a, b) => a - b);
+      applyToDeployment(S.dep, e);
       renderDeployment();
       if (e.status !== "searching") refetchDeployment();
     }

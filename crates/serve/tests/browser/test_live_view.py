@@ -635,3 +635,30 @@ def test_past_the_cap_of_event_streams_a_page_still_shows_and_retries(serve, vie
     assert 1 < len(tries) <= 6, tries
     first.page.close()
     second.wait_live(timeout=20000)
+
+
+def test_the_page_follows_a_fast_robot_to_its_last_trial(serve, view):
+    """A deployment read that crossed a robot's last trials replaced what the events had shown:
+    the page went back to an earlier trial and stayed there, still "live". After each of five
+    runs of 20 trials without a pause, the page shows the last trial within a second."""
+    server = serve()
+    v = view(server).open(TOKEN)
+    v.wait_live()
+    robot = Robot(server.api)
+    for run in range(5):
+        dep = robot.deploy(strategies=["model/prior", "model/uniform"], selector="ucb")
+        last = None
+        for i in range(20):
+            last = robot.finish(robot.start(dep["id"], TARGETS[i % len(TARGETS)]))
+        v.within(
+            """(e) => {
+                const card = document.querySelector("#plan-card");
+                return card.dataset.trial === String(e.trial) && card.dataset.status === e.status
+                    && document.querySelector("#deployment-card").dataset.deployment
+                        === String(e.deployment);
+            }""",
+            {"trial": last["trial"], "status": last["status"], "deployment": dep["id"]},
+            what=f"run {run}: the last trial, {last['trial']} (k = {last['k']})",
+            budget_ms=1000,
+        )
+    v.check_clean()

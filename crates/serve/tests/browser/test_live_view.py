@@ -204,6 +204,12 @@ def test_a_robots_search_shows_live(serve, view):
             sorted(replays),
             what=f"replays of trial {trial['trial']}",
         )
+        # Every column says what it holds (the third, the difference to the deployed
+        # strategy's cost, had no header).
+        headers = v.page.eval_on_selector_all(
+            "#replays thead th", "(ths) => ths.map((t) => t.textContent)"
+        )
+        assert len(headers) == 3 and all(h.strip() for h in headers), headers
         ended.append(trial)
 
     # A trial in progress, and an earlier one picked on the selection curve.

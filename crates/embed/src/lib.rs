@@ -31,7 +31,7 @@ mod table;
 mod text;
 
 pub use error::EmbedError;
-pub use npy::{Matrix, read_npy};
+pub use npy::{MAX_VALUES, Matrix, read_npy};
 pub use split::split_name;
 pub use table::{Embeddings, cosine};
 

@@ -96,7 +96,7 @@ impl Frame {
         if name == RESYNC {
             // Another replica's word that its events were lost on the way: whatever it counted,
             // this replica cannot tell how many of them its watchers wanted.
-            return Some((*resync_unknown()).clone());
+            return Some(resync_unknown());
         }
         Some(Frame {
             name: name.to_string(),
@@ -437,7 +437,7 @@ impl Events {
             }),
             // Names are bounded where they come in, so this is a safeguard: every watcher reads
             // again rather than one missing the trial's change.
-            _ => self.publish((*resync_unknown()).clone()),
+            _ => self.publish(resync_unknown()),
         }
     }
 
@@ -453,7 +453,7 @@ impl Events {
     /// Every watcher told to read everything again (the listener lost its session, and with it
     /// the events meanwhile).
     pub(crate) fn resync_all(&self) {
-        self.deliver((*resync_unknown()).clone());
+        self.deliver(resync_unknown());
     }
 
     /// Streams open now.
@@ -634,12 +634,12 @@ impl Watcher {
 }
 
 /// The event telling every watcher that events were lost, how many unknown.
-fn resync_unknown() -> Arc<Frame> {
-    Arc::new(Frame {
+fn resync_unknown() -> Frame {
+    Frame {
         name: RESYNC.into(),
         data: json_of(&ResyncEvent { missed: None }),
         deployment: None,
-    })
+    }
 }
 
 /// What a replica sends the others in place of events they did not get: a `resync`.
@@ -742,7 +742,7 @@ mod tests {
         assert_eq!(Frame::decode(&f.encode()), Some(f));
         assert_eq!(
             Frame::decode("resync\n{\"missed\":3}"),
-            Some((*resync_unknown()).clone()),
+            Some(resync_unknown()),
             "another replica's lost events: how many of them this one's pages wanted is unknown"
         );
         for stranger in [

@@ -72,12 +72,13 @@ impl Postgres {
 /// Listens on `channel` for good, on a session of its own named after `replica`, opening a new
 /// one after a loss.
 async fn listen(
-    config: tokio_postgres::Config,
+    mut config: tokio_postgres::Config,
     db: String,
     channel: &str,
     replica: String,
     deliver: Deliver,
 ) {
+    config.application_name(format!("{APPLICATION}{replica}"));
     let mut first = true;
     loop {
         match config.connect(NoTls).await {
@@ -99,9 +100,7 @@ async fn listen(
                     }
                 };
                 tokio::pin!(driver);
-                // The replica's name is letters, digits and `-` (see `Events`): safe to quote.
-                let sql =
-                    format!("SET application_name = '{APPLICATION}{replica}'; LISTEN {channel}");
+                let sql = format!("LISTEN {channel}");
                 let listening = tokio::select! {
                     r = client.batch_execute(&sql) => r.map_err(|e| e.to_string()),
                     why = &mut driver => Err(why),

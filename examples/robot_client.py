@@ -14,6 +14,12 @@ trial up (`abandoned`), so the trial is not left open. The simulated robot's eye
 a second before each search, so that a person can follow it on the server's live view (open the
 server's address in a browser).
 
+With `--robot ID` the robot names itself in every trial it starts: the server's list then says
+whose each trial is, the live view shows the robot and how long since it was last heard from, and
+with `--deployment` the client finishes (or `--abandon-open` gives up) only an open trial of its
+own, leaving other robots' trials alone. Give each robot sharing a deployment its own `--robot`;
+a client without one takes up only an open trial no robot named.
+
 With `--robot ID --team ID1,ID2,...` (and a shared `--deployment`) the client is one robot of a
 team that searches each trial together: the team's first robot starts each trial naming the
 team, the others join it; every robot asks for its own next container (`POST
@@ -152,12 +158,14 @@ def search_container(proposal, scene_containers, target):
     return cid, seen, proposal.get("distance_m")
 
 
-def open_trial_id(state):
-    """The deployment's open trial id, whether `open_trial` is an id or an object."""
-    t = state.get("open_trial")
-    if isinstance(t, dict):
-        t = t.get("trial", t.get("id"))
-    return t
+def open_trial_id(state, robot=None):
+    """The first of the deployment's open trials that is this robot's: one it started naming
+    itself `robot`, or with no robot one that no robot named. Another robot's trial is never
+    taken over."""
+    for t in state.get("trials") or []:
+        if t.get("status") == "searching" and t.get("robot") == robot:
+            return t.get("trial")
+    return None
 
 
 def run_trial(api, trial_id, target, strategy, reply, containers, log, pace=0.0):
@@ -364,7 +372,9 @@ def parse_args(argv):
     )
     ap.add_argument(
         "--robot",
-        help="this robot's id in a team (letters, digits, _ - . /); with --team",
+        help="this robot's id (1 to 64 letters, digits, _ - . /): it names the robot in the "
+        "trials it starts, and with --deployment only its own open trial is taken up; with "
+        "--team, its id in the team",
     )
     ap.add_argument(
         "--team",
@@ -397,8 +407,8 @@ def parse_args(argv):
         args.strategies = [s.strip() for s in args.strategies.split(",") if s.strip()]
         if not args.strategies:
             ap.error("--strategies names no strategy")
-    if (args.team is None) != (args.robot is None):
-        ap.error("--robot and --team go together")
+    if args.team is not None and args.robot is None:
+        ap.error("--team needs --robot: this robot's id in the team")
     if args.team is not None:
         args.team = [r.strip() for r in args.team.split(",") if r.strip()]
         if args.robot not in args.team:
@@ -434,7 +444,7 @@ def run(args, log):
     targets = list(args.targets)
     # A team's robots find their trials by the team's names (join_team_trial), not as the
     # deployment's open trial.
-    open_id = open_trial_id(state) if args.team is None else None
+    open_id = open_trial_id(state, args.robot) if args.team is None else None
     if open_id is not None and args.abandon_open:
         t = api.post(f"/trials/{quote(open_id)}/abandon", {})
         log(f"gave up open trial {open_id} ({t.get('target')}, {t.get('strategy')})")
@@ -483,9 +493,10 @@ def run(args, log):
     for target in targets:
         # No pose: the robot starts from the scene's start pose. A real robot sends its
         # localisation as "pose": [x, y, yaw_deg].
-        reply = api.post(
-            f"/deployments/{quote(dep)}/trials", {"scene": args.scene, "target": target}
-        )
+        body = {"scene": args.scene, "target": target}
+        if args.robot is not None:
+            body["robot"] = args.robot
+        reply = api.post(f"/deployments/{quote(dep)}/trials", body)
         trial_id = reply["trial"]
         log(f"trial {trial_id}: {target} with {reply.get('strategy')}")
         try:

@@ -551,10 +551,19 @@ class ServePlanner:
         if self.team:
             return self._team_trial(task, scene, deployment, places, pose)
         state = self.request("GET", f"/deployments/{deployment}")
-        open_trial = state.get("open_trial")
+        me = self.robot_id or None
+        open_trial = next(
+            (
+                t["trial"]
+                for t in state.get("trials") or []
+                if t.get("status") == "searching" and t.get("robot") == me
+            ),
+            None,
+        )
         if open_trial:
-            # A trial left open (this node stopped in the middle of a search, before it could
-            # abandon it): go on with it when it looks for the same object.
+            # A trial of this robot left open (this node stopped in the middle of a search,
+            # before it could abandon it): go on with it when it looks for the same object.
+            # Other robots' open trials are theirs.
             t = self.request("GET", f"/trials/{open_trial}")
             if not same_task(t, task) or t["scene"] != scene:
                 raise PlannerError(
@@ -570,6 +579,8 @@ class ServePlanner:
                 body["destination"] = task.destination.for_serve()
         if pose is not None:
             body["pose"] = [pose[0], pose[1], pose[2]]
+        if me is not None:
+            body["robot"] = me
         t = self.request("POST", f"/deployments/{deployment}/trials", body)
         return ServeTrial(self, t, places, task)
 

@@ -433,7 +433,8 @@ def test_goal_pose_fallback_times_out_when_the_robot_never_arrives(start_node, r
 
 def test_serve_backend_makes_the_same_searches(start_node, robot, house, ferret_serve, tmp_path):
     """Planning and selection in `ferret serve` (a fleet's server): the same trials as
-    `ferret deploy`, and the server holds them afterwards."""
+    `ferret deploy`, and the server holds them afterwards, each naming the robot (the node's
+    name, as it runs in no namespace)."""
     nav, _, _ = robot
     targets = house.target_types()[:4]
     rows = deploy_rows(tmp_path, targets)
@@ -451,6 +452,7 @@ def test_serve_backend_makes_the_same_searches(start_node, robot, house, ferret_
         state = json.loads(r.read())
     assert [t["target"] for t in state["trials"]] == targets
     assert [t["strategy"] for t in state["trials"]] == [r["chosen"] for r in rows]
+    assert [t["robot"] for t in state["trials"]] == ["ferret_serve_backend"] * len(targets)
 
 
 def test_a_failed_search_is_abandoned_on_the_server(start_node, robot, ferret_serve):

@@ -1051,3 +1051,74 @@ fn a_page_gets_every_acknowledged_event_or_a_resync_when_the_other_replica_is_ki
     );
     drop(b);
 }
+
+/// Robots sharing a deployment, each left an open trial (stopped mid-search), restart at once:
+/// each client named by `--robot` finishes its own open trial and no other, a client without
+/// one takes up only the trial no robot named, and every trial they start names its robot.
+#[test]
+fn python_clients_started_at_once_each_resume_only_their_own_open_trial() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(&dir.path().join("serve.sqlite"));
+    let (st, dep) = post(&format!("{}/deployments", server.url), json!({"seed": 4}));
+    assert_eq!(st, 201, "{dep}");
+    let id = dep["id"].as_i64().unwrap();
+    let robots = [Some("kitchen-bot"), Some("hall-bot"), None];
+    let mut left_open = Vec::new();
+    for (robot, target) in robots.iter().zip(["Wallet", "Pillow", "Blanket"]) {
+        let mut body = json!({"scene": "apartment", "target": target});
+        if let Some(r) = robot {
+            body["robot"] = json!(r);
+        }
+        let (st, t) = post(&format!("{}/deployments/{id}/trials", server.url), body);
+        assert_eq!(st, 201, "{t}");
+        left_open.push(t["trial"].as_i64().unwrap());
+    }
+    let clients: Vec<_> = robots
+        .iter()
+        .map(|robot| {
+            let mut c = Command::new("python3");
+            c.arg(repo().join("examples/robot_client.py"))
+                .args(["--url", &server.url, "--scene", "apartment"])
+                .args(["--deployment", &id.to_string(), "--json"])
+                .args(["--targets", "CellPhone,RemoteControl"])
+                .args(["--pace", "0.1"])
+                .env_remove("FERRET_SERVE_TOKEN")
+                .stdout(std::process::Stdio::piped())
+                .stderr(std::process::Stdio::piped());
+            if let Some(r) = robot {
+                c.args(["--robot", r]);
+            }
+            c.spawn().expect("python3 runs")
+        })
+        .collect();
+    let mut mine = Vec::new();
+    for ((robot, child), open) in robots.iter().zip(clients).zip(&left_open) {
+        let o = child.wait_with_output().unwrap();
+        assert!(o.status.success(), "{robot:?}: {}", text(&o));
+        let report: Value = serde_json::from_slice(&o.stdout).unwrap();
+        let trials: Vec<i64> = report["trials"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|t| t["trial"].as_i64().unwrap())
+            .collect();
+        assert_eq!(trials.len(), 3, "{robot:?}: {report}");
+        assert_eq!(
+            trials[0], *open,
+            "{robot:?} resumed another's trial: {report}"
+        );
+        mine.extend(trials.iter().map(|t| (*t, *robot)));
+    }
+    let state = get(&format!("{}/deployments/{id}", server.url));
+    let listed = state["trials"].as_array().unwrap();
+    assert_eq!(listed.len(), 9, "{state}");
+    for t in listed {
+        assert_eq!(t["status"], "done", "{state}");
+        let (_, robot) = mine
+            .iter()
+            .find(|(trial, _)| Some(*trial) == t["trial"].as_i64())
+            .unwrap_or_else(|| panic!("no client reported trial {}: {state}", t["trial"]));
+        assert_eq!(t["robot"].as_str(), *robot, "{state}");
+    }
+    server.kill();
+}

@@ -276,6 +276,14 @@ pub struct StartTrial {
     #[serde(default)]
     #[schema(min_items = 1, max_items = 4)]
     pub robots: Option<Vec<TeamRobot>>,
+    /// The id of the robot that searches alone (1 to 64 letters, digits, `_`, `-`, `.` or `/`;
+    /// a team's robots are named in `robots` instead). The deployment's trial list then says
+    /// whose each trial is, so that a robot that restarts finds its own open trial and leaves
+    /// other robots' alone, and the live view shows the robot and how long since it was last
+    /// heard from.
+    #[serde(default)]
+    #[schema(pattern = r"^[A-Za-z0-9_./-]{1,64}$")]
+    pub robot: Option<String>,
 }
 
 /// The destination of a trial's task, where it is.
@@ -413,6 +421,25 @@ pub struct ContainerInfo {
     pub contents: Vec<String>,
 }
 
+/// `GET /scenes/{name}/map`: the occupancy grid the planner measures the scene's distances on
+/// (walls, doors left open, furniture, free floor), for drawing under the plan.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct SceneMap {
+    /// Cell size, metres.
+    pub resolution_m: f64,
+    /// The map-frame corner of cell (0, 0): its lowest x and y, metres.
+    pub origin: [f64; 2],
+    /// Columns, along x.
+    pub width: u32,
+    /// Rows, along y.
+    pub height: u32,
+    /// Every cell's kind as runs of `[kind, count]`, row by row from row 0 (lowest y) and in
+    /// each row from column 0 (lowest x), the runs crossing from one row to the next. Kinds:
+    /// 0 outside every room, 1 wall, 2 furniture, 3 floor closer to an obstacle than the robot's
+    /// radius, 4 free floor. The counts add up to `width × height`.
+    pub runs: Vec<[u32; 2]>,
+}
+
 /// `GET /scenes/{name}`.
 #[derive(Debug, Serialize, ToSchema)]
 pub struct SceneDetail {
@@ -487,6 +514,8 @@ pub struct TrialState {
     /// (the longest way any robot drove).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub robots: Option<Vec<RobotState>>,
+    /// The robot that searches it alone, when it named itself at the start.
+    pub robot: Option<String>,
     /// Every candidate's replay cost (done trials).
     pub replays_m: Option<BTreeMap<String, f64>>,
 }
@@ -521,6 +550,11 @@ pub struct TrialSummary {
     pub status: TrialStatus,
     /// Its cost, once ended.
     pub cost_m: Option<f64>,
+    /// Whose it is: the robot that started it alone and named itself, or a team's robots
+    /// joined by `,`.
+    pub robot: Option<String>,
+    /// Seconds since a robot last reported on it (its start, an observation, its end); `None` for a trial stored by a server older than this field.
+    pub heard_s_ago: Option<f64>,
 }
 
 /// The next choice.

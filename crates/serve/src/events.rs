@@ -180,6 +180,9 @@ pub struct TrialEvent {
     pub next_path: Option<Vec<[f64; 2]>>,
     /// The observation this event reports, when it reports one.
     pub observed: Option<ObservationInfo>,
+    /// Whose trial it is: the robot that started it alone and named itself, or a team's
+    /// robots joined by `,`.
+    pub robot: Option<String>,
 }
 
 impl TrialEvent {
@@ -198,6 +201,14 @@ impl TrialEvent {
             cost_m: t.cost_m,
             next_path: t.next.as_ref().map(|n| n.path.clone()),
             observed,
+            robot: t.robot.clone().or_else(|| {
+                t.robots.as_ref().map(|team| {
+                    team.iter()
+                        .map(|r| r.id.as_str())
+                        .collect::<Vec<_>>()
+                        .join(",")
+                })
+            }),
         }
     }
 }

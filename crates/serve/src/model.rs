@@ -119,6 +119,11 @@ pub struct StoredTrial {
     pub task: Option<TaskBody>,
     /// The robots of a team that searches it together; `None` for one robot.
     pub robots: Option<Vec<TeamRobot>>,
+    /// The robot that started it alone and named itself, if it did.
+    pub robot: Option<String>,
+    /// When a robot last reported on it (start, observation, end; Unix milliseconds); `None`
+    /// for trials stored before this was kept.
+    pub heard_ms: Option<i64>,
 }
 
 /// One search reported by the robot.

@@ -91,6 +91,7 @@ mod tests {
             next: None,
             replays_m: None,
             robots: None,
+            robot: None,
         })
     }
 

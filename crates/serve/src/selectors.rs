@@ -328,6 +328,8 @@ mod tests {
                         end_seq: None,
                         task: None,
                         robots: None,
+                        robot: None,
+                        heard_ms: None,
                     });
                 }
             }

@@ -412,6 +412,7 @@ async fn the_openapi_document_lists_every_route() {
         ("/scenes", "get"),
         ("/scenes", "post"),
         ("/scenes/{name}", "get"),
+        ("/scenes/{name}/map", "get"),
         ("/deployments", "post"),
         ("/deployments/{id}", "get"),
         ("/deployments/{id}/trials", "post"),
@@ -811,4 +812,110 @@ async fn kept_plans_are_counted_once_per_scene() {
     let three = s.service.grid_cache_bytes();
     assert!(three > alone, "{three} {alone}");
     assert!(three < 2 * alone, "{three} against {alone} for one start");
+}
+
+/// A robot that names itself at a trial's start is shown as that trial's robot in the
+/// deployment's list, with the time since it last reported, which each report resets; a
+/// malformed id, or one beside a team, is refused naming `robot`.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_robot_that_names_itself_is_listed_with_the_time_since_it_was_heard() {
+    let s = start(None, None).await;
+    let (_, dep) = s.post("/deployments", json!({"seed": 2})).await;
+    let id = dep["id"].as_i64().unwrap();
+    let (st, mine) = s
+        .post(
+            &format!("/deployments/{id}/trials"),
+            json!({"scene": "flat", "target": "Wallet", "robot": "/kitchen/r1"}),
+        )
+        .await;
+    assert_eq!(st, 201, "{mine}");
+    assert_eq!(mine["robot"], "/kitchen/r1", "{mine}");
+    let (st, anonymous) = s
+        .post(
+            &format!("/deployments/{id}/trials"),
+            json!({"scene": "flat", "target": "Mug"}),
+        )
+        .await;
+    assert_eq!(st, 201, "{anonymous}");
+    assert_eq!(anonymous["robot"], Value::Null, "{anonymous}");
+
+    let heard = |state: &Value, k: usize| state["trials"][k]["heard_s_ago"].as_f64().unwrap();
+    tokio::time::sleep(std::time::Duration::from_millis(1300)).await;
+    let (_, before) = s.get(&format!("/deployments/{id}")).await;
+    assert_eq!(before["trials"][0]["robot"], "/kitchen/r1", "{before}");
+    assert_eq!(before["trials"][1]["robot"], Value::Null, "{before}");
+    assert!(heard(&before, 0) >= 1.3, "{before}");
+    assert!(heard(&before, 1) >= 1.3, "{before}");
+    let tid = mine["trial"].as_i64().unwrap();
+    let first = mine["next"]["container"].as_str().unwrap();
+    let (st, stepped) = s
+        .post(
+            &format!("/trials/{tid}/observations"),
+            json!({"container": first, "found": false}),
+        )
+        .await;
+    assert_eq!(st, 200, "{stepped}");
+    assert_eq!(stepped["robot"], "/kitchen/r1", "{stepped}");
+    let (_, after) = s.get(&format!("/deployments/{id}")).await;
+    assert!(heard(&after, 0) < 1.0, "{after}");
+    assert!(heard(&after, 1) >= 1.3, "{after}");
+
+    for (body, says) in [
+        (
+            json!({"scene": "flat", "target": "Mug", "robot": "r 1"}),
+            "not a robot id",
+        ),
+        (
+            json!({"scene": "flat", "target": "Mug", "robot": "x".repeat(65)}),
+            "not a robot id",
+        ),
+        (
+            json!({"scene": "flat", "target": "Mug", "robot": "a", "robots": [{"id": "a"}]}),
+            "named in `robots`",
+        ),
+    ] {
+        let (st, e) = s.post(&format!("/deployments/{id}/trials"), body).await;
+        assert_eq!(
+            (st, e["error"]["field"].as_str()),
+            (422, Some("robot")),
+            "{e}"
+        );
+        assert!(
+            e["error"]["message"].as_str().unwrap().contains(says),
+            "{e}"
+        );
+    }
+}
+
+/// A scene's map is the grid the planner measures on, cell for cell: its runs decode to the
+/// kinds of the grid the library builds from the same file, walls and free floor among them.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_scene_map_is_the_planners_grid_cell_for_cell() {
+    let s = start(None, None).await;
+    let (st, map) = s.get("/scenes/flat/map").await;
+    assert_eq!(st, 200, "{map}");
+    let file = SceneFile::parse(SCENE, Path::new("flat.json")).unwrap();
+    let sim = file.to_scene(Path::new("flat.json"), None).unwrap();
+    let grid = ferret_world::OccupancyGrid::build(&sim.house, &GridParams::default()).unwrap();
+    assert_eq!(map["width"].as_u64().unwrap(), u64::from(grid.width()));
+    assert_eq!(map["height"].as_u64().unwrap(), u64::from(grid.height()));
+    assert_eq!(map["resolution_m"].as_f64().unwrap(), grid.resolution());
+    assert_eq!(map["origin"][0].as_f64().unwrap(), grid.origin().x);
+    assert_eq!(map["origin"][1].as_f64().unwrap(), grid.origin().z);
+    let mut kinds = Vec::new();
+    let runs = map["runs"].as_array().unwrap();
+    for run in runs {
+        let (k, n) = (run[0].as_u64().unwrap(), run[1].as_u64().unwrap());
+        assert!(n > 0, "an empty run: {run}");
+        kinds.extend(std::iter::repeat_n(k as u8, n as usize));
+    }
+    let expected: Vec<u8> = grid.cells().map(|(_, k)| k as u8).collect();
+    assert_eq!(kinds.len(), expected.len());
+    assert!(kinds == expected, "the map's cells differ from the grid's");
+    for kind in [1, 4] {
+        assert!(kinds.contains(&kind), "no cell of kind {kind}");
+    }
+    assert!(runs.len() < expected.len() / 4, "{} runs", runs.len());
+    let (st, e) = s.get("/scenes/nowhere/map").await;
+    assert_eq!(st, 404, "{e}");
 }

@@ -32,7 +32,7 @@ use utoipa_axum::routes;
 
 use crate::api::{
     AbandonTrial, ClaimNext, CreateDeployment, DeploymentState, DeploymentSummary, ErrorBody,
-    Observe, SceneDetail, SceneSummary, StartTrial, TrialState, TrialView, UploadScene,
+    Observe, SceneDetail, SceneMap, SceneSummary, StartTrial, TrialState, TrialView, UploadScene,
 };
 use crate::error::{ApiError, ErrorKind};
 use crate::model::ApiReply;
@@ -153,6 +153,16 @@ async fn get_scene(
     blocking(move || s.get_scene(&name)).await
 }
 
+#[utoipa::path(get, path = "/scenes/{name}/map", params(("name" = String, Path, description = "Scene name")),
+    responses((status = 200, description = "The scene's occupancy grid, for drawing", body = SceneMap),
+        (status = 404, description = "No scene of that name", body = ErrorBody)))]
+async fn get_scene_map(
+    State(s): State<Arc<Service>>,
+    Segment(name, _): Segment<SceneName>,
+) -> Response {
+    blocking(move || s.scene_map(&name)).await
+}
+
 #[utoipa::path(post, path = "/scenes", request_body = UploadScene, params(("Idempotency-Key" = Option<String>, Header, description = "The request id, as the request_id field (either, or both the same)")), responses(
     (status = 200, description = "The same scene was uploaded before", body = SceneDetail),
     (status = 201, body = SceneDetail),
@@ -261,6 +271,7 @@ fn routes() -> (Router<Arc<Service>>, utoipa::openapi::OpenApi) {
         .routes(routes!(health))
         .routes(routes!(list_scenes, upload_scene))
         .routes(routes!(get_scene))
+        .routes(routes!(get_scene_map))
         .routes(routes!(create_deployment, list_deployments))
         .routes(routes!(get_deployment))
         .routes(routes!(start_trial))

@@ -10,7 +10,7 @@ use ferret_select::DEFAULT_C;
 use ferret_world::TravelCost;
 
 use super::replies::Begun;
-use super::{Service, json};
+use super::{Service, json, now_ms};
 use crate::api::{
     CreateDeployment, DeploymentState, DeploymentSummary, MAX_C, MAX_LISTED_DEPLOYMENTS, MAX_SEED,
     NextChoice, StrategyRow, TrialSummary,
@@ -195,6 +195,7 @@ impl Service {
         trials: &[StoredTrial],
     ) -> Result<DeploymentState, ApiError> {
         let (live, _) = replayed(id, spec, trials)?;
+        let now = now_ms();
         let stats = live.stats();
         let next = live.peek();
         Ok(DeploymentState {
@@ -213,6 +214,15 @@ impl Service {
                     strategy: spec.strategies.get(t.chosen).cloned().unwrap_or_default(),
                     status: t.status,
                     cost_m: t.cost,
+                    robot: t.robot.clone().or_else(|| {
+                        t.robots.as_ref().map(|team| {
+                            team.iter()
+                                .map(|r| r.id.as_str())
+                                .collect::<Vec<_>>()
+                                .join(",")
+                        })
+                    }),
+                    heard_s_ago: t.heard_ms.map(|h| (now - h).max(0) as f64 / 1000.0),
                 })
                 .collect(),
             per_strategy: spec

@@ -20,6 +20,7 @@ mod trials;
 
 use std::collections::BTreeMap;
 use std::sync::{Arc, RwLock};
+use std::time::{SystemTime, UNIX_EPOCH};
 
 use ferret_plan::Strategy;
 use ferret_world::{GridParams, Scene};
@@ -337,4 +338,12 @@ impl Service {
             }
         }
     }
+}
+
+/// Milliseconds since the Unix epoch, on this replica's clock (replicas sharing a database
+/// must agree on the time to well within a claim's time).
+pub(super) fn now_ms() -> i64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| i64::try_from(d.as_millis()).unwrap_or(i64::MAX))
 }

@@ -9,7 +9,8 @@ use ferret_world::{House, OccupancyGrid, Scene, SceneFile};
 use super::replies::Begun;
 use super::{Scenes, Service, json};
 use crate::api::{
-    ContainerInfo, MAX_TYPE_NAME, RoomInfo, SceneDetail, SceneSummary, UploadScene, is_type_name,
+    ContainerInfo, MAX_TYPE_NAME, RoomInfo, SceneDetail, SceneMap, SceneSummary, UploadScene,
+    is_type_name,
 };
 use crate::error::{ApiError, ErrorKind};
 use crate::grids::Placed;
@@ -139,6 +140,20 @@ impl Service {
         let scene = self.scene(name)?;
         let placed = self.placed(name, None)?;
         scene_detail(name, &scene, &placed).and_then(|d| json(Outcome::Done, &d))
+    }
+
+    /// `GET /scenes/{name}/map`: the grid of the scene placed at its start, run-length coded.
+    pub fn scene_map(&self, name: &str) -> Result<ApiReply, ApiError> {
+        self.scene(name)?;
+        let placed = self.placed(name, None)?;
+        let grid = placed.distances.grid().ok_or_else(|| {
+            ApiError::new(
+                ErrorKind::NotFound,
+                "name",
+                format!("scene {name:?} has no occupancy grid"),
+            )
+        })?;
+        json(Outcome::Done, &scene_map(grid))
     }
 
     /// `POST /scenes`.
@@ -422,5 +437,26 @@ fn scene_error(e: &ferret_world::WorldError) -> ApiError {
             message.clone(),
         ),
         other => ApiError::new(ErrorKind::Invalid, "scene", other.to_string()),
+    }
+}
+
+/// A grid as runs of equal cells in the order [`OccupancyGrid::cells`] gives them (row by row):
+/// a house of 400 × 300 cells is a few thousand runs, where one value per cell would be 120 000.
+fn scene_map(grid: &OccupancyGrid) -> SceneMap {
+    let mut runs: Vec<[u32; 2]> = Vec::new();
+    for (_, kind) in grid.cells() {
+        let k = kind as u32;
+        match runs.last_mut() {
+            Some(run) if run[0] == k => run[1] += 1,
+            _ => runs.push([k, 1]),
+        }
+    }
+    let origin = grid.origin();
+    SceneMap {
+        resolution_m: grid.resolution(),
+        origin: [origin.x, origin.z],
+        width: grid.width(),
+        height: grid.height(),
+        runs,
     }
 }

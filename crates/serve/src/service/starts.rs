@@ -9,7 +9,7 @@ use ferret_world::distance::Place;
 use super::replies::{Begun, ReplyTo, RequestClaim};
 use super::tasks::{destination_state, requested_task, trial_spec};
 use super::trials::{next_container, trial_state};
-use super::{Service, json};
+use super::{Service, json, now_ms};
 use crate::api::{StartTrial, TaskBody};
 use crate::error::{ApiError, ErrorKind, plan_error};
 use crate::model::{ApiReply, DeploymentSpec, Outcome, StoredTrial, TrialStatus};
@@ -177,6 +177,7 @@ impl Service {
         }
         let mut trials = Vec::with_capacity(reqs.len());
         let mut finals = Vec::with_capacity(reqs.len());
+        let heard_ms = now_ms();
         for (((req, asked), (chosen, counts)), id) in reqs.iter().zip(choices).zip(now.next_trials)
         {
             let new = NewTrial {
@@ -189,6 +190,8 @@ impl Service {
                 started_after: counts.ended as i64,
                 task: asked.task.as_ref(),
                 robots: req.robots.as_deref(),
+                robot: req.robot.as_deref(),
+                heard_ms,
             };
             finals.push(w.insert_trial_last(id, &new));
             trials.push(StoredTrial {
@@ -206,6 +209,8 @@ impl Service {
                 end_seq: None,
                 task: asked.task.clone(),
                 robots: req.robots.clone(),
+                robot: req.robot.clone(),
+                heard_ms: Some(heard_ms),
             });
         }
         Ok((trials, finals))
@@ -364,6 +369,7 @@ mod tests {
                 destination: None,
                 pose: None,
                 robots: None,
+                robot: None,
             },
             asked: Asked {
                 label: "Wallet".into(),

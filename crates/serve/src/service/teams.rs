@@ -13,7 +13,6 @@
 
 use std::collections::BTreeSet;
 use std::sync::Arc;
-use std::time::{SystemTime, UNIX_EPOCH};
 
 use ferret_plan::{
     Destination, DestinationLegs, MAX_ROBOTS, Search, Strategy, TrialSpec, replay_team_costs,
@@ -23,7 +22,7 @@ use ferret_world::distance::Place;
 use super::replies::{Begun, RequestClaim};
 use super::tasks::{destination_state, seen, targets_of, trial_spec};
 use super::trials::{next_container, trial_state};
-use super::{Service, json};
+use super::{Service, json, now_ms};
 use crate::api::{
     ClaimNext, NextContainer, Observe, RobotRoute, RobotState, StartTrial, TrialState,
 };
@@ -50,14 +49,6 @@ pub(crate) fn is_robot_id(id: &str) -> bool {
             .all(|b| b.is_ascii_alphanumeric() || b"_-./".contains(&b))
 }
 
-/// Milliseconds since the Unix epoch, on this replica's clock (replicas sharing a database
-/// must agree on the time to well within a claim's time).
-fn now_ms() -> i64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| i64::try_from(d.as_millis()).unwrap_or(i64::MAX))
-}
-
 impl Service {
     /// Checks a start's team, if it has one: 1 to [`MAX_ROBOTS`] robots with distinct, well
     /// formed ids, each pose one the scene can place.
@@ -65,9 +56,25 @@ impl Service {
     /// # Errors
     /// 422 naming the field (`robots[1].id`, `robots[0].pose`).
     pub(super) fn check_team(&self, req: &StartTrial) -> Result<(), ApiError> {
+        if let Some(robot) = &req.robot
+            && !is_robot_id(robot)
+        {
+            return Err(invalid(
+                "robot",
+                format!(
+                    "{robot:?} is not a robot id: 1 to {MAX_ROBOT_ID} letters, digits, '_', '-', '.' or '/'"
+                ),
+            ));
+        }
         let Some(robots) = &req.robots else {
             return Ok(());
         };
+        if req.robot.is_some() {
+            return Err(invalid(
+                "robot",
+                "a team's robots are named in `robots`; `robot` names a robot that searches alone",
+            ));
+        }
         if robots.is_empty() || robots.len() > MAX_ROBOTS {
             return Err(invalid(
                 "robots",
@@ -320,6 +327,7 @@ impl Service {
             }
             let mut finals = w.record_and_end_last(
                 (id, row.deployment),
+                now,
                 Some((observations.len(), &observation)),
                 (status != TrialStatus::Searching).then_some(TrialEnding {
                     status,

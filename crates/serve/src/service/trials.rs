@@ -14,7 +14,7 @@ use super::tasks::{destination_state, found_in, goal_of, seen, targets_of, trial
 
 use super::deployments::ROBOT_REPLAY;
 use super::replies::Begun;
-use super::{Service, json};
+use super::{Service, json, now_ms};
 use crate::api::{
     AbandonTrial, DestinationState, MAX_OBJECTS, MAX_TRAVELLED_M, NextContainer, ObservationInfo,
     Observe, TrialState, TrialView, is_type_name,
@@ -300,6 +300,7 @@ impl Service {
             lock_unchanged(w, id, observations.len(), "this observation was planned")?;
             let last = w.record_and_end_last(
                 (id, row.deployment),
+                now_ms(),
                 Some((observations.len(), &observation)),
                 (status != TrialStatus::Searching).then_some(TrialEnding {
                     status,
@@ -388,6 +389,7 @@ impl Service {
             lock_unchanged(w, id, observations.len(), "it was being abandoned")?;
             let last = w.record_and_end_last(
                 (id, row.deployment),
+                now_ms(),
                 None,
                 Some(TrialEnding {
                     status: TrialStatus::Abandoned,
@@ -623,6 +625,7 @@ pub(super) fn trial_state(
                 .collect()
         }),
         robots: None,
+        robot: row.robot.clone(),
     }
 }
 

@@ -33,8 +33,9 @@ use value::Value;
 /// The newest schema version this build writes. Version 1 is the schema of the first servers
 /// (their SQLite files record no version); version 2 records the order trials started and ended
 /// in, for deployments whose trials overlap; version 3 a trial's household task; version 4 its
-/// team of robots and their claims.
-pub const SCHEMA_VERSION: i64 = 4;
+/// team of robots and their claims; version 5 the robot that started a trial alone and when a
+/// trial's robot was last heard from.
+pub const SCHEMA_VERSION: i64 = 5;
 
 /// Version 2 on both backends, once its columns exist: the trials of the first servers, one at a
 /// time per deployment, started after every earlier trial ended and ended in the order they

@@ -17,7 +17,7 @@ use super::value::{Row, Value};
 
 /// Schema migrations, version `i + 1` at index `i`. Version 1 is the schema of the first
 /// servers, written with `IF NOT EXISTS` so that it also describes their files.
-const MIGRATIONS: [&[&str]; 4] = [
+const MIGRATIONS: [&[&str]; 5] = [
     &["CREATE TABLE IF NOT EXISTS scenes (
         name TEXT PRIMARY KEY, body TEXT NOT NULL);
     CREATE TABLE IF NOT EXISTS deployments (
@@ -50,6 +50,10 @@ const MIGRATIONS: [&[&str]; 4] = [
         trial INTEGER NOT NULL REFERENCES trials(id), robot TEXT NOT NULL,
         claim TEXT, claim_expires_ms INTEGER, heard_ms INTEGER NOT NULL,
         PRIMARY KEY (trial, robot), UNIQUE (trial, claim));"],
+    // Robots by name: the robot that named itself when it started a trial alone, and when a
+    // trial's robot was last heard from (Unix milliseconds).
+    &["ALTER TABLE trials ADD COLUMN robot TEXT;
+    ALTER TABLE trials ADD COLUMN heard_ms INTEGER;"],
 ];
 
 pub(super) struct Sqlite {

@@ -19,7 +19,7 @@ const INSERT_OBSERVATION: &str =
 /// A deployment's trials started after its first `$2` or ended after its first `$3`.
 pub(super) const SINCE: &str = "deployment = $1 AND (k > $2 OR end_seq > $3)";
 
-pub(super) const TRIAL_COLUMNS: &str = "id, deployment, k, scene, target, pose, chosen, status, cost, replays, started_after, end_seq, task, robots";
+pub(super) const TRIAL_COLUMNS: &str = "id, deployment, k, scene, target, pose, chosen, status, cost, replays, started_after, end_seq, task, robots, robot, heard_ms";
 
 impl Conn<'_> {
     /// A trial's status and observation count from a row of [`PROGRESS`].
@@ -77,6 +77,11 @@ impl Conn<'_> {
                         .map(serde_json::from_value)
                         .transpose()
                         .map_err(|_| bad("robots"))?,
+                    robot: c.text(r, 14, "trial robot")?,
+                    heard_ms: match r.get(15) {
+                        Some(Value::Null) => None,
+                        _ => Some(c.int(r, 15, "trial heard_ms")?),
+                    },
                 })
             })
             .collect()
@@ -97,8 +102,8 @@ impl Writer<'_> {
             .robots
             .map(|r| serde_json::to_value(r).unwrap_or_default().to_string());
         Final {
-            sql: "INSERT INTO trials (id, deployment, k, scene, target, pose, chosen, status, started_after, task, robots)
-                 VALUES ($1, $2, $3, $4, $5, $6, $7, 'searching', $8, $9, $10)",
+            sql: "INSERT INTO trials (id, deployment, k, scene, target, pose, chosen, status, started_after, task, robots, robot, heard_ms)
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, 'searching', $8, $9, $10, $11, $12)",
             params: vec![
                 id.into(),
                 t.deployment.into(),
@@ -110,6 +115,8 @@ impl Writer<'_> {
                 t.started_after.into(),
                 task.into(),
                 robots.into(),
+                t.robot.into(),
+                t.heard_ms.into(),
             ],
         }
     }
@@ -139,8 +146,8 @@ impl Writer<'_> {
         }
     }
 
-    /// Statements that store observation `seq` of `trial` (unless `observation` is `None`)
-    /// and, when `end` says how, end the trial as the next of `deployment`'s trials to end,
+    /// Statements that record that `trial`'s robot was heard from at `heard_ms`, store
+    /// observation `seq` of it (unless `observation` is `None`) and, when `end` says how, end the trial as the next of `deployment`'s trials to end,
     /// taking the deployment's lock for that: to run with the commit, so that the deployment
     /// is held for no round trip at all. Take the trial's lock first
     /// ([`lock_trial_progress`](Self::lock_trial_progress)): a transaction taking both takes
@@ -148,10 +155,15 @@ impl Writer<'_> {
     pub fn record_and_end_last(
         &self,
         (trial, deployment): (i64, i64),
+        heard_ms: i64,
         observation: Option<(usize, &StoredObservation)>,
         end: Option<TrialEnding<'_>>,
     ) -> Vec<Final> {
-        let mut statements = Vec::new();
+        // The trial's row is locked already (it was read under the lock), so this costs no wait.
+        let mut statements = vec![Final {
+            sql: "UPDATE trials SET heard_ms = $2 WHERE id = $1",
+            params: vec![trial.into(), heard_ms.into()],
+        }];
         if let Some((seq, o)) = observation {
             statements.push(Final {
                 sql: INSERT_OBSERVATION,
@@ -233,6 +245,10 @@ pub struct NewTrial<'a> {
     pub task: Option<&'a crate::model::TaskBody>,
     /// The team, for a trial searched by several robots.
     pub robots: Option<&'a [crate::model::TeamRobot]>,
+    /// The robot that started it alone and named itself.
+    pub robot: Option<&'a str>,
+    /// When it started (Unix milliseconds): its robot's first message.
+    pub heard_ms: i64,
 }
 
 impl Reader<'_> {

@@ -23,7 +23,7 @@ pub(super) use conn::Conn;
 use conn::{On, Tx, TxState};
 
 /// Schema migrations, version `i + 1` at index `i` (the same versions as SQLite's).
-const MIGRATIONS: [&[&str]; 4] = [
+const MIGRATIONS: [&[&str]; 5] = [
     &["CREATE TABLE scenes (name TEXT PRIMARY KEY, body TEXT NOT NULL);
     CREATE TABLE deployments (id BIGSERIAL PRIMARY KEY, spec TEXT NOT NULL);
     CREATE TABLE trials (
@@ -54,6 +54,10 @@ const MIGRATIONS: [&[&str]; 4] = [
         trial BIGINT NOT NULL REFERENCES trials(id), robot TEXT NOT NULL,
         claim TEXT, claim_expires_ms BIGINT, heard_ms BIGINT NOT NULL,
         PRIMARY KEY (trial, robot), UNIQUE (trial, claim));"],
+    // Robots by name: the robot that named itself when it started a trial alone, and when a
+    // trial's robot was last heard from (Unix milliseconds).
+    &["ALTER TABLE trials ADD COLUMN robot TEXT;
+    ALTER TABLE trials ADD COLUMN heard_ms BIGINT;"],
 ];
 
 /// What a new connection's server process runs first: planning it opens every table of the

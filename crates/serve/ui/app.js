@@ -44,6 +44,12 @@
   const $ = (id) => document.getElementById(id);
   // A team's robots, in the trial's order: the first is the one robot's blue.
   const ROBOT_COLOURS = ["#1d4ed8", "#c2410c", "#047857", "#7c3aed"];
+  // A robot not heard from for this long is marked silent: a minute by default, as a robot
+  // reports at every container; `?silent=<seconds>` in the page's address says otherwise.
+  const SILENT_AFTER_S = (() => {
+    const v = Number(new URLSearchParams(location.search).get("silent"));
+    return Number.isFinite(v) && v > 0 ? v : 60;
+  })();
 
   // Everything the page knows. `epoch` changes with every start (a new token, a refusal), and
   // answers to requests of an older epoch are dropped, so nothing of a refused session shows.
@@ -56,6 +62,8 @@
       shared: null,
       scenes: [],
       sceneCache: new Map(),
+      // Each scene's map (its occupancy grid, drawn once into an image), by scene name.
+      maps: new Map(),
       deployments: [],
       depId: null,
       depPicked: false,
@@ -80,6 +88,7 @@
     streams: new Set(),
     retryTimer: null,
     lastError: "",
+    abandoning: null,
     ...shown(),
   };
 
@@ -91,6 +100,26 @@
     }
   }
 
+  // Drawing waits for the next frame, once however many events asked for it: a burst of a
+  // robot's events costs one drawing of the deployment per frame, not one per event (with a few
+  // hundred trials on the curve, drawing at every event left the page seconds behind).
+  function perFrame(draw) {
+    let asked = false;
+    return () => {
+      if (asked) return;
+      asked = true;
+      requestAnimationFrame(() => {
+        asked = false;
+        draw();
+      });
+    };
+  }
+
+  const renderDeployment = perFrame(() => drawDeployment());
+  const renderDeploymentSelect = perFrame(() => drawDeploymentSelect());
+  const renderCurve = perFrame(() => drawCurve());
+  const renderOpenTrials = perFrame(() => drawOpenTrials());
+
   // ---------------------------------------------------------------- requests
 
   function headers() {
@@ -99,9 +128,15 @@
     return h;
   }
 
-  async function api(path) {
+  async function api(path, body) {
     const epoch = S.epoch;
-    const res = await fetch(path, { headers: headers(), cache: "no-store" });
+    const init = { headers: headers(), cache: "no-store" };
+    if (body !== undefined) {
+      init.method = "POST";
+      init.headers["Content-Type"] = "application/json";
+      init.body = JSON.stringify(body);
+    }
+    const res = await fetch(path, init);
     if (epoch !== S.epoch) throw new Stale();
     if (res.status === 401) {
       refuse();
@@ -116,9 +151,9 @@
       }
       throw new HttpError(res.status, `${path}: ${res.status} ${message}`);
     }
-    const body = await res.json();
+    const reply = await res.json();
     if (epoch !== S.epoch) throw new Stale();
-    return body;
+    return reply;
   }
 
   const seg = (v) => encodeURIComponent(String(v));
@@ -183,6 +218,60 @@
     return p;
   }
 
+  // A scene's occupancy grid as an image, read once per scene and kept as long as the scene
+  // is: the plan draws it under the rooms' outlines once it has come.
+  function getMap(name) {
+    if (S.maps.has(name)) return;
+    S.maps.set(name, null);
+    const epoch = S.epoch;
+    api(`/scenes/${seg(name)}/map`)
+      .then((m) => {
+        if (epoch !== S.epoch) return;
+        S.maps.set(name, mapImage(m));
+        while (S.maps.size > SCENES_KEPT) S.maps.delete(S.maps.keys().next().value);
+        if (S.scene && S.scene.name === name) renderPlan();
+      })
+      .catch(() => {
+        // A scene without a grid, or a server older than maps: the plan goes without.
+        if (epoch === S.epoch) S.maps.set(name, { none: true });
+      });
+  }
+
+  // Cell kinds as drawn: outside and free floor transparent (the room's fill shows), walls
+  // dark, furniture and the robot's clearance around it shaded.
+  const MAP_COLOURS = [
+    [0, 0, 0, 0],
+    [51, 65, 85, 255],
+    [120, 113, 108, 150],
+    [148, 163, 184, 60],
+    [0, 0, 0, 0],
+  ];
+
+  // The grid drawn one pixel per cell, rows flipped (the map's y grows north, the screen's
+  // down), as an image the SVG can place: the Content-Security-Policy allows data: images.
+  function mapImage(m) {
+    const canvas = document.createElement("canvas");
+    canvas.width = m.width;
+    canvas.height = m.height;
+    const ctx = canvas.getContext("2d");
+    const img = ctx.createImageData(m.width, m.height);
+    const counts = [0, 0, 0, 0, 0];
+    const kinds = new Uint8Array(m.width * m.height);
+    let i = 0;
+    for (const [kind, n] of m.runs) {
+      const colour = MAP_COLOURS[kind] || MAP_COLOURS[0];
+      counts[kind] = (counts[kind] || 0) + n;
+      kinds.fill(kind, i, Math.min(i + n, kinds.length));
+      for (let j = 0; j < n; j++, i++) {
+        const x = i % m.width;
+        const row = m.height - 1 - Math.floor(i / m.width);
+        img.data.set(colour, (row * m.width + x) * 4);
+      }
+    }
+    ctx.putImageData(img, 0, 0);
+    return { ...m, runs: undefined, counts, kinds, url: canvas.toDataURL("image/png") };
+  }
+
   async function loadAll() {
     S.loaded = true;
     const epoch = S.epoch;
@@ -237,6 +326,9 @@
       row = { trial: e.trial, k: e.k, target: e.target, strategy: e.strategy, cost_m: null };
       dep.trials.push(row);
     }
+    if (e.robot != null) row.robot = e.robot;
+    // Every event says its robot reported.
+    if (e.at != null && !(row.heardAt >= e.at)) row.heardAt = e.at;
     // An event older than what the row shows (a trial ended) changes nothing.
     if (row.status && row.status !== "searching" && e.status === "searching") return;
     row.status = e.status;
@@ -262,6 +354,8 @@
       if (S.depReading === reading) S.depReading = null;
     }
     if (id !== S.depId) return; // another was selected meanwhile; its own fetch follows
+    const now = Date.now();
+    for (const t of dep.trials) t.heardAt = t.heard_s_ago == null ? null : now - t.heard_s_ago * 1000;
     for (const e of reading) applyToDeployment(dep, e);
     S.dep = dep;
     const item = S.deployments.find((d) => d.id === id);
@@ -284,6 +378,13 @@
     const watchedHere = watchedInDeployment();
     if (newestOpen != null && (!watchedHere || watchedEnded())) {
       if (newestOpen !== S.watchedId) watch(newestOpen, false);
+      return;
+    }
+    // Every robot done: the follower rests on the deployment's last trial, not on whichever of
+    // several robots' trials it watched last.
+    if (newestOpen == null && watchedHere && watchedEnded()) {
+      const last = dep.trials.reduce((a, t) => (!a || t.k > a.k ? t : a), null);
+      if (last && last.trial !== S.watchedId) watch(last.trial, false);
       return;
     }
     if (!watchedHere) {
@@ -368,6 +469,9 @@
     el.dataset.state = state;
     el.textContent = text;
     el.title = title || "";
+    // While cut off, what the page shows may be out of date: it is dimmed until the stream is
+    // back and read again.
+    $("view").dataset.stale = String(state === "reconnecting");
   }
 
   // The stream follows the selected deployment: once the page shows one, only that deployment's
@@ -542,6 +646,7 @@
   }
 
   function onTrialEvent(e) {
+    e.at = Date.now();
     const isNew = !S.live.has(e.trial);
     S.live.set(e.trial, e);
     const item = S.deployments.find((d) => d.id === e.deployment);
@@ -660,13 +765,17 @@
     const hadToken = !!S.token;
     stop();
     clearAll();
-    setConnection("refused", "refused", "the server refused the token");
+    // A first visit has tried no token yet: it is asked for, not refused.
+    if (hadToken) setConnection("refused", "refused", "the server refused the token");
+    else setConnection("token", "token needed", "this server needs a token");
     $("view").hidden = true;
     $("token-panel").hidden = false;
     const err = $("auth-error");
     err.textContent = hadToken
       ? "The server refused this token. Enter the token it was started with."
       : "This server needs a token (it was started with FERRET_SERVE_TOKEN). Enter it to see the live view.";
+    err.dataset.kind = hadToken ? "refused" : "ask";
+    err.setAttribute("role", hadToken ? "alert" : "status");
     err.hidden = false;
     $("token-input").value = "";
     $("token-input").focus();
@@ -768,8 +877,8 @@
   // A task's destination as the page names it.
   function destinationWords(d) {
     if (d.kind === "start") return "the start";
-    if (d.kind === "container") return `container ${d.id}`;
-    if (d.kind === "room") return `the ${d.name}`;
+    if (d.kind === "container") return containerWords(d.id);
+    if (d.kind === "room") return `the ${roomWords(d.name)}`;
     return `(${fmtM(d.x)}, ${fmtM(d.y)})`;
   }
 
@@ -779,6 +888,47 @@
     return parts
       .map((p, i) => (i === 0 || (p.length > 1 && p === p.toUpperCase()) ? p : p.toLowerCase()))
       .join(" ");
+  }
+
+  // What a person calls a scene's rooms and containers: their types in words, numbered when a
+  // type occurs more than once ("Bedroom 2", "Drawer 3"). Ids (ProcTHOR's `4|3`, `room|4`) are
+  // for machines and show only in tooltips.
+  function sceneNames(scene) {
+    if (!scene) return { rooms: new Map(), containers: new Map() };
+    if (scene.names) return scene.names;
+    const numbered = (items, typeOf, idOf) => {
+      const count = new Map();
+      for (const it of items) count.set(typeOf(it), (count.get(typeOf(it)) || 0) + 1);
+      const seen = new Map();
+      const out = new Map();
+      for (const it of items) {
+        const t = typeOf(it);
+        const n = (seen.get(t) || 0) + 1;
+        seen.set(t, n);
+        out.set(idOf(it), count.get(t) > 1 ? `${words(t)} ${n}` : words(t));
+      }
+      return out;
+    };
+    scene.names = {
+      rooms: numbered(scene.rooms || [], (r) => r.type, (r) => r.name),
+      containers: numbered(scene.containers || [], (c) => c.type, (c) => c.id),
+    };
+    return scene.names;
+  }
+
+  function roomWords(id, scene = S.scene) {
+    const name = sceneNames(scene).rooms.get(id);
+    return name ? name.toLowerCase() : String(id);
+  }
+
+  // A container as a person names it: "Drawer 3 in the bedroom 2"; its id when the scene
+  // does not list it.
+  function containerWords(id, scene = S.scene) {
+    const names = sceneNames(scene);
+    const name = names.containers.get(id);
+    if (!name) return String(id);
+    const c = scene.containers.find((x) => x.id === id);
+    return c && c.room ? `${name} in the ${roomWords(c.room, scene)}` : name;
   }
 
   function likelihoodColour(p) {
@@ -826,6 +976,41 @@
 
   // ---------------------------------------------------------------- the floor plan
 
+  // How much a label's box (screen pixels) lies where a label should not: its area, in px²,
+  // on the map's walls or outside the house (sampled every 3 px), plus 400 px² for each leader
+  // line through it (a label a line strikes through is hard to read). A scene without a map counts
+  // the leader lines only.
+  function labelBlockers(map, t, leaders) {
+    const kinds = map && map.kinds;
+    const cellAt = (px, py) => {
+      const mx = t.minX + (px - t.ox) / t.s;
+      const my = t.maxY - (py - t.oy) / t.s;
+      const col = Math.floor((mx - map.origin[0]) / map.resolution_m);
+      const row = Math.floor((my - map.origin[1]) / map.resolution_m);
+      if (col < 0 || row < 0 || col >= map.width || row >= map.height) return 0;
+      return kinds[row * map.width + col];
+    };
+    const crosses = (b, [x1, y1, x2, y2]) => {
+      for (let k = 1; k < 12; k++) {
+        const x = x1 + ((x2 - x1) * k) / 12;
+        const y = y1 + ((y2 - y1) * k) / 12;
+        if (x > b.x1 && x < b.x2 && y > b.y1 && y < b.y2) return true;
+      }
+      return false;
+    };
+    return (b) => {
+      let cost = 0;
+      for (const l of leaders) if (crosses(b, l)) cost += 400;
+      if (!kinds) return cost;
+      for (let y = b.y1 + 1.5; y < b.y2; y += 3)
+        for (let x = b.x1 + 1.5; x < b.x2; x += 3) {
+          const k = cellAt(x, y);
+          if (k === 0 || k === 1) cost += 9;
+        }
+      return cost;
+    };
+  }
+
   function renderPlan() {
     const plan = $("plan");
     plan.replaceChildren();
@@ -857,6 +1042,8 @@
     // Map frame: y grows north, so it is flipped for the screen.
     const X = (x) => ox + (x - minX) * s;
     const Y = (y) => oy + (maxY - y) * s;
+    // The transform, for tests that check the drawing against the server's map.
+    Object.assign(plan.dataset, { scale: s, ox, oy, minX, maxY });
     const pts = (list) => list.map(([x, y]) => `${X(x).toFixed(1)},${Y(y).toFixed(1)}`).join(" ");
 
     const gRooms = svg("g", { class: "rooms" });
@@ -875,9 +1062,31 @@
         "stroke-linejoin": "round",
         "data-room": r.name,
       });
-      titled(poly, `${r.name} (${r.type})`);
+      titled(poly, `${roomWords(r.name, scene)} (id ${r.name})`);
       gRooms.appendChild(poly);
     });
+    // The map under the plan: walls, doors (gaps in them) and furniture as the planner sees them.
+    getMap(scene.name);
+    const map = S.maps.get(scene.name);
+    if (map && map.url) {
+      const [x0, y0] = map.origin;
+      const image = svg("image", {
+        class: "map",
+        href: map.url,
+        x: X(x0),
+        y: Y(y0 + map.height * map.resolution_m),
+        width: map.width * map.resolution_m * s,
+        height: map.height * map.resolution_m * s,
+        preserveAspectRatio: "none",
+        "image-rendering": "pixelated",
+        "data-width": map.width,
+        "data-height": map.height,
+        "data-walls": map.counts[1],
+        "data-furniture": map.counts[2],
+      });
+      titled(image, `the planner's map: ${map.width} × ${map.height} cells of ${map.resolution_m} m`);
+      gRooms.appendChild(image);
+    }
 
     // Obstacles for label placement, in screen pixels.
     const taken = [];
@@ -932,11 +1141,13 @@
       taken.push(best.box);
     }
 
-    // Access points, and a thin line to each from its container.
+    // Access points, and a thin line to each from its container (kept, so labels avoid them).
+    const leaders = [];
     for (const c of scene.containers) {
       if (!c.access) continue;
       const ax = X(c.access[0]);
       const ay = Y(c.access[1]);
+      leaders.push([X(c.x), Y(c.y), ax, ay]);
       gLinks.appendChild(
         svg("line", {
           x1: X(c.x),
@@ -954,7 +1165,7 @@
         fill: "#6b7280",
         "data-access": c.id,
       });
-      titled(ap, `access point of ${c.id}: where the robot stands to search it`);
+      titled(ap, `access point of ${containerWords(c.id, scene)}: where the robot stands to search it`);
       gLinks.appendChild(ap);
     }
 
@@ -1027,7 +1238,7 @@
           "data-robot": r.id,
           "data-container": state.claim || "",
         });
-        titled(claim, `robot ${r.id} is heading to ${state.claim}`);
+        titled(claim, `robot ${r.id} is heading to ${containerWords(state.claim, scene)}`);
         gPaths.appendChild(claim);
       }
     });
@@ -1044,12 +1255,16 @@
         "data-container": next.container,
         "data-points": next.path.length,
       });
-      titled(path, `path to the next container, ${next.container}: ${fmtM(next.distance_m)} m`);
+      titled(
+        path,
+        `path to the next container, ${containerWords(next.container, scene)}: ${fmtM(next.distance_m)} m`,
+      );
       gPaths.appendChild(path);
     }
 
-    // Containers, coloured by likelihood, searched ones numbered in order.
-    const likelihoods = view ? view.likelihoods : null;
+    // Containers, coloured by likelihood while the search goes on (once it ended they say
+    // nothing more: a red "62 %" beside a found target misleads), searched ones numbered.
+    const likelihoods = shownLikelihoods(view);
     const obs = new Map();
     if (view) view.observations.forEach((o, i) => obs.set(o.container, { ...o, order: i + 1 }));
     const searchedOrder = new Map();
@@ -1124,7 +1339,7 @@
           ),
         );
       }
-      let tip = `${words(c.type)} (${c.id})` + (c.room ? ` in the ${c.room}` : "");
+      let tip = `${containerWords(c.id, scene)} (id ${c.id})`;
       if (p != null) tip += `\nlikelihood the target is here: ${pct(p)}`;
       if (order)
         tip +=
@@ -1138,14 +1353,16 @@
       placed.push({ c, cx, cy, p, order, found, isNext, rank });
     }
 
-    // Container labels beside their markers, placed where they overlap nothing if they can.
+    // Container labels beside their markers, placed where they overlap nothing if they can: no
+    // other label or marker, no leader line, and on the map neither a wall nor outside the house.
     placed.sort((a, b) => a.rank - b.rank || a.cy - b.cy || a.cx - b.cx);
     const d = markerR + 4;
+    const blocked = labelBlockers(map, { s, ox, oy, minX, maxY }, leaders);
     for (const m of placed) {
       const text = svg("text", {
         class: "container-label" + (m.isNext ? " next" : "") + (m.found ? " found" : ""),
       });
-      text.appendChild(svg("tspan", {}, words(m.c.type)));
+      text.appendChild(svg("tspan", {}, sceneNames(scene).containers.get(m.c.id) || words(m.c.type)));
       if (m.found) text.appendChild(svg("tspan", { class: "pct" }, " · found"));
       // Near-zero likelihoods go without a number: the colour says it, and the labels stay short.
       else if (m.p != null && !m.order && m.p >= 0.005)
@@ -1162,12 +1379,14 @@
         [m.cx + d - 2, m.cy + d + 8, "start"],
         [m.cx - d + 2, m.cy - d, "end"],
         [m.cx - d + 2, m.cy + d + 8, "end"],
+        [m.cx, m.cy - 2 * d - 3, "middle"],
+        [m.cx, m.cy + 2 * d + 11, "middle"],
       ];
       let best = null;
       for (const [x, y, anchor] of spots) {
         const x1 = anchor === "start" ? x : anchor === "end" ? x - w : x - w / 2;
         const box = { x1: x1 - 1, x2: x1 + w + 1, y1: y - h + 2, y2: y + 3 };
-        let hit = taken.reduce((a, b) => a + overlap(box, b), 0);
+        let hit = taken.reduce((a, b) => a + overlap(box, b), 0) + blocked(box);
         if (box.x1 < 2 || box.x2 > W - 2 || box.y1 < 2 || box.y2 > H - 2) hit += 1e6;
         if (!best || hit < best.hit) best = { x, y, anchor, box, hit };
         if (hit === 0) break;
@@ -1233,7 +1452,7 @@
       titled(
         mark,
         `robot ${r.id}: ${plural((state.searched || []).length, "search", "searches")}, ` +
-          `${fmtM(state.cost_m)} m, ${state.claim ? `heading to ${state.claim}` : "no claim"}, ${heard}`,
+          `${fmtM(state.cost_m)} m, ${state.claim ? `heading to ${containerWords(state.claim)}` : "no claim"}, ${heard}`,
       );
       gMarks.appendChild(mark);
     });
@@ -1275,12 +1494,18 @@
 
   // ---------------------------------------------------------------- the legend
 
+  // The likelihoods the plan colours containers by: only while the trial searches.
+  function shownLikelihoods(view) {
+    if (!view || view.trial.status !== "searching") return null;
+    return view.likelihoods;
+  }
+
   function renderLegend() {
     const box = $("legend");
     box.replaceChildren();
     if (!S.scene) return;
     const view = S.view;
-    const hasLikelihoods = !!(view && view.likelihoods);
+    const hasLikelihoods = !!shownLikelihoods(view);
     const scale = el("div", {
       class: "legend-scale",
       id: "likelihood-legend",
@@ -1336,9 +1561,11 @@
         el(
           "span",
           {},
-          view
-            ? `grey: ${view.trial.strategy} plans without likelihoods`
-            : "grey: no trial, no likelihoods",
+          !view
+            ? "grey: no trial, no likelihoods"
+            : view.trial.status !== "searching"
+              ? `grey: the search has ended (${view.trial.status}); likelihoods show while it goes on`
+              : `grey: ${view.trial.strategy} plans without likelihoods`,
         ),
       );
     }
@@ -1462,6 +1689,7 @@
       delete $("next-container").dataset.container;
       $("searched-list").replaceChildren();
       $("replays-box").hidden = true;
+      renderAbandon(null);
       renderLegend();
       renderFollow();
       return;
@@ -1469,6 +1697,7 @@
 
     $("trial-empty").hidden = true;
     $("trial-body").hidden = false;
+    renderAbandon(trial);
     const found = view.observations.find((o) => o.found);
     $("trial-title").textContent = `Trial ${trial.trial}: ${taskWords(trial)}`;
     const ended = trial.status !== "searching";
@@ -1500,7 +1729,7 @@
               "data-target": t,
               "data-found-in": at || "",
             },
-            at ? `${t} ✓ ${at}` : t,
+            at ? `${t} ✓ ${containerWords(at)}` : t,
           ),
         );
       });
@@ -1548,7 +1777,7 @@
       nextEl.replaceChildren(
         el("strong", {}, "Next: "),
         document.createTextNode(
-          `${words(next.type)} (${next.container})${next.room ? ` in the ${next.room}` : ""}, ${fmtM(next.distance_m)} m away`,
+          `${containerWords(next.container)}, ${fmtM(next.distance_m)} m away`,
         ),
       );
       const p = view.likelihoods ? view.likelihoods[next.container] : null;
@@ -1562,13 +1791,11 @@
 
     const list = $("searched-list");
     list.replaceChildren();
-    const types = new Map((S.scene ? S.scene.containers : []).map((c) => [c.id, c]));
     const obs = new Map(view.observations.map((o) => [o.container, o]));
     for (const id of trial.searched) {
       const o = obs.get(id);
-      const c = types.get(id);
       const li = el("li", { "data-container": id, "data-found": o && o.found ? "true" : "false" });
-      li.appendChild(el("span", { class: "what" }, c ? `${words(c.type)} (${id})` : id));
+      li.appendChild(el("span", { class: "what", title: `id ${id}` }, containerWords(id)));
       const here = Object.entries(trial.found_in || {})
         .filter(([, c]) => c === id)
         .map(([t]) => t);
@@ -1588,7 +1815,7 @@
     if (!trial.searched.length) list.appendChild(el("li", { class: "muted empty" }, "nothing yet"));
     if (found && !trial.searched.includes(found.container)) {
       list.appendChild(
-        el("li", { "data-container": found.container }, `found in ${found.container}`),
+        el("li", { "data-container": found.container }, `found in ${containerWords(found.container)}`),
       );
     }
 
@@ -1637,7 +1864,7 @@
 
   // ---------------------------------------------------------------- the deployment
 
-  function renderDeploymentSelect() {
+  function drawDeploymentSelect() {
     const sel = $("deployment-select");
     const keep = document.activeElement === sel;
     sel.replaceChildren();
@@ -1654,7 +1881,7 @@
     if (keep) sel.focus();
   }
 
-  function renderDeployment() {
+  function drawDeployment() {
     const dep = S.dep;
     const card = $("deployment-card");
     card.dataset.deployment = dep ? dep.id : "";
@@ -1681,6 +1908,10 @@
       ` · seed ${dep.seed}` +
       (dep.sequential ? " · one trial at a time" : "") +
       ` · ${plural(dep.trials.length, "trial")}, ${ended} ended, ${dep.open_trials.length} open`;
+    // The server counts a strategy's ended trials; those it searches now are counted here.
+    const searching = new Map();
+    for (const t of dep.trials)
+      if (t.status === "searching") searching.set(t.strategy, (searching.get(t.strategy) || 0) + 1);
     for (const r of dep.per_strategy) {
       const isNext = dep.next && dep.next.strategy === r.strategy;
       const tr = el("tr", {
@@ -1693,9 +1924,15 @@
       sw.appendChild(svg("circle", { cx: 6, cy: 6, r: 5, fill: strategyColour(r.strategy) }));
       name.append(sw, document.createTextNode(r.strategy));
       if (isNext) name.appendChild(el("span", { class: "badge next" }, "next"));
+      const count = el("td", { "data-deployed": r.deployed }, String(r.deployed));
+      const now = searching.get(r.strategy) || 0;
+      if (now) {
+        count.dataset.searching = now;
+        count.appendChild(el("span", { class: "searching" }, ` +${now} searching`));
+      }
       tr.append(
         name,
-        el("td", {}, String(r.deployed)),
+        count,
         el("td", {}, fmtM(r.mean_cost_m)),
         el("td", {}, fmtM(r.replay_mean_m)),
         el("td", {}, fmtM(r.score)),
@@ -1709,7 +1946,7 @@
   }
 
   // The strategy chosen at each trial: one row per strategy, one mark per trial at x = k.
-  function renderCurve() {
+  function drawCurve() {
     const box = $("selection-curve");
     box.replaceChildren();
     const dep = S.dep;
@@ -1849,7 +2086,17 @@
     }
   }
 
-  function renderOpenTrials() {
+  // How long since a robot was heard from, in words, and whether it counts as silent.
+  function heardWords(heardAt) {
+    if (heardAt == null) return null;
+    const s = Math.max(0, Math.round((Date.now() - heardAt) / 1000));
+    const silent = s > SILENT_AFTER_S;
+    return { silent, text: silent ? `silent for ${s} s` : `heard ${s} s ago` };
+  }
+
+  // The robots searching: each open trial with its robot (as it named itself), what it looks
+  // for and how long since it was last heard from; one silent past SILENT_AFTER_S is marked.
+  function drawOpenTrials() {
     const list = $("open-trials");
     list.replaceChildren();
     const dep = S.dep;
@@ -1859,6 +2106,7 @@
       const t = rows.get(id) || {};
       const ev = S.live.get(id);
       const watched = id === S.watchedId;
+      const robot = t.robot || (ev && ev.robot) || null;
       const b = el("button", {
         type: "button",
         "data-trial": id,
@@ -1874,16 +2122,81 @@
         parts.push(
           `${ev.searched} searched`,
           `${fmtM(ev.cost_m)} m`,
-          ev.next ? `next ${ev.next}` : "",
+          ev.next ? `next ${S.scene && S.scene.name === ev.scene ? containerWords(ev.next) : ev.next}` : "",
         );
-      b.textContent = parts.filter(Boolean).join(" · ") + (watched ? "  (watching)" : "");
+      b.append(
+        el("span", { class: robot ? "robot" : "robot muted" }, robot || "unnamed robot"),
+        document.createTextNode(
+          " · " + parts.filter(Boolean).join(" · ") + (watched ? "  (watching)" : ""),
+        ),
+      );
+      const heard = heardWords(t.heardAt);
+      if (heard) {
+        b.append(" · ", el("span", { class: "heard" }, heard.text));
+        b.title = `silent: not heard from for more than ${SILENT_AFTER_S} s`;
+      }
       b.addEventListener("click", () => watch(id, true));
-      const li = el("li", { "data-trial": id });
+      const li = el("li", {
+        "data-trial": id,
+        "data-robot": robot || "",
+        "data-silent": heard ? String(heard.silent) : "",
+      });
       li.appendChild(b);
       list.appendChild(li);
     }
     if (!dep.open_trials.length)
       list.appendChild(el("li", { class: "muted empty" }, "none: no robot is searching"));
+  }
+
+  // Ages change without events: the open trials' are redrawn every second.
+  function tickAges() {
+    const dep = S.dep;
+    if (!dep || !dep.open_trials.length) return;
+    const rows = new Map(dep.trials.map((t) => [t.trial, t]));
+    for (const li of $("open-trials").querySelectorAll("li[data-trial]")) {
+      const t = rows.get(Number(li.dataset.trial));
+      const heard = t && heardWords(t.heardAt);
+      const span = li.querySelector(".heard");
+      if (!heard || !span) continue;
+      span.textContent = heard.text;
+      li.dataset.silent = String(heard.silent);
+    }
+  }
+
+  // ---------------------------------------------------------------- giving a trial up
+
+  // An operator may end a stuck robot's trial from the page (as the robot would with POST
+  // /trials/{id}/abandon); a second click confirms it. A view-only server refuses, and says so.
+  function renderAbandon(trial) {
+    const box = $("abandon-box");
+    const open = !!trial && trial.status === "searching";
+    box.hidden = !open;
+    if (!open || S.abandoning !== trial.trial) {
+      S.abandoning = null;
+      $("abandon").hidden = false;
+      $("abandon-confirm").hidden = true;
+    }
+    if (!open) $("abandon-error").hidden = true;
+  }
+
+  async function abandonWatched() {
+    const id = S.abandoning;
+    if (id == null) return;
+    const err = $("abandon-error");
+    err.hidden = true;
+    $("abandon-yes").disabled = true;
+    try {
+      const rid = `page-${Date.now().toString(36)}-${Math.random().toString(36).slice(2, 10)}`;
+      await api(`/trials/${seg(id)}/abandon`, { request_id: rid });
+      S.abandoning = null;
+      if (id === S.watchedId) refetchView();
+    } catch (e) {
+      if (e instanceof Stale) return;
+      err.textContent = `Not given up: ${e.message}`;
+      err.hidden = false;
+    } finally {
+      $("abandon-yes").disabled = false;
+    }
   }
 
   // ---------------------------------------------------------------- wiring
@@ -1923,6 +2236,21 @@
         renderCurve();
       }, 150);
     });
+    $("abandon").addEventListener("click", () => {
+      if (S.watchedId == null) return;
+      S.abandoning = S.watchedId;
+      $("abandon-trial").textContent = String(S.watchedId);
+      $("abandon").hidden = true;
+      $("abandon-confirm").hidden = false;
+      $("abandon-error").hidden = true;
+    });
+    $("abandon-no").addEventListener("click", () => {
+      S.abandoning = null;
+      $("abandon").hidden = false;
+      $("abandon-confirm").hidden = true;
+    });
+    $("abandon-yes").addEventListener("click", abandonWatched);
+    setInterval(tickAges, 1000);
     S.token = readToken();
     start();
   }

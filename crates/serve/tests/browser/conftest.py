@@ -187,10 +187,11 @@ class Robot:
     def deploy(self, **body):
         return self.api.post("/deployments", body)
 
-    def start(self, deployment, target):
-        return self.api.post(
-            f"/deployments/{seg(deployment)}/trials", {"scene": self.scene, "target": target}
-        )
+    def start(self, deployment, target, robot=None):
+        body = {"scene": self.scene, "target": target}
+        if robot is not None:
+            body["robot"] = robot
+        return self.api.post(f"/deployments/{seg(deployment)}/trials", body)
 
     def start_task(self, deployment, targets, goal="all", destination=None):
         """Starts a household task: several targets, all or any, brought to `destination`."""

@@ -730,7 +730,6 @@ def test_robots_are_listed_by_name_and_a_silent_one_is_marked(serve, view):
         2,
         what="two trials counted as searching in the strategy table",
     )
-    v.shot("robots-heard.png")
     v.within(
         ROBOTS_SHOWN,
         {"trials": trials, "robots": robots, "silent": [True, True]},
@@ -750,6 +749,7 @@ def test_robots_are_listed_by_name_and_a_silent_one_is_marked(serve, view):
         {"trials": trials, "robots": robots, "silent": [False, True]},
         what="the robot that reported is no longer silent",
     )
+    v.shot("serve-view-robots.png")
     again = view(server)
     again.page.goto(server.url + "/?silent=4")
     again.enter_token(TOKEN)
@@ -876,7 +876,7 @@ def test_the_layout_fits_desktop_tablet_and_phone(
         budget_ms=LOAD_MS,
     )
     v.page.wait_for_timeout(300)  # the plan is drawn again 150 ms after a resize
-    v.shot(f"layout-{width}x{height}.png")
+    v.shot(f"serve-view-{width}x{height}.png")
     got = v.page.evaluate(LAYOUT)
     assert got["overflow"] == [], got["overflow"]
     assert got["scrollWidth"] <= got["width"], got
@@ -955,7 +955,7 @@ def test_the_map_the_planner_uses_is_drawn_under_the_plan(
     x0, y0, x1, y1 = got["box"]
     r0, s0, r1, s1 = got["rooms"]
     assert x0 <= r0 + cell and y0 <= s0 + cell and x1 >= r1 - cell and y1 >= s1 - cell, got
-    v.shot(f"map-{source.split()[0]}.png")
+    v.shot(f"serve-view-map-{source.split()[0]}.png")
     v.check_clean()
 
 
@@ -1096,7 +1096,7 @@ def test_labels_keep_off_walls_and_leader_lines_in_a_large_house(serve, view, fe
         budget_ms=LOAD_MS,
     )
     got = v.page.evaluate(LABELS_MEASURED, m)
-    v.shot("labels-large-house.png")
+    v.shot("serve-view-large-house.png")
     print(f"labels in a {len(robot.contents)}-container house: {got}")
     assert got["labels"] == len(robot.contents), got
     # Measured on this house: 1 % of label area on walls, 4 labels crossed, 3 pairs overlapping

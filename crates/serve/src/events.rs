@@ -201,14 +201,10 @@ impl TrialEvent {
             cost_m: t.cost_m,
             next_path: t.next.as_ref().map(|n| n.path.clone()),
             observed,
-            robot: t.robot.clone().or_else(|| {
-                t.robots.as_ref().map(|team| {
-                    team.iter()
-                        .map(|r| r.id.as_str())
-                        .collect::<Vec<_>>()
-                        .join(",")
-                })
-            }),
+            robot: crate::model::whose(
+                t.robot.as_deref(),
+                t.robots.iter().flatten().map(|r| r.id.as_str()),
+            ),
         }
     }
 }

@@ -126,6 +126,19 @@ pub struct StoredTrial {
     pub heard_ms: Option<i64>,
 }
 
+/// Whose a trial is, as lists and events name it: the robot that started it alone and named
+/// itself, else its team's robots joined by `,` (`None` for a robot that gave no name).
+pub(crate) fn whose<'a>(
+    robot: Option<&str>,
+    team: impl Iterator<Item = &'a str>,
+) -> Option<String> {
+    if let Some(r) = robot {
+        return Some(r.to_string());
+    }
+    let ids: Vec<&str> = team.collect();
+    (!ids.is_empty()).then(|| ids.join(","))
+}
+
 /// One search reported by the robot.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StoredObservation {

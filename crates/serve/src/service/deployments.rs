@@ -214,14 +214,10 @@ impl Service {
                     strategy: spec.strategies.get(t.chosen).cloned().unwrap_or_default(),
                     status: t.status,
                     cost_m: t.cost,
-                    robot: t.robot.clone().or_else(|| {
-                        t.robots.as_ref().map(|team| {
-                            team.iter()
-                                .map(|r| r.id.as_str())
-                                .collect::<Vec<_>>()
-                                .join(",")
-                        })
-                    }),
+                    robot: crate::model::whose(
+                        t.robot.as_deref(),
+                        t.robots.iter().flatten().map(|r| r.id.as_str()),
+                    ),
                     heard_s_ago: t.heard_ms.map(|h| (now - h).max(0) as f64 / 1000.0),
                 })
                 .collect(),

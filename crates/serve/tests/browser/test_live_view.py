@@ -769,19 +769,26 @@ RAW_IDS = r"""() => {
 }"""
 
 
+def generated_house(serve, ferret_bin, tmp_path, generate, serve_args=()):
+    """A server on a ProcTHOR-format house file that `ferret generate` makes with `generate`
+    (besides the apartment), a robot on the house's scene and the object types it holds."""
+    houses = tmp_path / "houses.jsonl.gz"
+    subprocess.run(
+        [ferret_bin, "generate", *generate, "--out", str(houses)], check=True, capture_output=True
+    )
+    server = serve("--scene", str(houses), *serve_args)
+    scene = next(s["name"] for s in server.api.get("/scenes") if s["name"] != "apartment")
+    robot = Robot(server.api, scene=scene)
+    held = sorted({o for objs in robot.contents.values() for o in objs})
+    return server, robot, held
+
+
 def test_procthor_ids_are_shown_as_names(serve, view, ferret_bin, tmp_path):
     """A ProcTHOR-format house (generated) names its rooms `room|4` and its containers `4|3`:
     the page says "Drawer 2 in the bedroom" instead, keeping ids for the tooltips."""
-    houses = tmp_path / "house.jsonl.gz"
-    subprocess.run(
-        [ferret_bin, "generate", "--count", "1", "--seed", "7", "--out", str(houses)],
-        check=True,
-        capture_output=True,
+    server, robot, held = generated_house(
+        serve, ferret_bin, tmp_path, ["--count", "1", "--seed", "7"]
     )
-    server = serve("--scene", str(houses))
-    name = next(s["name"] for s in server.api.get("/scenes") if s["name"] != "apartment")
-    robot = Robot(server.api, scene=name)
-    held = sorted({o for objs in robot.contents.values() for o in objs})
     dep = robot.deploy(strategies=["model/prior", "model/uniform"])
     v = view(server).open(TOKEN)
     v.wait_live()
@@ -904,6 +911,22 @@ MAP_SHOWN = """() => {
 }"""
 
 
+def watching_a_trial_on_its_map(server, view, robot, target, m):
+    """A page that shows a trial of `robot` for `target` just started, over the map `m`."""
+    dep = robot.deploy(strategies=["model/prior"])
+    v = view(server).open(TOKEN)
+    v.wait_live()
+    trial = robot.start(dep["id"], target)
+    v.within(
+        """(e) => document.querySelector("#plan-card").dataset.trial === String(e.trial)
+            && document.querySelector("#plan image.map")?.dataset.width === String(e.width)""",
+        {"trial": trial["trial"], "width": m["width"]},
+        what="the trial's scene with its map",
+        budget_ms=LOAD_MS,
+    )
+    return v
+
+
 def map_counts(api, scene):
     m = api.get(f"/scenes/{seg(scene)}/map")
     counts = [0] * 5
@@ -920,32 +943,16 @@ def test_the_map_the_planner_uses_is_drawn_under_the_plan(
     and a ProcTHOR-format house (generated): as many cells, walls and furniture as the server's
     map says, placed over the rooms it was built from."""
     if source == "procthor":
-        houses = tmp_path / "house.jsonl.gz"
-        subprocess.run(
-            [ferret_bin, "generate", "--count", "1", "--seed", "3", "--out", str(houses)],
-            check=True,
-            capture_output=True,
+        server, robot, held = generated_house(
+            serve, ferret_bin, tmp_path, ["--count", "1", "--seed", "3"]
         )
-        server = serve("--scene", str(houses))
-        scene = next(s["name"] for s in server.api.get("/scenes") if s["name"] != "apartment")
     else:
         server = serve()
-        scene = "apartment"
-    m, counts = map_counts(server.api, scene)
+        robot = Robot(server.api)
+        held = sorted({o for objs in robot.contents.values() for o in objs})
+    m, counts = map_counts(server.api, robot.scene)
     assert counts[1] > 0 and counts[4] > 0, counts
-    robot = Robot(server.api, scene=scene)
-    dep = robot.deploy(strategies=["model/prior"])
-    held = sorted({o for objs in robot.contents.values() for o in objs})
-    v = view(server).open(TOKEN)
-    v.wait_live()
-    trial = robot.start(dep["id"], held[0])
-    v.within(
-        """(e) => document.querySelector("#plan-card").dataset.trial === String(e.trial)
-            && document.querySelector("#plan image.map")?.dataset.width === String(e.width)""",
-        {"trial": trial["trial"], "width": m["width"]},
-        what="the trial's scene with its map",
-        budget_ms=LOAD_MS,
-    )
+    v = watching_a_trial_on_its_map(server, view, robot, held[0], m)
     got = v.page.evaluate(MAP_SHOWN)
     assert (got["width"], got["height"]) == (m["width"], m["height"]), got
     assert (got["walls"], got["furniture"]) == (counts[1], counts[2]), (got, counts)
@@ -1060,41 +1067,15 @@ def test_labels_keep_off_walls_and_leader_lines_in_a_large_house(serve, view, fe
     """A house of 8 rooms and 43 containers: every container labelled, labels off walls and
     outside the house, and few crossed by a leader line or overlapping another label (where
     the house leaves no room)."""
-    houses = tmp_path / "big.jsonl.gz"
-    subprocess.run(
-        [
-            ferret_bin,
-            "generate",
-            "--count",
-            "5",
-            "--seed",
-            "7",
-            "--min-rooms",
-            "7",
-            "--max-rooms",
-            "10",
-            "--out",
-            str(houses),
-        ],
-        check=True,
-        capture_output=True,
+    server, robot, held = generated_house(
+        serve,
+        ferret_bin,
+        tmp_path,
+        ["--count", "5", "--seed", "7", "--min-rooms", "7", "--max-rooms", "10"],
+        ["--range", "4"],
     )
-    server = serve("--scene", str(houses), "--range", "4")
-    scene = next(s["name"] for s in server.api.get("/scenes") if s["name"] != "apartment")
-    m = server.api.get(f"/scenes/{seg(scene)}/map")
-    robot = Robot(server.api, scene=scene)
-    dep = robot.deploy(strategies=["model/prior"])
-    held = sorted({o for objs in robot.contents.values() for o in objs})
-    v = view(server).open(TOKEN)
-    v.wait_live()
-    trial = robot.start(dep["id"], held[0])
-    v.within(
-        """(e) => document.querySelector("#plan-card").dataset.trial === String(e.trial)
-            && document.querySelector("#plan image.map")?.dataset.width === String(e.width)""",
-        {"trial": trial["trial"], "width": m["width"]},
-        what="the trial's scene with its map",
-        budget_ms=LOAD_MS,
-    )
+    m = server.api.get(f"/scenes/{seg(robot.scene)}/map")
+    v = watching_a_trial_on_its_map(server, view, robot, held[0], m)
     got = v.page.evaluate(LABELS_MEASURED, m)
     v.shot("serve-view-large-house.png")
     print(f"labels in a {len(robot.contents)}-container house: {got}")

@@ -581,6 +581,38 @@ def test_view_only_shows_the_page_and_refuses_writes(serve, view, tmp_path):
     assert status == 403, (status, body)
 
 
+def test_a_view_only_server_on_the_robots_sqlite_file_follows_them(serve, view, tmp_path):
+    """A wall screen served by `--view-only` on the file another server writes: SQLite carries
+    no events between processes, so the wall looks at the file; each step of the robot's trial,
+    and a deployment created meanwhile, shows there within a second, without a reload."""
+    db = str(tmp_path / "site.sqlite")
+    writer = serve(db=db)
+    robot = Robot(writer.api)
+    dep = robot.deploy(strategies=["model/prior", "model/uniform"])
+    wall = serve("--view-only", db=db)
+    v = view(wall).open(TOKEN)
+    v.wait_live()
+    v.within(
+        """(id) => document.querySelector("#deployment-card").dataset.deployment
+            === String(id)""",
+        dep["id"],
+        budget_ms=LOAD_MS,
+    )
+    trial = robot.start(dep["id"], "Wallet")
+    expect_trial(v, wall.api, trial)
+    while trial["status"] == "searching":
+        trial = robot.search_next(trial)
+        expect_trial(v, wall.api, trial)
+    newer = robot.deploy(strategies=["model/prior"])
+    v.within(
+        """(id) => [...document.querySelectorAll("#deployment-select option")]
+            .some((o) => o.value === String(id))""",
+        newer["id"],
+        what="a deployment the other server created",
+    )
+    v.check_clean()
+
+
 def test_a_trial_driven_through_another_replica_shows_live(serve, view, postgres_url):
     a = serve(db=postgres_url)
     b = serve(db=postgres_url)

@@ -537,3 +537,21 @@ fn a_second_run_into_a_busy_output_directory_is_refused() {
     let o = eval(&out, "0", "2");
     assert!(o.status.success(), "{}", stderr(&o));
 }
+
+/// Every command that takes strategies names the learned ones and their fused forms in its help.
+#[test]
+fn every_strategy_list_in_help_names_the_learned_strategies() {
+    for command in ["eval", "calibrate", "deploy", "serve"] {
+        let o = ferret(&[command, "--help"]);
+        assert!(o.status.success(), "{command} --help failed");
+        let help = String::from_utf8_lossy(&o.stdout).into_owned();
+        for name in [
+            "model/learned",
+            "model/learned-random",
+            "fused-learned/<prompt>/<llm>",
+            "fused-learned/noise",
+        ] {
+            assert!(help.contains(name), "{command} --help does not name {name}");
+        }
+    }
+}

@@ -29,7 +29,10 @@ pub struct Args {
     /// Likelihood sources as strategy specs, comma separated: model/uniform, model/prior,
     /// model/prior-raw (the uncalibrated estimate of earlier versions), model/noise (a control
     /// that knows nothing), llm+model/<prompt>/<llm> and fused/<prompt>/<llm> or fused/noise
-    /// (with --fusion); any planner suffix is ignored: only the probabilities count.
+    /// (with --fusion); with a prior trained with --embeddings, model/learned, model/learned-head,
+    /// model/learned-random, model/learned-head-random and (with --fusion)
+    /// fused-learned/<prompt>/<llm> and fused-learned/noise; any planner suffix is ignored: only
+    /// the probabilities count.
     #[arg(long, value_delimiter = ',', default_value = DEFAULT_SOURCES)]
     pub sources: Vec<String>,
     /// Targets per house: `all` (every small-object type present) or a number N. With N, the

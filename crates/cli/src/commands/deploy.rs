@@ -32,7 +32,10 @@ pub struct Args {
     #[command(flatten)]
     protocol: ProtocolArgs,
     /// Candidate strategies, comma separated (the oracle is never a candidate); for tasks,
-    /// sequential/<spec> looks for one target after another with the planner of <spec>.
+    /// sequential/<spec> looks for one target after another with the planner of <spec>. With a
+    /// --prior trained with --embeddings: model/learned (and model/learned-head,
+    /// model/learned-random, model/learned-head-random), and with --fusion
+    /// fused-learned/<prompt>/<llm> and fused-learned/noise.
     #[arg(long, value_delimiter = ',', default_value = DEFAULT_STRATEGIES)]
     strategies: Vec<String>,
     /// Number of trials [default: 20, or the number of types to --find].

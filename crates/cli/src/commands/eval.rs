@@ -48,7 +48,10 @@ pub struct Args {
     /// p-context-b, p-minimal, p-direct, or a template path); with --task, also
     /// sequential/<spec> (the planner of <spec> looking for one target after another); with
     /// --robots, independent/<spec> (each robot blind to the others) and split/<spec> (the
-    /// rooms divided among the robots), a plain spec coordinating its robots.
+    /// rooms divided among the robots), a plain spec coordinating its robots. With a prior
+    /// trained with --embeddings (see docs/learned.md): model/learned, model/learned-head and
+    /// their controls model/learned-random and model/learned-head-random, and with --fusion
+    /// fused-learned/<prompt>/<llm> and fused-learned/noise.
     #[arg(long, value_delimiter = ',', default_value = DEFAULT_STRATEGIES)]
     pub strategies: Vec<String>,
     /// Seed of the trials (targets drawn per house).

@@ -50,7 +50,10 @@ pub struct Args {
     /// Strategies deployments may choose from, comma separated (the oracle never: a robot has no
     /// ground truth). For trials of household tasks (several targets, a destination), add
     /// sequential/model/prior to let selection weigh one search after another against the
-    /// task planner.
+    /// task planner. With a --prior trained with --embeddings: model/learned (and
+    /// model/learned-head, model/learned-random, model/learned-head-random), and with --fusion
+    /// fused-learned/<prompt>/<llm> and fused-learned/noise; the embeddings' folder is given
+    /// with --embeddings or FERRET_EMBEDDINGS for furniture and rooms the prior never saw.
     #[arg(long, value_delimiter = ',', default_value = DEFAULT_STRATEGIES)]
     strategies: Vec<String>,
     /// Address to listen on. Anything but loopback exposes the robot's planner to the network:

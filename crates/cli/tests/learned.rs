@@ -500,3 +500,267 @@ fn serve_plans_model_learned_as_deploy_does() {
         );
     }
 }
+
+/// A scene of two rooms whose dresser is of type `dresser` (a name to misspell), holding a wallet.
+fn scene_with(dir: &Path, name: &str, dresser: &str) -> PathBuf {
+    let scene = serde_json::json!({
+        "ferret_scene": 1, "name": name,
+        "rooms": [
+            {"name": "bedroom", "type": "Bedroom", "polygon": [[0, 0], [5, 0], [5, 4], [0, 4]]},
+            {"name": "kitchen", "type": "Kitchen", "polygon": [[5, 0], [9, 0], [9, 4], [5, 4]]}
+        ],
+        "doors": [{"from": [5, 1.5], "to": [5, 2.5]}],
+        "containers": [
+            {"id": "d", "type": dresser, "pose": [2, 3.6, -90], "size": [0.5, 1.2], "contents": ["Wallet"]},
+            {"id": "b", "type": "Bed", "pose": [1.2, 1.2, 0], "size": [1.4, 2.0]},
+            {"id": "f", "type": "Fridge", "pose": [8.5, 3.5, -90], "size": [0.7, 0.8], "contents": ["Egg"]}
+        ],
+        "start": [4, 2, 0]
+    });
+    let path = dir.join(format!("{name}.yaml"));
+    std::fs::write(&path, scene.to_string()).unwrap();
+    path
+}
+
+fn post(url: &str, body: serde_json::Value) -> (u16, serde_json::Value) {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let r = reqwest::Client::new()
+            .post(url)
+            .json(&body)
+            .send()
+            .await
+            .unwrap();
+        (r.status().as_u16(), r.json().await.unwrap())
+    })
+}
+
+/// A misspelt name never plans in silence: a word left out of a name's vector is said once on
+/// stderr; a name with no known word fails the learned rows (the others are written), stops
+/// `ferret serve` from starting, and is answered 422 when uploaded; a served trial's state
+/// carries the note on its scene's names.
+#[test]
+fn a_misspelt_name_is_refused_or_said_and_never_planned_in_silence() {
+    let dir = tempfile::tempdir().unwrap();
+    let table = table(dir.path());
+    let prior = dir.path().join("prior.json");
+    ok(
+        &[
+            "prior",
+            "train",
+            "--generate",
+            "30",
+            "--house-seed",
+            "9",
+            "--embeddings",
+            s(&table),
+            "--learned-folds",
+            "3",
+            "--learned-epochs",
+            "10",
+            "--out",
+            s(&prior),
+        ],
+        None,
+    );
+    let typo = scene_with(dir.path(), "typo", "Xyzzyblorp");
+    let noted = scene_with(dir.path(), "noted", "XyzzyDresser");
+    let eval = |scene: &Path, out: &Path| -> Output {
+        run(
+            &[
+                "eval",
+                "--houses",
+                s(scene),
+                "--prior",
+                s(&prior),
+                "--trials-per-house",
+                "all",
+                "--strategies",
+                "model/prior,model/learned",
+                "--out",
+                s(out),
+            ],
+            Some(&table),
+        )
+    };
+    let out = dir.path().join("typo-eval");
+    let o = eval(&typo, &out);
+    let said = text(&o);
+    assert!(
+        !o.status.success() && said.contains("`Xyzzyblorp`"),
+        "{said}"
+    );
+    assert!(
+        said.contains("xyzzyblorp") && said.contains("spelling"),
+        "{said}"
+    );
+    assert_eq!(costs(&out, "model/prior").len(), 2);
+    assert!(costs(&out, "model/learned").is_empty());
+
+    let out = dir.path().join("noted-eval");
+    let o = eval(&noted, &out);
+    let said = text(&o);
+    assert!(o.status.success(), "{said}");
+    assert_eq!(
+        said.matches("`XyzzyDresser`: `xyzzy`").count(),
+        1,
+        "said once, whatever the trials: {said}"
+    );
+    assert_eq!(costs(&out, "model/learned").len(), 2);
+
+    // `ferret serve` checks its scenes before it listens.
+    let serve = |scene: &Path, embeddings: Option<&Path>| {
+        run(
+            &[
+                "serve",
+                "--scene",
+                s(scene),
+                "--strategies",
+                "model/prior,model/learned",
+                "--prior",
+                s(&prior),
+                "--listen",
+                "127.0.0.1:0",
+                "--db",
+                s(&dir.path().join("refused.sqlite")),
+            ],
+            embeddings,
+        )
+    };
+    let o = serve(&typo, Some(&table));
+    let said = text(&o);
+    assert!(
+        !o.status.success() && said.contains("`Xyzzyblorp`"),
+        "{said}"
+    );
+    let apartment =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/apartment/scene.yaml");
+    let o = serve(&apartment, None);
+    let said = text(&o);
+    assert!(
+        !o.status.success() && said.contains("`DiningRoom`") && said.contains("--embeddings"),
+        "{said}"
+    );
+
+    let server = Server::spawn(
+        &[
+            "--scene",
+            s(&noted),
+            "--strategies",
+            "model/learned",
+            "--prior",
+            s(&prior),
+            "--listen",
+            "127.0.0.1:0",
+            "--db",
+            s(&dir.path().join("served.sqlite")),
+        ],
+        &[("FERRET_EMBEDDINGS", &table)],
+    );
+    let url = server.url.clone();
+    let upload: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&typo).unwrap()).unwrap();
+    let (status, reply) = post(
+        &format!("{url}/scenes"),
+        serde_json::json!({"scene": upload}),
+    );
+    assert_eq!(status, 422, "{reply}");
+    assert!(reply.to_string().contains("`Xyzzyblorp`"), "{reply}");
+    let (status, deployment) = post(
+        &format!("{url}/deployments"),
+        serde_json::json!({"seed": 1}),
+    );
+    assert_eq!(status, 201, "{deployment}");
+    let id = deployment["id"].as_i64().unwrap();
+    let (status, trial) = post(
+        &format!("{url}/deployments/{id}/trials"),
+        serde_json::json!({"scene": "noted", "target": "Wallet"}),
+    );
+    server.kill();
+    assert_eq!(status, 201, "{trial}");
+    let language = trial["language"].as_array().cloned().unwrap_or_default();
+    assert!(
+        language.len() == 1 && language[0].as_str().unwrap().contains("`xyzzy`"),
+        "{trial}"
+    );
+}
+
+/// `--knowledge wordnet` puts WordNet's knowledge of each name beside its vector (and says when
+/// WordNet cannot be read); its shuffled control reads other nouns' and makes another file.
+#[test]
+fn wordnet_knowledge_stands_beside_the_vectors_with_its_shuffled_control() {
+    let dir = tempfile::tempdir().unwrap();
+    let table = table(dir.path());
+    let train = |knowledge: &str, out: &Path, wordnet: Option<&Path>| -> Output {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_ferret"));
+        c.args([
+            "prior",
+            "train",
+            "--generate",
+            "30",
+            "--house-seed",
+            "9",
+            "--embeddings",
+            s(&table),
+            "--learned-folds",
+            "3",
+            "--learned-epochs",
+            "10",
+            "--knowledge",
+            knowledge,
+            "--out",
+            s(out),
+        ])
+        .env_remove("FERRET_EMBEDDINGS");
+        if let Some(w) = wordnet {
+            c.env("FERRET_WORDNET", w);
+        }
+        c.output().expect("the ferret binary runs")
+    };
+    let nowhere = dir.path().join("nowhere");
+    let o = train("wordnet", &dir.path().join("x.json"), Some(&nowhere));
+    assert!(
+        !o.status.success() && text(&o).contains("nowhere"),
+        "{}",
+        text(&o)
+    );
+    let real = std::env::var_os("FERRET_WORDNET")
+        .map(PathBuf::from)
+        .or_else(|| Some(PathBuf::from("/usr/share/wordnet")))
+        .filter(|d| d.join("index.noun").is_file());
+    let Some(wordnet) = real else {
+        eprintln!(
+            "skipped: scripts/embeddings.sh install wordnet (or FERRET_WORDNET) to run the rest"
+        );
+        return;
+    };
+    let mut files = Vec::new();
+    for k in ["wordnet", "wordnet-shuffled"] {
+        let out = dir.path().join(format!("{k}.json"));
+        let o = train(k, &out, Some(&wordnet));
+        assert!(o.status.success(), "{}", text(&o));
+        assert!(text(&o).contains(&format!("over tiny+{k}")), "{}", text(&o));
+        let learned = &common::read_json(&out)["learned"];
+        assert_eq!(learned["embedding"], format!("tiny+{k}"));
+        assert_eq!(learned["dim"], 10);
+        files.push(std::fs::read(&out).unwrap());
+        ok(
+            &[
+                "eval",
+                "--generate",
+                "3",
+                "--prior",
+                s(&out),
+                "--strategies",
+                "model/prior,model/learned",
+                "--out",
+                s(&dir.path().join(format!("e-{k}"))),
+            ],
+            None,
+        );
+    }
+    assert_ne!(files[0], files[1]);
+}

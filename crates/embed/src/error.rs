@@ -137,4 +137,26 @@ pub enum EmbedError {
         /// What is wrong.
         what: String,
     },
+    /// A WordNet dictionary folder is missing or malformed.
+    #[error("{path}: {what}")]
+    WordNet {
+        /// The folder or file at fault.
+        path: PathBuf,
+        /// What is wrong.
+        what: String,
+    },
+    /// No word of a name is known, so it has no vector ([`Embeddings::resolve_name`](crate::Embeddings::resolve_name)).
+    #[error(
+        "the name `{name}` has no vector: none of its words ({words:?}) is known to {embeddings} {wordnet}; check its spelling, or name it with words the embeddings know"
+    )]
+    UnknownName {
+        /// The name.
+        name: String,
+        /// Its words.
+        words: Vec<String>,
+        /// The embeddings' id.
+        embeddings: String,
+        /// Whether WordNet was asked, and where it is.
+        wordnet: String,
+    },
 }

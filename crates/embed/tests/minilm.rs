@@ -258,4 +258,31 @@ mod with_model {
             assert!(got == want, "{threads} threads give other vectors");
         }
     }
+
+    /// The sentence model has a vector for any text: the rule only says which words are neither
+    /// whole tokens nor WordNet nouns, and refuses a name with none (WordNet at hand).
+    #[test]
+    fn real_minilm_says_which_words_it_embeds_from_pieces_and_refuses_a_typo() {
+        let Some(t) = open() else { return };
+        let Some(wn_dir) = ferret_embed::WordNet::default_dir() else {
+            println!(
+                "skipped: scripts/embeddings.sh install wordnet (or FERRET_WORDNET) to run it"
+            );
+            return;
+        };
+        let wn = ferret_embed::WordNet::open(&wn_dir).unwrap();
+        // `ladle` and `spatula` are not whole tokens of its vocabulary, but WordNet nouns.
+        for n in ["Ladle", "Spatula", "CounterTop", "LaundryHamper"] {
+            let r = t.resolve_name(n, Some(&wn)).unwrap();
+            assert!(r.notes.is_empty(), "{n}: {:?}", r.notes);
+            assert_eq!(Some(r.vector), t.embed_name(n), "{n}");
+        }
+        let r = t.resolve_name("XyzzyLadle", Some(&wn)).unwrap();
+        assert_eq!(r.notes.len(), 1, "{:?}", r.notes);
+        assert_eq!(r.notes[0].reading, ferret_embed::WordReading::Pieces);
+        let err = t.resolve_name("Xyzzyblorp", Some(&wn)).unwrap_err();
+        assert!(err.to_string().contains("`Xyzzyblorp`"), "{err}");
+        // Without WordNet only the vocabulary is known: said, not refused.
+        assert_eq!(t.resolve_name("Ladle", None).unwrap().notes.len(), 1);
+    }
 }

@@ -4,14 +4,16 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock, PoisonError};
 
-use ferret_embed::{EMBEDDINGS_ENV, Embeddings, INSTALL_HINT};
+use ferret_embed::{EMBEDDINGS_ENV, Embeddings, INSTALL_HINT, WordNet};
 use ferret_plan::learned::{self, LearnedSettings, NameVectors};
 use ferret_plan::{Embedder, Prior};
 use ferret_world::Scene;
 
 use crate::error::{LabError, Result};
+
+pub use ferret_embed::{Knowledge, WORDNET_INSTALL_HINT};
 
 /// The embeddings folder a run names, or the one [`EMBEDDINGS_ENV`] names.
 pub fn embeddings_dir(given: Option<&Path>) -> Option<PathBuf> {
@@ -37,58 +39,127 @@ pub fn open_embeddings(dir: &Path) -> Result<Embeddings> {
 pub struct LearnedReport {
     /// Names embedded.
     pub names: usize,
-    /// Names none of whose words the embeddings know: they get a zero vector.
-    pub unknown: Vec<String>,
+    /// One line per word of a name read otherwise than spelt (its base form, a WordNet
+    /// hypernym, left out), each word once.
+    pub notes: Vec<String>,
+    /// The WordNet folder the rule read, if one was found.
+    pub wordnet: Option<PathBuf>,
 }
 
-/// The vectors of `names` from `embeddings` (a zero vector for a name none of whose words it
-/// knows), with those names.
+/// WordNet from `dir`, else from [`ferret_embed::WORDNET_ENV`] or Debian's folder; `None` when
+/// none is given or installed. A folder given or named that cannot be read is an error.
+pub fn open_wordnet(dir: Option<&Path>) -> Result<Option<WordNet>> {
+    let Some(dir) = dir.map(Path::to_path_buf).or_else(WordNet::default_dir) else {
+        return Ok(None);
+    };
+    WordNet::open(&dir)
+        .map(Some)
+        .map_err(|e| LabError::invalid(format!("WordNet: {e}")))
+}
+
+/// What gives names their vectors: the embeddings, WordNet for words they lack, and a second
+/// knowledge source beside them.
+#[derive(Clone, Copy)]
+pub struct NameSource<'a> {
+    /// The word (or sentence) vectors.
+    pub embeddings: &'a Embeddings,
+    /// WordNet, when installed or given.
+    pub wordnet: Option<&'a WordNet>,
+    /// What stands beside each name's vector, if anything.
+    pub knowledge: Option<Knowledge>,
+}
+
+impl NameSource<'_> {
+    /// The id a prior file records (`glove-6b-50d`, `glove-6b-50d+wordnet`).
+    pub fn id(&self) -> String {
+        match self.knowledge {
+            Some(k) => k.id(self.embeddings.id()),
+            None => self.embeddings.id().to_string(),
+        }
+    }
+
+    /// The length of every vector.
+    pub fn dim(&self) -> usize {
+        self.embeddings.dim() * if self.knowledge.is_some() { 2 } else { 1 }
+    }
+
+    /// The vector of `name` by [`Embeddings::resolve_name`]'s rule, with its knowledge beside
+    /// it, and the notes on how it was read; an error for a name with no known word.
+    pub fn vector(&self, name: &str) -> std::result::Result<(Vec<f32>, Vec<String>), String> {
+        let resolved = self
+            .embeddings
+            .resolve_name(name, self.wordnet)
+            .map_err(|e| e.to_string())?;
+        let mut notes: Vec<String> = resolved.notes.iter().map(ToString::to_string).collect();
+        let Some(knowledge) = self.knowledge else {
+            return Ok((resolved.vector, notes));
+        };
+        let wordnet = self.wordnet.ok_or_else(|| {
+            format!(
+                "{} vectors need WordNet (`{}`, or FERRET_WORDNET)",
+                self.id(),
+                ferret_embed::WORDNET_INSTALL_HINT
+            )
+        })?;
+        let known = self
+            .embeddings
+            .knowledge_vector(name, wordnet, knowledge)
+            .map_err(|e| e.to_string())?;
+        if known.is_none() && knowledge == Knowledge::WordNet {
+            notes.push(format!(
+                "`{name}`: WordNet has no noun for it; its WordNet half is zeros"
+            ));
+        }
+        Ok((
+            ferret_embed::joined(&resolved.vector, known.as_deref()),
+            notes,
+        ))
+    }
+}
+
+/// Vectors by name.
+pub type NameVectorsByName = BTreeMap<String, Vec<f32>>;
+
+/// The vectors of `names` from `source`, with the notes on words read otherwise than spelt; an
+/// error naming the first name with no known word.
 pub fn embed_names<'a>(
-    embeddings: &Embeddings,
+    source: &NameSource<'_>,
     names: impl IntoIterator<Item = &'a str>,
-) -> (BTreeMap<String, Vec<f32>>, Vec<String>) {
+) -> Result<(NameVectorsByName, Vec<String>)> {
     let mut vectors = BTreeMap::new();
-    let mut unknown = Vec::new();
+    let mut notes = Vec::new();
     for name in names {
         if name.is_empty() {
             continue;
         }
-        let v = embeddings.embed_name(name).unwrap_or_else(|| {
-            unknown.push(name.to_string());
-            vec![0.0; embeddings.dim()]
-        });
-        vectors.insert(name.to_string(), v);
+        let (vector, said) = source.vector(name).map_err(LabError::invalid)?;
+        notes.extend(said);
+        vectors.insert(name.to_string(), vector);
     }
-    (vectors, unknown)
+    Ok((vectors, notes))
 }
 
 /// `prior` (counted on `scenes`) with a learned part trained on the same houses over the names'
-/// vectors from `embeddings`.
+/// vectors from `source`.
 pub fn train_learned(
     scenes: &[Scene],
     prior: &Prior,
-    embeddings: &Embeddings,
+    source: &NameSource<'_>,
     settings: &LearnedSettings,
 ) -> Result<(Prior, LearnedReport)> {
     let mut names = std::collections::BTreeSet::new();
     for s in scenes {
         names.extend(learned::scene_names(s));
     }
-    let (vectors, unknown) = embed_names(embeddings, names.iter().map(String::as_str));
-    if !unknown.is_empty() {
-        tracing::debug!(
-            "{} name(s) have no known word in {}: {}",
-            unknown.len(),
-            embeddings.id(),
-            unknown.join(", ")
-        );
-    }
+    let (vectors, notes) = embed_names(source, names.iter().map(String::as_str))
+        .map_err(|e| LabError::invalid(format!("the training houses: {e}")))?;
     let report = LearnedReport {
         names: vectors.len(),
-        unknown,
+        notes,
+        wordnet: source.wordnet.map(|w| w.dir().to_path_buf()),
     };
     let refs: Vec<&Scene> = scenes.iter().collect();
-    let learned = learned::train(&refs, prior, embeddings.id(), vectors, settings)?;
+    let learned = learned::train(&refs, prior, &source.id(), vectors, settings)?;
     Ok((prior.with_learned(learned), report))
 }
 
@@ -98,9 +169,16 @@ pub struct LazyEmbeddings {
     dir: PathBuf,
     expected: String,
     dim: usize,
-    opened: OnceLock<std::result::Result<Embeddings, String>>,
-    cache: Mutex<BTreeMap<String, Vec<f32>>>,
+    opened: OnceLock<std::result::Result<Opened, String>>,
+    /// Each name's vector (or why it has none) and the notes on its words, said once.
+    cache: Mutex<BTreeMap<String, Resolved>>,
 }
+
+/// The embeddings, WordNet when installed, and the knowledge the prior's vectors carry.
+type Opened = (Embeddings, Option<WordNet>, Option<Knowledge>);
+
+/// A name as the rule resolved it.
+type Resolved = (std::result::Result<Vec<f32>, String>, Vec<String>);
 
 impl LazyEmbeddings {
     /// Embeddings from `dir`, which must be those `expected` (the learned part's embedding id)
@@ -122,47 +200,73 @@ impl LazyEmbeddings {
     }
 }
 
-impl NameVectors for LazyEmbeddings {
-    fn vector(&self, name: &str) -> std::result::Result<Vec<f32>, String> {
-        if let Ok(cache) = self.cache.lock()
-            && let Some(v) = cache.get(name)
-        {
-            return Ok(v.clone());
-        }
-        let embeddings = self
-            .opened
+impl LazyEmbeddings {
+    /// The embeddings (and WordNet, when installed), opened and checked at the first call.
+    fn opened(&self) -> std::result::Result<&Opened, String> {
+        self.opened
             .get_or_init(|| {
                 tracing::info!("opening embeddings {}", self.dir.display());
                 let e = open_embeddings(&self.dir).map_err(|e| e.to_string())?;
-                if e.id() != self.expected {
+                let (base, knowledge) = Knowledge::split_id(&self.expected)?;
+                if e.id() != base {
                     return Err(format!(
-                        "embeddings {} are {}, but the prior's learned part was trained with {}",
+                        "embeddings {} are {}, but the prior's learned part was trained with {base}",
                         self.dir.display(),
                         e.id(),
-                        self.expected
                     ));
                 }
+                let dim = e.dim() * if knowledge.is_some() { 2 } else { 1 };
                 // Checked once here, not as a wrong-length vector at every name asked.
-                if e.dim() != self.dim {
+                if dim != self.dim {
                     return Err(format!(
                         "embeddings {} ({}) have vectors of {} numbers, but the prior's learned part was trained on {}-number vectors: give the embeddings it was trained with",
                         self.dir.display(),
-                        e.id(),
-                        e.dim(),
+                        self.expected,
+                        dim,
                         self.dim
                     ));
                 }
-                Ok(e)
+                let wordnet = open_wordnet(None).map_err(|e| e.to_string())?;
+                Ok((e, wordnet, knowledge))
             })
             .as_ref()
-            .map_err(Clone::clone)?;
-        let v = embeddings
-            .embed_name(name)
-            .unwrap_or_else(|| vec![0.0; embeddings.dim()]);
-        if let Ok(mut cache) = self.cache.lock() {
-            cache.insert(name.to_string(), v.clone());
+            .map_err(Clone::clone)
+    }
+
+    fn resolve(&self, name: &str) -> std::result::Result<Resolved, String> {
+        // Held while a name is resolved, so that threads asking for the same new name at once
+        // resolve it once and say its notes once.
+        let mut cache = self.cache.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Some(r) = cache.get(name) {
+            return Ok(r.clone());
         }
-        Ok(v)
+        let (embeddings, wordnet, knowledge) = self.opened()?;
+        let source = NameSource {
+            embeddings,
+            wordnet: wordnet.as_ref(),
+            knowledge: *knowledge,
+        };
+        let resolved = match source.vector(name) {
+            Ok((vector, notes)) => {
+                for n in &notes {
+                    tracing::warn!("{n}");
+                }
+                (Ok(vector), notes)
+            }
+            Err(e) => (Err(e), Vec::new()),
+        };
+        cache.insert(name.to_string(), resolved.clone());
+        Ok(resolved)
+    }
+}
+
+impl NameVectors for LazyEmbeddings {
+    fn vector(&self, name: &str) -> std::result::Result<Vec<f32>, String> {
+        self.resolve(name)?.0
+    }
+
+    fn notes(&self, name: &str) -> Vec<String> {
+        self.resolve(name).map(|r| r.1).unwrap_or_default()
     }
 }
 
@@ -200,12 +304,38 @@ mod tests {
     }
 
     #[test]
-    fn names_without_a_known_word_get_zeros_and_are_reported() {
-        let (vectors, unknown) = embed_names(&table(), ["Fridge", "Zzyzx", ""]);
-        assert_eq!(unknown, ["Zzyzx"]);
-        assert_eq!(vectors["Zzyzx"], vec![0.0; 3]);
+    fn a_name_without_a_known_word_is_refused_and_a_skipped_word_noted() {
+        let table = table();
+        let source = NameSource {
+            embeddings: &table,
+            wordnet: None,
+            knowledge: None,
+        };
+        let err = embed_names(&source, ["Fridge", "Zzyzx", ""]).unwrap_err();
+        assert!(err.to_string().contains("`Zzyzx`"), "{err}");
+        let (vectors, notes) = embed_names(&source, ["Fridge", "ZzyzxSoap", ""]).unwrap();
+        assert_eq!(notes.len(), 1, "{notes:?}");
+        assert!(
+            notes[0].contains("`ZzyzxSoap`") && notes[0].contains("zzyzx"),
+            "{notes:?}"
+        );
+        assert!(vectors["ZzyzxSoap"][1] > 0.9);
         assert!(vectors["Fridge"][0] > 0.99);
         assert!(!vectors.contains_key(""));
+    }
+
+    #[test]
+    fn a_lazy_name_is_noted_once_and_a_typo_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("vectors.txt"), "fridge 1 0 0\nsoap 0 1 0\n").unwrap();
+        let lazy = LazyEmbeddings::new(dir.path().to_path_buf(), "vectors", 3);
+        let err = lazy.vector("Xyzzyblorp").unwrap_err();
+        assert!(err.contains("`Xyzzyblorp`"), "{err}");
+        assert!(lazy.vector("BlorpSoap").is_ok());
+        let notes = lazy.notes("BlorpSoap");
+        assert_eq!(notes.len(), 1, "{notes:?}");
+        assert!(notes[0].contains("blorp"), "{notes:?}");
+        assert!(lazy.notes("Soap").is_empty());
     }
 
     #[test]

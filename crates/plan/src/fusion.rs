@@ -310,6 +310,12 @@ impl LikelihoodSource for Fused {
         &self.name
     }
 
+    fn check_names(&self, house: &House, targets: &[ObjectType]) -> Result<Vec<String>, String> {
+        let mut notes = self.base.check_names(house, targets)?;
+        notes.extend(self.other.check_names(house, targets)?);
+        Ok(notes)
+    }
+
     fn likelihoods(
         &self,
         house: &House,

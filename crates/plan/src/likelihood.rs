@@ -18,6 +18,15 @@ pub trait LikelihoodSource: Send + Sync {
         house: &House,
         target: &ObjectType,
     ) -> Result<Vec<Probability>, PlanError>;
+
+    /// Checks, before any trial, that every name of `house` and `targets` can be answered:
+    /// notes on names read otherwise than spelt (a word taken as its base form or a WordNet
+    /// hypernym, a word left out), or an error naming the first name that cannot be and what to
+    /// give. Sources that answer any name (counts, an LLM) have nothing to check.
+    fn check_names(&self, house: &House, targets: &[ObjectType]) -> Result<Vec<String>, String> {
+        let _ = (house, targets);
+        Ok(Vec::new())
+    }
 }
 
 /// The same probability for every container: planning then trades distance only against how many

@@ -43,6 +43,7 @@ impl PyPrior {
             )));
         }
         let scenes = scenes_of(&houses);
+        let mut notes = Vec::new();
         let prior = py.allow_threads(|| {
             errors::guarded("Prior.train", || {
                 let prior = Prior::train(scenes.iter().map(|s| s.as_ref()), smoothing);
@@ -50,6 +51,7 @@ impl PyPrior {
                     return Ok(prior);
                 };
                 let table = ferret_lab::language::open_embeddings(dir).map_err(errors::lab)?;
+                let wordnet = ferret_lab::language::open_wordnet(None).map_err(errors::lab)?;
                 let owned: Vec<ferret_world::Scene> =
                     scenes.iter().map(|s| s.as_ref().clone()).collect();
                 let settings = ferret_plan::LearnedSettings {
@@ -57,11 +59,29 @@ impl PyPrior {
                     seed: learned_seed,
                     ..Default::default()
                 };
-                ferret_lab::language::train_learned(&owned, &prior, &table, &settings)
-                    .map(|(p, _)| p)
+                let source = ferret_lab::language::NameSource {
+                    embeddings: &table,
+                    wordnet: wordnet.as_ref(),
+                    knowledge: None,
+                };
+                ferret_lab::language::train_learned(&owned, &prior, &source, &settings)
+                    .map(|(p, report)| {
+                        notes = report.notes;
+                        p
+                    })
                     .map_err(errors::lab)
             })
         })?;
+        // A word read otherwise than spelt (a base form, a WordNet hypernym, left out) is said
+        // as a Python warning, once per name, so that a typo never trains in silence.
+        for note in notes {
+            PyErr::warn(
+                py,
+                &py.get_type::<pyo3::exceptions::PyUserWarning>(),
+                &std::ffi::CString::new(note).unwrap_or_default(),
+                1,
+            )?;
+        }
         Ok(Self {
             inner: Arc::new(prior),
         })

@@ -1,6 +1,8 @@
 """Priors: training, files, the default one, and identical evaluations after a round trip."""
 
+import hashlib
 import json
+import re
 
 import pytest
 
@@ -67,20 +69,37 @@ def test_default_prior_is_the_one_ferret_eval_uses(tmp_path, houses, ferret_bin)
     )
 
 
-def write_table(folder):
-    """A tiny word table: kitchen words near one another, bedroom words near one another."""
+def words_of(name):
+    """A type name's words as ferret splits them (`TVStand` -> tv, stand)."""
+    return [w.lower() for w in re.findall(r"[A-Z]+(?![a-z])|[A-Z]?[a-z]+", name)]
+
+
+def write_table(folder, extra=()):
+    """A tiny word table: kitchen words near one another, bedroom words near one another, and
+    every other word of the generator's names on a fourth axis of its own (a name with no known
+    word is refused), one small fixed vector per word."""
     folder.mkdir()
     words = {
-        "kitchen": [1, 0, 0],
-        "fridge": [0.9, 0.1, 0],
-        "counter": [0.8, 0, 0.2],
-        "bedroom": [0, 1, 0],
-        "bed": [0, 0.9, 0.1],
-        "dresser": [0.1, 0.8, 0],
-        "living": [0, 0, 1],
-        "room": [0.2, 0.2, 0.6],
-        "sofa": [0, 0.1, 0.9],
+        "kitchen": [1, 0, 0, 0],
+        "fridge": [0.9, 0.1, 0, 0],
+        "counter": [0.8, 0, 0.2, 0],
+        "bedroom": [0, 1, 0, 0],
+        "bed": [0, 0.9, 0.1, 0],
+        "dresser": [0.1, 0.8, 0, 0],
+        "living": [0, 0, 1, 0],
+        "room": [0.2, 0.2, 0.6, 0],
+        "sofa": [0, 0.1, 0.9, 0],
     }
+    names = set(extra)
+    for h in ferret.generate_houses(200, 0):
+        names.update(c.type for c in h.containers)
+        names.update(c.room_type for c in h.containers if c.room_type)
+        names.update(o.type for o in h.objects)
+    for name in sorted(names):
+        for w in words_of(name):
+            if w not in words:
+                digest = hashlib.sha256(w.encode()).digest()
+                words[w] = [digest[0] / 2550, digest[1] / 2550, digest[2] / 2550, 1]
     lines = [" ".join([w, *map(str, v)]) for w, v in words.items()]
     (folder / "vectors.txt").write_text("# id: tiny\n" + "\n".join(lines) + "\n")
     return folder
@@ -138,3 +157,49 @@ def test_learned_training_errors_name_the_folder(tmp_path):
             embeddings=str(write_table(tmp_path / "t")),
             learned_folds=5,
         )
+
+
+def test_a_misspelt_name_never_plans_in_silence(tmp_path, monkeypatch):
+    table = write_table(tmp_path / "table", extra=("Wallet",))
+    training = ferret.generate_houses(30, 21)
+    # A word left out of a name is a warning; a name with no known word is refused.
+    houses_with = []
+    for name, out in (("XyzzyDresser", "noted"), ("Xyzzyblorp", "typo")):
+        path = tmp_path / f"{out}.yaml"
+        path.write_text(
+            json.dumps(
+                {
+                    "ferret_scene": 1,
+                    "name": out,
+                    "rooms": [
+                        {
+                            "name": "b",
+                            "type": "Bedroom",
+                            "polygon": [[0, 0], [5, 0], [5, 4], [0, 4]],
+                        }
+                    ],
+                    "containers": [
+                        {"id": "d", "type": name, "pose": [2, 3.6, -90], "contents": ["Wallet"]},
+                        {"id": "e", "type": "Bed", "pose": [1.2, 1.2, 0], "contents": ["Pillow"]},
+                    ],
+                    "start": [4, 2, 0],
+                }
+            )
+        )
+        houses_with.append(ferret.load_houses(path))
+    with pytest.warns(UserWarning, match=r"`XyzzyDresser`: `xyzzy`"):
+        ferret.Prior.train(training + houses_with[0], embeddings=str(table), learned_folds=3)
+    with pytest.raises(ferret.FerretError, match=r"`Xyzzyblorp`.*spelling"):
+        ferret.Prior.train(training + houses_with[1], embeddings=str(table), learned_folds=3)
+    # Planning a house whose furniture the prior file lacks reads the embeddings: a typo there
+    # fails the learned rows with its name.
+    prior = ferret.Prior.train(training, embeddings=str(table), learned_folds=3)
+    monkeypatch.setenv("FERRET_EMBEDDINGS", str(table))
+    with pytest.warns(UserWarning, match=r"`Xyzzyblorp`"):
+        typo = ferret.evaluate(
+            houses_with[1], ["model/prior", "model/learned"], prior=prior, seed=1
+        )
+    assert [r["strategy"] for r in typo.rows] == ["model/prior"]
+    assert typo.errors and all("`Xyzzyblorp`" in e for e in typo.errors), typo.errors
+    ok = ferret.evaluate(houses_with[0], ["model/learned"], prior=prior, seed=1)
+    assert len(ok.rows) == 1 and not ok.errors

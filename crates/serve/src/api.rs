@@ -516,6 +516,11 @@ pub struct TrialState {
     pub robots: Option<Vec<RobotState>>,
     /// The robot that searches it alone, when it named itself at the start.
     pub robot: Option<String>,
+    /// What the deployment's strategies said of the scene's names when they were checked:
+    /// one line per word read otherwise than spelt (its base form, a WordNet hypernym, a word
+    /// left out), so that a misspelt furniture or room name shows where the robot is watched.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub language: Vec<String>,
     /// Every candidate's replay cost (done trials).
     pub replays_m: Option<BTreeMap<String, f64>>,
 }

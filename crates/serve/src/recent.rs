@@ -92,6 +92,7 @@ mod tests {
             replays_m: None,
             robots: None,
             robot: None,
+            language: Vec::new(),
         })
     }
 

@@ -43,6 +43,19 @@ pub struct TrainArgs {
     /// had.
     #[arg(long, value_name = "DIR", env = "FERRET_EMBEDDINGS")]
     embeddings: Option<PathBuf>,
+    /// A WordNet dictionary folder (Debian's wordnet-base; `scripts/embeddings.sh install
+    /// wordnet`), read for words of a name the embeddings lack: their base forms, then the
+    /// nearest hypernym the embeddings know (`vise` → `holding device`). Each such word is
+    /// reported on stderr; a name with no known word is refused. Default: FERRET_WORDNET, else
+    /// /usr/share/wordnet when installed.
+    #[arg(long, value_name = "DIR")]
+    wordnet: Option<PathBuf>,
+    /// A second knowledge source beside the word vectors (with --embeddings): `wordnet` puts
+    /// what WordNet says of each name (its synonyms, the nouns above it, its gloss), embedded
+    /// with the same vectors, beside the name's own vector; `wordnet-shuffled` is its control,
+    /// the same of another noun picked by hashing the name. Needs WordNet.
+    #[arg(long, value_enum, value_name = "SOURCE")]
+    knowledge: Option<KnowledgeArg>,
     /// Folds of held-out types and houses while training the learned likelihood: at least 2,
     /// and at most half the training houses. `--holdout-types N` runs need N here.
     #[arg(long, value_name = "N", default_value_t = LearnedSettings::default().folds)]
@@ -142,6 +155,7 @@ fn train(args: TrainArgs) -> Result<ExitCode> {
     let mut learned_line = String::new();
     if let Some(dir) = &args.embeddings {
         let embeddings = ferret_lab::language::open_embeddings(dir)?;
+        let wordnet = ferret_lab::language::open_wordnet(args.wordnet.as_deref())?;
         let settings = LearnedSettings {
             folds: args.learned_folds,
             seeds: args.learned_seeds,
@@ -154,16 +168,23 @@ fn train(args: TrainArgs) -> Result<ExitCode> {
             },
             compare_counts_in_head: args.learned_compare_counts_in_head,
         };
-        let (trained, report) =
-            ferret_lab::language::train_learned(&loaded.scenes, &prior, &embeddings, &settings)?;
-        prior = trained;
-        if !report.unknown.is_empty() {
-            eprintln!(
-                "{} name(s) have no word in {} and get a zero vector: {}",
-                report.unknown.len(),
-                embeddings.id(),
-                report.unknown.join(", ")
+        let source = ferret_lab::language::NameSource {
+            embeddings: &embeddings,
+            wordnet: wordnet.as_ref(),
+            knowledge: args.knowledge.map(Into::into),
+        };
+        if source.knowledge.is_some() && source.wordnet.is_none() {
+            anyhow::bail!(
+                "--knowledge {}: WordNet is not installed (`{}`, or give --wordnet DIR)",
+                source.knowledge.map_or("", |k| k.name()),
+                ferret_lab::language::WORDNET_INSTALL_HINT
             );
+        }
+        let (trained, report) =
+            ferret_lab::language::train_learned(&loaded.scenes, &prior, &source, &settings)?;
+        prior = trained;
+        for note in &report.notes {
+            eprintln!("warning: {note}");
         }
         if let Some(l) = prior.learned() {
             let s = &l.language.unseen_score;
@@ -212,4 +233,22 @@ counts and language, each fitted on all folds but one and scored on that one: th
         args.out.display()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// `--knowledge`.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum KnowledgeArg {
+    /// WordNet's synonyms, hypernyms and gloss of each name.
+    Wordnet,
+    /// The control: the same of a noun picked by hashing the name.
+    WordnetShuffled,
+}
+
+impl From<KnowledgeArg> for ferret_lab::language::Knowledge {
+    fn from(k: KnowledgeArg) -> Self {
+        match k {
+            KnowledgeArg::Wordnet => ferret_lab::language::Knowledge::WordNet,
+            KnowledgeArg::WordnetShuffled => ferret_lab::language::Knowledge::WordNetShuffled,
+        }
+    }
 }

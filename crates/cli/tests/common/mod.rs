@@ -63,8 +63,9 @@ pub fn data_dir() -> Option<PathBuf> {
     }
 }
 
-/// A word table of a few kitchen, bedroom and bathroom words: enough for names of generated
-/// houses to differ in meaning (names none of whose words it has get a zero vector).
+/// A word table of a few kitchen, bedroom and bathroom words with meaning, and every other word
+/// of the generator's names and the example scenes' (a name with no known word is refused) on
+/// a fifth axis of its own, one fixed small vector per word from its letters.
 pub fn word_table(dir: &Path) -> PathBuf {
     let folder = dir.join("table");
     std::fs::create_dir_all(&folder).unwrap();
@@ -83,10 +84,48 @@ pub fn word_table(dir: &Path) -> PathBuf {
         ("sofa", [0.0, 0.3, 0.0, 0.9]),
         ("table", [0.5, 0.1, 0.0, 0.6]),
     ];
-    let lines: Vec<String> = words
+    let mut lines: Vec<String> = words
         .iter()
-        .map(|(w, v)| format!("{w} {} {} {} {}", v[0], v[1], v[2], v[3]))
+        .map(|(w, v)| format!("{w} {} {} {} {} 0", v[0], v[1], v[2], v[3]))
         .collect();
+    let mut others = std::collections::BTreeSet::new();
+    for scene in ferret_world::generate::default_scenes(200, 0).unwrap() {
+        for name in ferret_plan::learned::scene_names(&scene) {
+            others.extend(ferret_embed::split_name(&name));
+        }
+    }
+    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
+    for scene in ["apartment", "workshop"] {
+        let text = std::fs::read_to_string(examples.join(scene).join("scene.yaml")).unwrap();
+        for line in text.lines() {
+            if let Some((_, name)) = line.split_once("type: ") {
+                let name = name.split([',', '}', ' ']).next().unwrap_or("");
+                others.extend(ferret_embed::split_name(name));
+            }
+        }
+    }
+    others.extend(
+        [
+            "blanket", "cell", "phone", "remote", "control", "pillow", "wallet",
+        ]
+        .map(String::from),
+    );
+    for w in others {
+        if words.iter().any(|(known, _)| *known == w) {
+            continue;
+        }
+        let h = w
+            .bytes()
+            .fold(7u32, |h, b| h.wrapping_mul(31).wrapping_add(u32::from(b)));
+        let small = |k: u32| f64::from((h >> k) % 100) / 1000.0;
+        lines.push(format!(
+            "{w} {} {} {} {} 1",
+            small(0),
+            small(8),
+            small(16),
+            small(24)
+        ));
+    }
     std::fs::write(
         folder.join("vectors.txt"),
         format!("# id: tiny\n{}\n", lines.join("\n")),

@@ -162,6 +162,13 @@ pub trait NameVectors: Send + Sync {
     /// The vector of `name`, of the learned part's length, from the embeddings it was trained
     /// with.
     fn vector(&self, name: &str) -> Result<Vec<f32>, String>;
+
+    /// What was said of `name` when its vector was made: one line per word read otherwise than
+    /// spelt (its base form, a WordNet hypernym, left out). Empty for a name not asked yet.
+    fn notes(&self, name: &str) -> Vec<String> {
+        let _ = name;
+        Vec::new()
+    }
 }
 
 /// A [`NameVectors`] kept beside a prior: compared as equal always (it only fills in what the

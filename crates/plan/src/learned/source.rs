@@ -124,6 +124,53 @@ impl LikelihoodSource for LearnedSource {
         self.kind.name()
     }
 
+    fn check_names(&self, house: &House, targets: &[ObjectType]) -> Result<Vec<String>, String> {
+        let Some(learned) = self.prior.learned() else {
+            return Err("the prior has no learned part".into());
+        };
+        // The control's vectors are made from the name alone: only the language model's need
+        // a word vector.
+        if self.kind.control() {
+            return Ok(Vec::new());
+        }
+        let embedder = self.prior.embedder();
+        let mut notes = Vec::new();
+        let rooms = (0..house.containers.len()).filter_map(|c| house.container_room(c));
+        let asked = targets
+            .iter()
+            .map(|t| (t.as_str(), "target type"))
+            .chain(
+                house
+                    .containers
+                    .iter()
+                    .map(|c| (c.object_type.as_str(), "container type")),
+            )
+            .chain(rooms.map(|r| (r.room_type.as_str(), "room type")));
+        let mut seen = std::collections::BTreeSet::new();
+        let mut missing = Vec::new();
+        for (name, kind) in asked {
+            if name.is_empty() || !seen.insert(name) || learned.vectors.contains_key(name) {
+                continue;
+            }
+            match embedder {
+                Some(e) => {
+                    learned.vector(name, false, kind, embedder)?;
+                    notes.extend(e.0.notes(name));
+                }
+                None => missing.push(format!("the {kind} `{name}`")),
+            }
+        }
+        // Every name at once: an operator fixes the command line once, not once per name.
+        if !missing.is_empty() {
+            return Err(format!(
+                "no word vector for {}, which the training houses never had: give the embeddings the prior was trained with ({}) as --embeddings DIR or FERRET_EMBEDDINGS (scripts/embeddings.sh install prints the folder)",
+                missing.join(", "),
+                learned.embedding
+            ));
+        }
+        Ok(notes)
+    }
+
     fn likelihoods(
         &self,
         house: &House,

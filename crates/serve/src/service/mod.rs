@@ -130,6 +130,9 @@ pub struct Service {
     pub(crate) events: Arc<Events>,
     /// Trials' states as their last writes answered them.
     pub(crate) recent: crate::recent::RecentStates,
+    /// What each candidate said of each scene's names (strategy, line), by scene.
+    pub(crate) language:
+        std::sync::Mutex<std::collections::HashMap<String, Arc<scenes::SceneLanguage>>>,
 }
 
 impl std::fmt::Debug for Service {
@@ -227,6 +230,7 @@ impl Service {
             events.route_through(outbox);
         }
         Ok(Service {
+            language: std::sync::Mutex::default(),
             events,
             recent: crate::recent::RecentStates::new(KEPT_STATES),
             store,

@@ -14,7 +14,7 @@ use crate::api::{
 };
 use crate::error::{ApiError, ErrorKind};
 use crate::grids::Placed;
-use crate::model::{ApiReply, Outcome};
+use crate::model::{ApiReply, DeploymentSpec, Outcome};
 
 /// A name or id in an uploaded scene: printable ASCII, not only spaces, at most 100 characters
 /// (they appear in URLs and replies; the scene file format itself is more lenient).
@@ -42,7 +42,75 @@ pub(super) fn start_pose(house: &House) -> [f64; 3] {
     ]
 }
 
+/// What the candidates said of a scene's names: (strategy, line) pairs.
+pub(crate) type SceneLanguage = Vec<(String, String)>;
+
 impl Service {
+    /// Asks every candidate's likelihood source whether it can answer the names of `scene`
+    /// (its furniture, rooms and targets): a learned prior needs a vector for each, from its
+    /// file or its embeddings. The notes (words read otherwise than spelt) are logged as
+    /// warnings and kept for the scene's trial states.
+    ///
+    /// # Errors
+    /// 422 on `field` naming the first name a candidate cannot answer and what to give.
+    pub(crate) fn check_language(
+        &self,
+        name: &str,
+        scene: &Scene,
+        field: &str,
+    ) -> Result<Arc<SceneLanguage>, ApiError> {
+        let targets: Vec<_> = scene.truth.target_types().into_iter().collect();
+        let mut said = Vec::new();
+        for s in &self.candidates {
+            let Some(source) = s.likelihood_source() else {
+                continue;
+            };
+            let notes = source.check_names(&scene.house, &targets).map_err(|m| {
+                ApiError::new(
+                    ErrorKind::Invalid,
+                    field,
+                    format!("scene {name:?}: {} cannot plan here: {m}", s.name()),
+                )
+            })?;
+            for n in notes {
+                tracing::info!(scene = name, strategy = s.name(), "{n}");
+                said.push((s.name().to_string(), n));
+            }
+        }
+        let said = Arc::new(said);
+        self.language
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .insert(name.to_string(), said.clone());
+        Ok(said)
+    }
+
+    /// What the strategies of a deployment said of scene `name`'s names (checked when the
+    /// scene was added; a scene another replica uploaded is checked at its first trial here).
+    pub(crate) fn language(&self, name: &str, spec: &DeploymentSpec) -> Vec<String> {
+        let known = self
+            .language
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .get(name)
+            .cloned();
+        let said = match known {
+            Some(said) => said,
+            None => match self
+                .scene(name)
+                .and_then(|scene| self.check_language(name, &scene, "scene"))
+            {
+                Ok(said) => said,
+                // A trial's start answers that error itself; a state only lacks the notes.
+                Err(_) => return Vec::new(),
+            },
+        };
+        said.iter()
+            .filter(|(strategy, _)| spec.strategies.contains(strategy))
+            .map(|(_, line)| line.clone())
+            .collect()
+    }
+
     /// Offers `scene` under `name` (scene files and houses named on the command line; no limits
     /// apply, the operator chose them). Its grid is built now, to check it.
     ///
@@ -57,6 +125,7 @@ impl Service {
                 format!("a scene named {name:?} exists already"),
             ));
         }
+        self.check_language(name, &scene, "scene")?;
         let targets = Arc::new(scene.truth.target_types());
         let placed = self.grids.build(&scene.house, targets, None, "scene")?;
         let s = summary(name, &scene);
@@ -183,6 +252,7 @@ impl Service {
             Some(_) => return Err(taken(&name)),
             None => {}
         }
+        self.check_language(&name, &scene, "scene.containers")?;
         let targets = Arc::new(scene.truth.target_types());
         let placed = self
             .grids

@@ -270,7 +270,8 @@ impl Service {
                 destination_state(row.task.as_ref(), &owner.placed, search.destination(), None);
             Ok::<_, ApiError>((next, destination))
         })?;
-        let state = trial_state(&row, &spec, &[], 0.0, (next, destination));
+        let language = self.language(&row.scene, &spec);
+        let state = trial_state(&row, &spec, &[], 0.0, (next, destination), language);
         let reply = json(Outcome::Created, &state)?;
         if let Some(claim) = claim {
             claim.replace(&reply)?;

@@ -143,6 +143,7 @@ impl Service {
             legs.push(l);
         }
         Ok(TeamTrial {
+            language: self.language(&row.scene, &spec),
             targets: targets_of(row),
             robots,
             spec,
@@ -495,6 +496,8 @@ fn team_of(row: &StoredTrial) -> Result<&[TeamRobot], ApiError> {
 
 /// A team trial with what its robots' plans need.
 struct TeamTrial {
+    /// What the strategies said of the scene's names.
+    language: Vec<String>,
     robots: Vec<TeamRobot>,
     targets: Vec<String>,
     spec: DeploymentSpec,
@@ -690,6 +693,7 @@ impl TeamTrial {
             observations,
             row.cost.unwrap_or(longest),
             (next, destination),
+            self.language.clone(),
         );
         state.robots = Some(team);
         Ok(state)

@@ -44,6 +44,7 @@ impl Service {
         })?;
         let placed = self.placed(&row.scene, row.pose)?;
         Ok(LoadedTrial {
+            language: self.language(&row.scene, &spec),
             observations,
             trial: trial_spec(row, &placed)?,
             placed,
@@ -87,6 +88,7 @@ impl Service {
             &t.observations,
             travelled,
             (next, destination),
+            t.language.clone(),
         ))
     }
 
@@ -290,6 +292,7 @@ impl Service {
             ),
             Step::Exhausted => (TrialStatus::Exhausted, None, None),
         };
+        let language = self.language(&row.scene, spec);
         let mut told = None;
         let reply = claim.complete_with(&route, body, |w| {
             // Every observation holds its trial's row, so one observation per sequence number
@@ -320,6 +323,7 @@ impl Service {
                 &all,
                 cost,
                 (next.clone(), destination.clone()),
+                language.clone(),
             );
             let reply = json(Outcome::Done, &state)?;
             told = Some(state);
@@ -383,6 +387,7 @@ impl Service {
             }
             _ => None,
         };
+        let language = self.language(&row.scene, &spec);
         let mut told = None;
         let reply = claim.complete_with(&route, body, |w| {
             // As any trial's end: the trial's row, then the deployment's.
@@ -406,6 +411,7 @@ impl Service {
                 &observations,
                 cost,
                 (None, destination.clone()),
+                language.clone(),
             );
             let reply = json(Outcome::Done, &state)?;
             told = Some(state);
@@ -533,6 +539,8 @@ fn check_searching(row: &StoredTrial) -> Result<(), ApiError> {
 
 /// A stored trial with what it needs to plan its next step.
 struct LoadedTrial {
+    /// What the strategies said of the scene's names.
+    language: Vec<String>,
     observations: Vec<StoredObservation>,
     spec: DeploymentSpec,
     candidates: Vec<Arc<dyn Strategy>>,
@@ -598,6 +606,7 @@ pub(super) fn trial_state(
     observations: &[StoredObservation],
     cost: f64,
     (next, destination): (Option<NextContainer>, Option<DestinationState>),
+    language: Vec<String>,
 ) -> TrialState {
     let reported: Vec<f64> = observations.iter().filter_map(|o| o.travelled).collect();
     let targets = targets_of(row);
@@ -626,6 +635,7 @@ pub(super) fn trial_state(
         }),
         robots: None,
         robot: row.robot.clone(),
+        language,
     }
 }
 

@@ -73,6 +73,17 @@ printf '  "counts and language, GloVe": "%s",\n' "${compared#counts and language
 "$ferret" prior train "${train[@]}" --also "$DATA/oneroom-train500.jsonl.gz" --containers furniture \
     --embeddings "$glove" --out prior-glove-furniture.json >/dev/null
 embeddings=(glove)
+# WordNet's knowledge beside the GloVe vectors, and its shuffled control (another noun's).
+if "$ROOT/scripts/embeddings.sh" path wordnet >/dev/null 2>&1; then
+    for k in wordnet wordnet-shuffled; do
+        timed "prior train, 1 500 houses, with the learned part (GloVe + $k)" \
+            "$ferret" prior train "${train[@]}" --also "$DATA/oneroom-train500.jsonl.gz" \
+            --embeddings "$glove" --knowledge "$k" --out "prior-$k.json"
+        embeddings+=("$k")
+    done
+else
+    log "no WordNet (scripts/embeddings.sh install wordnet): no GloVe + WordNet rows"
+fi
 if [ -n "$minilm" ]; then
     timed "prior train, 1 500 houses, with the learned part (MiniLM)" \
         "$ferret" prior train "${train[@]}" --also "$DATA/oneroom-train500.jsonl.gz" \

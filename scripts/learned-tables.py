@@ -187,6 +187,10 @@ def main():
             ("unseen types (5 folds), MiniLM", "cal-unseen-minilm"),
             ("workshop, GloVe", "cal-workshop-glove"),
             ("workshop, MiniLM", "cal-workshop-minilm"),
+            ("unseen types (5 folds), GloVe + WordNet", "cal-unseen-wordnet"),
+            ("unseen types (5 folds), GloVe + shuffled WordNet", "cal-unseen-wordnet-shuffled"),
+            ("workshop, GloVe + WordNet", "cal-workshop-wordnet"),
+            ("workshop, GloVe + shuffled WordNet", "cal-workshop-wordnet-shuffled"),
         ],
     )
     planning(
@@ -198,6 +202,8 @@ def main():
             ("one target, MiniLM", "unseen-minilm-1"),
             ("one target, GloVe, head seed 100", "unseen-glove-seed100"),
             ("one target, GloVe, head seed 200", "unseen-glove-seed200"),
+            ("one target, GloVe + WordNet", "unseen-wordnet-1"),
+            ("one target, GloVe + shuffled WordNet", "unseen-wordnet-shuffled-1"),
         ],
     )
     planning(
@@ -212,7 +218,12 @@ def main():
     planning(
         out,
         "Furniture and rooms ProcTHOR never had (examples/workshop, every target)",
-        [("GloVe", "workshop-glove"), ("MiniLM", "workshop-minilm")],
+        [
+            ("GloVe", "workshop-glove"),
+            ("MiniLM", "workshop-minilm"),
+            ("GloVe + WordNet", "workshop-wordnet"),
+            ("GloVe + shuffled WordNet", "workshop-wordnet-shuffled"),
+        ],
     )
     planning(
         out,

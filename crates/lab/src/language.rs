@@ -42,7 +42,7 @@ pub struct LearnedReport {
     /// One line per word of a name read otherwise than spelt (its base form, a WordNet
     /// hypernym, left out), each word once.
     pub notes: Vec<String>,
-    /// The WordNet folder the rule read, if one was found.
+    /// The WordNet folder the rule read, if a name needed it.
     pub wordnet: Option<PathBuf>,
 }
 
@@ -57,14 +57,47 @@ pub fn open_wordnet(dir: Option<&Path>) -> Result<Option<WordNet>> {
         .map_err(|e| LabError::invalid(format!("WordNet: {e}")))
 }
 
+/// WordNet opened when a name first needs it ([`open_wordnet`]'s folder): reading its noun
+/// index costs a third of a second and 30 MB, which a run whose every word the vectors know
+/// never pays.
+#[derive(Debug, Default)]
+pub struct LazyWordNet {
+    dir: Option<PathBuf>,
+    opened: OnceLock<std::result::Result<Option<WordNet>, String>>,
+}
+
+impl LazyWordNet {
+    /// WordNet from `dir` (else the default folder), not read yet.
+    pub fn new(dir: Option<&Path>) -> Self {
+        Self {
+            dir: dir.map(Path::to_path_buf),
+            opened: OnceLock::new(),
+        }
+    }
+
+    /// WordNet, read at the first call; `None` when none is installed or given.
+    pub fn get(&self) -> std::result::Result<Option<&WordNet>, String> {
+        self.opened
+            .get_or_init(|| open_wordnet(self.dir.as_deref()).map_err(|e| e.to_string()))
+            .as_ref()
+            .map(Option::as_ref)
+            .map_err(Clone::clone)
+    }
+
+    /// Whether it has been read.
+    pub fn is_open(&self) -> bool {
+        self.opened.get().is_some()
+    }
+}
+
 /// What gives names their vectors: the embeddings, WordNet for words they lack, and a second
 /// knowledge source beside them.
 #[derive(Clone, Copy)]
 pub struct NameSource<'a> {
     /// The word (or sentence) vectors.
     pub embeddings: &'a Embeddings,
-    /// WordNet, when installed or given.
-    pub wordnet: Option<&'a WordNet>,
+    /// WordNet, read when a name first needs it.
+    pub wordnet: &'a LazyWordNet,
     /// What stands beside each name's vector, if anything.
     pub knowledge: Option<Knowledge>,
 }
@@ -86,15 +119,23 @@ impl NameSource<'_> {
     /// The vector of `name` by [`Embeddings::resolve_name`]'s rule, with its knowledge beside
     /// it, and the notes on how it was read; an error for a name with no known word.
     pub fn vector(&self, name: &str) -> std::result::Result<(Vec<f32>, Vec<String>), String> {
-        let resolved = self
-            .embeddings
-            .resolve_name(name, self.wordnet)
-            .map_err(|e| e.to_string())?;
+        // Without WordNet first: a name whose every word the vectors have reads the same
+        // either way, and then WordNet is never read.
+        let plain = self.embeddings.resolve_name(name, None);
+        let resolved = match plain {
+            Ok(r) if r.notes.is_empty() => r,
+            other => {
+                tracing::debug!(name, without = ?other.map(|r| r.notes), "reading with WordNet");
+                self.embeddings
+                    .resolve_name(name, self.wordnet.get()?)
+                    .map_err(|e| e.to_string())?
+            }
+        };
         let mut notes: Vec<String> = resolved.notes.iter().map(ToString::to_string).collect();
         let Some(knowledge) = self.knowledge else {
             return Ok((resolved.vector, notes));
         };
-        let wordnet = self.wordnet.ok_or_else(|| {
+        let wordnet = self.wordnet.get()?.ok_or_else(|| {
             format!(
                 "{} vectors need WordNet (`{}`, or FERRET_WORDNET)",
                 self.id(),
@@ -156,7 +197,17 @@ pub fn train_learned(
     let report = LearnedReport {
         names: vectors.len(),
         notes,
-        wordnet: source.wordnet.map(|w| w.dir().to_path_buf()),
+        // Only a WordNet a name needed was read; asking for it here would read it.
+        wordnet: if source.wordnet.is_open() {
+            source
+                .wordnet
+                .get()
+                .ok()
+                .flatten()
+                .map(|w| w.dir().to_path_buf())
+        } else {
+            None
+        },
     };
     let refs: Vec<&Scene> = scenes.iter().collect();
     let learned = learned::train(&refs, prior, &source.id(), vectors, settings)?;
@@ -175,7 +226,7 @@ pub struct LazyEmbeddings {
 }
 
 /// The embeddings, WordNet when installed, and the knowledge the prior's vectors carry.
-type Opened = (Embeddings, Option<WordNet>, Option<Knowledge>);
+type Opened = (Embeddings, LazyWordNet, Option<Knowledge>);
 
 /// A name as the rule resolved it.
 type Resolved = (std::result::Result<Vec<f32>, String>, Vec<String>);
@@ -226,8 +277,7 @@ impl LazyEmbeddings {
                         self.dim
                     ));
                 }
-                let wordnet = open_wordnet(None).map_err(|e| e.to_string())?;
-                Ok((e, wordnet, knowledge))
+                Ok((e, LazyWordNet::new(None), knowledge))
             })
             .as_ref()
             .map_err(Clone::clone)
@@ -243,7 +293,7 @@ impl LazyEmbeddings {
         let (embeddings, wordnet, knowledge) = self.opened()?;
         let source = NameSource {
             embeddings,
-            wordnet: wordnet.as_ref(),
+            wordnet,
             knowledge: *knowledge,
         };
         let resolved = match source.vector(name) {
@@ -306,9 +356,10 @@ mod tests {
     #[test]
     fn a_name_without_a_known_word_is_refused_and_a_skipped_word_noted() {
         let table = table();
+        let wordnet = LazyWordNet::default();
         let source = NameSource {
             embeddings: &table,
-            wordnet: None,
+            wordnet: &wordnet,
             knowledge: None,
         };
         let err = embed_names(&source, ["Fridge", "Zzyzx", ""]).unwrap_err();
@@ -322,6 +373,23 @@ mod tests {
         assert!(vectors["ZzyzxSoap"][1] > 0.9);
         assert!(vectors["Fridge"][0] > 0.99);
         assert!(!vectors.contains_key(""));
+    }
+
+    #[test]
+    fn wordnet_is_read_only_for_a_word_the_vectors_lack() {
+        let table = table();
+        let wordnet = LazyWordNet::new(Some(Path::new("/nowhere")));
+        let source = NameSource {
+            embeddings: &table,
+            wordnet: &wordnet,
+            knowledge: None,
+        };
+        let (vectors, notes) = embed_names(&source, ["Fridge", "SoapToilet"]).unwrap();
+        assert_eq!((vectors.len(), notes.len()), (2, 0));
+        assert!(!wordnet.is_open());
+        let err = embed_names(&source, ["ZzyzxSoap"]).unwrap_err().to_string();
+        assert!(wordnet.is_open());
+        assert!(err.contains("nowhere"), "{err}");
     }
 
     #[test]

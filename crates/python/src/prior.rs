@@ -51,7 +51,7 @@ impl PyPrior {
                     return Ok(prior);
                 };
                 let table = ferret_lab::language::open_embeddings(dir).map_err(errors::lab)?;
-                let wordnet = ferret_lab::language::open_wordnet(None).map_err(errors::lab)?;
+                let wordnet = ferret_lab::language::LazyWordNet::new(None);
                 let owned: Vec<ferret_world::Scene> =
                     scenes.iter().map(|s| s.as_ref().clone()).collect();
                 let settings = ferret_plan::LearnedSettings {
@@ -61,7 +61,7 @@ impl PyPrior {
                 };
                 let source = ferret_lab::language::NameSource {
                     embeddings: &table,
-                    wordnet: wordnet.as_ref(),
+                    wordnet: &wordnet,
                     knowledge: None,
                 };
                 ferret_lab::language::train_learned(&owned, &prior, &source, &settings)

@@ -155,7 +155,7 @@ fn train(args: TrainArgs) -> Result<ExitCode> {
     let mut learned_line = String::new();
     if let Some(dir) = &args.embeddings {
         let embeddings = ferret_lab::language::open_embeddings(dir)?;
-        let wordnet = ferret_lab::language::open_wordnet(args.wordnet.as_deref())?;
+        let wordnet = ferret_lab::language::LazyWordNet::new(args.wordnet.as_deref());
         let settings = LearnedSettings {
             folds: args.learned_folds,
             seeds: args.learned_seeds,
@@ -170,10 +170,11 @@ fn train(args: TrainArgs) -> Result<ExitCode> {
         };
         let source = ferret_lab::language::NameSource {
             embeddings: &embeddings,
-            wordnet: wordnet.as_ref(),
+            wordnet: &wordnet,
             knowledge: args.knowledge.map(Into::into),
         };
-        if source.knowledge.is_some() && source.wordnet.is_none() {
+        if source.knowledge.is_some() && source.wordnet.get().map_err(anyhow::Error::msg)?.is_none()
+        {
             anyhow::bail!(
                 "--knowledge {}: WordNet is not installed (`{}`, or give --wordnet DIR)",
                 source.knowledge.map_or("", |k| k.name()),

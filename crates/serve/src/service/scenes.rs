@@ -69,7 +69,7 @@ impl Service {
                 ApiError::new(
                     ErrorKind::Invalid,
                     field,
-                    format!("scene {name:?}: {} cannot plan here: {m}", s.name()),
+                    format!("{} cannot plan here: {m}", s.name()),
                 )
             })?;
             for n in notes {

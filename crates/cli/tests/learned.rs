@@ -8,7 +8,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use common::{Server, data_dir, read_csv, s, text, word_table as table};
+use common::{Server, data_dir, post, read_csv, s, text, word_table as table};
 
 /// Runs ferret with `args`, without `FERRET_EMBEDDINGS` unless `embeddings` gives it.
 fn run(args: &[&str], embeddings: Option<&Path>) -> Output {
@@ -398,14 +398,11 @@ fn on_real_houses_language_plans_unseen_targets_cheaper_than_counts_and_random_v
 
 const TARGETS: &str = "Blanket,CellPhone,RemoteControl,Pillow,Wallet";
 
-/// `ferret deploy` on the apartment and the same deployment driven through `ferret serve` by the
-/// Python robot client choose the same strategies at the same costs, `model/learned` among them
-/// (the apartment's names the prior file lacks come from `FERRET_EMBEDDINGS` in both).
-#[test]
-fn serve_plans_model_learned_as_deploy_does() {
-    let dir = tempfile::tempdir().unwrap();
-    let table = table(dir.path());
-    let prior = dir.path().join("prior.json");
+/// The tests' word table and a prior trained over it on 30 generated houses (3 folds, short
+/// training): the table's folder and the prior's file.
+fn tiny_learned_prior(dir: &Path) -> (PathBuf, PathBuf) {
+    let table = table(dir);
+    let prior = dir.join("prior.json");
     ok(
         &[
             "prior",
@@ -425,6 +422,16 @@ fn serve_plans_model_learned_as_deploy_does() {
         ],
         None,
     );
+    (table, prior)
+}
+
+/// `ferret deploy` on the apartment and the same deployment driven through `ferret serve` by the
+/// Python robot client choose the same strategies at the same costs, `model/learned` among them
+/// (the apartment's names the prior file lacks come from `FERRET_EMBEDDINGS` in both).
+#[test]
+fn serve_plans_model_learned_as_deploy_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let (table, prior) = tiny_learned_prior(dir.path());
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/apartment/scene.yaml");
     let strategies = "model/prior,model/learned,model/learned-head";
     let out = dir.path().join("deploy");
@@ -522,22 +529,6 @@ fn scene_with(dir: &Path, name: &str, dresser: &str) -> PathBuf {
     path
 }
 
-fn post(url: &str, body: serde_json::Value) -> (u16, serde_json::Value) {
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    rt.block_on(async {
-        let r = reqwest::Client::new()
-            .post(url)
-            .json(&body)
-            .send()
-            .await
-            .unwrap();
-        (r.status().as_u16(), r.json().await.unwrap())
-    })
-}
-
 /// A misspelt name never plans in silence: a word left out of a name's vector is said once on
 /// stderr; a name with no known word fails the learned rows (the others are written), stops
 /// `ferret serve` from starting, and is answered 422 when uploaded; a served trial's state
@@ -545,27 +536,7 @@ fn post(url: &str, body: serde_json::Value) -> (u16, serde_json::Value) {
 #[test]
 fn a_misspelt_name_is_refused_or_said_and_never_planned_in_silence() {
     let dir = tempfile::tempdir().unwrap();
-    let table = table(dir.path());
-    let prior = dir.path().join("prior.json");
-    ok(
-        &[
-            "prior",
-            "train",
-            "--generate",
-            "30",
-            "--house-seed",
-            "9",
-            "--embeddings",
-            s(&table),
-            "--learned-folds",
-            "3",
-            "--learned-epochs",
-            "10",
-            "--out",
-            s(&prior),
-        ],
-        None,
-    );
+    let (table, prior) = tiny_learned_prior(dir.path());
     let typo = scene_with(dir.path(), "typo", "Xyzzyblorp");
     let noted = scene_with(dir.path(), "noted", "XyzzyDresser");
     let eval = |scene: &Path, out: &Path| -> Output {

@@ -6,7 +6,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use common::{Server, ferret, s, text};
+use common::{Server, ferret, post, s, text};
 use serde_json::{Value, json};
 
 const TARGETS: &str = "Blanket,CellPhone,RemoteControl,Pillow,Wallet";
@@ -42,22 +42,6 @@ impl Server {
         args.extend_from_slice(extra);
         Server::spawn(&args, &[])
     }
-}
-
-fn post(url: &str, body: Value) -> (u16, Value) {
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    rt.block_on(async {
-        let r = reqwest::Client::new()
-            .post(url)
-            .json(&body)
-            .send()
-            .await
-            .unwrap();
-        (r.status().as_u16(), r.json().await.unwrap())
-    })
 }
 
 fn get(url: &str) -> Value {

@@ -169,7 +169,7 @@ impl Embeddings {
         let mut sum = vec![0f32; self.dim()];
         let mut known = 0usize;
         for t in texts {
-            let v = if self.whole_token("").is_some() {
+            let v = if self.is_model() {
                 self.embed_name(t)
             } else {
                 self.phrase(t)

@@ -6,7 +6,7 @@
 //! 2. as one of its base forms (WordNet's morphy: `noun.exc`, then the regular endings), or
 //!    else a plural/singular variant, that the embeddings have;
 //! 3. as the nearest WordNet phrase above it whose words the embeddings all have: a synonym of
-//!    its first sense, else a hypernym up to [`MAX_HYPERNYM_DEPTH`] steps (`vise` → `holding
+//!    its first sense, else a hypernym up to [`MAX_HYPERNYM_DEPTH`](crate::MAX_HYPERNYM_DEPTH) steps (`vise` → `holding
 //!    device`);
 //! 4. otherwise it is left out of the name's vector.
 //!
@@ -20,7 +20,7 @@
 //! known word is refused. Without WordNet such names are only noted, since the model's
 //! vocabulary alone lacks common nouns (`ladle`, `spatula`).
 
-use crate::wordnet::{MAX_HYPERNYM_DEPTH, WORDNET_INSTALL_HINT, WordNet};
+use crate::wordnet::{WORDNET_INSTALL_HINT, WordNet};
 use crate::{EmbedError, Embeddings, split_name};
 
 /// How a word of a name was read when not as spelt.
@@ -130,7 +130,7 @@ impl Embeddings {
                 |w| format!("nor WordNet ({})", w.dir().display()),
             ),
         };
-        if self.whole_token("").is_some() {
+        if self.is_model() {
             let mut notes = Vec::new();
             for w in &words {
                 let known = self.whole_token(w) == Some(true)
@@ -202,7 +202,6 @@ impl Embeddings {
             return Ok(None);
         };
         for (phrase, distance) in wn.related(word)? {
-            debug_assert!(distance <= MAX_HYPERNYM_DEPTH);
             if let Some(v) = self.phrase(&phrase) {
                 return Ok(Some((v, Some(WordReading::Related { phrase, distance }))));
             }
